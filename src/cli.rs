@@ -1,0 +1,222 @@
+//! The command line: a thin edge over the library. Degrees and JSON live here.
+
+use crate::kinematics::{self, IkOptions, Joints, Pose, Setup, Units, Vec3};
+use crate::machines::{self, Library};
+use clap::{Parser, Subcommand};
+use serde_json::{Map, Value, json};
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+#[derive(Parser, Debug)]
+#[command(
+    name = "kinepost",
+    version,
+    about = "5-axis CNC postprocessor: exact inverse kinematics for any machine profile"
+)]
+pub struct Cli {
+    /// Directory of machine profiles (default: ./machines, or the one shipped with kinepost).
+    #[arg(long, global = true, env = "KINEPOST_MACHINES")]
+    pub machines: Option<PathBuf>,
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+pub enum Command {
+    /// List the machine profiles.
+    Machines {
+        /// One JSON object per line instead of a table.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Forward kinematics: axis words → tool pose in the part frame, as JSON.
+    Fk {
+        #[arg(long)]
+        machine: String,
+        #[command(flatten)]
+        setup: SetupArgs,
+        /// Axis words, e.g. X=10 Y=0 Z=-5 B=30 C=-90 (degrees for rotaries). Missing ones are 0.
+        #[arg(required = true, allow_hyphen_values = true)]
+        words: Vec<String>,
+    },
+    /// Inverse kinematics: tool pose x y z i j k → every joint solution, as JSON.
+    Ik {
+        #[arg(long)]
+        machine: String,
+        #[command(flatten)]
+        setup: SetupArgs,
+        /// Units of x y z (default: the profile's).
+        #[arg(long)]
+        units: Option<String>,
+        /// x y z i j k in the part frame.
+        #[arg(num_args = 6, required = true, allow_negative_numbers = true)]
+        pose: Vec<f64>,
+    },
+}
+
+#[derive(clap::Args, Debug, Clone)]
+pub struct SetupArgs {
+    /// Tool length (gauge line to tip), profile units (default: the profile's).
+    #[arg(long, allow_hyphen_values = true)]
+    pub tool_length: Option<f64>,
+    /// Work offset x,y,z in profile units: the part origin in the machine frame at home.
+    #[arg(long, allow_hyphen_values = true)]
+    pub work_offset: Option<String>,
+}
+
+impl SetupArgs {
+    fn setup(&self, m: &kinematics::Machine) -> Result<Setup, String> {
+        let wo = match &self.work_offset {
+            Some(s) => parse_triple(s)?,
+            None => Vec3::zeros(),
+        };
+        let l = self.tool_length.unwrap_or(m.default_tool_length);
+        if !l.is_finite() {
+            return Err("--tool-length must be finite".into());
+        }
+        Ok(Setup::new(l, wo))
+    }
+}
+
+pub fn parse_triple(s: &str) -> Result<Vec3, String> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|p| p.trim().parse::<f64>().map_err(|_| format!("{p:?} is not a number")))
+        .collect::<Result<_, _>>()?;
+    match v.as_slice() {
+        [x, y, z] if v.iter().all(|c| c.is_finite()) => Ok(Vec3::new(*x, *y, *z)),
+        _ => Err(format!("expected three finite numbers x,y,z, got {s:?}")),
+    }
+}
+
+pub fn main() -> ExitCode {
+    let cli = Cli::parse();
+    match run(cli) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("kinepost: {e}");
+            ExitCode::from(2)
+        }
+    }
+}
+
+fn library(cli: &Cli) -> Result<Library, String> {
+    let dir = cli.machines.clone().unwrap_or_else(machines::default_dir);
+    Library::load_dir(&dir).map_err(|e| e.to_string())
+}
+
+fn run(cli: Cli) -> Result<(), String> {
+    let lib = library(&cli)?;
+    match cli.command {
+        Command::Machines { json } => {
+            for p in lib.iter() {
+                let m = &p.machine;
+                if json {
+                    let v = json!({"id": m.id, "name": m.name, "kinematics": m.kinematics_kind(),
+                        "controller": m.controller, "units": m.units.as_str()});
+                    println!("{v}");
+                } else {
+                    println!(
+                        "{:<22} {:<14} {:<11} {:<5} {}",
+                        m.id,
+                        m.kinematics_kind(),
+                        m.controller,
+                        m.units.as_str(),
+                        m.name
+                    );
+                }
+            }
+            Ok(())
+        }
+        Command::Fk { machine, setup, words } => {
+            let p = lib.get(&machine).map_err(|e| e.to_string())?;
+            let m = &p.machine;
+            let setup = setup.setup(m)?;
+            let joints = parse_words(m, &words)?;
+            let pose = kinematics::fk(m, &joints, &setup);
+            println!("{}", json!({"tip": pose.tip.as_slice(), "axis": pose.axis.as_slice()}));
+            Ok(())
+        }
+        Command::Ik {
+            machine,
+            setup,
+            units,
+            pose,
+        } => {
+            let p = lib.get(&machine).map_err(|e| e.to_string())?;
+            let m = &p.machine;
+            let setup = setup.setup(m)?;
+            let f = match units.as_deref() {
+                None => 1.0,
+                Some("mm") => Units::Mm.factor_to(m.units),
+                Some("inch") => Units::Inch.factor_to(m.units),
+                Some(o) => return Err(format!("--units {o:?}: expected mm or inch")),
+            };
+            let pose = Pose {
+                tip: Vec3::new(pose[0], pose[1], pose[2]) * f,
+                axis: Vec3::new(pose[3], pose[4], pose[5]),
+            };
+            let sols = kinematics::ik(m, &pose, &setup, &IkOptions::default())
+                .map_err(|e| format!("{machine}: pose unreachable: {e}"))?;
+            let list: Vec<Value> = sols.iter().map(|s| solution_json(m, s)).collect();
+            println!("{}", json!({ "solutions": list }));
+            Ok(())
+        }
+    }
+}
+
+/// One solution as the CLI and the API show it: axis words, branch, flags. Rotary words are those
+/// of the actual angle in (−180°, 180°]; they are never wrapped themselves, because angle-error
+/// compensation is not periodic (a word of 183.26° may be the one that stands at 179.41°).
+pub fn solution_json(m: &kinematics::Machine, s: &kinematics::Solution) -> Value {
+    let mut o = Map::new();
+    for (i, l) in m.linears.iter().enumerate() {
+        if l.is_some() {
+            o.insert(kinematics::LINEAR_NAMES[i].to_string(), json!(s.joints.linear[i]));
+        }
+    }
+    for (i, r) in m.rotaries.iter().enumerate() {
+        o.insert(r.name.to_string(), json!(s.joints.rotary[i].to_degrees()));
+    }
+    o.insert("branch".into(), json!(s.branch));
+    if m.rotaries.len() == 3 {
+        o.insert("root".into(), json!(s.root));
+    }
+    o.insert("within_limits".into(), json!(kinematics::reachable_within_limits(m, s)));
+    o.insert("singular".into(), json!(s.singular.is_some()));
+    if let Some(ri) = s.singular {
+        o.insert("free_axis".into(), json!(m.rotaries[ri].name.to_string()));
+    }
+    Value::Object(o)
+}
+
+fn parse_words(m: &kinematics::Machine, words: &[String]) -> Result<Joints, String> {
+    let mut j = Joints::default();
+    for w in words {
+        let (name, val) = w
+            .split_once('=')
+            .ok_or_else(|| format!("{w:?}: expected AXIS=value, e.g. B=30"))?;
+        let v: f64 = val.trim().parse().map_err(|_| format!("{w:?}: {val:?} is not a number"))?;
+        if !v.is_finite() {
+            return Err(format!("{w:?}: value must be finite"));
+        }
+        let name = name.trim().to_ascii_uppercase();
+        match name.as_str() {
+            "X" | "Y" | "Z" => {
+                let i = (name.as_bytes()[0] - b'X') as usize;
+                if m.linears[i].is_none() {
+                    return Err(format!("{}: this machine has no {name} axis", m.id));
+                }
+                j.linear[i] = v;
+            }
+            _ => {
+                let c = name.chars().next().filter(|_| name.len() == 1);
+                let i = c
+                    .and_then(|c| m.rotary_index(c))
+                    .ok_or_else(|| format!("{}: no axis {name:?} (axes: {:?})", m.id, m.axis_names()))?;
+                j.rotary[i] = v.to_radians();
+            }
+        }
+    }
+    Ok(j)
+}

@@ -1,0 +1,76 @@
+//! Forward kinematics, written as literally as `docs/machine-model.md` states it, so that it can
+//! serve as the independent replay of every block IK produced (self-verification).
+
+use super::model::{Machine, Mount};
+use super::{Joints, Pose, Setup, Vec3};
+
+/// Rodrigues: rotate `v` by the angle whose cosine and sine are `c`, `s` about unit `k`.
+#[inline]
+pub(crate) fn rotate(k: &Vec3, c: f64, s: f64, v: &Vec3) -> Vec3 {
+    v * c + k.cross(v) * s + k * (k.dot(v) * (1.0 - c))
+}
+
+/// The tool pose in the workpiece frame for commanded joints (NC words, radians).
+pub fn fk(m: &Machine, joints: &Joints, setup: &Setup) -> Pose {
+    fk_actual(m, &joints.linear, &m.actual_angles(&joints.rotary), setup)
+}
+
+/// As [`fk`], for actual rotary angles (angle error already applied).
+pub fn fk_actual(m: &Machine, linear: &[f64; 3], actual: &[f64; 3], setup: &Setup) -> Pose {
+    let (offset, mut axis) = head_offset(m, actual, setup.tool_length);
+    let xyz = Vec3::new(
+        if m.linears[0].is_some() { linear[0] } else { 0.0 },
+        if m.linears[1].is_some() { linear[1] } else { 0.0 },
+        if m.linears[2].is_some() { linear[2] } else { 0.0 },
+    );
+    let mut p = xyz + offset;
+    // tip_W = G_tk(-φk) ∘ … ∘ G_t1(-φ1)(tip_M) − work_offset: undo t1 first.
+    for (r, &phi) in m.rotaries.iter().zip(actual) {
+        if r.mount == Mount::Table {
+            let (s, c) = (-phi).sin_cos();
+            p = r.pivot + rotate(&r.axis, c, s, &(p - r.pivot));
+            axis = rotate(&r.axis, c, s, &axis);
+        }
+    }
+    Pose {
+        tip: p - setup.work_offset,
+        axis,
+    }
+}
+
+/// Tip relative to the controlled point, and the tool axis, both in M, for actual head angles:
+/// `G_h1(θ1) ∘ … ∘ G_hm(θm)(0)` with head pivots shifted by the tool length.
+#[inline]
+pub(crate) fn head_offset(m: &Machine, actual: &[f64; 3], tool_length: f64) -> (Vec3, Vec3) {
+    let mut v = Vec3::zeros();
+    let mut a = Vec3::z();
+    for (r, &th) in m.rotaries.iter().zip(actual).rev() {
+        if r.mount == Mount::Head {
+            let q = r.pivot + Vec3::new(0.0, 0.0, tool_length);
+            let (s, c) = th.sin_cos();
+            v = q + rotate(&r.axis, c, s, &(v - q));
+            a = rotate(&r.axis, c, s, &a);
+        }
+    }
+    (v, a)
+}
+
+/// `T(φ)(P) = G_t1(φ1) ∘ … ∘ G_tk(φk)(P)`: where a point of W (work offset included) sits in M.
+#[inline]
+pub(crate) fn table_to_machine(m: &Machine, actual: &[f64; 3], p: Vec3) -> Vec3 {
+    let mut p = p;
+    for (r, &phi) in m.rotaries.iter().zip(actual).rev() {
+        if r.mount == Mount::Table {
+            let (s, c) = phi.sin_cos();
+            p = r.pivot + rotate(&r.axis, c, s, &(p - r.pivot));
+        }
+    }
+    p
+}
+
+/// The controlled point `(X, Y, Z)` that puts the tip at `tip_w` for the given actual angles.
+#[inline]
+pub fn controlled_point(m: &Machine, actual: &[f64; 3], tip_w: &Vec3, setup: &Setup) -> Vec3 {
+    let (off, _) = head_offset(m, actual, setup.tool_length);
+    table_to_machine(m, actual, tip_w + setup.work_offset) - off
+}

@@ -1,0 +1,124 @@
+//! Machine model, forward and inverse kinematics of `docs/machine-model.md`.
+//!
+//! Pure: no IO, no async, no serde, no HTTP. Radians and profile units inside; degrees appear only
+//! at the edges (profile loading, NC words, CLI and JSON output). Free functions take the machine,
+//! the pose and the setup explicitly, so nothing here holds state between calls.
+
+mod angle_error;
+mod fk;
+mod model;
+mod solver;
+mod subproblem;
+
+pub use angle_error::AngleError;
+pub use fk::{controlled_point, fk, fk_actual};
+pub use model::{LINEAR_NAMES, Linear, Machine, MachineSpec, Mount, Rotary, Units};
+pub use solver::{IkOptions, Solution, Solutions, ik};
+
+pub type Vec3 = nalgebra::Vector3<f64>;
+
+/// Joint values: the NC words. Linears X, Y, Z in profile units (0 where the machine lacks one);
+/// rotaries in chain order, radians, before angle-error compensation (what the NC word says).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Joints {
+    pub linear: [f64; 3],
+    pub rotary: [f64; 3],
+}
+
+/// A tool pose in the workpiece frame W: tip point and unit tool axis (tip toward spindle).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Pose {
+    pub tip: Vec3,
+    pub axis: Vec3,
+}
+
+/// What a job adds to a profile: tool length (gauge line to tip) and work offset (origin of W in
+/// M at home), both in profile units.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Setup {
+    pub tool_length: f64,
+    pub work_offset: Vec3,
+}
+
+impl Setup {
+    pub fn new(tool_length: f64, work_offset: Vec3) -> Setup {
+        Setup {
+            tool_length,
+            work_offset,
+        }
+    }
+}
+
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum Error {
+    /// A profile value is wrong; `key` names it (`rotary[1] (C).axis`).
+    #[error("{key}: {problem}")]
+    Profile { key: String, problem: String },
+    #[error("invalid pose: {problem}")]
+    InvalidPose { problem: String },
+    /// The tool orientation lies outside what the machine's rotaries can reach.
+    #[error("orientation unreachable: misses the reachable set by {:.6}°", .miss.to_degrees())]
+    Unreachable { miss: f64 },
+    /// The orientation is reachable but no rotary position also places the tip.
+    #[error("no solution: {reason}")]
+    NoSolution { reason: String },
+}
+
+/// One axis outside its travel.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LimitViolation {
+    pub axis: char,
+    /// Profile units, or degrees for rotaries (this is an edge type: it names what an operator reads).
+    pub value: f64,
+    pub min: f64,
+    pub max: f64,
+}
+
+/// The first axis of `joints` outside its travel (rotaries compared as given, no windings).
+pub fn limit_violation(m: &Machine, joints: &Joints, eps: f64) -> Option<LimitViolation> {
+    for (i, l) in m.linears.iter().enumerate() {
+        if let Some(l) = l {
+            let v = joints.linear[i];
+            if !(v >= l.min - eps && v <= l.max + eps) {
+                return Some(LimitViolation {
+                    axis: LINEAR_NAMES[i],
+                    value: v,
+                    min: l.min,
+                    max: l.max,
+                });
+            }
+        }
+    }
+    for (i, r) in m.rotaries.iter().enumerate() {
+        if let Some((lo, hi)) = r.limits {
+            let v = joints.rotary[i];
+            if !r.within(v, 1e-9) {
+                return Some(LimitViolation {
+                    axis: r.name,
+                    value: v.to_degrees(),
+                    min: lo.to_degrees(),
+                    max: hi.to_degrees(),
+                });
+            }
+        }
+    }
+    None
+}
+
+/// Whether some winding of every rotary, with these linears, lies within travel.
+pub fn reachable_within_limits(m: &Machine, sol: &Solution) -> bool {
+    let lin_ok = m.linears.iter().enumerate().all(|(i, l)| match l {
+        Some(l) => sol.joints.linear[i] >= l.min - 1e-9 && sol.joints.linear[i] <= l.max + 1e-9,
+        None => true,
+    });
+    lin_ok
+        && m.rotaries
+            .iter()
+            .enumerate()
+            .all(|(i, r)| !r.windings(sol.actual[i], sol.actual[i]).is_empty())
+}
+
+/// Angle in radians between two vectors (robust near 0 and π).
+pub fn angle_between(a: &Vec3, b: &Vec3) -> f64 {
+    a.cross(b).norm().atan2(a.dot(b))
+}

@@ -1,0 +1,287 @@
+//! The machine model of `docs/machine-model.md` as validated Rust values.
+//!
+//! Built once per profile; everything the solver can precompute is precomputed here, so the
+//! per-pose path (FK, IK) does no allocation and no validation.
+
+use super::angle_error::AngleError;
+use super::solver::Solver;
+use super::{Error, Vec3};
+use arrayvec::ArrayVec;
+
+/// Length units of a profile. Every length of a profile, and its NC output, is in these units.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Units {
+    Mm,
+    Inch,
+}
+
+impl Units {
+    pub fn mm_per_unit(self) -> f64 {
+        match self {
+            Units::Mm => 1.0,
+            Units::Inch => 25.4,
+        }
+    }
+
+    /// Factor that converts a length in `self` into `to`. Explicit, so that no caller guesses.
+    pub fn factor_to(self, to: Units) -> f64 {
+        self.mm_per_unit() / to.mm_per_unit()
+    }
+
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Units::Mm => "mm",
+            Units::Inch => "inch",
+        }
+    }
+}
+
+/// Which body a rotary turns.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Mount {
+    /// Turns the workpiece (the frame W turns with it).
+    Table,
+    /// Turns the spindle.
+    Head,
+}
+
+/// One of X, Y, Z: it translates the head along M's x, y or z. Limits in profile units.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Linear {
+    pub min: f64,
+    pub max: f64,
+    /// Units per minute.
+    pub max_feed: Option<f64>,
+}
+
+/// A rotary joint: turns its body by +angle about `axis` through `pivot` (right-hand rule).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Rotary {
+    /// The NC word: 'A', 'B' or 'C'.
+    pub name: char,
+    pub mount: Mount,
+    /// Unit vector.
+    pub axis: Vec3,
+    /// Table: a point in M. Head: relative to the gauge point at home.
+    pub pivot: Vec3,
+    /// Commanded-word travel in radians; `None` for an unbounded axis.
+    pub limits: Option<(f64, f64)>,
+    /// Radians per minute.
+    pub max_feed: Option<f64>,
+    pub angle_error: Option<AngleError>,
+}
+
+impl Rotary {
+    /// The angle the axis really stands at when the NC word commands `word` (radians).
+    #[inline]
+    pub fn actual(&self, word: f64) -> f64 {
+        match &self.angle_error {
+            Some(e) => word + e.delta(word),
+            None => word,
+        }
+    }
+
+    /// The NC word that makes the axis stand at `actual` (inverse of [`Rotary::actual`]).
+    #[inline]
+    pub fn word(&self, actual: f64) -> f64 {
+        match &self.angle_error {
+            Some(e) => e.word_for(actual),
+            None => actual,
+        }
+    }
+
+    pub fn within(&self, word: f64, eps: f64) -> bool {
+        match self.limits {
+            Some((lo, hi)) => word >= lo - eps && word <= hi + eps,
+            None => true,
+        }
+    }
+
+    /// Every commanded word within travel that makes the axis stand at `actual` modulo a full
+    /// turn, in increasing order. Unbounded axes get the one nearest `near`.
+    pub fn windings(&self, actual: f64, near: f64) -> ArrayVec<f64, 8> {
+        use std::f64::consts::TAU;
+        let mut out = ArrayVec::new();
+        match self.limits {
+            None => {
+                let k = ((near - actual) / TAU).round();
+                out.push(self.word(actual + k * TAU));
+            }
+            Some((lo, hi)) => {
+                // Windings of the actual angle, then mapped to words; angle error is bounded, so a
+                // margin of one extra turn each side is enough to catch every word in range.
+                let k0 = ((lo - actual) / TAU).floor() as i64 - 1;
+                let k1 = ((hi - actual) / TAU).ceil() as i64 + 1;
+                for k in k0..=k1 {
+                    let w = self.word(actual + k as f64 * TAU);
+                    if self.within(w, 1e-9) && !out.is_full() {
+                        out.push(w.clamp(lo, hi));
+                    }
+                }
+            }
+        }
+        out
+    }
+}
+
+/// A validated machine. Construct with [`Machine::new`].
+#[derive(Clone, Debug)]
+pub struct Machine {
+    pub id: String,
+    pub name: String,
+    pub units: Units,
+    /// Default dialect.
+    pub controller: String,
+    pub description: String,
+    /// X, Y, Z; `None` where the machine lacks that linear (its value is then always 0).
+    pub linears: [Option<Linear>; 3],
+    /// In chain order (file order): tables from the bed outward, heads from the ram outward.
+    pub rotaries: ArrayVec<Rotary, 3>,
+    pub default_tool_length: f64,
+    pub(crate) solver: Solver,
+}
+
+/// What a caller supplies to build a [`Machine`]; plain values, no file format attached.
+#[derive(Clone, Debug)]
+pub struct MachineSpec {
+    pub id: String,
+    pub name: String,
+    pub units: Units,
+    pub controller: String,
+    pub description: String,
+    pub linears: [Option<Linear>; 3],
+    pub rotaries: Vec<Rotary>,
+    pub default_tool_length: f64,
+}
+
+pub const LINEAR_NAMES: [char; 3] = ['X', 'Y', 'Z'];
+
+impl Machine {
+    /// Validates the spec and prepares the solver. Errors name the key that is wrong.
+    pub fn new(spec: MachineSpec) -> Result<Machine, Error> {
+        let bad = |key: String, problem: String| Err(Error::Profile { key, problem });
+        if spec.id.is_empty()
+            || !spec
+                .id
+                .bytes()
+                .all(|b| b.is_ascii_lowercase() || b.is_ascii_digit() || b == b'-')
+        {
+            return bad("id".into(), format!("{:?} must match [a-z0-9-]+", spec.id));
+        }
+        for (i, l) in spec.linears.iter().enumerate() {
+            let Some(l) = l else { continue };
+            let key = format!("linear.{}", LINEAR_NAMES[i]);
+            if !l.min.is_finite() || !l.max.is_finite() {
+                return bad(key, "min and max must be finite".into());
+            }
+            if l.min >= l.max {
+                return bad(key, format!("min ({}) must be less than max ({})", l.min, l.max));
+            }
+            if let Some(f) = l.max_feed
+                && !(f.is_finite() && f > 0.0)
+            {
+                return bad(format!("{key}.max_feed"), "must be a positive number".into());
+            }
+        }
+        if spec.rotaries.len() > 3 {
+            return bad("rotary".into(), format!("at most 3 rotaries, found {}", spec.rotaries.len()));
+        }
+        let mut rotaries = ArrayVec::<Rotary, 3>::new();
+        for (i, r) in spec.rotaries.into_iter().enumerate() {
+            let key = format!("rotary[{i}] ({})", r.name);
+            if !matches!(r.name, 'A' | 'B' | 'C') {
+                return bad(format!("rotary[{i}].name"), format!("{:?} must be A, B or C", r.name));
+            }
+            if rotaries.iter().any(|o| o.name == r.name) {
+                return bad(format!("rotary[{i}].name"), format!("duplicate rotary name {}", r.name));
+            }
+            let n = r.axis.norm();
+            if !n.is_finite() || n < 1e-9 {
+                return bad(format!("{key}.axis"), "must be a finite, non-zero vector".into());
+            }
+            if !r.pivot.iter().all(|v| v.is_finite()) {
+                return bad(format!("{key}.pivot"), "must be finite".into());
+            }
+            if let Some((lo, hi)) = r.limits {
+                if !lo.is_finite() || !hi.is_finite() {
+                    return bad(format!("{key}.min/max"), "must be finite".into());
+                }
+                if lo >= hi {
+                    return bad(
+                        format!("{key}.min/max"),
+                        format!("min ({}) must be less than max ({})", lo.to_degrees(), hi.to_degrees()),
+                    );
+                }
+            }
+            if let Some(f) = r.max_feed
+                && !(f.is_finite() && f > 0.0)
+            {
+                return bad(format!("{key}.max_feed"), "must be a positive number".into());
+            }
+            if let Some(e) = &r.angle_error {
+                e.validate().map_err(|p| Error::Profile {
+                    key: format!("{key}.angle_error"),
+                    problem: p,
+                })?;
+            }
+            rotaries.push(Rotary { axis: r.axis / n, ..r });
+        }
+        if !(spec.default_tool_length.is_finite() && spec.default_tool_length >= 0.0) {
+            return bad("tool.default_length".into(), "must be a finite, non-negative length".into());
+        }
+        let solver = Solver::new(&spec.linears, &rotaries).map_err(|problem| Error::Profile {
+            key: "rotary".into(),
+            problem,
+        })?;
+        Ok(Machine {
+            id: spec.id,
+            name: spec.name,
+            units: spec.units,
+            controller: spec.controller,
+            description: spec.description,
+            linears: spec.linears,
+            rotaries,
+            default_tool_length: spec.default_tool_length,
+            solver,
+        })
+    }
+
+    /// Actual rotary angles for commanded words (angle-error compensation applied).
+    #[inline]
+    pub fn actual_angles(&self, words: &[f64; 3]) -> [f64; 3] {
+        let mut a = [0.0; 3];
+        for (i, r) in self.rotaries.iter().enumerate() {
+            a[i] = r.actual(words[i]);
+        }
+        a
+    }
+
+    pub fn rotary_index(&self, name: char) -> Option<usize> {
+        self.rotaries.iter().position(|r| r.name == name)
+    }
+
+    /// "table-table", "head-head", "head-table", "3-axis", … for listings.
+    pub fn kinematics_kind(&self) -> String {
+        let tables = self.rotaries.iter().filter(|r| r.mount == Mount::Table).count();
+        let heads = self.rotaries.len() - tables;
+        let lin = self.linears.iter().filter(|l| l.is_some()).count();
+        match (tables, heads) {
+            (0, 0) => "3-axis".into(),
+            (1, 0) | (0, 1) => "4-axis".into(),
+            (2, 0) => "table-table".into(),
+            (0, 2) => "head-head".into(),
+            (1, 1) => "head-table".into(),
+            _ => format!("{}-rotary/{lin}-linear", tables + heads),
+        }
+    }
+
+    /// Names of the axes in NC word order (linears X Y Z present, then rotaries in chain order).
+    pub fn axis_names(&self) -> Vec<char> {
+        let mut v: Vec<char> = (0..3)
+            .filter(|&i| self.linears[i].is_some())
+            .map(|i| LINEAR_NAMES[i])
+            .collect();
+        v.extend(self.rotaries.iter().map(|r| r.name));
+        v
+    }
+}

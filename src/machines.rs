@@ -1,0 +1,261 @@
+//! Machine profiles: TOML files (`machines/<id>.toml`) → validated [`Machine`]s.
+//!
+//! The file format lives here, not in `kinematics`, which knows no serde. Every error names the
+//! file, the key and the problem, so a shop editing a profile knows what to fix.
+
+use crate::kinematics::{self, AngleError, Linear, Machine, MachineSpec, Mount, Rotary, Units, Vec3};
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    #[error("{file}: {message}")]
+    Parse { file: String, message: String },
+    #[error("{file}: {key}: {problem}")]
+    Invalid { file: String, key: String, problem: String },
+    #[error("{path}: {source}")]
+    Io { path: String, source: std::io::Error },
+    #[error("no machine profile {0:?}")]
+    NotFound(String),
+}
+
+/// The TOML document of one profile, exactly as `machine-model.md` shows it.
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct ProfileDoc {
+    pub id: String,
+    #[serde(default)]
+    pub name: Option<String>,
+    pub units: String,
+    #[serde(default)]
+    pub controller: Option<String>,
+    #[serde(default)]
+    pub description: Option<String>,
+    #[serde(default)]
+    pub linear: Vec<LinearDoc>,
+    #[serde(default)]
+    pub rotary: Vec<RotaryDoc>,
+    #[serde(default)]
+    pub tool: Option<ToolDoc>,
+}
+
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct LinearDoc {
+    pub name: String,
+    pub min: f64,
+    pub max: f64,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_feed: Option<f64>,
+}
+
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct RotaryDoc {
+    pub name: String,
+    pub on: String,
+    pub axis: [f64; 3],
+    pub pivot: [f64; 3],
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub min: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_feed: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub angle_error: Option<AngleErrorDoc>,
+}
+
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct AngleErrorDoc {
+    pub coefficients: Vec<f64>,
+    pub range: [f64; 2],
+}
+
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct ToolDoc {
+    #[serde(default)]
+    pub default_length: Option<f64>,
+}
+
+/// A loaded profile: the validated machine plus the document it came from (for listings/API).
+#[derive(Clone, Debug)]
+pub struct Profile {
+    pub machine: Machine,
+    pub doc: ProfileDoc,
+}
+
+/// Parses and validates one profile. `stem` is the file stem the id must equal, if any.
+pub fn parse_profile(text: &str, file: &str, stem: Option<&str>) -> Result<Profile, Error> {
+    let doc: ProfileDoc = toml::from_str(text).map_err(|e| Error::Parse {
+        file: file.into(),
+        message: one_line(&e),
+    })?;
+    let invalid = |key: &str, problem: String| Error::Invalid {
+        file: file.into(),
+        key: key.into(),
+        problem,
+    };
+    if let Some(stem) = stem
+        && doc.id != stem
+    {
+        return Err(invalid("id", format!("{:?} differs from the file name {:?}", doc.id, stem)));
+    }
+    let units = match doc.units.as_str() {
+        "mm" => Units::Mm,
+        "inch" => Units::Inch,
+        other => return Err(invalid("units", format!("{other:?} must be \"mm\" or \"inch\""))),
+    };
+    let mut linears: [Option<Linear>; 3] = [None, None, None];
+    for (i, l) in doc.linear.iter().enumerate() {
+        let idx = match l.name.as_str() {
+            "X" => 0,
+            "Y" => 1,
+            "Z" => 2,
+            other => return Err(invalid(&format!("linear[{i}].name"), format!("{other:?} must be X, Y or Z"))),
+        };
+        if linears[idx].is_some() {
+            return Err(invalid(
+                &format!("linear[{i}].name"),
+                format!("duplicate linear axis {}", l.name),
+            ));
+        }
+        linears[idx] = Some(Linear {
+            min: l.min,
+            max: l.max,
+            max_feed: l.max_feed,
+        });
+    }
+    let mut rotaries = Vec::new();
+    for (i, r) in doc.rotary.iter().enumerate() {
+        let key = |k: &str| format!("rotary[{i}].{k}");
+        let mut chars = r.name.chars();
+        let name = match (chars.next(), chars.next()) {
+            (Some(c @ ('A' | 'B' | 'C')), None) => c,
+            _ => return Err(invalid(&key("name"), format!("{:?} must be A, B or C", r.name))),
+        };
+        let mount = match r.on.as_str() {
+            "table" => Mount::Table,
+            "head" => Mount::Head,
+            other => return Err(invalid(&key("on"), format!("{other:?} must be \"table\" or \"head\""))),
+        };
+        let limits = match (r.min, r.max) {
+            (Some(lo), Some(hi)) => Some((lo.to_radians(), hi.to_radians())),
+            (None, None) => None,
+            _ => {
+                return Err(invalid(
+                    &key("min/max"),
+                    "give both min and max, or neither for an unbounded axis".into(),
+                ));
+            }
+        };
+        rotaries.push(Rotary {
+            name,
+            mount,
+            axis: Vec3::from(r.axis),
+            pivot: Vec3::from(r.pivot),
+            limits,
+            max_feed: r.max_feed.map(f64::to_radians),
+            angle_error: r
+                .angle_error
+                .as_ref()
+                .map(|e| AngleError::new(e.coefficients.clone(), (e.range[0], e.range[1]))),
+        });
+    }
+    let spec = MachineSpec {
+        id: doc.id.clone(),
+        name: doc.name.clone().unwrap_or_else(|| doc.id.clone()),
+        units,
+        controller: doc.controller.clone().unwrap_or_else(|| "fanuc".into()),
+        description: doc.description.clone().unwrap_or_default(),
+        linears,
+        rotaries,
+        // Absent means 0, as in the reference verifier: every shipped profile states it.
+        default_tool_length: doc.tool.as_ref().and_then(|t| t.default_length).unwrap_or(0.0),
+    };
+    let machine = Machine::new(spec).map_err(|e| match e {
+        kinematics::Error::Profile { key, problem } => invalid(&key, problem),
+        other => invalid("", other.to_string()),
+    })?;
+    Ok(Profile { machine, doc })
+}
+
+fn one_line(e: &toml::de::Error) -> String {
+    e.to_string().split_whitespace().collect::<Vec<_>>().join(" ")
+}
+
+/// Reads one profile file; its id must equal the file stem.
+pub fn load_file(path: &Path) -> Result<Profile, Error> {
+    let file = path.display().to_string();
+    let text = std::fs::read_to_string(path).map_err(|source| Error::Io {
+        path: file.clone(),
+        source,
+    })?;
+    let stem = path.file_stem().and_then(|s| s.to_str()).unwrap_or_default();
+    parse_profile(&text, &file, Some(stem))
+}
+
+/// The machine library: every `*.toml` of a directory, by id.
+#[derive(Clone, Debug, Default)]
+pub struct Library {
+    profiles: BTreeMap<String, Arc<Profile>>,
+    pub dir: PathBuf,
+}
+
+impl Library {
+    /// Loads every profile; the first bad one fails the whole load (a server must not start with
+    /// a library the operator believes complete).
+    pub fn load_dir(dir: &Path) -> Result<Library, Error> {
+        let rd = std::fs::read_dir(dir).map_err(|source| Error::Io {
+            path: dir.display().to_string(),
+            source,
+        })?;
+        let mut paths: Vec<PathBuf> = rd
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| p.extension().is_some_and(|x| x == "toml"))
+            .collect();
+        paths.sort();
+        let mut profiles = BTreeMap::new();
+        for p in paths {
+            let prof = load_file(&p)?;
+            profiles.insert(prof.machine.id.clone(), Arc::new(prof));
+        }
+        Ok(Library {
+            profiles,
+            dir: dir.to_path_buf(),
+        })
+    }
+
+    pub fn get(&self, id: &str) -> Result<Arc<Profile>, Error> {
+        self.profiles.get(id).cloned().ok_or_else(|| Error::NotFound(id.into()))
+    }
+
+    pub fn iter(&self) -> impl Iterator<Item = &Arc<Profile>> {
+        self.profiles.values()
+    }
+
+    pub fn len(&self) -> usize {
+        self.profiles.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.profiles.is_empty()
+    }
+}
+
+/// Where the shipped profiles live: `$KINEPOST_MACHINES`, else `machines/` in the working
+/// directory, else the one beside the crate (for tests and `cargo run` from anywhere).
+pub fn default_dir() -> PathBuf {
+    if let Ok(d) = std::env::var("KINEPOST_MACHINES") {
+        return PathBuf::from(d);
+    }
+    let cwd = PathBuf::from("machines");
+    if cwd.is_dir() {
+        return cwd;
+    }
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("machines")
+}

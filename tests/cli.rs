@@ -1,0 +1,160 @@
+//! The command line as a user runs it: real process, real output.
+
+use serde_json::Value;
+use std::process::Command;
+
+fn kinepost(args: &[&str]) -> (i32, String, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_kinepost"))
+        .args(args)
+        .env("KINEPOST_MACHINES", concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))
+        .output()
+        .unwrap();
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8(out.stdout).unwrap(),
+        String::from_utf8(out.stderr).unwrap(),
+    )
+}
+
+fn json(s: &str) -> Value {
+    serde_json::from_str(s).unwrap_or_else(|e| panic!("{e}: {s}"))
+}
+
+#[test]
+fn machines_lists_every_profile_with_its_facts() {
+    let (code, out, _) = kinepost(&["machines", "--json"]);
+    assert_eq!(code, 0);
+    let rows: Vec<Value> = out.lines().map(json).collect();
+    assert_eq!(rows.len(), 10);
+    let haas = rows.iter().find(|r| r["id"] == "haas-umc750").unwrap();
+    assert_eq!(haas["kinematics"], "table-table");
+    assert_eq!(haas["controller"], "haas");
+    assert_eq!(haas["units"], "inch");
+    let (code, table, _) = kinepost(&["machines"]);
+    assert_eq!(code, 0);
+    assert!(table.contains("propeller-3r2l") && table.contains("3-rotary/2-linear"));
+}
+
+#[test]
+fn fk_then_ik_round_trips_through_the_cli_with_negative_options() {
+    let (code, out, err) = kinepost(&[
+        "fk",
+        "--machine",
+        "htm50200-horizontal",
+        "--tool-length",
+        "120",
+        "--work-offset",
+        "-1500,-1600,-400",
+        "X=-900",
+        "Y=-1000",
+        "Z=-500",
+        "A=230",
+        "B=5",
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let pose = json(&out);
+    let nums: Vec<String> = pose["tip"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .chain(pose["axis"].as_array().unwrap())
+        .map(|v| v.to_string())
+        .collect();
+    let mut args = vec![
+        "ik",
+        "--machine",
+        "htm50200-horizontal",
+        "--tool-length",
+        "120",
+        "--work-offset",
+        "-1500,-1600,-400",
+        "--",
+    ];
+    args.extend(nums.iter().map(|s| s.as_str()));
+    let (code, out, err) = kinepost(&args);
+    assert_eq!(code, 0, "{err}");
+    let sols = json(&out)["solutions"].as_array().unwrap().clone();
+    assert_eq!(sols.len(), 2);
+    // Every solution printed, in limits or not, must reproduce the pose through `fk`: the words
+    // are never wrapped (angle error is not periodic: the out-of-limits branch needs B > 180°).
+    for s in &sols {
+        let words: Vec<String> = ["X", "Y", "Z", "A", "B"].iter().map(|k| format!("{k}={}", s[k])).collect();
+        let mut a = vec![
+            "fk",
+            "--machine",
+            "htm50200-horizontal",
+            "--tool-length",
+            "120",
+            "--work-offset",
+            "-1500,-1600,-400",
+        ];
+        a.extend(words.iter().map(|s| s.as_str()));
+        let (code, back, err) = kinepost(&a);
+        assert_eq!(code, 0, "{err}");
+        let back = json(&back);
+        for k in 0..3 {
+            let d = back["tip"][k].as_f64().unwrap() - pose["tip"][k].as_f64().unwrap();
+            assert!(d.abs() < 1e-8, "{s}: tip {k} off by {d}");
+        }
+    }
+    let inside = sols.iter().find(|s| s["within_limits"] == true).unwrap();
+    assert!(
+        (inside["A"].as_f64().unwrap() - -130.0).abs() < 1e-9,
+        "A 230° is -130° in (-180, 180]: {inside}"
+    );
+    assert!((inside["B"].as_f64().unwrap() - 5.0).abs() < 1e-9);
+}
+
+#[test]
+fn ik_reports_singular_and_unreachable_poses() {
+    let (code, out, _) = kinepost(&["ik", "--machine", "spinner-u5-620", "10", "20", "30", "0", "0", "1"]);
+    assert_eq!(code, 0);
+    let s = &json(&out)["solutions"][0];
+    assert_eq!(s["singular"], true);
+    assert_eq!(s["free_axis"], "C");
+    let (code, _, err) = kinepost(&["ik", "--machine", "vmc-3axis", "0", "0", "0", "0", "0.5", "0.866"]);
+    assert_ne!(code, 0);
+    assert!(err.contains("unreachable") && err.contains("30.0"), "{err}");
+}
+
+#[test]
+fn ik_converts_explicit_units() {
+    // 25.4 mm on an inch machine is 1 inch.
+    let (_, a, _) = kinepost(&[
+        "ik",
+        "--machine",
+        "haas-umc750",
+        "--units",
+        "mm",
+        "25.4",
+        "0",
+        "0",
+        "0",
+        "0",
+        "1",
+    ]);
+    let (_, b, _) = kinepost(&["ik", "--machine", "haas-umc750", "1", "0", "0", "0", "0", "1"]);
+    assert_eq!(json(&a), json(&b));
+}
+
+#[test]
+fn bad_arguments_are_clear_errors() {
+    for (args, want) in [
+        (vec!["fk", "--machine", "nope", "X=1"], "no machine profile"),
+        (vec!["fk", "--machine", "propeller-3r2l", "X=1"], "no X axis"),
+        (vec!["fk", "--machine", "spinner-u5-620", "Q=1"], "no axis"),
+        (vec!["fk", "--machine", "spinner-u5-620", "B=abc"], "not a number"),
+        (
+            vec!["fk", "--machine", "spinner-u5-620", "--work-offset", "1,2", "B=1"],
+            "three finite numbers",
+        ),
+        (
+            vec!["ik", "--machine", "spinner-u5-620", "1", "2", "3", "0", "0", "0"],
+            "axis non-zero",
+        ),
+    ] {
+        let (code, _, err) = kinepost(&args);
+        assert_ne!(code, 0, "{args:?}");
+        assert!(err.contains(want), "{args:?}: {err}");
+    }
+}
