@@ -2,7 +2,7 @@
 //! nutating (non-orthogonal) and the 3-rotary/2-linear machine. `cargo bench --bench ik`.
 
 use criterion::{Criterion, criterion_group, criterion_main};
-use kinepost::kinematics::{IkOptions, Joints, Pose, Setup, Vec3, fk, ik};
+use kinepost::kinematics::{IkOptions, Joints, Pose, Setup, Solutions, Vec3, fk, ik_into};
 use kinepost::machines::Library;
 use std::hint::black_box;
 
@@ -48,10 +48,12 @@ fn bench(c: &mut Criterion) {
         let ps = poses(&m, &setup, 1024);
         let opt = IkOptions::default();
         let mut i = 0;
+        let mut out = Solutions::new();
         g.bench_function(id, |b| {
             b.iter(|| {
                 i = (i + 1) & 1023;
-                black_box(ik(&m, black_box(&ps[i]), &setup, &opt).map(|s| s.len()).unwrap_or(0))
+                let _ = ik_into(&m, black_box(&ps[i]), &setup, &opt, &mut out);
+                black_box(out.len())
             })
         });
     }

@@ -16,6 +16,18 @@ pub(crate) struct Solver {
     /// Rotary index (chain order) of each element of the orientation sequence.
     seq: ArrayVec<usize, 3>,
     shape: Shape,
+    /// The rotaries in chain order, compact: what placing the linears reads per solution.
+    links: ArrayVec<Link, 3>,
+    has_linear: [bool; 3],
+}
+
+#[derive(Clone, Copy, Debug)]
+struct Link {
+    axis: [f64; 3],
+    pivot: [f64; 3],
+    head: bool,
+    /// Has angle-error compensation (words differ from actual angles).
+    compensated: bool,
 }
 
 #[derive(Clone, Debug)]
@@ -90,7 +102,21 @@ impl Solver {
                 ));
             }
         };
-        Ok(Solver { seq, shape })
+        let links = rotaries
+            .iter()
+            .map(|r| Link {
+                axis: r.axis.into(),
+                pivot: r.pivot.into(),
+                head: r.mount == Mount::Head,
+                compensated: r.angle_error.is_some(),
+            })
+            .collect();
+        Ok(Solver {
+            seq,
+            shape,
+            links,
+            has_linear: [linears[0].is_some(), linears[1].is_some(), linears[2].is_some()],
+        })
     }
 }
 
@@ -137,15 +163,28 @@ impl Default for IkOptions {
 
 /// Every joint solution of `pose` (in W, profile units), unfiltered by limits.
 pub fn ik(m: &Machine, pose: &Pose, setup: &Setup, opt: &IkOptions) -> Result<Solutions, Error> {
-    let n = pose.axis.norm();
-    if !(n.is_finite() && n > 1e-12 && pose.tip.iter().all(|v| v.is_finite())) {
+    let mut out = Solutions::new();
+    ik_into(m, pose, setup, opt, &mut out)?;
+    Ok(out)
+}
+
+/// As [`ik`], into a caller's buffer (cleared first): the hot path of the planner, which reuses
+/// one buffer rather than moving a solution set per pose.
+pub fn ik_into(m: &Machine, pose: &Pose, setup: &Setup, opt: &IkOptions, out: &mut Solutions) -> Result<(), Error> {
+    out.clear();
+    let n2 = pose.axis.norm_squared();
+    if !(n2.is_finite() && n2 > 1e-24 && pose.tip.iter().all(|v| v.is_finite())) {
         return Err(Error::InvalidPose {
             problem: "tip and axis must be finite and the axis non-zero".into(),
         });
     }
-    let u = pose.axis / n;
-    let free = Cs::of(opt.free_angle);
-    let mut out = Solutions::new();
+    // CL readers hand over unit axes; normalise only what is not unit to rounding.
+    let u = if (n2 - 1.0).abs() <= 4.0 * f64::EPSILON {
+        pose.axis
+    } else {
+        pose.axis * (1.0 / n2.sqrt())
+    };
+    let free = FreeAngle(opt.free_angle);
     let sv = &m.solver;
     match &sv.shape {
         Shape::Fixed => {
@@ -153,7 +192,7 @@ pub fn ik(m: &Machine, pose: &Pose, setup: &Setup, opt: &IkOptions) -> Result<So
             if miss > opt.orientation_tolerance {
                 return Err(Error::Unreachable { miss });
             }
-            push(m, &mut out, pose, setup, &[], [Cs::ZERO; 3], 0, 0, None);
+            push(m, out, pose, setup, &[], [Cs::ZERO; 3], None, 0, 0, None);
         }
         Shape::One { s } => {
             let cone = s.z.clamp(-1.0, 1.0).acos();
@@ -163,9 +202,9 @@ pub fn ik(m: &Machine, pose: &Pose, setup: &Setup, opt: &IkOptions) -> Result<So
             }
             let (a, sing) = match sp1(s, &Vec3::z(), &u) {
                 Some(a) if (u - s * s.dot(&u)).norm_squared() > 1e-18 && s.cross(&Vec3::z()).norm_squared() > 1e-18 => (a, None),
-                _ => (free, Some((sv.seq[0], opt.free_angle))),
+                _ => (free.cs(), Some((sv.seq[0], opt.free_angle))),
             };
-            push(m, &mut out, pose, setup, &sv.seq, [a, Cs::ZERO, Cs::ZERO], 0, 0, sing);
+            push(m, out, pose, setup, &sv.seq, [a, Cs::ZERO, Cs::ZERO], None, 0, 0, sing);
         }
         Shape::Two(pair) => {
             let meet = pair.meet(&u);
@@ -175,21 +214,46 @@ pub fn ik(m: &Machine, pose: &Pose, setup: &Setup, opt: &IkOptions) -> Result<So
                     return Err(Error::Unreachable { miss });
                 }
             }
-            let signs: &[i8] = if meet.reach > 0.0 && !meet.on_axis { &[1, -1] } else { &[0] };
-            for &sg in signs {
-                let (a1, a2, sing) = pair.angles(&u, &meet, sg as f64, free);
+            if meet.reach > 0.0 && !meet.on_axis {
+                for ((a1, t1, a2, t2), sg) in pair.both(&meet).into_iter().zip([1i8, -1]) {
+                    push(
+                        m,
+                        out,
+                        pose,
+                        setup,
+                        &sv.seq,
+                        [a1, a2, Cs::ZERO],
+                        Some([t1, t2, 0.0]),
+                        sg,
+                        0,
+                        None,
+                    );
+                }
+            } else {
+                let (a1, a2, sing) = pair.angles(&u, &meet, 0.0, free);
                 let sing = sing.then_some((sv.seq[0], opt.free_angle));
-                push(m, &mut out, pose, setup, &sv.seq, [a1, a2, Cs::ZERO], sg, 0, sing);
+                push(m, out, pose, setup, &sv.seq, [a1, a2, Cs::ZERO], None, 0, 0, sing);
             }
         }
-        Shape::Three { s0, pair, missing } => three(m, sv, s0, pair, *missing, &u, pose, setup, opt, free, &mut out)?,
+        Shape::Three { s0, pair, missing } => three(m, sv, s0, pair, *missing, &u, pose, setup, opt, free, out)?,
     }
-    Ok(out)
+    Ok(())
+}
+
+/// The caller's free angle, turned into (cos, sin) only at a singular pose.
+#[derive(Clone, Copy)]
+pub(crate) struct FreeAngle(pub f64);
+
+impl FreeAngle {
+    #[inline]
+    pub(crate) fn cs(self) -> Cs {
+        Cs::of(self.0)
+    }
 }
 
 /// Builds a solution from orientation angles (in sequence order) and places the linears.
 #[allow(clippy::too_many_arguments)]
-#[inline]
+#[inline(always)]
 fn push(
     m: &Machine,
     out: &mut Solutions,
@@ -197,6 +261,7 @@ fn push(
     setup: &Setup,
     seq: &[usize],
     cs: [Cs; 3],
+    angles: Option<[f64; 3]>,
     branch: i8,
     root: u8,
     singular: Option<(usize, f64)>,
@@ -205,7 +270,10 @@ fn push(
     let mut actual = [0.0; 3];
     for (k, &ri) in seq.iter().enumerate() {
         rcs[ri] = cs[k];
-        actual[ri] = cs[k].angle();
+        actual[ri] = match angles {
+            Some(a) => a[k],
+            None => cs[k].angle(),
+        };
     }
     let singular = singular.map(|(ri, free)| {
         // The caller's free angle as given: it may carry windings the planner wants to keep.
@@ -215,12 +283,19 @@ fn push(
     let cp = controlled_point_cs(m, &rcs, &(pose.tip + setup.work_offset), setup.tool_length);
     let mut joints = Joints::default();
     for i in 0..3 {
-        joints.linear[i] = if m.linears[i].is_some() { cp[i] } else { 0.0 };
+        joints.linear[i] = if m.solver.has_linear[i] { cp[i] } else { 0.0 };
     }
-    for (i, r) in m.rotaries.iter().enumerate() {
-        joints.rotary[i] = r.word(actual[i]);
+    for (i, l) in m.solver.links.iter().enumerate() {
+        joints.rotary[i] = if l.compensated {
+            m.rotaries[i].word(actual[i])
+        } else {
+            actual[i]
+        };
     }
-    let _ = out.try_push(Solution {
+    if out.is_full() {
+        return;
+    }
+    out.push(Solution {
         joints,
         actual,
         branch,
@@ -229,21 +304,33 @@ fn push(
     });
 }
 
-/// `T(φ)(p) − head offset(θ)` from (cos, sin) pairs: the same composition as `fk`.
+/// `T(φ)(p) − head offset(θ)` from (cos, sin) pairs: the same composition as `fk`, in plain
+/// scalars (the hot path of every solution; nalgebra's generic ops cost 3× the instructions here).
 #[inline]
 fn controlled_point_cs(m: &Machine, cs: &[Cs; 3], p_w: &Vec3, tool_length: f64) -> Vec3 {
-    let mut v = Vec3::zeros();
-    let mut p = *p_w;
-    for (r, a) in m.rotaries.iter().zip(cs).rev() {
-        match r.mount {
-            Mount::Head => {
-                let q = r.pivot + Vec3::new(0.0, 0.0, tool_length);
-                v = q + rotate(&r.axis, a.c, a.s, &(v - q));
-            }
-            Mount::Table => p = r.pivot + rotate(&r.axis, a.c, a.s, &(p - r.pivot)),
+    #[inline(always)]
+    fn turn(k: &[f64; 3], o: &[f64; 3], c: f64, s: f64, p: [f64; 3]) -> [f64; 3] {
+        let v = [p[0] - o[0], p[1] - o[1], p[2] - o[2]];
+        let d = (k[0] * v[0] + k[1] * v[1] + k[2] * v[2]) * (1.0 - c);
+        [
+            o[0] + v[0] * c + (k[1] * v[2] - k[2] * v[1]) * s + k[0] * d,
+            o[1] + v[1] * c + (k[2] * v[0] - k[0] * v[2]) * s + k[1] * d,
+            o[2] + v[2] * c + (k[0] * v[1] - k[1] * v[0]) * s + k[2] * d,
+        ]
+    }
+    let mut v = [0.0; 3];
+    let mut p = [p_w.x, p_w.y, p_w.z];
+    let links = &m.solver.links;
+    for i in (0..links.len()).rev() {
+        let (l, a) = (&links[i], cs[i]);
+        if l.head {
+            let q = [l.pivot[0], l.pivot[1], l.pivot[2] + tool_length];
+            v = turn(&l.axis, &q, a.c, a.s, v);
+        } else {
+            p = turn(&l.axis, &l.pivot, a.c, a.s, p);
         }
     }
-    p - v
+    Vec3::new(p[0] - v[0], p[1] - v[1], p[2] - v[2])
 }
 
 /// Samples of the outer angle for the root search of the 3-rotary chain; intervals where the
@@ -403,7 +490,7 @@ fn three(
     pose: &Pose,
     setup: &Setup,
     opt: &IkOptions,
-    free: Cs,
+    free: FreeAngle,
     out: &mut Solutions,
 ) -> Result<(), Error> {
     let p_w = pose.tip + setup.work_offset;
@@ -483,7 +570,7 @@ fn three(
             continue;
         }
         let sing = sing.then_some((sv.seq[1], opt.free_angle));
-        push(m, out, pose, setup, &sv.seq, [Cs::of(a), a1, a2], branch, count, sing);
+        push(m, out, pose, setup, &sv.seq, [Cs::of(a), a1, a2], None, branch, count, sing);
         if let Some(s) = out.last_mut() {
             polish(m, pose, setup, s);
         }

@@ -2,6 +2,7 @@
 //! can rotate without evaluating trigonometric functions again.
 
 use super::Vec3;
+use super::solver::FreeAngle;
 
 /// Angle pair of a rotation.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -19,9 +20,11 @@ impl Cs {
         Cs { c, s }
     }
 
+    /// musl's atan2 (via the `libm` crate): < 1 ulp like glibc's, but inlinable and without
+    /// glibc's slow correctly-rounded paths; it was 40% of IK time.
     #[inline]
     pub fn angle(self) -> f64 {
-        self.s.atan2(self.c)
+        libm::atan2(self.s, self.c)
     }
 }
 
@@ -52,14 +55,21 @@ pub fn sp1(k: &Vec3, p: &Vec3, q: &Vec3) -> Option<Cs> {
 pub struct Pair {
     pub s1: Vec3,
     pub s2: Vec3,
-    /// cos ω, sin ω of ω = ∠(s1, s2).
+    /// cos ω of ω = ∠(s1, s2).
     cw: f64,
-    sw: f64,
     /// Unit tangent at s1 toward s2, and the normal s1 × s2 / sin ω.
     e: Vec3,
     f: Vec3,
     /// cos θ2 − cos ω, without cancellation.
     k0: f64,
+    /// α2 from c without projections: with z' = z − s2 (s2·z) and w = s2 × z', (cos α2, sin α2) =
+    /// (z'·c, w·c) / |z'|², and c = ct1 s1 + st1 (cos A e + sin A f): six constant products.
+    zs: [f64; 3],
+    ws: [f64; 3],
+    /// Angle about s2 of s1's projection: c− mirrors c+ across the plane (s1, s2), which holds
+    /// s2, so α2− = 2 θm − α2+.
+    theta_m: f64,
+    inv_sw: f64,
     cos_t2: f64,
     t2: f64,
     /// Half-width of the band of `s1·c` over the cone of `s2` (for the miss of an unreachable q).
@@ -72,6 +82,9 @@ pub struct Meet {
     ct1: f64,
     st1: f64,
     cos_a: f64,
+    /// q's components across s1, along e and f (exact: no projection is subtracted).
+    eq: f64,
+    fq: f64,
     /// sin² A: negative where the cones miss each other (q unreachable), 0 on the fold.
     pub reach: f64,
     /// q lies along s1 (θ1 ≈ 0 or π): α1 is free and c = q.
@@ -92,14 +105,24 @@ impl Pair {
         let cos_t2 = t2.cos();
         let k0 = -2.0 * ((t2 + w) / 2.0).sin() * ((t2 - w) / 2.0).sin();
         let band = t2.sin() * sw;
+        let (e, f) = ((s2 - s1 * cw) / sw, n / sw);
+        let zp = Vec3::z() - s2 * s2.z;
+        let z2 = zp.norm_squared();
+        let w = s2.cross(&zp);
+        let zs = [zp.dot(&s1) / z2, zp.dot(&e) / z2, zp.dot(&f) / z2];
+        let ws = [w.dot(&s1) / z2, w.dot(&e) / z2, w.dot(&f) / z2];
+        let theta_m = ws[0].atan2(zs[0]);
         Some(Pair {
             s1,
             s2,
             cw,
-            sw,
-            e: (s2 - s1 * cw) / sw,
-            f: n / sw,
+            e,
+            f,
             k0,
+            zs,
+            ws,
+            theta_m,
+            inv_sw: 1.0 / sw,
             cos_t2,
             t2,
             band,
@@ -108,7 +131,9 @@ impl Pair {
 
     #[inline]
     pub fn meet(&self, q: &Vec3) -> Meet {
-        let st1 = self.s1.cross(q).norm();
+        // (s1, e, f) is orthonormal: q's components across s1 are exact, and so is sin θ1.
+        let (eq, fq) = (self.e.dot(q), self.f.dot(q));
+        let st1 = (eq * eq + fq * fq).sqrt();
         let ct1 = self.s1.dot(q);
         if st1 < 1e-12 {
             // c = q: reachable iff q sits on the cone of s2 (checked by `reach`).
@@ -117,18 +142,23 @@ impl Pair {
                 ct1,
                 st1,
                 cos_a: 1.0,
+                eq: 0.0,
+                fq: 0.0,
                 reach: if d < 1e-12 { 0.0 } else { -d },
                 on_axis: true,
             };
         }
         // 1 − cos θ1 without cancellation.
         let one_minus = if ct1 > 0.0 { st1 * st1 / (1.0 + ct1) } else { 1.0 - ct1 };
-        let cos_a = (self.k0 + self.cw * one_minus) / (st1 * self.sw);
+        let inv = 1.0 / st1;
+        let cos_a = (self.k0 + self.cw * one_minus) * inv * self.inv_sw;
         let reach = (1.0 - cos_a) * (1.0 + cos_a);
         Meet {
             ct1,
             st1,
             cos_a,
+            eq: eq * inv,
+            fq: fq * inv,
             reach,
             on_axis: false,
         }
@@ -144,17 +174,79 @@ impl Pair {
     }
 
     /// Both angles for one branch (`sign` +1 or −1; the fold takes either). Returns (α1, α2) as
-    /// Cs pairs and whether α1 is free (`q` along `s1`), in which case `free` is used for it.
+    /// Cs pairs and whether α1 is free (`q` along `s1`), in which case `free` is used for it (its sine and cosine are taken only then).
     #[inline]
-    pub fn angles(&self, q: &Vec3, m: &Meet, sign: f64, free: Cs) -> (Cs, Cs, bool) {
+    pub fn angles(&self, q: &Vec3, m: &Meet, sign: f64, free: FreeAngle) -> (Cs, Cs, bool) {
         if m.on_axis {
             let a2 = sp1(&self.s2, &Vec3::z(), q).unwrap_or(Cs::ZERO);
-            return (free, a2, true);
+            return (free.cs(), a2, true);
         }
         let sin_a = m.reach.max(0.0).sqrt() * sign;
-        let c = self.s1 * m.ct1 + (self.e * m.cos_a.clamp(-1.0, 1.0) + self.f * sin_a) * m.st1;
-        let a2 = sp1(&self.s2, &Vec3::z(), &c).unwrap_or(Cs::ZERO);
-        let a1 = sp1(&self.s1, &c, q).unwrap_or(Cs::ZERO);
+        let cos_a = m.cos_a.clamp(-1.0, 1.0);
+        // α1 turns ĉ = cos A e + sin A f (c across s1, unit) onto q̂ (q across s1, unit); since
+        // s1 × ĉ = cos A f − sin A e: cos α1 = ĉ·q̂, sin α1 = (s1 × ĉ)·q̂.
+        let a1 = Cs {
+            c: cos_a * m.eq + sin_a * m.fq,
+            s: cos_a * m.fq - sin_a * m.eq,
+        };
+        let (ce, cf) = (m.st1 * cos_a, m.st1 * sin_a);
+        let a2 = Cs {
+            c: self.zs[0] * m.ct1 + self.zs[1] * ce + self.zs[2] * cf,
+            s: self.ws[0] * m.ct1 + self.ws[1] * ce + self.ws[2] * cf,
+        };
         (a1, a2, false)
+    }
+
+    /// Both branches (+ then −) with their angles, for a reachable `q` off the axis: three atan2
+    /// for the four angles, by α1± = φq ∓ A and the mirror identity for α2−.
+    #[inline]
+    pub fn both(&self, m: &Meet) -> [(Cs, f64, Cs, f64); 2] {
+        let sin_a = m.reach.max(0.0).sqrt();
+        let cos_a = m.cos_a.clamp(-1.0, 1.0);
+        let phi_q = libm::atan2(m.fq, m.eq);
+        let big_a = libm::atan2(sin_a, cos_a);
+        let (ce, cf) = (m.st1 * cos_a, m.st1 * sin_a);
+        let a2p = Cs {
+            c: self.zs[0] * m.ct1 + self.zs[1] * ce + self.zs[2] * cf,
+            s: self.ws[0] * m.ct1 + self.ws[1] * ce + self.ws[2] * cf,
+        };
+        let a2m = Cs {
+            c: self.zs[0] * m.ct1 + self.zs[1] * ce - self.zs[2] * cf,
+            s: self.ws[0] * m.ct1 + self.ws[1] * ce - self.ws[2] * cf,
+        };
+        let t2p = a2p.angle();
+        [
+            (
+                Cs {
+                    c: cos_a * m.eq + sin_a * m.fq,
+                    s: cos_a * m.fq - sin_a * m.eq,
+                },
+                wrap(phi_q - big_a),
+                a2p,
+                t2p,
+            ),
+            (
+                Cs {
+                    c: cos_a * m.eq - sin_a * m.fq,
+                    s: cos_a * m.fq + sin_a * m.eq,
+                },
+                wrap(phi_q + big_a),
+                a2m,
+                wrap(2.0 * self.theta_m - t2p),
+            ),
+        ]
+    }
+}
+
+/// Into (−π, π].
+#[inline]
+pub fn wrap(a: f64) -> f64 {
+    use std::f64::consts::{PI, TAU};
+    if a > PI {
+        a - TAU
+    } else if a <= -PI {
+        a + TAU
+    } else {
+        a
     }
 }
