@@ -39,6 +39,14 @@ pub enum Command {
         #[arg(required = true, allow_hyphen_values = true)]
         words: Vec<String>,
     },
+    /// Read a CL file and report its diagnostics and record counts (JSON summary on stdout).
+    Lint {
+        /// CL file, or - for standard input.
+        input: String,
+        /// Print every diagnostic, one per line, on stderr.
+        #[arg(long)]
+        verbose: bool,
+    },
     /// Inverse kinematics: tool pose x y z i j k → every joint solution, as JSON.
     Ik {
         #[arg(long)]
@@ -105,9 +113,52 @@ fn library(cli: &Cli) -> Result<Library, String> {
     Library::load_dir(&dir).map_err(|e| e.to_string())
 }
 
+/// Opens a CL input: a path, or `-` for standard input.
+pub fn open_input(path: &str) -> Result<Box<dyn std::io::BufRead>, String> {
+    if path == "-" {
+        Ok(Box::new(std::io::BufReader::with_capacity(1 << 16, std::io::stdin())))
+    } else {
+        let f = std::fs::File::open(path).map_err(|e| format!("{path}: {e}"))?;
+        Ok(Box::new(std::io::BufReader::with_capacity(1 << 16, f)))
+    }
+}
+
+fn lint(input: &str, verbose: bool) -> Result<(), String> {
+    use crate::cl::{Event, Reader};
+    use crate::diag::Severity;
+    let mut counts: std::collections::BTreeMap<String, u64> = Default::default();
+    let (mut records, mut errors, mut warnings) = (0u64, 0u64, 0u64);
+    for ev in Reader::new(open_input(input)?) {
+        match ev.map_err(|e| e.to_string())? {
+            Event::Statement(s) => {
+                records += 1;
+                let name = format!("{:?}", s.record);
+                let key = name.split([' ', '(', '{']).next().unwrap_or("").to_string();
+                *counts.entry(key).or_default() += 1;
+            }
+            Event::Diagnostic(d) => {
+                match d.severity {
+                    Severity::Error => errors += 1,
+                    Severity::Warning => warnings += 1,
+                    Severity::Info => {}
+                }
+                if verbose || d.severity == Severity::Error {
+                    eprintln!("{input}: {d}");
+                }
+            }
+        }
+    }
+    println!("{}", json!({"records": records, "errors": errors, "warnings": warnings, "by_record": counts}));
+    if errors > 0 { Err(format!("{errors} bad records")) } else { Ok(()) }
+}
+
 fn run(cli: Cli) -> Result<(), String> {
+    if let Command::Lint { input, verbose } = &cli.command {
+        return lint(input, *verbose);
+    }
     let lib = library(&cli)?;
     match cli.command {
+        Command::Lint { .. } => unreachable!("handled above"),
         Command::Machines { json } => {
             for p in lib.iter() {
                 let m = &p.machine;

@@ -3,3 +3,5 @@
 pub mod cli;
 pub mod kinematics;
 pub mod machines;
+pub mod cl;
+pub mod diag;

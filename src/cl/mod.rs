@@ -1,0 +1,222 @@
+//! CL (APT / CLSF) reading: a streaming statement reader that never fails the whole file.
+//!
+//! Bytes in, events out: each event is a record with its source line, or a diagnostic. Memory is
+//! one statement (bounded by [`MAX_STATEMENT`]); a malformed record becomes an error diagnostic
+//! naming line, column and what was expected, and reading goes on.
+
+mod record;
+
+pub use record::{CoolantCmd, CycleKind, CycleParams, FeedUnit, Record, SpindleCmd, parse_statement};
+
+use crate::diag::{Code, Diagnostic, Severity};
+use std::io::BufRead;
+
+/// Longest statement (after joining `$` continuations) kept; longer ones are reported and skipped.
+pub const MAX_STATEMENT: usize = 64 * 1024;
+
+/// One parsed record and the line its statement starts on.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Statement {
+    pub line: u32,
+    pub record: Record,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub enum Event {
+    Statement(Statement),
+    Diagnostic(Diagnostic),
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    #[error("reading CL input: {0}")]
+    Io(#[from] std::io::Error),
+}
+
+/// Streaming reader over any `BufRead` (a file, stdin, an HTTP body).
+pub struct Reader<R> {
+    input: R,
+    raw: Vec<u8>,
+    line_no: u32,
+    pending: String,
+    pending_line: u32,
+    pending_overflow: bool,
+    in_comment: bool,
+    queue: std::collections::VecDeque<Event>,
+    done: bool,
+}
+
+impl<R: BufRead> Reader<R> {
+    pub fn new(input: R) -> Reader<R> {
+        Reader {
+            input,
+            raw: Vec::with_capacity(256),
+            line_no: 0,
+            pending: String::with_capacity(256),
+            pending_line: 0,
+            pending_overflow: false,
+            in_comment: false,
+            queue: Default::default(),
+            done: false,
+        }
+    }
+
+    pub fn line(&self) -> u32 {
+        self.line_no
+    }
+
+    /// Reads one physical line into `raw` without letting a huge line grow memory: past
+    /// `MAX_STATEMENT` bytes the rest of the line is consumed and dropped. Returns (got a line,
+    /// overflowed).
+    fn read_line(&mut self) -> Result<(bool, bool), Error> {
+        self.raw.clear();
+        let mut overflow = false;
+        loop {
+            let buf = match self.input.fill_buf() {
+                Ok(b) => b,
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
+                Err(e) => return Err(e.into()),
+            };
+            if buf.is_empty() {
+                return Ok((!self.raw.is_empty() || overflow, overflow));
+            }
+            let (take, end) = match memchr(b'\n', buf) {
+                Some(i) => (i + 1, true),
+                None => (buf.len(), false),
+            };
+            let room = MAX_STATEMENT.saturating_sub(self.raw.len());
+            if take > room {
+                overflow = true;
+                self.raw.extend_from_slice(&buf[..room]);
+            } else {
+                self.raw.extend_from_slice(&buf[..take]);
+            }
+            self.input.consume(take);
+            if end {
+                return Ok((true, overflow));
+            }
+        }
+    }
+
+    /// The next event, `None` at the end of input.
+    pub fn next_event(&mut self) -> Result<Option<Event>, Error> {
+        loop {
+            if let Some(e) = self.queue.pop_front() {
+                return Ok(Some(e));
+            }
+            if self.done {
+                return Ok(None);
+            }
+            let (got, overflow) = self.read_line()?;
+            if !got {
+                self.done = true;
+                if !self.pending.is_empty() {
+                    self.flush();
+                }
+                continue;
+            }
+            self.line_no += 1;
+            let line_no = self.line_no;
+            if overflow {
+                self.queue.push_back(Event::Diagnostic(Diagnostic::new(
+                    Code::LineTooLong,
+                    Severity::Error,
+                    Some(line_no),
+                    format!("line longer than {MAX_STATEMENT} bytes: skipped"),
+                )));
+                self.in_comment = false;
+                continue;
+            }
+            let raw = std::mem::take(&mut self.raw);
+            match std::str::from_utf8(&raw) {
+                Ok(t) => self.take_line(t.trim_end_matches(['\n', '\r']), line_no),
+                Err(e) => {
+                    self.queue.push_back(Event::Diagnostic(
+                        Diagnostic::new(Code::InvalidUtf8, Severity::Warning, Some(line_no), "bytes that are not UTF-8 replaced")
+                            .at(e.valid_up_to() as u32 + 1),
+                    ));
+                    let t = String::from_utf8_lossy(&raw);
+                    self.take_line(t.trim_end_matches(['\n', '\r']), line_no);
+                }
+            }
+            self.raw = raw;
+        }
+    }
+
+    /// Adds one physical line to the statement being assembled.
+    fn take_line(&mut self, text: &str, line_no: u32) {
+        if self.in_comment {
+            // A `$$` comment that ended in `$` continues onto this line.
+            self.in_comment = text.trim_end().ends_with('$');
+            return;
+        }
+        let (code, comment) = match text.find("$$") {
+            Some(i) => (&text[..i], Some(&text[i + 2..])),
+            None => (text, None),
+        };
+        let code = code.trim();
+        if code.is_empty() {
+            if let Some(c) = comment {
+                self.in_comment = c.trim_end().ends_with('$');
+            }
+            return;
+        }
+        if self.pending.is_empty() {
+            self.pending_line = line_no;
+            self.pending_overflow = false;
+        }
+        let (part, continued) = match code.strip_suffix('$') {
+            Some(p) => (p.trim_end(), true),
+            None => (code, false),
+        };
+        if self.pending.len() + part.len() > MAX_STATEMENT {
+            self.pending_overflow = true;
+        } else {
+            self.pending.push_str(part);
+        }
+        if continued {
+            return;
+        }
+        // NX writes a GOTO whose values run on after a trailing comma.
+        if self.pending.ends_with(',') && starts_with_ci(&self.pending, "GO") {
+            return;
+        }
+        self.flush();
+    }
+
+    fn flush(&mut self) {
+        let line = self.pending_line;
+        if self.pending_overflow {
+            self.queue.push_back(Event::Diagnostic(Diagnostic::new(
+                Code::LineTooLong,
+                Severity::Error,
+                Some(line),
+                format!("statement longer than {MAX_STATEMENT} bytes after joining continuations: skipped"),
+            )));
+        } else {
+            let mut diags = Vec::new();
+            let rec = parse_statement(&self.pending, line, &mut diags);
+            self.queue.extend(diags.into_iter().map(Event::Diagnostic));
+            if let Some(record) = rec {
+                self.queue.push_back(Event::Statement(Statement { line, record }));
+            }
+        }
+        self.pending.clear();
+    }
+}
+
+impl<R: BufRead> Iterator for Reader<R> {
+    type Item = Result<Event, Error>;
+    fn next(&mut self) -> Option<Self::Item> {
+        self.next_event().transpose()
+    }
+}
+
+fn starts_with_ci(s: &str, prefix: &str) -> bool {
+    s.len() >= prefix.len() && s.as_bytes()[..prefix.len()].eq_ignore_ascii_case(prefix.as_bytes())
+}
+
+#[inline]
+fn memchr(b: u8, s: &[u8]) -> Option<usize> {
+    s.iter().position(|&c| c == b)
+}

@@ -1,0 +1,434 @@
+//! One CL statement → one [`Record`]. The syntax variety of NX, Creo, SOLIDWORKS CAM / CAMWorks and
+//! CATIA: spaces around `/` and `,`, `6.` and `.9625`, units before or after values, free-text
+//! records without a slash.
+
+use crate::diag::{Code, Diagnostic, Severity};
+use crate::kinematics::Units;
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FeedUnit {
+    /// Length units per minute (MMPM, IPM, or none given).
+    PerMinute,
+    /// Length units per spindle revolution (MMPR, IPR).
+    PerRev,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum SpindleCmd {
+    Rpm { speed: f64, clockwise: bool },
+    /// Surface speed (SFM/SMM); the RPM depends on the tool diameter.
+    Surface { speed: f64, clockwise: bool },
+    Off,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum CoolantCmd {
+    Flood,
+    Mist,
+    Through,
+    Off,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum CycleKind {
+    Drill,
+    Deep,
+    Tap,
+    Bore,
+    Other,
+}
+
+/// A drilling cycle: every GOTO while it is on is a hole at that point.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CycleParams {
+    pub kind: CycleKind,
+    /// Depth below the point along the tool axis (FEDTO).
+    pub depth: f64,
+    /// Rapid to this height above the point (RAPTO).
+    pub rapid_to: f64,
+    /// Retract to this height above the point (RTRCTO), else `rapid_to`.
+    pub retract_to: Option<f64>,
+    pub feed: Option<(f64, FeedUnit, Option<Units>)>,
+    pub peck: Option<f64>,
+    pub dwell: Option<f64>,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub enum Record {
+    /// Tip point, and the tool axis when the record gives one (else modal).
+    Goto { p: [f64; 3], axis: Option<[f64; 3]> },
+    GoDelta { d: [f64; 3], axis: Option<[f64; 3]> },
+    From { p: [f64; 3], axis: Option<[f64; 3]> },
+    /// The next motion only is a rapid.
+    Rapid,
+    /// `units` is what the record itself says (MMPM → mm, IPM → inch), if anything.
+    Feedrate { value: f64, unit: FeedUnit, units: Option<Units> },
+    Spindle(SpindleCmd),
+    Coolant(CoolantCmd),
+    LoadTool { number: Option<u32>, length: Option<f64> },
+    ToolData { diameter: Option<f64>, length: Option<f64> },
+    Units(Units),
+    Multax(bool),
+    ToolAxis([f64; 3]),
+    /// The next GOTO ends an arc about this centre and axis (counter-clockwise about it).
+    Circle { center: [f64; 3], axis: [f64; 3], radius: Option<f64> },
+    Cycle(CycleParams),
+    CycleOff,
+    /// Operation start (`TOOL PATH/…`) with its name.
+    OperationStart(String),
+    OperationEnd,
+    PartNo(String),
+    /// Text to pass through as an NC comment (PPRINT, INSERT).
+    Comment(String),
+    End,
+    /// Recognised and deliberately not used (PAINT, MSYS, CSYS, vendor records, …).
+    Ignored(String),
+}
+
+/// Records kinepost recognises and does not act on (no warning for these).
+const IGNORED: &[&str] = &[
+    "PAINT", "MSYS", "CSYS", "TRNTYP", "BOX", "MACHIN", "OPFEATSTART", "OPFEATEND", "SELECT", "TOOLNO", "TPRINT", "SYN",
+    "PPFUN", "TURRET", "REWIND", "CUTCOM", "CLRSRF", "MODE", "ROTABL", "CLEARP", "DISPLY", "OPSKIP", "OPSTOP", "STOP", "MFGNO",
+    "FEATNO", "AUTOPS", "TRANS", "NURBS", "OPERATION", "CYCLE_DEF", "SET", "ORIGIN", "DELAY", "OPTIONS", "TECHNO",
+    "PREFUN", "AUXFUN", "SEQNO", "MOVE_ATTRIB", "SWITCH", "LINTOL", "INTOL", "OUTTOL", "THICK", "ROTATE", "INDIRV", "ARCSLP", "PITCH",
+];
+
+struct Arg<'a> {
+    text: &'a str,
+    col: u32,
+}
+
+/// Parses one statement (continuations joined). `None` when the statement yields no record; then
+/// `diags` says why.
+pub fn parse_statement(stmt: &str, line: u32, diags: &mut Vec<Diagnostic>) -> Option<Record> {
+    let s = stmt.trim_start();
+    let lead = (stmt.len() - s.len()) as u32;
+    let (major, rest, rest_col) = match s.find('/') {
+        Some(i) => (s[..i].trim(), &s[i + 1..], lead + i as u32 + 2),
+        None => {
+            let word_end = s.find(char::is_whitespace).unwrap_or(s.len());
+            (&s[..word_end], s[word_end..].trim(), lead + word_end as u32 + 2)
+        }
+    };
+    let major_uc = major.split_whitespace().collect::<Vec<_>>().join(" ").to_ascii_uppercase();
+    let args = split_args(rest, rest_col);
+    let bad = |diags: &mut Vec<Diagnostic>, col: u32, msg: String| {
+        diags.push(Diagnostic::new(Code::BadRecord, Severity::Error, Some(line), msg).at(col));
+    };
+    let word = |a: &Arg| a.text.trim().to_ascii_uppercase();
+
+    match major_uc.as_str() {
+        "GOTO" | "GODLTA" | "FROM" => {
+            let mut v = [0.0; 6];
+            let n = args.len();
+            if !(n == 3 || n >= 6) {
+                let col = args.last().map_or(rest_col, |a| a.col);
+                bad(diags, col, format!("{major_uc}: expected 3 values (x,y,z) or 6 (x,y,z,i,j,k), found {n}"));
+                return None;
+            }
+            for (k, a) in args.iter().take(6).enumerate() {
+                match num(a.text) {
+                    Some(x) if x.is_finite() => v[k] = x,
+                    _ => {
+                        bad(diags, a.col, format!("{major_uc}: expected a finite number as value {}, found {:?}", k + 1, a.text.trim()));
+                        return None;
+                    }
+                }
+            }
+            let p = [v[0], v[1], v[2]];
+            let axis = (n >= 6).then_some([v[3], v[4], v[5]]);
+            Some(match major_uc.as_str() {
+                "GOTO" => Record::Goto { p, axis },
+                "GODLTA" => Record::GoDelta { d: p, axis },
+                _ => Record::From { p, axis },
+            })
+        }
+        "RAPID" => Some(Record::Rapid),
+        "FEDRAT" => {
+            let mut value = None;
+            let mut unit = FeedUnit::PerMinute;
+            let mut units = None;
+            for a in &args {
+                let w = word(a);
+                match w.as_str() {
+                    "MMPM" => units = Some(Units::Mm),
+                    "IPM" => units = Some(Units::Inch),
+                    "MMPR" => (unit, units) = (FeedUnit::PerRev, Some(Units::Mm)),
+                    "IPR" => (unit, units) = (FeedUnit::PerRev, Some(Units::Inch)),
+                    "" => {}
+                    _ => match num(a.text) {
+                        Some(x) if x.is_finite() && x >= 0.0 && value.is_none() => value = Some(x),
+                        _ => {
+                            bad(diags, a.col, format!("FEDRAT: expected a feed value and MMPM, IPM, MMPR or IPR, found {:?}", a.text.trim()));
+                            return None;
+                        }
+                    },
+                }
+            }
+            match value {
+                Some(value) => Some(Record::Feedrate { value, unit, units }),
+                None => {
+                    bad(diags, rest_col, "FEDRAT: no feed value".into());
+                    None
+                }
+            }
+        }
+        "SPINDL" => {
+            let mut speed = None;
+            let (mut cw, mut surface, mut off) = (true, false, false);
+            for a in &args {
+                match word(a).as_str() {
+                    "RPM" => {}
+                    "SFM" | "SMM" => surface = true,
+                    "CLW" => cw = true,
+                    "CCLW" => cw = false,
+                    "OFF" => off = true,
+                    "ON" | "" | "RANGE" | "MAXRPM" => {}
+                    _ => match num(a.text) {
+                        Some(x) if x.is_finite() && x >= 0.0 => speed = speed.or(Some(x)),
+                        _ => {
+                            bad(diags, a.col, format!("SPINDL: expected a speed, RPM, SFM, CLW, CCLW or OFF, found {:?}", a.text.trim()));
+                            return None;
+                        }
+                    },
+                }
+            }
+            Some(Record::Spindle(match (off, speed, surface) {
+                (true, _, _) => SpindleCmd::Off,
+                (false, Some(speed), false) => SpindleCmd::Rpm { speed, clockwise: cw },
+                (false, Some(speed), true) => SpindleCmd::Surface { speed, clockwise: cw },
+                (false, None, _) => {
+                    bad(diags, rest_col, "SPINDL: expected a speed or OFF".into());
+                    return None;
+                }
+            }))
+        }
+        "COOLNT" => {
+            let w = args.first().map(word).unwrap_or_default();
+            Some(Record::Coolant(match w.as_str() {
+                "ON" | "FLOOD" | "" => CoolantCmd::Flood,
+                "MIST" => CoolantCmd::Mist,
+                "THRU" | "THROUGH" | "TAP" => CoolantCmd::Through,
+                "OFF" => CoolantCmd::Off,
+                other => {
+                    bad(diags, args[0].col, format!("COOLNT: expected ON, FLOOD, MIST, THRU or OFF, found {other:?}"));
+                    return None;
+                }
+            }))
+        }
+        "LOADTL" | "LOAD" => {
+            // LOADTL/n[,LENGTH,l] ; LOAD/TOOL,n
+            let mut number = None;
+            let mut length = None;
+            let mut i = 0;
+            while i < args.len() {
+                let w = word(&args[i]);
+                if w == "TOOL" {
+                } else if w == "LENGTH" {
+                    length = args.get(i + 1).and_then(|a| num(a.text));
+                    i += 1;
+                } else if let Some(x) = num(args[i].text) {
+                    if number.is_none() && x >= 0.0 && x.fract() == 0.0 && x < 1e9 {
+                        number = Some(x as u32);
+                    }
+                } else if !w.is_empty() && !matches!(w.as_str(), "ADJUST" | "OSETNO" | "MILL" | "LATHE") {
+                    diags.push(
+                        Diagnostic::new(Code::IgnoredRecord, Severity::Info, Some(line), format!("{major_uc}: {w} not used")).at(args[i].col),
+                    );
+                }
+                i += 1;
+            }
+            Some(Record::LoadTool { number, length })
+        }
+        "TLDATA" => {
+            // TLDATA/MILL,diameter,corner radius,length,…
+            let nums: Vec<f64> = args.iter().filter_map(|a| num(a.text)).collect();
+            Some(Record::ToolData { diameter: nums.first().copied(), length: nums.get(2).copied().filter(|l| *l > 0.0) })
+        }
+        "CUTTER" => Some(Record::ToolData { diameter: args.first().and_then(|a| num(a.text)), length: None }),
+        "UNITS" | "UNIT" => {
+            let w = args.first().map(word).unwrap_or_default();
+            match w.as_str() {
+                "MM" | "MILLIMETERS" | "METRIC" => Some(Record::Units(Units::Mm)),
+                "INCHES" | "INCH" | "IN" => Some(Record::Units(Units::Inch)),
+                other => {
+                    bad(diags, args.first().map_or(rest_col, |a| a.col), format!("{major_uc}: expected MM or INCHES, found {other:?}"));
+                    None
+                }
+            }
+        }
+        "MULTAX" => Some(Record::Multax(!matches!(args.first().map(word).as_deref(), Some("OFF")))),
+        "TLAXIS" => {
+            let v: Vec<f64> = args.iter().filter_map(|a| num(a.text)).collect();
+            if v.len() >= 3 {
+                Some(Record::ToolAxis([v[0], v[1], v[2]]))
+            } else {
+                bad(diags, rest_col, "TLAXIS: expected i,j,k".into());
+                None
+            }
+        }
+        "CIRCLE" => {
+            // Centre, axis[, radius[, tolerances…]], then optional words: SOLIDWORKS CAM leaves
+            // the radius out (the next point implies it), NX appends TIMES,n, CAMWorks a
+            // direction word that the axis already states (motion is counter-clockwise about it).
+            let mut v = Vec::with_capacity(11);
+            let mut words = Vec::new();
+            for a in &args {
+                match num(a.text) {
+                    Some(x) if x.is_finite() && words.is_empty() => v.push(x),
+                    Some(_) if !words.is_empty() => {}
+                    _ if v.len() >= 6 && a.text.trim().chars().all(|c| c.is_ascii_alphabetic()) => words.push(word(a)),
+                    _ => {
+                        bad(diags, a.col, format!("CIRCLE: expected a number, found {:?}", a.text.trim()));
+                        return None;
+                    }
+                }
+            }
+            if v.len() < 6 {
+                bad(diags, rest_col, format!("CIRCLE: expected centre and axis (6 values) and a radius, found {} values", v.len()));
+                return None;
+            }
+            if words.iter().any(|w| w == "TIMES") {
+                diags.push(Diagnostic::new(Code::IgnoredRecord, Severity::Warning, Some(line), "CIRCLE: TIMES (repeated turns) not supported: the arc is taken once").at(rest_col));
+            }
+            Some(Record::Circle { center: [v[0], v[1], v[2]], axis: [v[3], v[4], v[5]], radius: v.get(6).copied() })
+        }
+        "CYCLE" => parse_cycle(&args, line, rest_col, diags),
+        "TOOL PATH" => Some(Record::OperationStart(args.first().map(|a| a.text.trim().to_string()).unwrap_or_default())),
+        "END-OF-PATH" => Some(Record::OperationEnd),
+        "PARTNO" => Some(Record::PartNo(rest.trim().to_string())),
+        "PPRINT" | "INSERT" => Some(Record::Comment(rest.trim().to_string())),
+        "FINI" | "END" => Some(Record::End),
+        m if IGNORED.contains(&m) || m.starts_with("CSI_") => Some(Record::Ignored(m.to_string())),
+        m => {
+            let shown: String = s.chars().take(60).collect();
+            diags.push(
+                Diagnostic::new(Code::UnknownRecord, Severity::Warning, Some(line), format!("unknown record {:?}: ignored", if m.is_empty() { &shown } else { m }))
+                    .at(lead + 1),
+            );
+            None
+        }
+    }
+}
+
+fn parse_cycle(args: &[Arg], line: u32, rest_col: u32, diags: &mut Vec<Diagnostic>) -> Option<Record> {
+    let w = |a: &Arg| a.text.trim().to_ascii_uppercase();
+    let first = args.first().map(w).unwrap_or_default();
+    let kind = match first.as_str() {
+        "OFF" => return Some(Record::CycleOff),
+        "INIT" | "ON" | "" => return Some(Record::Ignored("CYCLE".into())),
+        "DRILL" | "FACE" | "CSINK" => CycleKind::Drill,
+        "DEEP" | "DEEP2" | "BRKCHP" | "PECK" => CycleKind::Deep,
+        "TAP" | "RGDTAP" => CycleKind::Tap,
+        "BORE" | "REAM" => CycleKind::Bore,
+        _ => CycleKind::Other,
+    };
+    let mut p = CycleParams { kind, depth: f64::NAN, rapid_to: f64::NAN, retract_to: None, feed: None, peck: None, dwell: None };
+    let value = |i: usize, diags: &mut Vec<Diagnostic>| -> Option<f64> {
+        let a = args.get(i)?;
+        // CAMWorks writes one value as "46.927686 46.927686": take the first, say so.
+        let t = a.text.trim();
+        match num(t) {
+            Some(x) => Some(x),
+            None => {
+                let first = t.split_whitespace().next().and_then(num);
+                if first.is_some() {
+                    diags.push(
+                        Diagnostic::new(Code::BadRecord, Severity::Warning, Some(line), format!("CYCLE: value {t:?} has extra text; used the first number"))
+                            .at(a.col),
+                    );
+                }
+                first
+            }
+        }
+    };
+    let mut i = 1;
+    let mut positional = Vec::new();
+    while i < args.len() {
+        let k = w(&args[i]);
+        match k.as_str() {
+            "FEDTO" | "DEPTH" => {
+                p.depth = value(i + 1, diags).unwrap_or(f64::NAN);
+                i += 1;
+            }
+            "RAPTO" | "CLEAR" => {
+                p.rapid_to = value(i + 1, diags).unwrap_or(f64::NAN);
+                i += 1;
+            }
+            "RTRCTO" => {
+                p.retract_to = value(i + 1, diags);
+                i += 1;
+            }
+            "1STPECK" | "STEP" => {
+                p.peck = value(i + 1, diags);
+                i += 1;
+            }
+            "DWELL" => {
+                p.dwell = value(i + 1, diags);
+                i += 1;
+            }
+            "MMPM" | "IPM" | "MMPR" | "IPR" => {
+                let unit = if k.ends_with("PR") { FeedUnit::PerRev } else { FeedUnit::PerMinute };
+                let units = if k.starts_with("MM") { Units::Mm } else { Units::Inch };
+                p.feed = value(i + 1, diags).map(|f| (f, unit, Some(units)));
+                i += 1;
+            }
+            _ => {
+                if let Some(x) = value(i, diags) {
+                    positional.push(x)
+                }
+            }
+        }
+        i += 1;
+    }
+    // CAMWorks: DRILL,G98,depth,PECKING,a,b,MMPM,feed,clear,retract — positional around keywords.
+    if p.depth.is_nan() && !positional.is_empty() {
+        p.depth = positional[0];
+    }
+    if p.rapid_to.is_nan() {
+        p.rapid_to = positional.get(positional.len().wrapping_sub(2)).copied().filter(|_| positional.len() >= 3).unwrap_or(0.0);
+        if p.retract_to.is_none() && positional.len() >= 3 {
+            p.retract_to = positional.last().copied();
+        }
+    }
+    if p.depth.is_nan() {
+        diags.push(
+            Diagnostic::new(Code::BadRecord, Severity::Warning, Some(line), format!("CYCLE/{first}: no depth given; holes are positioned only"))
+                .at(rest_col),
+        );
+        p.depth = 0.0;
+    }
+    Some(Record::Cycle(p))
+}
+
+fn split_args(rest: &str, start_col: u32) -> Vec<Arg<'_>> {
+    if rest.trim().is_empty() {
+        return Vec::new();
+    }
+    let mut out = Vec::new();
+    let mut col = start_col;
+    for part in rest.split(',') {
+        let lead = (part.len() - part.trim_start().len()) as u32;
+        out.push(Arg { text: part, col: col + lead });
+        col += part.len() as u32 + 1;
+    }
+    // A trailing comma (CAMWorks' CUTTER/…,) adds no argument.
+    if out.last().is_some_and(|a| a.text.trim().is_empty()) {
+        out.pop();
+    }
+    out
+}
+
+/// A number as CL files write them: `6.`, `.9625`, `-0.5`, `1e-3`, spaces around.
+#[inline]
+pub(crate) fn num(s: &str) -> Option<f64> {
+    let t = s.trim();
+    if t.is_empty() {
+        return None;
+    }
+    let b = t.as_bytes();
+    if !(b[0].is_ascii_digit() || matches!(b[0], b'-' | b'+' | b'.')) {
+        return None;
+    }
+    fast_float2::parse(t).ok()
+}

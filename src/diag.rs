@@ -1,0 +1,102 @@
+//! Diagnostics: data, not errors. Every stage (reader, planner, writer) reports what it noticed
+//! as a `Diagnostic` with a stable code, and carries on.
+
+use serde::Serialize;
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Severity {
+    Info,
+    Warning,
+    Error,
+}
+
+/// Stable codes: tools and tests match on these, so never rename one.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Code {
+    BadRecord,
+    UnknownRecord,
+    IgnoredRecord,
+    UnitsAssumed,
+    AxisNormalized,
+    LineTooLong,
+    InvalidUtf8,
+    Unreachable,
+    LimitViolation,
+    NearLimit,
+    Singular,
+    BranchChange,
+    Unwind,
+    Linearized,
+    FeedClamped,
+    AngleCompOutOfRange,
+    VerifyDeviation,
+    ArcLinearized,
+    CycleExpanded,
+}
+
+impl Code {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Code::BadRecord => "bad_record",
+            Code::UnknownRecord => "unknown_record",
+            Code::IgnoredRecord => "ignored_record",
+            Code::UnitsAssumed => "units_assumed",
+            Code::AxisNormalized => "axis_normalized",
+            Code::LineTooLong => "line_too_long",
+            Code::InvalidUtf8 => "invalid_utf8",
+            Code::Unreachable => "unreachable",
+            Code::LimitViolation => "limit_violation",
+            Code::NearLimit => "near_limit",
+            Code::Singular => "singular",
+            Code::BranchChange => "branch_change",
+            Code::Unwind => "unwind",
+            Code::Linearized => "linearized",
+            Code::FeedClamped => "feed_clamped",
+            Code::AngleCompOutOfRange => "angle_comp_out_of_range",
+            Code::VerifyDeviation => "verify_deviation",
+            Code::ArcLinearized => "arc_linearized",
+            Code::CycleExpanded => "cycle_expanded",
+        }
+    }
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Diagnostic {
+    pub code: Code,
+    pub severity: Severity,
+    /// 1-based line of the CL source, where the diagnostic has one.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub line: Option<u32>,
+    /// 1-based column in that line.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub column: Option<u32>,
+    pub message: String,
+}
+
+impl Diagnostic {
+    pub fn new(code: Code, severity: Severity, line: Option<u32>, message: impl Into<String>) -> Diagnostic {
+        Diagnostic { code, severity, line, column: None, message: message.into() }
+    }
+
+    pub fn at(mut self, column: u32) -> Diagnostic {
+        self.column = Some(column);
+        self
+    }
+}
+
+impl std::fmt::Display for Diagnostic {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let sev = match self.severity {
+            Severity::Info => "info",
+            Severity::Warning => "warning",
+            Severity::Error => "error",
+        };
+        match (self.line, self.column) {
+            (Some(l), Some(c)) => write!(f, "{sev}[{}] line {l}, column {c}: {}", self.code.as_str(), self.message),
+            (Some(l), None) => write!(f, "{sev}[{}] line {l}: {}", self.code.as_str(), self.message),
+            _ => write!(f, "{sev}[{}]: {}", self.code.as_str(), self.message),
+        }
+    }
+}
