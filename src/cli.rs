@@ -39,6 +39,8 @@ pub enum Command {
         #[arg(required = true, allow_hyphen_values = true)]
         words: Vec<String>,
     },
+    /// Post-process a CL file into NC for a machine; NC on stdout (or --output), summary on stderr.
+    Post(PostArgs),
     /// Read a CL file and report its diagnostics and record counts (JSON summary on stdout).
     Lint {
         /// CL file, or - for standard input.
@@ -60,6 +62,42 @@ pub enum Command {
         #[arg(num_args = 6, required = true, allow_negative_numbers = true)]
         pose: Vec<f64>,
     },
+}
+
+#[derive(clap::Args, Debug, Clone)]
+pub struct PostArgs {
+    #[arg(long)]
+    pub machine: String,
+    /// NC dialect (default: the profile's controller).
+    #[arg(long)]
+    pub dialect: Option<String>,
+    /// joint (no TCP on the control) or tcp (X Y Z are the tip, the control does the rest).
+    #[arg(long, default_value = "joint")]
+    pub mode: String,
+    #[command(flatten)]
+    pub setup: SetupArgs,
+    /// Chord tolerance in profile units (default 0.01 mm / 0.0004 in).
+    #[arg(long)]
+    pub tolerance: Option<f64>,
+    /// Units of the CL file when it does not say (mm or inch).
+    #[arg(long)]
+    pub cl_units: Option<String>,
+    /// N numbers on blocks.
+    #[arg(long)]
+    pub sequence_numbers: bool,
+    #[arg(long, default_value_t = 1000)]
+    pub program_number: u32,
+    /// Stop at the first error (bad record, unreachable pose, limit) with a non-zero exit.
+    #[arg(long)]
+    pub strict: bool,
+    /// Write per-block diagnostics as NDJSON to this file.
+    #[arg(long)]
+    pub diagnostics: Option<PathBuf>,
+    /// Write the NC here instead of stdout.
+    #[arg(long, short)]
+    pub output: Option<PathBuf>,
+    /// CL file, or - for standard input.
+    pub input: String,
 }
 
 #[derive(clap::Args, Debug, Clone)]
@@ -148,8 +186,15 @@ fn lint(input: &str, verbose: bool) -> Result<(), String> {
             }
         }
     }
-    println!("{}", json!({"records": records, "errors": errors, "warnings": warnings, "by_record": counts}));
-    if errors > 0 { Err(format!("{errors} bad records")) } else { Ok(()) }
+    println!(
+        "{}",
+        json!({"records": records, "errors": errors, "warnings": warnings, "by_record": counts})
+    );
+    if errors > 0 {
+        Err(format!("{errors} bad records"))
+    } else {
+        Ok(())
+    }
 }
 
 fn run(cli: Cli) -> Result<(), String> {
@@ -159,6 +204,10 @@ fn run(cli: Cli) -> Result<(), String> {
     let lib = library(&cli)?;
     match cli.command {
         Command::Lint { .. } => unreachable!("handled above"),
+        Command::Post(a) => {
+            let p = lib.get(&a.machine).map_err(|e| e.to_string())?;
+            post_cmd(&p.machine, &a)
+        }
         Command::Machines { json } => {
             for p in lib.iter() {
                 let m = &p.machine;
@@ -214,6 +263,131 @@ fn run(cli: Cli) -> Result<(), String> {
             Ok(())
         }
     }
+}
+
+fn post_cmd(m: &kinematics::Machine, a: &PostArgs) -> Result<(), String> {
+    use crate::post::{self, Mode, Options, Sink};
+    use std::io::Write;
+    let mut o = Options::new(m);
+    o.mode = match a.mode.as_str() {
+        "joint" => Mode::Joint,
+        "tcp" => Mode::Tcp,
+        other => return Err(format!("--mode {other:?}: expected joint or tcp")),
+    };
+    if let Some(d) = &a.dialect {
+        o.dialect =
+            crate::nc::dialect(d).ok_or_else(|| format!("--dialect {d:?}: known dialects are {:?}", crate::nc::DIALECTS))?;
+    }
+    o.tool_length = a.setup.tool_length;
+    if let Some(w) = &a.setup.work_offset {
+        o.work_offset = parse_triple(w)?;
+    }
+    if let Some(t) = a.tolerance {
+        if !(t.is_finite() && t > 0.0) {
+            return Err("--tolerance must be a positive number".into());
+        }
+        o.tolerance = t;
+    }
+    o.cl_units = match a.cl_units.as_deref() {
+        None => None,
+        Some("mm") => Some(Units::Mm),
+        Some("inch") => Some(Units::Inch),
+        Some(u) => return Err(format!("--cl-units {u:?}: expected mm or inch")),
+    };
+    o.sequence_numbers = a.sequence_numbers;
+    o.program_number = a.program_number;
+    o.strict = a.strict;
+    o.header.push(format!(
+        "SOURCE {}",
+        std::path::Path::new(&a.input)
+            .file_name()
+            .and_then(|f| f.to_str())
+            .unwrap_or("-")
+    ));
+    let input = open_input(&a.input)?;
+    let out: Box<dyn Write> = match &a.output {
+        Some(p) => Box::new(std::fs::File::create(p).map_err(|e| format!("{}: {e}", p.display()))?),
+        None => Box::new(std::io::stdout().lock()),
+    };
+    let diag: Option<Box<dyn Write>> = match &a.diagnostics {
+        Some(p) => Some(Box::new(
+            std::fs::File::create(p).map_err(|e| format!("{}: {e}", p.display()))?,
+        )),
+        None => None,
+    };
+    struct CliSink {
+        nc: std::io::BufWriter<Box<dyn Write>>,
+        nd: Option<std::io::BufWriter<Box<dyn Write>>>,
+    }
+    impl Sink for CliSink {
+        fn line(&mut self, text: &str, b: Option<&post::BlockInfo>) -> std::io::Result<()> {
+            self.nc.write_all(text.as_bytes())?;
+            self.nc.write_all(b"\n")?;
+            if let (Some(nd), Some(b)) = (self.nd.as_mut(), b) {
+                serde_json::to_writer(
+                    &mut *nd,
+                    &json!({"type": "block", "n": b.n, "nc": text, "source_line": b.source_line, "joints": b.joints, "diagnostics": b.diagnostics}),
+                )?;
+                nd.write_all(b"\n")?;
+            }
+            Ok(())
+        }
+        fn diagnostic(&mut self, d: &crate::diag::Diagnostic) -> std::io::Result<()> {
+            if let Some(nd) = self.nd.as_mut() {
+                serde_json::to_writer(&mut *nd, &json!({"type": "diagnostic", "diagnostic": d}))?;
+                nd.write_all(b"\n")?;
+            }
+            if d.severity >= crate::diag::Severity::Warning {
+                eprintln!("kinepost: {d}");
+            }
+            Ok(())
+        }
+        fn summary(&mut self, s: &post::Summary) -> std::io::Result<()> {
+            if let Some(nd) = self.nd.as_mut() {
+                serde_json::to_writer(&mut *nd, &json!({"type": "summary", "summary": s}))?;
+                nd.write_all(b"\n")?;
+            }
+            Ok(())
+        }
+    }
+    let mut sink = CliSink {
+        nc: std::io::BufWriter::with_capacity(1 << 16, out),
+        nd: diag.map(|d| std::io::BufWriter::new(d)),
+    };
+    let res = post::post(input, m, &o, &mut sink);
+    sink.nc.flush().map_err(|e| e.to_string())?;
+    if let Some(nd) = sink.nd.as_mut() {
+        nd.flush().map_err(|e| e.to_string())?;
+    }
+    let s = res.map_err(|e| e.to_string())?;
+    let rot: Vec<String> = m
+        .rotaries
+        .iter()
+        .filter_map(|r| {
+            s.axes.get(&r.name).map(|st| {
+                format!(
+                    "{} travel {:.1}° max step {:.1}°",
+                    r.name,
+                    st.travel.unwrap_or(0.0),
+                    st.largest_step.unwrap_or(0.0)
+                )
+            })
+        })
+        .collect();
+    eprintln!(
+        "kinepost: {} CL points -> {} blocks ({} inserted); {}; FK replay max {:.2e} {} / {:.2e}°; {} errors, {} warnings; est. {:.1} min",
+        s.cl_points,
+        s.blocks,
+        s.inserted_blocks,
+        rot.join(", "),
+        s.max_tip_deviation,
+        m.units.as_str(),
+        s.max_axis_deviation_deg,
+        s.errors,
+        s.warnings,
+        s.cycle_time_s / 60.0
+    );
+    Ok(())
 }
 
 /// One solution as the CLI and the API show it: axis words, branch, flags. Rotary words are those

@@ -77,7 +77,13 @@ pub struct Diagnostic {
 
 impl Diagnostic {
     pub fn new(code: Code, severity: Severity, line: Option<u32>, message: impl Into<String>) -> Diagnostic {
-        Diagnostic { code, severity, line, column: None, message: message.into() }
+        Diagnostic {
+            code,
+            severity,
+            line,
+            column: None,
+            message: message.into(),
+        }
     }
 
     pub fn at(mut self, column: u32) -> Diagnostic {

@@ -1,7 +1,9 @@
 //! kinepost: a 5-axis CNC postprocessor. See ARCHITECTURE.md for the map.
 
+pub mod cl;
 pub mod cli;
+pub mod diag;
 pub mod kinematics;
 pub mod machines;
-pub mod cl;
-pub mod diag;
+pub mod nc;
+pub mod post;

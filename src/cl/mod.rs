@@ -132,8 +132,13 @@ impl<R: BufRead> Reader<R> {
                 Ok(t) => self.take_line(t.trim_end_matches(['\n', '\r']), line_no),
                 Err(e) => {
                     self.queue.push_back(Event::Diagnostic(
-                        Diagnostic::new(Code::InvalidUtf8, Severity::Warning, Some(line_no), "bytes that are not UTF-8 replaced")
-                            .at(e.valid_up_to() as u32 + 1),
+                        Diagnostic::new(
+                            Code::InvalidUtf8,
+                            Severity::Warning,
+                            Some(line_no),
+                            "bytes that are not UTF-8 replaced",
+                        )
+                        .at(e.valid_up_to() as u32 + 1),
                     ));
                     let t = String::from_utf8_lossy(&raw);
                     self.take_line(t.trim_end_matches(['\n', '\r']), line_no);

@@ -15,9 +15,15 @@ pub enum FeedUnit {
 
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum SpindleCmd {
-    Rpm { speed: f64, clockwise: bool },
+    Rpm {
+        speed: f64,
+        clockwise: bool,
+    },
     /// Surface speed (SFM/SMM); the RPM depends on the tool diameter.
-    Surface { speed: f64, clockwise: bool },
+    Surface {
+        speed: f64,
+        clockwise: bool,
+    },
     Off,
 }
 
@@ -56,22 +62,45 @@ pub struct CycleParams {
 #[derive(Clone, Debug, PartialEq)]
 pub enum Record {
     /// Tip point, and the tool axis when the record gives one (else modal).
-    Goto { p: [f64; 3], axis: Option<[f64; 3]> },
-    GoDelta { d: [f64; 3], axis: Option<[f64; 3]> },
-    From { p: [f64; 3], axis: Option<[f64; 3]> },
+    Goto {
+        p: [f64; 3],
+        axis: Option<[f64; 3]>,
+    },
+    GoDelta {
+        d: [f64; 3],
+        axis: Option<[f64; 3]>,
+    },
+    From {
+        p: [f64; 3],
+        axis: Option<[f64; 3]>,
+    },
     /// The next motion only is a rapid.
     Rapid,
     /// `units` is what the record itself says (MMPM → mm, IPM → inch), if anything.
-    Feedrate { value: f64, unit: FeedUnit, units: Option<Units> },
+    Feedrate {
+        value: f64,
+        unit: FeedUnit,
+        units: Option<Units>,
+    },
     Spindle(SpindleCmd),
     Coolant(CoolantCmd),
-    LoadTool { number: Option<u32>, length: Option<f64> },
-    ToolData { diameter: Option<f64>, length: Option<f64> },
+    LoadTool {
+        number: Option<u32>,
+        length: Option<f64>,
+    },
+    ToolData {
+        diameter: Option<f64>,
+        length: Option<f64>,
+    },
     Units(Units),
     Multax(bool),
     ToolAxis([f64; 3]),
     /// The next GOTO ends an arc about this centre and axis (counter-clockwise about it).
-    Circle { center: [f64; 3], axis: [f64; 3], radius: Option<f64> },
+    Circle {
+        center: [f64; 3],
+        axis: [f64; 3],
+        radius: Option<f64>,
+    },
     Cycle(CycleParams),
     CycleOff,
     /// Operation start (`TOOL PATH/…`) with its name.
@@ -87,10 +116,55 @@ pub enum Record {
 
 /// Records kinepost recognises and does not act on (no warning for these).
 const IGNORED: &[&str] = &[
-    "PAINT", "MSYS", "CSYS", "TRNTYP", "BOX", "MACHIN", "OPFEATSTART", "OPFEATEND", "SELECT", "TOOLNO", "TPRINT", "SYN",
-    "PPFUN", "TURRET", "REWIND", "CUTCOM", "CLRSRF", "MODE", "ROTABL", "CLEARP", "DISPLY", "OPSKIP", "OPSTOP", "STOP", "MFGNO",
-    "FEATNO", "AUTOPS", "TRANS", "NURBS", "OPERATION", "CYCLE_DEF", "SET", "ORIGIN", "DELAY", "OPTIONS", "TECHNO",
-    "PREFUN", "AUXFUN", "SEQNO", "MOVE_ATTRIB", "SWITCH", "LINTOL", "INTOL", "OUTTOL", "THICK", "ROTATE", "INDIRV", "ARCSLP", "PITCH",
+    "PAINT",
+    "MSYS",
+    "CSYS",
+    "TRNTYP",
+    "BOX",
+    "MACHIN",
+    "OPFEATSTART",
+    "OPFEATEND",
+    "SELECT",
+    "TOOLNO",
+    "TPRINT",
+    "SYN",
+    "PPFUN",
+    "TURRET",
+    "REWIND",
+    "CUTCOM",
+    "CLRSRF",
+    "MODE",
+    "ROTABL",
+    "CLEARP",
+    "DISPLY",
+    "OPSKIP",
+    "OPSTOP",
+    "STOP",
+    "MFGNO",
+    "FEATNO",
+    "AUTOPS",
+    "TRANS",
+    "NURBS",
+    "OPERATION",
+    "CYCLE_DEF",
+    "SET",
+    "ORIGIN",
+    "DELAY",
+    "OPTIONS",
+    "TECHNO",
+    "PREFUN",
+    "AUXFUN",
+    "SEQNO",
+    "MOVE_ATTRIB",
+    "SWITCH",
+    "LINTOL",
+    "INTOL",
+    "OUTTOL",
+    "THICK",
+    "ROTATE",
+    "INDIRV",
+    "ARCSLP",
+    "PITCH",
 ];
 
 struct Arg<'a> {
@@ -123,14 +197,26 @@ pub fn parse_statement(stmt: &str, line: u32, diags: &mut Vec<Diagnostic>) -> Op
             let n = args.len();
             if !(n == 3 || n >= 6) {
                 let col = args.last().map_or(rest_col, |a| a.col);
-                bad(diags, col, format!("{major_uc}: expected 3 values (x,y,z) or 6 (x,y,z,i,j,k), found {n}"));
+                bad(
+                    diags,
+                    col,
+                    format!("{major_uc}: expected 3 values (x,y,z) or 6 (x,y,z,i,j,k), found {n}"),
+                );
                 return None;
             }
             for (k, a) in args.iter().take(6).enumerate() {
                 match num(a.text) {
                     Some(x) if x.is_finite() => v[k] = x,
                     _ => {
-                        bad(diags, a.col, format!("{major_uc}: expected a finite number as value {}, found {:?}", k + 1, a.text.trim()));
+                        bad(
+                            diags,
+                            a.col,
+                            format!(
+                                "{major_uc}: expected a finite number as value {}, found {:?}",
+                                k + 1,
+                                a.text.trim()
+                            ),
+                        );
                         return None;
                     }
                 }
@@ -159,7 +245,14 @@ pub fn parse_statement(stmt: &str, line: u32, diags: &mut Vec<Diagnostic>) -> Op
                     _ => match num(a.text) {
                         Some(x) if x.is_finite() && x >= 0.0 && value.is_none() => value = Some(x),
                         _ => {
-                            bad(diags, a.col, format!("FEDRAT: expected a feed value and MMPM, IPM, MMPR or IPR, found {:?}", a.text.trim()));
+                            bad(
+                                diags,
+                                a.col,
+                                format!(
+                                    "FEDRAT: expected a feed value and MMPM, IPM, MMPR or IPR, found {:?}",
+                                    a.text.trim()
+                                ),
+                            );
                             return None;
                         }
                     },
@@ -187,7 +280,14 @@ pub fn parse_statement(stmt: &str, line: u32, diags: &mut Vec<Diagnostic>) -> Op
                     _ => match num(a.text) {
                         Some(x) if x.is_finite() && x >= 0.0 => speed = speed.or(Some(x)),
                         _ => {
-                            bad(diags, a.col, format!("SPINDL: expected a speed, RPM, SFM, CLW, CCLW or OFF, found {:?}", a.text.trim()));
+                            bad(
+                                diags,
+                                a.col,
+                                format!(
+                                    "SPINDL: expected a speed, RPM, SFM, CLW, CCLW or OFF, found {:?}",
+                                    a.text.trim()
+                                ),
+                            );
                             return None;
                         }
                     },
@@ -211,7 +311,11 @@ pub fn parse_statement(stmt: &str, line: u32, diags: &mut Vec<Diagnostic>) -> Op
                 "THRU" | "THROUGH" | "TAP" => CoolantCmd::Through,
                 "OFF" => CoolantCmd::Off,
                 other => {
-                    bad(diags, args[0].col, format!("COOLNT: expected ON, FLOOD, MIST, THRU or OFF, found {other:?}"));
+                    bad(
+                        diags,
+                        args[0].col,
+                        format!("COOLNT: expected ON, FLOOD, MIST, THRU or OFF, found {other:?}"),
+                    );
                     return None;
                 }
             }))
@@ -233,7 +337,13 @@ pub fn parse_statement(stmt: &str, line: u32, diags: &mut Vec<Diagnostic>) -> Op
                     }
                 } else if !w.is_empty() && !matches!(w.as_str(), "ADJUST" | "OSETNO" | "MILL" | "LATHE") {
                     diags.push(
-                        Diagnostic::new(Code::IgnoredRecord, Severity::Info, Some(line), format!("{major_uc}: {w} not used")).at(args[i].col),
+                        Diagnostic::new(
+                            Code::IgnoredRecord,
+                            Severity::Info,
+                            Some(line),
+                            format!("{major_uc}: {w} not used"),
+                        )
+                        .at(args[i].col),
                     );
                 }
                 i += 1;
@@ -243,16 +353,26 @@ pub fn parse_statement(stmt: &str, line: u32, diags: &mut Vec<Diagnostic>) -> Op
         "TLDATA" => {
             // TLDATA/MILL,diameter,corner radius,length,…
             let nums: Vec<f64> = args.iter().filter_map(|a| num(a.text)).collect();
-            Some(Record::ToolData { diameter: nums.first().copied(), length: nums.get(2).copied().filter(|l| *l > 0.0) })
+            Some(Record::ToolData {
+                diameter: nums.first().copied(),
+                length: nums.get(2).copied().filter(|l| *l > 0.0),
+            })
         }
-        "CUTTER" => Some(Record::ToolData { diameter: args.first().and_then(|a| num(a.text)), length: None }),
+        "CUTTER" => Some(Record::ToolData {
+            diameter: args.first().and_then(|a| num(a.text)),
+            length: None,
+        }),
         "UNITS" | "UNIT" => {
             let w = args.first().map(word).unwrap_or_default();
             match w.as_str() {
                 "MM" | "MILLIMETERS" | "METRIC" => Some(Record::Units(Units::Mm)),
                 "INCHES" | "INCH" | "IN" => Some(Record::Units(Units::Inch)),
                 other => {
-                    bad(diags, args.first().map_or(rest_col, |a| a.col), format!("{major_uc}: expected MM or INCHES, found {other:?}"));
+                    bad(
+                        diags,
+                        args.first().map_or(rest_col, |a| a.col),
+                        format!("{major_uc}: expected MM or INCHES, found {other:?}"),
+                    );
                     None
                 }
             }
@@ -285,16 +405,37 @@ pub fn parse_statement(stmt: &str, line: u32, diags: &mut Vec<Diagnostic>) -> Op
                 }
             }
             if v.len() < 6 {
-                bad(diags, rest_col, format!("CIRCLE: expected centre and axis (6 values) and a radius, found {} values", v.len()));
+                bad(
+                    diags,
+                    rest_col,
+                    format!(
+                        "CIRCLE: expected centre and axis (6 values) and a radius, found {} values",
+                        v.len()
+                    ),
+                );
                 return None;
             }
             if words.iter().any(|w| w == "TIMES") {
-                diags.push(Diagnostic::new(Code::IgnoredRecord, Severity::Warning, Some(line), "CIRCLE: TIMES (repeated turns) not supported: the arc is taken once").at(rest_col));
+                diags.push(
+                    Diagnostic::new(
+                        Code::IgnoredRecord,
+                        Severity::Warning,
+                        Some(line),
+                        "CIRCLE: TIMES (repeated turns) not supported: the arc is taken once",
+                    )
+                    .at(rest_col),
+                );
             }
-            Some(Record::Circle { center: [v[0], v[1], v[2]], axis: [v[3], v[4], v[5]], radius: v.get(6).copied() })
+            Some(Record::Circle {
+                center: [v[0], v[1], v[2]],
+                axis: [v[3], v[4], v[5]],
+                radius: v.get(6).copied(),
+            })
         }
         "CYCLE" => parse_cycle(&args, line, rest_col, diags),
-        "TOOL PATH" => Some(Record::OperationStart(args.first().map(|a| a.text.trim().to_string()).unwrap_or_default())),
+        "TOOL PATH" => Some(Record::OperationStart(
+            args.first().map(|a| a.text.trim().to_string()).unwrap_or_default(),
+        )),
         "END-OF-PATH" => Some(Record::OperationEnd),
         "PARTNO" => Some(Record::PartNo(rest.trim().to_string())),
         "PPRINT" | "INSERT" => Some(Record::Comment(rest.trim().to_string())),
@@ -303,8 +444,13 @@ pub fn parse_statement(stmt: &str, line: u32, diags: &mut Vec<Diagnostic>) -> Op
         m => {
             let shown: String = s.chars().take(60).collect();
             diags.push(
-                Diagnostic::new(Code::UnknownRecord, Severity::Warning, Some(line), format!("unknown record {:?}: ignored", if m.is_empty() { &shown } else { m }))
-                    .at(lead + 1),
+                Diagnostic::new(
+                    Code::UnknownRecord,
+                    Severity::Warning,
+                    Some(line),
+                    format!("unknown record {:?}: ignored", if m.is_empty() { &shown } else { m }),
+                )
+                .at(lead + 1),
             );
             None
         }
@@ -323,7 +469,15 @@ fn parse_cycle(args: &[Arg], line: u32, rest_col: u32, diags: &mut Vec<Diagnosti
         "BORE" | "REAM" => CycleKind::Bore,
         _ => CycleKind::Other,
     };
-    let mut p = CycleParams { kind, depth: f64::NAN, rapid_to: f64::NAN, retract_to: None, feed: None, peck: None, dwell: None };
+    let mut p = CycleParams {
+        kind,
+        depth: f64::NAN,
+        rapid_to: f64::NAN,
+        retract_to: None,
+        feed: None,
+        peck: None,
+        dwell: None,
+    };
     let value = |i: usize, diags: &mut Vec<Diagnostic>| -> Option<f64> {
         let a = args.get(i)?;
         // CAMWorks writes one value as "46.927686 46.927686": take the first, say so.
@@ -334,8 +488,13 @@ fn parse_cycle(args: &[Arg], line: u32, rest_col: u32, diags: &mut Vec<Diagnosti
                 let first = t.split_whitespace().next().and_then(num);
                 if first.is_some() {
                     diags.push(
-                        Diagnostic::new(Code::BadRecord, Severity::Warning, Some(line), format!("CYCLE: value {t:?} has extra text; used the first number"))
-                            .at(a.col),
+                        Diagnostic::new(
+                            Code::BadRecord,
+                            Severity::Warning,
+                            Some(line),
+                            format!("CYCLE: value {t:?} has extra text; used the first number"),
+                        )
+                        .at(a.col),
                     );
                 }
                 first
@@ -368,7 +527,11 @@ fn parse_cycle(args: &[Arg], line: u32, rest_col: u32, diags: &mut Vec<Diagnosti
                 i += 1;
             }
             "MMPM" | "IPM" | "MMPR" | "IPR" => {
-                let unit = if k.ends_with("PR") { FeedUnit::PerRev } else { FeedUnit::PerMinute };
+                let unit = if k.ends_with("PR") {
+                    FeedUnit::PerRev
+                } else {
+                    FeedUnit::PerMinute
+                };
                 let units = if k.starts_with("MM") { Units::Mm } else { Units::Inch };
                 p.feed = value(i + 1, diags).map(|f| (f, unit, Some(units)));
                 i += 1;
@@ -386,15 +549,24 @@ fn parse_cycle(args: &[Arg], line: u32, rest_col: u32, diags: &mut Vec<Diagnosti
         p.depth = positional[0];
     }
     if p.rapid_to.is_nan() {
-        p.rapid_to = positional.get(positional.len().wrapping_sub(2)).copied().filter(|_| positional.len() >= 3).unwrap_or(0.0);
+        p.rapid_to = positional
+            .get(positional.len().wrapping_sub(2))
+            .copied()
+            .filter(|_| positional.len() >= 3)
+            .unwrap_or(0.0);
         if p.retract_to.is_none() && positional.len() >= 3 {
             p.retract_to = positional.last().copied();
         }
     }
     if p.depth.is_nan() {
         diags.push(
-            Diagnostic::new(Code::BadRecord, Severity::Warning, Some(line), format!("CYCLE/{first}: no depth given; holes are positioned only"))
-                .at(rest_col),
+            Diagnostic::new(
+                Code::BadRecord,
+                Severity::Warning,
+                Some(line),
+                format!("CYCLE/{first}: no depth given; holes are positioned only"),
+            )
+            .at(rest_col),
         );
         p.depth = 0.0;
     }
@@ -409,7 +581,10 @@ fn split_args(rest: &str, start_col: u32) -> Vec<Arg<'_>> {
     let mut col = start_col;
     for part in rest.split(',') {
         let lead = (part.len() - part.trim_start().len()) as u32;
-        out.push(Arg { text: part, col: col + lead });
+        out.push(Arg {
+            text: part,
+            col: col + lead,
+        });
         col += part.len() as u32 + 1;
     }
     // A trailing comma (CAMWorks' CUTTER/…,) adds no argument.

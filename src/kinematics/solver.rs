@@ -120,6 +120,15 @@ impl Solver {
     }
 }
 
+/// The tool-axis direction (in W) at which the outer rotary of a two-rotary chain turns freely:
+/// near it, exact orientation makes that rotary swing. `None` for other chains.
+pub fn singular_direction(m: &Machine) -> Option<Vec3> {
+    match &m.solver.shape {
+        Shape::Two(p) => Some(p.s1),
+        _ => None,
+    }
+}
+
 /// One joint solution.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Solution {

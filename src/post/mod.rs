@@ -1,0 +1,939 @@
+//! The postprocessing engine: CL records → poses → planned joint moves → NC blocks with
+//! diagnostics, pushed into a [`Sink`] (a file, an HTTP stream, a golden test are all sinks).
+//!
+//! Every block written is replayed through FK from the words as written (rounded) and compared
+//! with the pose it was meant to reach: the summary carries the largest deviation, and a block
+//! over tolerance is an error diagnostic.
+
+mod plan;
+mod source;
+
+pub use source::{Item, MotionPt, ProgEvent, Source};
+
+use crate::cl::{CoolantCmd, FeedUnit, SpindleCmd};
+use crate::diag::{Code, Diagnostic, Severity};
+use crate::kinematics::{self, IkOptions, Joints, Machine, Pose, Setup, Solutions, Units, Vec3, angle_between, fk, ik_into};
+use crate::nc::{Dialect, FeedMode, Formats, Formatter, Motion};
+use plan::{Cand, Committed, Out, Planner, wrap};
+use serde::Serialize;
+use std::collections::BTreeMap;
+use std::io::BufRead;
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Mode {
+    /// No TCP on the controller: X Y Z are the machine's linear joints.
+    Joint,
+    /// The controller's tool-centre-point control: X Y Z are the tip in the part frame.
+    Tcp,
+}
+
+#[derive(Clone, Debug)]
+pub struct Options {
+    pub mode: Mode,
+    pub dialect: &'static Dialect,
+    /// Profile units; overrides the CL file's and the profile's default.
+    pub tool_length: Option<f64>,
+    pub work_offset: Vec3,
+    /// Chord tolerance (profile units): linearization, arcs, and the self-verification bound.
+    pub tolerance: f64,
+    pub sequence_numbers: bool,
+    pub program_number: u32,
+    pub strict: bool,
+    pub cl_units: Option<Units>,
+    /// Largest rotary change in one feed block before it is subdivided (radians).
+    pub max_rotary_step: f64,
+    /// Retract distance along the tool axis for unwinds and repositions (profile units).
+    pub clearance: f64,
+    /// Cone (radians) around a singular direction within which blocks are marked `singular`.
+    pub singular_cone: f64,
+    /// Header comment lines (source file name, date …) the caller wants in the program.
+    pub header: Vec<String>,
+}
+
+impl Options {
+    pub fn new(m: &Machine) -> Options {
+        let mm = m.units == Units::Mm;
+        Options {
+            mode: Mode::Joint,
+            dialect: crate::nc::dialect(&m.controller).unwrap_or(&crate::nc::FANUC),
+            tool_length: None,
+            work_offset: Vec3::zeros(),
+            tolerance: if mm { 0.01 } else { 0.0004 },
+            sequence_numbers: false,
+            program_number: 1000,
+            strict: false,
+            cl_units: None,
+            max_rotary_step: 10f64.to_radians(),
+            clearance: if mm { 50.0 } else { 2.0 },
+            singular_cone: 2f64.to_radians(),
+            header: Vec::new(),
+        }
+    }
+}
+
+/// What a sink is told about a motion block, beside its text.
+#[derive(Clone, Debug, Serialize)]
+pub struct BlockInfo {
+    /// 1-based index of the motion block in the program.
+    pub n: u64,
+    pub source_line: Option<u32>,
+    /// Axis words as written: name → value (profile units, degrees).
+    pub joints: BTreeMap<char, f64>,
+    pub diagnostics: Vec<Diagnostic>,
+}
+
+/// Where the program goes. The NC file, the NDJSON stream and a golden test are all sinks.
+pub trait Sink {
+    fn line(&mut self, text: &str, block: Option<&BlockInfo>) -> std::io::Result<()>;
+    /// A diagnostic not attached to a block (reader problems, program-level notes).
+    fn diagnostic(&mut self, _d: &Diagnostic) -> std::io::Result<()> {
+        Ok(())
+    }
+    fn summary(&mut self, _s: &Summary) -> std::io::Result<()> {
+        Ok(())
+    }
+}
+
+/// NC text to any writer, one line each.
+pub struct TextSink<W: std::io::Write>(pub W);
+
+impl<W: std::io::Write> Sink for TextSink<W> {
+    fn line(&mut self, text: &str, _b: Option<&BlockInfo>) -> std::io::Result<()> {
+        self.0.write_all(text.as_bytes())?;
+        self.0.write_all(b"\n")
+    }
+}
+
+/// Per-axis figures of the summary.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct AxisStats {
+    pub min: f64,
+    pub max: f64,
+    /// Rotary axes: total travel in degrees.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub travel: Option<f64>,
+    /// Rotary axes: largest change in one feed block, and the CL line of that block.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub largest_step: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub largest_step_line: Option<u32>,
+}
+
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct Summary {
+    pub machine: String,
+    pub mode: Option<Mode>,
+    pub units: String,
+    pub cl_units: String,
+    pub cl_units_source: String,
+    pub tool_length: f64,
+    pub cl_points: u64,
+    pub blocks: u64,
+    pub inserted_blocks: u64,
+    pub counts: BTreeMap<String, u64>,
+    pub axes: BTreeMap<char, AxisStats>,
+    pub cycle_time_s: f64,
+    /// FK replay of every written block against the pose it was meant to reach.
+    pub max_tip_deviation: f64,
+    pub max_axis_deviation_deg: f64,
+    /// Largest angle between an inserted block's tool axis and the CL orientation, where a
+    /// segment passing near a singular direction is followed in joint space (as the control
+    /// would between the CL points) instead of swinging the free rotary.
+    pub max_singular_deviation_deg: f64,
+    pub errors: u64,
+    pub warnings: u64,
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    #[error(transparent)]
+    Read(#[from] source::Error),
+    #[error("writing output: {0}")]
+    Io(#[from] std::io::Error),
+    /// Strict mode: the first error diagnostic ends the run.
+    #[error("{0}")]
+    Strict(Diagnostic),
+}
+
+/// The last block written: where the machine is.
+#[derive(Clone, Copy, Debug)]
+struct At {
+    joints: Joints,
+    actual: [f64; 3],
+    pose: Pose,
+    branch: i8,
+}
+
+struct Emitter<'a, S: Sink + ?Sized> {
+    m: &'a Machine,
+    o: &'a Options,
+    sink: &'a mut S,
+    f: Formatter,
+    setup: Setup,
+    at: Option<At>,
+    tool: Option<u32>,
+    comp_on: bool,
+    rpm: Option<f64>,
+    blocks: u64,
+    sum: Summary,
+    buf: Solutions,
+    strict_error: Option<Diagnostic>,
+    warned_no_tool: bool,
+    warned_per_rev: bool,
+}
+
+/// Post-processes CL from `input` for machine `m` into `sink`.
+pub fn post<R: BufRead, S: Sink + ?Sized>(input: R, m: &Machine, o: &Options, sink: &mut S) -> Result<Summary, Error> {
+    let mut src = Source::new(input, m.units, o.cl_units, o.tolerance, o.strict)?;
+    let setup = Setup::new(o.tool_length.unwrap_or(m.default_tool_length), o.work_offset);
+    let mut e = Emitter {
+        m,
+        o,
+        sink,
+        f: Formatter::new(o.dialect, Formats::for_units(m.units), o.sequence_numbers),
+        setup,
+        at: None,
+        tool: None,
+        comp_on: false,
+        rpm: None,
+        blocks: 0,
+        sum: Summary {
+            machine: m.id.clone(),
+            mode: Some(o.mode),
+            units: m.units.as_str().into(),
+            cl_units: src.cl_units.as_str().into(),
+            cl_units_source: src.units_source.into(),
+            tool_length: setup.tool_length,
+            ..Default::default()
+        },
+        buf: Solutions::new(),
+        strict_error: None,
+        warned_no_tool: false,
+        warned_per_rev: false,
+    };
+    e.program_start()?;
+    let mut planner = Planner::new(m, setup);
+    let mut pending: Vec<Out> = Vec::new();
+    loop {
+        let item = src.next_item()?;
+        let Some(item) = item else { break };
+        match item {
+            Item::Motion(pt) => planner.push_point(pt, &mut |o| pending.push(o)),
+            Item::Event(ProgEvent::ToolLength(l)) if o.tool_length.is_none() => {
+                // The tool length governs IK: it cannot wait in the window.
+                planner.finish(&mut |o| pending.push(o));
+                e.drain(&mut pending)?;
+                planner.setup.tool_length = l;
+                e.setup.tool_length = l;
+                e.sum.tool_length = l;
+            }
+            Item::Event(ev) => planner.push_event(ev, &mut |o| pending.push(o)),
+        }
+        e.drain(&mut pending)?;
+        if let Some(d) = e.strict_error.take().or_else(|| src.strict_error.take()) {
+            return Err(Error::Strict(d));
+        }
+    }
+    if let Some(d) = src.strict_error.take() {
+        return Err(Error::Strict(d));
+    }
+    planner.finish(&mut |o| pending.push(o));
+    e.drain(&mut pending)?;
+    if let Some(d) = e.strict_error.take() {
+        return Err(Error::Strict(d));
+    }
+    e.program_end()?;
+    let sum = e.sum.clone();
+    e.sink.summary(&sum)?;
+    Ok(sum)
+}
+
+impl<S: Sink + ?Sized> Emitter<'_, S> {
+    fn out(&mut self, text: &str) -> std::io::Result<()> {
+        self.sink.line(text, None)
+    }
+
+    fn note(&mut self, d: Diagnostic) -> std::io::Result<()> {
+        self.count(&d);
+        self.sink.diagnostic(&d)
+    }
+
+    fn count(&mut self, d: &Diagnostic) {
+        *self.sum.counts.entry(d.code.as_str().to_string()).or_default() += 1;
+        match d.severity {
+            Severity::Error => {
+                self.sum.errors += 1;
+                if self.o.strict && self.strict_error.is_none() {
+                    self.strict_error = Some(d.clone());
+                }
+            }
+            Severity::Warning => self.sum.warnings += 1,
+            Severity::Info => {}
+        }
+    }
+
+    fn program_start(&mut self) -> std::io::Result<()> {
+        let d = self.o.dialect;
+        for l in d.program_start {
+            self.out(l)?;
+        }
+        self.out(&format!("O{:04}", self.o.program_number))?;
+        let mut lines = vec![
+            format!("KINEPOST {} FOR {} ({})", env!("CARGO_PKG_VERSION"), self.m.id, self.m.name),
+            format!(
+                "MODE {} UNITS {} TOOL LENGTH {} TOLERANCE {}",
+                match self.o.mode {
+                    Mode::Joint => "JOINT",
+                    Mode::Tcp => "TCP",
+                },
+                self.m.units.as_str(),
+                self.setup.tool_length,
+                self.o.tolerance
+            ),
+        ];
+        let wo = self.o.work_offset;
+        if wo != Vec3::zeros() {
+            lines.push(format!("WORK OFFSET {},{},{}", wo.x, wo.y, wo.z));
+        }
+        lines.extend(self.o.header.iter().cloned());
+        for l in lines {
+            let c = self.f.comment(&l).to_string();
+            self.out(&c)?;
+        }
+        let units = if self.m.units == Units::Mm { d.units_mm } else { d.units_inch };
+        let l = self.f.words(units).to_string();
+        self.out(&l)?;
+        let l = self.f.words(d.safe_start).to_string();
+        self.out(&l)
+    }
+
+    fn program_end(&mut self) -> std::io::Result<()> {
+        let d = self.o.dialect;
+        for w in [d.spindle_off, d.coolant_off, d.tcp_off] {
+            let l = self.f.words(w).to_string();
+            self.out(&l)?;
+        }
+        for l in d.program_end {
+            let l = if l.starts_with('%') {
+                l.to_string()
+            } else {
+                self.f.words(l).to_string()
+            };
+            self.out(&l)?;
+        }
+        Ok(())
+    }
+
+    fn drain(&mut self, pending: &mut Vec<Out>) -> Result<(), Error> {
+        for o in pending.drain(..) {
+            match o {
+                Out::Event(ev) => self.event(ev)?,
+                Out::Point(c) => self.point(c)?,
+            }
+        }
+        Ok(())
+    }
+
+    fn event(&mut self, ev: ProgEvent) -> std::io::Result<()> {
+        let d = self.o.dialect;
+        match ev {
+            ProgEvent::Tool { number, .. } => {
+                if self.comp_on {
+                    let l = self.f.words(d.tcp_off).to_string();
+                    self.out(&l)?;
+                    self.comp_on = false;
+                }
+                let c = self.f.comment(&format!("TOOL {number}")).to_string();
+                self.out(&c)?;
+                let l = self.f.words_t(d.tool_change, number).to_string();
+                self.out(&l)?;
+                self.f.reset_modal();
+                self.tool = Some(number);
+            }
+            ProgEvent::ToolLength(l) => {
+                // Only when the job fixed the length (else handled before planning).
+                let _ = l;
+            }
+            ProgEvent::Spindle(c) => {
+                let l = match c {
+                    SpindleCmd::Rpm { speed, clockwise } => {
+                        self.rpm = Some(speed);
+                        format!(
+                            "S{} {}",
+                            speed.round() as i64,
+                            if clockwise { d.spindle_cw } else { d.spindle_ccw }
+                        )
+                    }
+                    SpindleCmd::Surface { speed, clockwise } => {
+                        self.note(Diagnostic::new(
+                            Code::IgnoredRecord,
+                            Severity::Warning,
+                            None,
+                            "surface speed not converted: written as S",
+                        ))?;
+                        format!(
+                            "S{} {}",
+                            speed.round() as i64,
+                            if clockwise { d.spindle_cw } else { d.spindle_ccw }
+                        )
+                    }
+                    SpindleCmd::Off => {
+                        self.rpm = None;
+                        d.spindle_off.to_string()
+                    }
+                };
+                let l = self.f.words(&l).to_string();
+                self.out(&l)?;
+            }
+            ProgEvent::Coolant(c) => {
+                let w = match c {
+                    CoolantCmd::Flood => d.coolant_flood,
+                    CoolantCmd::Mist => d.coolant_mist,
+                    CoolantCmd::Through => d.coolant_through,
+                    CoolantCmd::Off => d.coolant_off,
+                };
+                let l = self.f.words(w).to_string();
+                self.out(&l)?;
+            }
+            ProgEvent::Comment(t) => {
+                let c = self.f.comment(&t).to_string();
+                self.out(&c)?;
+            }
+            ProgEvent::Operation(name) => {
+                let c = self.f.comment(&format!("OPERATION {name}")).to_string();
+                self.out(&c)?;
+            }
+            ProgEvent::Diag(dg) => self.note(dg)?,
+            ProgEvent::End => {}
+        }
+        Ok(())
+    }
+
+    /// Length compensation (or TCP) on, before the first motion of a tool.
+    fn ensure_comp(&mut self) -> std::io::Result<()> {
+        if self.comp_on {
+            return Ok(());
+        }
+        let t = match self.tool {
+            Some(t) => t,
+            None => {
+                if !self.warned_no_tool {
+                    self.warned_no_tool = true;
+                    self.note(Diagnostic::new(
+                        Code::IgnoredRecord,
+                        Severity::Info,
+                        None,
+                        "no tool loaded in the CL: length offset H1 used",
+                    ))?;
+                }
+                1
+            }
+        };
+        let d = self.o.dialect;
+        let w = match self.o.mode {
+            Mode::Joint => d.length_comp,
+            Mode::Tcp => d.tcp_on,
+        };
+        let l = self.f.words_t(w, t).to_string();
+        self.out(&l)?;
+        self.comp_on = true;
+        Ok(())
+    }
+
+    /// The chosen candidate with its unbounded windings and singular free angle resolved against
+    /// where the machine is.
+    fn resolve(&mut self, pose: &Pose, cand: &Cand) -> Option<(Joints, [f64; 3], i8)> {
+        let mut sol = cand.sol;
+        if let Some(free) = sol.singular {
+            let prev = self.at.map_or(0.0, |a| a.actual[free]);
+            let opt = IkOptions {
+                free_angle: prev,
+                ..Default::default()
+            };
+            if ik_into(self.m, pose, &self.setup, &opt, &mut self.buf).is_ok()
+                && let Some(s) = self.buf.iter().find(|s| s.singular == Some(free))
+            {
+                sol = *s;
+            }
+            // The bounded windings the planner chose stay as chosen.
+            for (i, r) in self.m.rotaries.iter().enumerate() {
+                if i != free && r.limits.is_some() {
+                    sol.joints.rotary[i] = cand.sol.joints.rotary[i];
+                }
+            }
+        }
+        let mut joints = sol.joints;
+        let mut actual = sol.actual;
+        if let Some(at) = self.at {
+            for (i, r) in self.m.rotaries.iter().enumerate() {
+                if r.limits.is_none() && sol.singular != Some(i) {
+                    actual[i] = at.actual[i] + wrap(sol.actual[i] - at.actual[i]);
+                    joints.rotary[i] = r.word(actual[i]);
+                }
+            }
+        }
+        for (i, r) in self.m.rotaries.iter().enumerate() {
+            if r.limits.is_some() {
+                actual[i] = r.actual(joints.rotary[i]);
+            }
+        }
+        Some((joints, actual, sol.branch))
+    }
+
+    fn point(&mut self, c: Committed) -> Result<(), Error> {
+        self.sum.cl_points += !c.pt.inserted as u64;
+        let pt = c.pt;
+        let Some(cand) = c.cand else {
+            let what = match &c.error {
+                Some(e) => e.to_string(),
+                None => "no solution".into(),
+            };
+            self.note(Diagnostic::new(
+                Code::Unreachable,
+                Severity::Error,
+                Some(pt.line),
+                format!("pose unreachable on {}: {what}; block skipped", self.m.id),
+            ))?;
+            return Ok(());
+        };
+        let Some((joints, actual, branch)) = self.resolve(&pt.pose, &cand) else {
+            return Ok(());
+        };
+        self.ensure_comp()?;
+        let mut diags: Vec<Diagnostic> = Vec::new();
+        if !cand.feasible
+            && let Some(v) = kinematics::limit_violation(self.m, &joints, 1e-6)
+        {
+            diags.push(Diagnostic::new(
+                Code::LimitViolation,
+                Severity::Error,
+                Some(pt.line),
+                format!("{} = {:.4} outside its travel [{}, {}]", v.axis, v.value, v.min, v.max),
+            ));
+        }
+        let target = At {
+            joints,
+            actual,
+            pose: pt.pose,
+            branch,
+        };
+        match self.at {
+            Some(prev) if !pt.rapid => {
+                let unwind =
+                    self.m.rotaries.iter().enumerate().any(|(i, r)| {
+                        r.limits.is_some() && (joints.rotary[i] - prev.joints.rotary[i]).abs() > std::f64::consts::PI
+                    });
+                let branch_change = prev.branch * branch < 0
+                    && !plan::crosses_fold(self.m, &prev.joints.rotary, &joints.rotary, &prev.pose.axis, &pt.pose.axis);
+                if unwind || branch_change {
+                    self.reposition(prev, target, unwind, &pt)?;
+                } else {
+                    self.segment(prev, target, &pt, diags, 0)?;
+                    return Ok(());
+                }
+            }
+            _ => {}
+        }
+        self.block(target, &pt, pt.rapid || self.at.is_none(), diags, pt.inserted, None)?;
+        Ok(())
+    }
+
+    /// Retract along the tool axis, turn at clearance, re-approach: for an unwind of a bounded
+    /// rotary or a change of IK branch inside a cut.
+    fn reposition(&mut self, prev: At, to: At, unwind: bool, pt: &MotionPt) -> Result<(), Error> {
+        let word = if unwind { "UNWIND" } else { "REPOSITION" };
+        let code = if unwind { Code::Unwind } else { Code::BranchChange };
+        let d = Diagnostic::new(
+            code,
+            Severity::Warning,
+            Some(pt.line),
+            format!("{word}: retract {} along the tool axis, turn, re-approach", self.o.clearance),
+        );
+        let up = |a: At, s: &Setup, m: &Machine, clear: f64| {
+            let pose = Pose {
+                tip: a.pose.tip + a.pose.axis * clear,
+                axis: a.pose.axis,
+            };
+            let cp = kinematics::controlled_point(m, &a.actual, &pose.tip, s);
+            let mut j = a.joints;
+            for i in 0..3 {
+                j.linear[i] = if m.linears[i].is_some() { cp[i] } else { 0.0 };
+            }
+            At { joints: j, pose, ..a }
+        };
+        let r1 = up(prev, &self.setup, self.m, self.o.clearance);
+        let r2 = up(to, &self.setup, self.m, self.o.clearance);
+        self.block(r1, pt, true, vec![d], true, Some(&format!("RETRACT {word}")))?;
+        self.block(r2, pt, true, Vec::new(), true, Some(word))?;
+        self.block(to, pt, false, Vec::new(), pt.inserted, None)?;
+        Ok(())
+    }
+
+    /// A feed move from `a` to `b`, subdivided where the rotaries step too far in one block or
+    /// (joint mode) the joint-space line strays from the CL segment.
+    fn segment(&mut self, a: At, b: At, pt: &MotionPt, diags: Vec<Diagnostic>, depth: u32) -> Result<u32, Error> {
+        let step = (0..self.m.rotaries.len())
+            .map(|i| (b.joints.rotary[i] - a.joints.rotary[i]).abs())
+            .fold(0.0, f64::max);
+        let mut split = step > self.o.max_rotary_step;
+        if !split && self.o.mode == Mode::Joint && step > 0.0 {
+            split = self.nonlinear_error(&a, &b) > 0.8 * self.o.tolerance;
+        }
+        if split && depth < 14 {
+            if let Some(mid) = self.midpoint(&a, &b) {
+                let n1 = self.segment(a, mid, pt, Vec::new(), depth + 1)?;
+                let n2 = self.segment(mid, b, pt, diags, depth + 1)?;
+                return Ok(n1 + n2);
+            }
+        }
+        let mut diags = diags;
+        let is_last = (b.pose.tip - pt.pose.tip).norm() < 1e-12 && (b.pose.axis - pt.pose.axis).norm() < 1e-12;
+        if is_last && depth > 0 {
+            diags.push(Diagnostic::new(
+                Code::Linearized,
+                Severity::Info,
+                Some(pt.line),
+                "segment subdivided (see the blocks before this one)",
+            ));
+        }
+        self.block(b, pt, false, diags, !is_last || pt.inserted, None)?;
+        Ok(1)
+    }
+
+    /// Largest distance of the joint-space line a→b from the CL chord, sampled at ¼, ½, ¾.
+    fn nonlinear_error(&self, a: &At, b: &At) -> f64 {
+        let mut worst: f64 = 0.0;
+        for t in [0.25, 0.5, 0.75] {
+            let mut j = a.joints;
+            for i in 0..3 {
+                j.linear[i] += t * (b.joints.linear[i] - a.joints.linear[i]);
+                j.rotary[i] += t * (b.joints.rotary[i] - a.joints.rotary[i]);
+            }
+            let p = fk(self.m, &j, &self.setup).tip;
+            worst = worst.max(seg_dist(&p, &a.pose.tip, &b.pose.tip));
+        }
+        worst
+    }
+
+    /// The pose halfway along the CL segment (tip on the chord, axis on the great circle) and
+    /// its IK solution nearest the joint-space midpoint.
+    fn midpoint(&mut self, a: &At, b: &At) -> Option<At> {
+        let tip = (a.pose.tip + b.pose.tip) * 0.5;
+        let axis = slerp_half(&a.pose.axis, &b.pose.axis);
+        let pose = Pose { tip, axis };
+        let mut want = [0.0; 3];
+        for i in 0..3 {
+            want[i] = 0.5 * (a.actual[i] + b.actual[i]);
+        }
+        let free = self.m.rotaries.len().min(1).saturating_sub(1);
+        let opt = IkOptions {
+            free_angle: want[free],
+            ..Default::default()
+        };
+        ik_into(self.m, &pose, &self.setup, &opt, &mut self.buf).ok()?;
+        let mut best: Option<(f64, At)> = None;
+        for s in self.buf.iter() {
+            let mut actual = s.actual;
+            let mut joints = s.joints;
+            let mut d = 0.0;
+            for (i, r) in self.m.rotaries.iter().enumerate() {
+                if s.singular == Some(i) {
+                    actual[i] = want[i];
+                } else {
+                    actual[i] = want[i] + wrap(s.actual[i] - want[i]);
+                }
+                joints.rotary[i] = r.word(actual[i]);
+                d += (actual[i] - want[i]).abs();
+            }
+            if best.as_ref().is_none_or(|(bd, _)| d < *bd) {
+                best = Some((
+                    d,
+                    At {
+                        joints,
+                        actual,
+                        pose,
+                        branch: s.branch,
+                    },
+                ));
+            }
+        }
+        let exact = best.filter(|(d, _)| *d <= NEAR_SINGULAR_SWING);
+        if let Some((_, at)) = exact {
+            return Some(at);
+        }
+        // Near a singular direction the exact midpoint's free rotary follows the azimuth of a
+        // nearly aligned axis and swings wildly. Keep the interpolated rotaries (the motion the
+        // control makes between the two blocks anyway), put the tip exactly on the chord, and
+        // account for the orientation this leaves (bounded by how near the path passes).
+        let mut joints = a.joints;
+        for (i, r) in self.m.rotaries.iter().enumerate() {
+            joints.rotary[i] = r.word(want[i]);
+        }
+        let axis_fk = fk(self.m, &joints, &self.setup).axis;
+        let cp = kinematics::controlled_point(self.m, &want, &tip, &self.setup);
+        for i in 0..3 {
+            joints.linear[i] = if self.m.linears[i].is_some() { cp[i] } else { 0.0 };
+        }
+        let dev = angle_between(&axis_fk, &axis).to_degrees();
+        self.sum.max_singular_deviation_deg = self.sum.max_singular_deviation_deg.max(dev);
+        Some(At {
+            joints,
+            actual: want,
+            pose: Pose { tip, axis: axis_fk },
+            branch: a.branch,
+        })
+    }
+
+    /// Writes one motion block and accounts for it.
+    fn block(
+        &mut self,
+        to: At,
+        pt: &MotionPt,
+        rapid: bool,
+        mut diags: Vec<Diagnostic>,
+        inserted: bool,
+        comment: Option<&str>,
+    ) -> Result<(), Error> {
+        let m = self.m;
+        let tcp = self.o.mode == Mode::Tcp;
+        let mut axes: [Option<f64>; 6] = [None; 6];
+        for i in 0..3 {
+            if m.linears[i].is_some() || tcp {
+                axes[i] = Some(if tcp { to.pose.tip[i] } else { to.joints.linear[i] });
+            }
+        }
+        for (i, r) in m.rotaries.iter().enumerate() {
+            let k = 3 + (r.name as u8 - b'A') as usize;
+            axes[k] = Some(to.joints.rotary[i].to_degrees());
+        }
+        // Feed.
+        let prev = self.at;
+        let mut feed = None;
+        let mut time = 0.0;
+        if !rapid && let Some((fv, unit)) = pt.feed {
+            let mut f = fv;
+            if unit == FeedUnit::PerRev {
+                match self.rpm {
+                    Some(r) => f *= r,
+                    None if !self.warned_per_rev => {
+                        self.warned_per_rev = true;
+                        diags.push(Diagnostic::new(
+                            Code::FeedClamped,
+                            Severity::Warning,
+                            Some(pt.line),
+                            "feed per revolution with no spindle speed: taken per minute",
+                        ));
+                    }
+                    None => {}
+                }
+            }
+            let len = prev.map_or(0.0, |p| (to.pose.tip - p.pose.tip).norm());
+            let rot_moves =
+                prev.is_some_and(|p| (0..m.rotaries.len()).any(|i| (to.joints.rotary[i] - p.joints.rotary[i]).abs() > 1e-12));
+            let mut t = if f > 0.0 { len / f } else { 0.0 };
+            // Axis feed limits.
+            let mut limited = false;
+            if let Some(p) = prev {
+                for (i, l) in m.linears.iter().enumerate() {
+                    if let Some(l) = l
+                        && let Some(mf) = l.max_feed
+                    {
+                        let need = (to.joints.linear[i] - p.joints.linear[i]).abs() / mf;
+                        if need > t * (1.0 + 1e-9) {
+                            (t, limited) = (need, true);
+                        }
+                    }
+                }
+                for (i, r) in m.rotaries.iter().enumerate() {
+                    if let Some(mf) = r.max_feed {
+                        let need = (to.joints.rotary[i] - p.joints.rotary[i]).abs() / mf;
+                        if need > t * (1.0 + 1e-9) {
+                            (t, limited) = (need, true);
+                        }
+                    }
+                }
+            }
+            if rot_moves && !tcp {
+                if t <= 0.0 {
+                    t = 1e-6;
+                }
+                feed = Some((FeedMode::InverseTime, 1.0 / t));
+            } else {
+                let fz = if limited && t > 0.0 { len / t } else { f };
+                feed = Some((FeedMode::PerMinute, fz.max(0.0)));
+            }
+            if limited {
+                diags.push(Diagnostic::new(
+                    Code::FeedClamped,
+                    Severity::Warning,
+                    Some(pt.line),
+                    "feed reduced to respect an axis feed limit",
+                ));
+            }
+            time = t;
+        } else if let Some(p) = prev {
+            let len = (to
+                .joints
+                .linear
+                .iter()
+                .zip(p.joints.linear.iter())
+                .map(|(a, b)| (a - b) * (a - b))
+                .sum::<f64>())
+            .sqrt();
+            let rapid_rate = m
+                .linears
+                .iter()
+                .flatten()
+                .filter_map(|l| l.max_feed)
+                .fold(f64::INFINITY, f64::min);
+            let rate = if rapid_rate.is_finite() {
+                rapid_rate
+            } else if m.units == Units::Mm {
+                10000.0
+            } else {
+                400.0
+            };
+            time = len / rate;
+        }
+        // Diagnostics of the pose itself.
+        for (i, r) in m.rotaries.iter().enumerate() {
+            if let Some(e) = &r.angle_error
+                && !e.in_range(to.joints.rotary[i])
+            {
+                diags.push(Diagnostic::new(
+                    Code::AngleCompOutOfRange,
+                    Severity::Warning,
+                    Some(pt.line),
+                    format!(
+                        "{} = {:.4}° outside the angle-error fitted range [{}, {}]",
+                        r.name,
+                        to.joints.rotary[i].to_degrees(),
+                        e.range_deg.0,
+                        e.range_deg.1
+                    ),
+                ));
+            }
+        }
+        if let Some(dir) = kinematics::singular_direction(m)
+            && angle_between(&to.pose.axis, &dir).min(angle_between(&to.pose.axis, &-dir)) < self.o.singular_cone
+        {
+            diags.push(Diagnostic::new(
+                Code::Singular,
+                Severity::Info,
+                Some(pt.line),
+                "tool axis within the singular cone: the free rotary is held",
+            ));
+        }
+        // Self-verification: FK of the words as written.
+        let mut written = to.joints;
+        for i in 0..3 {
+            if let Some(v) = axes[i] {
+                written.linear[i] = self.f.written(v, i);
+            }
+        }
+        for (i, r) in m.rotaries.iter().enumerate() {
+            let k = 3 + (r.name as u8 - b'A') as usize;
+            written.rotary[i] = self.f.written(axes[k].unwrap_or(0.0), k).to_radians();
+        }
+        let replay = fk(m, &written, &self.setup);
+        let tip_dev = if tcp {
+            let w = Vec3::new(
+                self.f.written(to.pose.tip.x, 0),
+                self.f.written(to.pose.tip.y, 1),
+                self.f.written(to.pose.tip.z, 2),
+            );
+            (w - to.pose.tip).norm()
+        } else {
+            (replay.tip - to.pose.tip).norm()
+        };
+        let ax_dev = angle_between(&replay.axis, &to.pose.axis).to_degrees();
+        self.sum.max_tip_deviation = self.sum.max_tip_deviation.max(tip_dev);
+        self.sum.max_axis_deviation_deg = self.sum.max_axis_deviation_deg.max(ax_dev);
+        if tip_dev > self.o.tolerance || ax_dev > 0.01 {
+            diags.push(Diagnostic::new(
+                Code::VerifyDeviation,
+                Severity::Error,
+                Some(pt.line),
+                format!("FK replay of the written block misses the pose by {tip_dev:.6} / {ax_dev:.6}°"),
+            ));
+        }
+        // Statistics.
+        for (k, v) in axes.iter().enumerate() {
+            let Some(v) = v else { continue };
+            let name = crate::nc::AXIS_LETTERS[k];
+            let st = self.sum.axes.entry(name).or_insert(AxisStats {
+                min: *v,
+                max: *v,
+                ..Default::default()
+            });
+            st.min = st.min.min(*v);
+            st.max = st.max.max(*v);
+        }
+        if let Some(p) = prev {
+            for (i, r) in m.rotaries.iter().enumerate() {
+                let d = (to.joints.rotary[i] - p.joints.rotary[i]).to_degrees().abs();
+                let st = self.sum.axes.get_mut(&r.name).expect("rotary stats");
+                *st.travel.get_or_insert(0.0) += d;
+                if !rapid && comment.is_none() && d > st.largest_step.unwrap_or(0.0) {
+                    st.largest_step = Some(d);
+                    st.largest_step_line = Some(pt.line);
+                }
+            }
+        }
+        self.sum.cycle_time_s += time * 60.0;
+        for d in &diags {
+            self.count(d);
+        }
+        let comment = comment.or(pt.comment);
+        let motion = if rapid { Motion::Rapid } else { Motion::Feed };
+        let text = self.f.motion(motion, &axes, feed, "", comment).map(str::to_string);
+        self.at = Some(to);
+        if let Some(text) = text {
+            self.blocks += 1;
+            self.sum.blocks += 1;
+            self.sum.inserted_blocks += inserted as u64;
+            let mut joints = BTreeMap::new();
+            for (k, v) in axes.iter().enumerate() {
+                if let Some(v) = v {
+                    joints.insert(crate::nc::AXIS_LETTERS[k], *v);
+                }
+            }
+            let info = BlockInfo {
+                n: self.blocks,
+                source_line: Some(pt.line),
+                joints,
+                diagnostics: diags,
+            };
+            self.sink.line(&text, Some(&info))?;
+        } else {
+            for d in diags {
+                self.sink.diagnostic(&d)?;
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Rotary distance (radians, summed) from the joint-space midpoint beyond which an exact midpoint
+/// is not taken: the segment passes near a singular direction.
+const NEAR_SINGULAR_SWING: f64 = 0.0873;
+
+/// Distance of `p` from the segment [a, b].
+pub fn seg_dist(p: &Vec3, a: &Vec3, b: &Vec3) -> f64 {
+    let ab = b - a;
+    let l2 = ab.norm_squared();
+    let t = if l2 == 0.0 {
+        0.0
+    } else {
+        ((p - a).dot(&ab) / l2).clamp(0.0, 1.0)
+    };
+    (p - (a + ab * t)).norm()
+}
+
+/// The unit vector halfway along the great circle from `a` to `b`.
+fn slerp_half(a: &Vec3, b: &Vec3) -> Vec3 {
+    let s = a + b;
+    let n = s.norm();
+    if n < 1e-9 { *a } else { s / n }
+}

@@ -1,0 +1,353 @@
+//! CL events → motion points (poses in the profile's units) and program events, in file order.
+//!
+//! Owns what CL makes modal: units, tool axis, RAPID for the next motion, feed, an arc announced
+//! by CIRCLE, an active drilling cycle. Arcs and cycles become plain points here (linearized or
+//! expanded) so the planner sees one kind of motion.
+
+use crate::cl::{CoolantCmd, CycleParams, Event, FeedUnit, Reader, Record, SpindleCmd};
+use crate::diag::{Code, Diagnostic, Severity};
+use crate::kinematics::{Pose, Units, Vec3};
+use std::collections::VecDeque;
+use std::io::BufRead;
+
+/// Statements read ahead to find the CL units before the first motion is planned.
+const UNITS_LOOKAHEAD: usize = 4096;
+
+#[derive(Clone, Debug)]
+pub struct MotionPt {
+    pub line: u32,
+    pub pose: Pose,
+    pub rapid: bool,
+    /// Programmed feed in profile units per minute (or per rev).
+    pub feed: Option<(f64, FeedUnit)>,
+    /// A point the source inserted (arc or cycle expansion), not a CL GOTO itself.
+    pub inserted: bool,
+    pub comment: Option<&'static str>,
+}
+
+#[derive(Clone, Debug)]
+pub enum ProgEvent {
+    Tool { number: u32, line: u32 },
+    ToolLength(f64),
+    Spindle(SpindleCmd),
+    Coolant(CoolantCmd),
+    Comment(String),
+    Operation(String),
+    Diag(Diagnostic),
+    End,
+}
+
+#[derive(Clone, Debug)]
+pub enum Item {
+    Motion(MotionPt),
+    Event(ProgEvent),
+}
+
+pub struct Source<R> {
+    reader: Reader<R>,
+    ahead: VecDeque<Event>,
+    out: VecDeque<Item>,
+    /// CL units → profile units.
+    pub scale: f64,
+    pub cl_units: Units,
+    pub units_source: &'static str,
+    profile_units: Units,
+    tip: Option<Vec3>,
+    axis: Vec3,
+    rapid_next: bool,
+    feed: Option<(f64, FeedUnit)>,
+    circle: Option<([f64; 3], [f64; 3], Option<f64>)>,
+    cycle: Option<CycleParams>,
+    chord_tol: f64,
+    ended: bool,
+    pub strict_error: Option<Diagnostic>,
+    strict: bool,
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    #[error(transparent)]
+    Read(#[from] crate::cl::Error),
+}
+
+impl<R: BufRead> Source<R> {
+    /// `cl_units`: the caller's statement of the CL units (wins over the file's); `chord_tol` in
+    /// profile units, for arcs.
+    pub fn new(input: R, profile_units: Units, cl_units: Option<Units>, chord_tol: f64, strict: bool) -> Result<Self, Error> {
+        let mut reader = Reader::new(input);
+        let mut ahead = VecDeque::new();
+        let mut found: Option<(Units, &'static str)> = cl_units.map(|u| (u, "option"));
+        let mut feed_hint: Option<Units> = None;
+        while found.is_none() && ahead.len() < UNITS_LOOKAHEAD {
+            let Some(ev) = reader.next_event()? else { break };
+            if let Event::Statement(s) = &ev {
+                match &s.record {
+                    Record::Units(u) => found = Some((*u, "UNITS record")),
+                    Record::Feedrate { units: Some(u), .. } if feed_hint.is_none() => feed_hint = Some(*u),
+                    _ => {}
+                }
+            }
+            ahead.push_back(ev);
+        }
+        let (cl_units, units_source) = found
+            .or(feed_hint.map(|u| (u, "FEDRAT unit")))
+            .unwrap_or((profile_units, "assumed: the profile's"));
+        let mut out = VecDeque::new();
+        if units_source.starts_with("assumed") {
+            out.push_back(Item::Event(ProgEvent::Diag(Diagnostic::new(
+                Code::UnitsAssumed,
+                Severity::Warning,
+                None,
+                format!(
+                    "no UNITS record or unit-bearing FEDRAT found: CL taken as {}",
+                    profile_units.as_str()
+                ),
+            ))));
+        }
+        Ok(Source {
+            reader,
+            ahead,
+            out,
+            scale: cl_units.factor_to(profile_units),
+            cl_units,
+            units_source,
+            profile_units,
+            tip: None,
+            axis: Vec3::z(),
+            rapid_next: false,
+            feed: None,
+            circle: None,
+            cycle: None,
+            chord_tol,
+            ended: false,
+            strict_error: None,
+            strict,
+        })
+    }
+
+    pub fn next_item(&mut self) -> Result<Option<Item>, Error> {
+        loop {
+            if let Some(i) = self.out.pop_front() {
+                return Ok(Some(i));
+            }
+            if self.ended || self.strict_error.is_some() {
+                return Ok(None);
+            }
+            let ev = match self.ahead.pop_front() {
+                Some(e) => e,
+                None => match self.reader.next_event()? {
+                    Some(e) => e,
+                    None => {
+                        self.ended = true;
+                        continue;
+                    }
+                },
+            };
+            match ev {
+                Event::Diagnostic(d) => {
+                    if self.strict && d.severity == Severity::Error {
+                        self.strict_error = Some(d.clone());
+                    }
+                    self.out.push_back(Item::Event(ProgEvent::Diag(d)));
+                }
+                Event::Statement(s) => self.statement(s.line, s.record),
+            }
+        }
+    }
+
+    fn diag(&mut self, code: Code, sev: Severity, line: u32, msg: String) {
+        let d = Diagnostic::new(code, sev, Some(line), msg);
+        if self.strict && sev == Severity::Error {
+            self.strict_error = Some(d.clone());
+        }
+        self.out.push_back(Item::Event(ProgEvent::Diag(d)));
+    }
+
+    fn set_axis(&mut self, a: [f64; 3], line: u32) -> bool {
+        let v = Vec3::from(a);
+        let n = v.norm();
+        if !(n.is_finite() && n > 1e-9) {
+            self.diag(
+                Code::BadRecord,
+                Severity::Error,
+                line,
+                "tool axis is zero or not finite: record skipped".into(),
+            );
+            return false;
+        }
+        if (n - 1.0).abs() > 1e-4 {
+            self.diag(
+                Code::AxisNormalized,
+                Severity::Warning,
+                line,
+                format!("tool axis of length {n:.6} normalised"),
+            );
+        }
+        self.axis = v / n;
+        true
+    }
+
+    fn statement(&mut self, line: u32, rec: Record) {
+        match rec {
+            Record::Goto { p, axis } | Record::From { p, axis } => {
+                if let Some(a) = axis
+                    && !self.set_axis(a, line)
+                {
+                    return;
+                }
+                self.motion(line, Vec3::from(p));
+            }
+            Record::GoDelta { d, axis } => {
+                if let Some(a) = axis
+                    && !self.set_axis(a, line)
+                {
+                    return;
+                }
+                let base = self.tip.unwrap_or_else(Vec3::zeros);
+                self.motion(line, base + Vec3::from(d));
+            }
+            Record::Rapid => self.rapid_next = true,
+            Record::Feedrate { value, unit, units } => {
+                let f = units.map_or(self.scale, |u| u.factor_to(self.profile_units));
+                self.feed = Some((value * f, unit));
+            }
+            Record::Units(u) => {
+                self.cl_units = u;
+                self.scale = u.factor_to(self.profile_units);
+            }
+            Record::Spindle(c) => self.out.push_back(Item::Event(ProgEvent::Spindle(c))),
+            Record::Coolant(c) => self.out.push_back(Item::Event(ProgEvent::Coolant(c))),
+            Record::LoadTool { number, length } => {
+                if let Some(l) = length {
+                    self.out.push_back(Item::Event(ProgEvent::ToolLength(l * self.scale)));
+                }
+                self.out.push_back(Item::Event(ProgEvent::Tool {
+                    number: number.unwrap_or(1),
+                    line,
+                }));
+            }
+            Record::ToolData { length: Some(l), .. } => self.out.push_back(Item::Event(ProgEvent::ToolLength(l * self.scale))),
+            Record::ToolData { .. } => {}
+            Record::Multax(on) => {
+                if !on {
+                    self.axis = Vec3::z();
+                }
+            }
+            Record::ToolAxis(a) => {
+                self.set_axis(a, line);
+            }
+            Record::Circle { center, axis, radius } => self.circle = Some((center, axis, radius)),
+            Record::Cycle(c) => {
+                self.cycle = Some(c);
+                self.diag(
+                    Code::CycleExpanded,
+                    Severity::Info,
+                    line,
+                    "drilling cycle expanded into moves".into(),
+                );
+            }
+            Record::CycleOff => self.cycle = None,
+            Record::OperationStart(name) => self.out.push_back(Item::Event(ProgEvent::Operation(name))),
+            Record::OperationEnd => {}
+            Record::PartNo(t) => self.out.push_back(Item::Event(ProgEvent::Comment(format!("PART {t}")))),
+            Record::Comment(t) => self.out.push_back(Item::Event(ProgEvent::Comment(t))),
+            Record::End => {
+                self.out.push_back(Item::Event(ProgEvent::End));
+            }
+            Record::Ignored(_) => {}
+        }
+    }
+
+    fn push(&mut self, line: u32, p_cl: Vec3, rapid: bool, inserted: bool, comment: Option<&'static str>) {
+        self.out.push_back(Item::Motion(MotionPt {
+            line,
+            pose: Pose {
+                tip: p_cl * self.scale,
+                axis: self.axis,
+            },
+            rapid,
+            feed: self.feed,
+            inserted,
+            comment,
+        }));
+    }
+
+    fn motion(&mut self, line: u32, p: Vec3) {
+        let rapid = std::mem::take(&mut self.rapid_next) || self.feed.is_none();
+        if let Some(c) = self.cycle {
+            self.hole(line, p, c);
+            self.tip = Some(p);
+            return;
+        }
+        if let (Some((center, axis, radius)), Some(start)) = (self.circle.take(), self.tip) {
+            self.arc(line, start, p, Vec3::from(center), Vec3::from(axis), radius);
+        }
+        self.push(line, p, rapid, false, None);
+        self.tip = Some(p);
+    }
+
+    /// Points strictly between `start` and `end` on the arc about `axis` through `center`
+    /// (counter-clockwise about the axis), within the chord tolerance.
+    fn arc(&mut self, line: u32, start: Vec3, end: Vec3, center: Vec3, axis: Vec3, radius: Option<f64>) {
+        let n = axis.norm();
+        if !(n > 1e-12) {
+            return;
+        }
+        let k = axis / n;
+        let (a, b) = (start - center, end - center);
+        let (a_p, b_p) = (a - k * k.dot(&a), b - k * k.dot(&b));
+        let r = radius.unwrap_or_else(|| a_p.norm());
+        if !(r > 1e-9) || a_p.norm() < 1e-9 {
+            return;
+        }
+        let mut sweep = k.dot(&a_p.cross(&b_p)).atan2(a_p.dot(&b_p));
+        if sweep <= 1e-12 {
+            sweep += std::f64::consts::TAU;
+        }
+        let tol = (self.chord_tol / self.scale).max(1e-9);
+        let step = 2.0 * (1.0 - (tol / r).min(1.0)).acos();
+        let segs = ((sweep / step.max(1e-6)).ceil() as usize).clamp(1, 100_000);
+        let (h0, h1) = (k.dot(&a), k.dot(&b));
+        for i in 1..segs {
+            let t = i as f64 / segs as f64;
+            let th = sweep * t;
+            let (s, c) = th.sin_cos();
+            let v = a_p * c + k.cross(&a_p) * s;
+            let p = center + v * (r / a_p.norm()) + k * (h0 + (h1 - h0) * t);
+            self.push(line, p, false, true, None);
+        }
+        self.diag(
+            Code::ArcLinearized,
+            Severity::Info,
+            line,
+            format!("arc of {:.1}° linearized in {segs} chords", sweep.to_degrees()),
+        );
+    }
+
+    fn hole(&mut self, line: u32, p: Vec3, c: CycleParams) {
+        let u = self.axis;
+        let clear = p + u * c.rapid_to;
+        let saved = self.feed;
+        if let Some((f, unit, units)) = c.feed {
+            let s = units.map_or(self.scale, |x| x.factor_to(self.profile_units));
+            self.feed = Some((f * s, unit));
+        }
+        if self.feed.is_none() {
+            self.diag(
+                Code::BadRecord,
+                Severity::Warning,
+                line,
+                "drilling cycle without a feed: holes rapid to depth".into(),
+            );
+        }
+        // Rapid to the R plane, feed through the hole's point (the CL GOTO) to depth, rapid out.
+        let rapid = self.feed.is_none();
+        self.push(line, clear, true, true, Some("CYCLE"));
+        self.push(line, p, rapid, false, Some("CYCLE"));
+        if c.depth > 0.0 {
+            self.push(line, p - u * c.depth, rapid, true, Some("CYCLE"));
+        }
+        self.push(line, p + u * c.retract_to.unwrap_or(c.rapid_to), true, true, Some("CYCLE"));
+        self.feed = saved;
+    }
+}
