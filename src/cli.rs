@@ -41,6 +41,18 @@ pub enum Command {
     },
     /// Post-process a CL file into NC for a machine; NC on stdout (or --output), summary on stderr.
     Post(PostArgs),
+    /// Write a generated 5-axis CL path for a profile (smooth joint motion within travel, through
+    /// FK): a smoke test for a new profile, and the benchmark's input.
+    Generate {
+        #[arg(long)]
+        machine: String,
+        #[arg(long, default_value_t = 1000)]
+        points: usize,
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        #[arg(long, allow_hyphen_values = true)]
+        tool_length: Option<f64>,
+    },
     /// Read a CL file and report its diagnostics and record counts (JSON summary on stdout).
     Lint {
         /// CL file, or - for standard input.
@@ -204,6 +216,14 @@ fn run(cli: Cli) -> Result<(), String> {
     let lib = library(&cli)?;
     match cli.command {
         Command::Lint { .. } => unreachable!("handled above"),
+        Command::Generate { machine, points, seed, tool_length } => {
+            let p = lib.get(&machine).map_err(|e| e.to_string())?;
+            let out = std::io::stdout().lock();
+            let mut w = std::io::BufWriter::with_capacity(1 << 16, out);
+            crate::testgen::write_path(&p.machine, points, seed, tool_length.unwrap_or(p.machine.default_tool_length), &mut w)
+                .and_then(|_| std::io::Write::flush(&mut w))
+                .map_err(|e| e.to_string())
+        }
         Command::Post(a) => {
             let p = lib.get(&a.machine).map_err(|e| e.to_string())?;
             post_cmd(&p.machine, &a)

@@ -7,3 +7,4 @@ pub mod kinematics;
 pub mod machines;
 pub mod nc;
 pub mod post;
+pub mod testgen;

@@ -550,24 +550,40 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             Some(pt.line),
             format!("{word}: retract {} along the tool axis, turn, re-approach", self.o.clearance),
         );
-        let up = |a: At, s: &Setup, m: &Machine, clear: f64| {
-            let pose = Pose {
-                tip: a.pose.tip + a.pose.axis * clear,
-                axis: a.pose.axis,
-            };
-            let cp = kinematics::controlled_point(m, &a.actual, &pose.tip, s);
-            let mut j = a.joints;
-            for i in 0..3 {
-                j.linear[i] = if m.linears[i].is_some() { cp[i] } else { 0.0 };
-            }
-            At { joints: j, pose, ..a }
-        };
-        let r1 = up(prev, &self.setup, self.m, self.o.clearance);
-        let r2 = up(to, &self.setup, self.m, self.o.clearance);
+        let r1 = self.lifted(prev, self.o.clearance);
+        let r2 = self.lifted(to, self.o.clearance);
         self.block(r1, pt, true, vec![d], true, Some(&format!("RETRACT {word}")))?;
         self.block(r2, pt, true, Vec::new(), true, Some(word))?;
         self.block(to, pt, false, Vec::new(), pt.inserted, None)?;
         Ok(())
+    }
+
+    /// The same orientation `clear` further along the tool axis. With three linears only the
+    /// linears move; a chain missing one needs the exact solution nearest the current one.
+    fn lifted(&mut self, a: At, clear: f64) -> At {
+        let pose = Pose { tip: a.pose.tip + a.pose.axis * clear, axis: a.pose.axis };
+        if self.m.linears.iter().all(|l| l.is_some()) {
+            let cp = kinematics::controlled_point(self.m, &a.actual, &pose.tip, &self.setup);
+            let mut j = a.joints;
+            j.linear = [cp.x, cp.y, cp.z];
+            return At { joints: j, pose, ..a };
+        }
+        let opt = IkOptions { free_angle: a.actual[0], ..Default::default() };
+        if ik_into(self.m, &pose, &self.setup, &opt, &mut self.buf).is_ok()
+            && let Some(s) = self.buf.iter().min_by(|x, y| {
+                let d = |s: &kinematics::Solution| (0..3).map(|i| wrap(s.actual[i] - a.actual[i]).abs()).sum::<f64>();
+                d(x).total_cmp(&d(y))
+            })
+        {
+            let mut actual = s.actual;
+            let mut joints = s.joints;
+            for (i, r) in self.m.rotaries.iter().enumerate() {
+                actual[i] = a.actual[i] + wrap(s.actual[i] - a.actual[i]);
+                joints.rotary[i] = r.word(actual[i]);
+            }
+            return At { joints, actual, pose, branch: s.branch };
+        }
+        a
     }
 
     /// A feed move from `a` to `b`, subdivided where the rotaries step too far in one block or
@@ -580,11 +596,24 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         if !split && self.o.mode == Mode::Joint && step > 0.0 {
             split = self.nonlinear_error(&a, &b) > 0.8 * self.o.tolerance;
         }
+        if split && depth >= 14 && self.o.mode == Mode::Joint && self.nonlinear_error(&a, &b) > self.o.tolerance {
+            // Subdivision did not converge: the solution followed runs into a fold.
+            self.reposition(a, b, false, pt)?;
+            return Ok(3);
+        }
         if split && depth < 14 {
-            if let Some(mid) = self.midpoint(&a, &b) {
-                let n1 = self.segment(a, mid, pt, Vec::new(), depth + 1)?;
-                let n2 = self.segment(mid, b, pt, diags, depth + 1)?;
-                return Ok(n1 + n2);
+            match self.midpoint(&a, &b) {
+                Some(mid) => {
+                    let n1 = self.segment(a, mid, pt, Vec::new(), depth + 1)?;
+                    let n2 = self.segment(mid, b, pt, diags, depth + 1)?;
+                    return Ok(n1 + n2);
+                }
+                None => {
+                    // No solution continues between the two: the root followed ends on a fold
+                    // (3-rotary chains). The machine cannot follow the segment: reposition.
+                    self.reposition(a, b, false, pt)?;
+                    return Ok(3);
+                }
             }
         }
         let mut diags = diags;
@@ -658,9 +687,13 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                 ));
             }
         }
-        let exact = best.filter(|(d, _)| *d <= NEAR_SINGULAR_SWING);
-        if let Some((_, at)) = exact {
-            return Some(at);
+        // A chain without one linear (3 rotaries) can only place the tip with an exact root.
+        let missing_linear = self.m.linears.iter().any(|l| l.is_none());
+        let limit = if missing_linear { std::f64::consts::FRAC_PI_2 } else { NEAR_SINGULAR_SWING };
+        match best {
+            Some((d, at)) if d <= limit => return Some(at),
+            _ if missing_linear => return None,
+            _ => {}
         }
         // Near a singular direction the exact midpoint's free rotary follows the azimuth of a
         // nearly aligned axis and swings wildly. Keep the interpolated rotaries (the motion the
