@@ -216,13 +216,24 @@ fn run(cli: Cli) -> Result<(), String> {
     let lib = library(&cli)?;
     match cli.command {
         Command::Lint { .. } => unreachable!("handled above"),
-        Command::Generate { machine, points, seed, tool_length } => {
+        Command::Generate {
+            machine,
+            points,
+            seed,
+            tool_length,
+        } => {
             let p = lib.get(&machine).map_err(|e| e.to_string())?;
             let out = std::io::stdout().lock();
             let mut w = std::io::BufWriter::with_capacity(1 << 16, out);
-            crate::testgen::write_path(&p.machine, points, seed, tool_length.unwrap_or(p.machine.default_tool_length), &mut w)
-                .and_then(|_| std::io::Write::flush(&mut w))
-                .map_err(|e| e.to_string())
+            crate::testgen::write_path(
+                &p.machine,
+                points,
+                seed,
+                tool_length.unwrap_or(p.machine.default_tool_length),
+                &mut w,
+            )
+            .and_then(|_| std::io::Write::flush(&mut w))
+            .map_err(|e| e.to_string())
         }
         Command::Post(a) => {
             let p = lib.get(&a.machine).map_err(|e| e.to_string())?;
@@ -372,7 +383,7 @@ fn post_cmd(m: &kinematics::Machine, a: &PostArgs) -> Result<(), String> {
     }
     let mut sink = CliSink {
         nc: std::io::BufWriter::with_capacity(1 << 16, out),
-        nd: diag.map(|d| std::io::BufWriter::new(d)),
+        nd: diag.map(std::io::BufWriter::new),
     };
     let res = post::post(input, m, &o, &mut sink);
     sink.nc.flush().map_err(|e| e.to_string())?;

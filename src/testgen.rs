@@ -19,7 +19,10 @@ pub fn write_path(m: &Machine, points: usize, seed: u64, tool_length: f64, out: 
     writeln!(out, "LOADTL/1,LENGTH,{tool_length}")?;
     writeln!(out, "SPINDL/12000,RPM,CLW")?;
     writeln!(out, "COOLNT/FLOOD")?;
-    let ph = |k: u64| ((seed.wrapping_mul(6364136223846793005).wrapping_add(k * 1442695040888963407)) >> 11) as f64 / (1u64 << 53) as f64 * std::f64::consts::TAU;
+    let ph = |k: u64| {
+        ((seed.wrapping_mul(6364136223846793005).wrapping_add(k * 1442695040888963407)) >> 11) as f64 / (1u64 << 53) as f64
+            * std::f64::consts::TAU
+    };
     for n in 0..points {
         let t = n as f64 / points.max(2) as f64;
         let mut j = Joints::default();
@@ -47,7 +50,11 @@ pub fn write_path(m: &Machine, points: usize, seed: u64, tool_length: f64, out: 
         if n == 1 {
             writeln!(out, "FEDRAT/{},{}", units.2, units.1)?;
         }
-        writeln!(out, "GOTO/{:.6},{:.6},{:.6},{:.9},{:.9},{:.9}", p.tip.x, p.tip.y, p.tip.z, p.axis.x, p.axis.y, p.axis.z)?;
+        writeln!(
+            out,
+            "GOTO/{:.6},{:.6},{:.6},{:.9},{:.9},{:.9}",
+            p.tip.x, p.tip.y, p.tip.z, p.axis.x, p.axis.y, p.axis.z
+        )?;
     }
     writeln!(out, "SPINDL/OFF")?;
     writeln!(out, "FINI")?;

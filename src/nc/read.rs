@@ -31,6 +31,9 @@ pub struct NcReader<R> {
     units: Units,
     tcp: bool,
     incremental: bool,
+    /// A `%` after program text ends the tape: what follows is not part of the program.
+    percents: u32,
+    content: bool,
 }
 
 impl<R: std::io::BufRead> NcReader<R> {
@@ -44,6 +47,8 @@ impl<R: std::io::BufRead> NcReader<R> {
             units: default_units,
             tcp: false,
             incremental: false,
+            percents: 0,
+            content: false,
         }
     }
 
@@ -78,9 +83,20 @@ impl<R: std::io::BufRead> NcReader<R> {
             }
         }
         let code = code.trim();
-        if code.is_empty() || code.starts_with('%') || code.starts_with('O') {
+        if code.starts_with('%') {
+            self.percents += 1;
+            if self.content {
+                self.percents = u32::MAX;
+            }
             return Ok(None);
         }
+        if self.percents == u32::MAX {
+            return Ok(None);
+        }
+        if code.is_empty() || code.starts_with('O') {
+            return Ok(None);
+        }
+        self.content = true;
         let mut vals: [Option<f64>; 6] = [None; 6];
         let mut machine_coords = false;
         let mut setting = false;

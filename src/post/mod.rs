@@ -1,3 +1,4 @@
+#![allow(clippy::needless_range_loop)] // X Y Z loops index several parallel arrays
 //! The postprocessing engine: CL records → poses → planned joint moves → NC blocks with
 //! diagnostics, pushed into a [`Sink`] (a file, an HTTP stream, a golden test are all sinks).
 //!
@@ -561,14 +562,20 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
     /// The same orientation `clear` further along the tool axis. With three linears only the
     /// linears move; a chain missing one needs the exact solution nearest the current one.
     fn lifted(&mut self, a: At, clear: f64) -> At {
-        let pose = Pose { tip: a.pose.tip + a.pose.axis * clear, axis: a.pose.axis };
+        let pose = Pose {
+            tip: a.pose.tip + a.pose.axis * clear,
+            axis: a.pose.axis,
+        };
         if self.m.linears.iter().all(|l| l.is_some()) {
             let cp = kinematics::controlled_point(self.m, &a.actual, &pose.tip, &self.setup);
             let mut j = a.joints;
             j.linear = [cp.x, cp.y, cp.z];
             return At { joints: j, pose, ..a };
         }
-        let opt = IkOptions { free_angle: a.actual[0], ..Default::default() };
+        let opt = IkOptions {
+            free_angle: a.actual[0],
+            ..Default::default()
+        };
         if ik_into(self.m, &pose, &self.setup, &opt, &mut self.buf).is_ok()
             && let Some(s) = self.buf.iter().min_by(|x, y| {
                 let d = |s: &kinematics::Solution| (0..3).map(|i| wrap(s.actual[i] - a.actual[i]).abs()).sum::<f64>();
@@ -581,7 +588,12 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                 actual[i] = a.actual[i] + wrap(s.actual[i] - a.actual[i]);
                 joints.rotary[i] = r.word(actual[i]);
             }
-            return At { joints, actual, pose, branch: s.branch };
+            return At {
+                joints,
+                actual,
+                pose,
+                branch: s.branch,
+            };
         }
         a
     }
@@ -689,7 +701,11 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         }
         // A chain without one linear (3 rotaries) can only place the tip with an exact root.
         let missing_linear = self.m.linears.iter().any(|l| l.is_none());
-        let limit = if missing_linear { std::f64::consts::FRAC_PI_2 } else { NEAR_SINGULAR_SWING };
+        let limit = if missing_linear {
+            std::f64::consts::FRAC_PI_2
+        } else {
+            NEAR_SINGULAR_SWING
+        };
         match best {
             Some((d, at)) if d <= limit => return Some(at),
             _ if missing_linear => return None,

@@ -59,6 +59,8 @@ pub struct Column {
     pub error: Option<crate::kinematics::Error>,
 }
 
+// Points are the common case: boxing them would allocate once per CL point.
+#[allow(clippy::large_enum_variant)]
 pub enum Slot {
     Event(ProgEvent),
     Point(Column),
@@ -71,6 +73,7 @@ pub struct Committed {
     pub error: Option<crate::kinematics::Error>,
 }
 
+#[allow(clippy::large_enum_variant)]
 pub enum Out {
     Event(ProgEvent),
     Point(Committed),
@@ -316,7 +319,7 @@ impl<'m> Planner<'m> {
             }
             let (before, after) = slots.split_at_mut(i);
             let p = prev.and_then(|k| match &before[k] {
-                Slot::Point(c) => Some(&*c),
+                Slot::Point(c) => Some(c),
                 Slot::Event(_) => None,
             });
             if let Slot::Point(col) = &mut after[0] {

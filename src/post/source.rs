@@ -290,14 +290,14 @@ impl<R: BufRead> Source<R> {
     /// (counter-clockwise about the axis), within the chord tolerance.
     fn arc(&mut self, line: u32, start: Vec3, end: Vec3, center: Vec3, axis: Vec3, radius: Option<f64>) {
         let n = axis.norm();
-        if !(n > 1e-12) {
+        if n.is_nan() || n <= 1e-12 {
             return;
         }
         let k = axis / n;
         let (a, b) = (start - center, end - center);
         let (a_p, b_p) = (a - k * k.dot(&a), b - k * k.dot(&b));
         let r = radius.unwrap_or_else(|| a_p.norm());
-        if !(r > 1e-9) || a_p.norm() < 1e-9 {
+        if r.is_nan() || r <= 1e-9 || a_p.norm() < 1e-9 {
             return;
         }
         let mut sweep = k.dot(&a_p.cross(&b_p)).atan2(a_p.dot(&b_p));

@@ -1,0 +1,121 @@
+#!/usr/bin/env python3
+"""CI checks that read ../shared: every corpus file lints without errors; generated paths on every
+shipped profile, joint and TCP mode, pass the independent verifier; real corpus files posted on
+suitable machines pass it; the NX golden comparison (travel, largest step).
+
+    python3 scripts/ci_checks.py --kinepost target/release/kinepost --shared ../shared
+"""
+import argparse, glob, json, os, subprocess, sys, tempfile
+
+# (file, machine, checks that may fail, why)
+CORPUS = [
+    ('nx_clsf_mech491_variable_axis_inch_5ax.cls', 'haas-umc750', (), ''),
+    ('nx_clsf_mech491_variable_axis_inch_5ax.cls', 'spinner-u5-620', (), ''),
+    ('nx_clsf_mech491_contour_chamfer_inch_5ax.cls', 'haas-umc750', (), ''),
+    ('nx_clsf_mech491_project2_inch_5ax.cls', 'haas-umc750', (), ''),
+    ('nx_clsf_mech491_simple_mill_plane_mm.cls', 'haas-umc750', (), ''),
+    ('nx_clsf_mech491_simple_mill_plane_zig_mm.cls', 'vmc-3axis', (), ''),
+    ('swcam_apt_basemach_3ax.apt', 'vmc-3axis', (), ''),
+    ('swcam_apt_interface_glue_3ax_cycles.apt', 'vmc-3axis', (), ''),
+    ('creo8_ncl_schruppen_roughing_mm.ncl', 'vmc-3axis', (), ''),
+    ('creo8_ncl_profilfraesen_profile_mm.ncl', 'vmc-3axis', (), ''),
+    ('creo8_ncl_bohren_drill_mm.ncl', 'vmc-3axis', (), ''),
+    # Full circles (CIRCLE whose GOTO repeats the previous point): the verifier matches the CL
+    # GOTO to the block before the circle, so the circle's blocks fall in the next CL gap.
+    ('swcam_apt_boss_3plus2.apt', 'haas-umc750', ('inserted_on_chord', 'nonlinear'), 'full circles'),
+    ('swcam_apt_wall_holes_3plus2.apt', 'haas-umc750', ('inserted_on_chord', 'nonlinear'), 'full circles'),
+]
+
+
+def run(cmd, **kw):
+    return subprocess.run(cmd, capture_output=True, text=True, **kw)
+
+
+def verify(shared, machines, mid, cl, nc, mode):
+    r = run([sys.executable, os.path.join(shared, 'tools/verifier/verify.py'), '--profile', os.path.join(machines, mid + '.toml'),
+             '--cl', cl, '--nc', nc, '--dialect', 'fanuc', '--mode', mode])
+    return json.loads(r.stdout)
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument('--kinepost', required=True)
+    ap.add_argument('--shared', required=True)
+    ap.add_argument('--points', type=int, default=300)
+    a = ap.parse_args()
+    a.shared, a.kinepost = os.path.abspath(a.shared), os.path.abspath(a.kinepost)
+    here = os.path.dirname(os.path.abspath(__file__))
+    machines = os.path.join(here, '..', 'machines')
+    corpus = os.path.join(a.shared, 'corpus')
+    fails = []
+    tmp = tempfile.mkdtemp(prefix='kinepost-ci-')
+
+    lint = 0
+    for f in sorted(glob.glob(os.path.join(corpus, '*.*'))):
+        if f.endswith('.md'):
+            continue
+        r = run([a.kinepost, 'lint', f])
+        lint += 1
+        if r.returncode:
+            fails.append(f'lint {os.path.basename(f)}: {r.stderr.strip()[:300]}')
+    print(f'corpus lint: {lint} files')
+
+    ok = 0
+    for path in sorted(glob.glob(os.path.join(machines, '*.toml'))):
+        mid = os.path.basename(path)[:-5]
+        cl = os.path.join(tmp, mid + '.cls')
+        with open(cl, 'w') as out:
+            g = run([a.kinepost, 'generate', '--machine', mid, '--points', str(a.points if 'propeller' not in mid else 150)])
+            out.write(g.stdout)
+        for mode in ('joint', 'tcp'):
+            nc = os.path.join(tmp, f'{mid}-{mode}.nc')
+            p = run([a.kinepost, 'post', '--machine', mid, '--dialect', 'fanuc', '--mode', mode, cl, '-o', nc])
+            if p.returncode:
+                fails.append(f'post {mid} {mode}: {p.stderr.strip()[-300:]}')
+                continue
+            rep = verify(a.shared, machines, mid, cl, nc, mode)
+            if not rep.get('ok'):
+                fails.append(f'verify generated {mid} {mode}: {rep.get("failed")} {rep.get("error", "")}')
+            else:
+                ok += 1
+            print(f'generated {mid:22s} {mode:5s} ok={rep.get("ok")} matched={rep["counts"]["matched"]}/{rep["counts"]["cl_points"]} '
+                  f'max_pos_err={rep["counts"]["max_pos_err"]:.2e} nonlinear={rep["counts"]["max_nonlinear_err"]:.2e}')
+    print(f'generated paths verified: {ok}')
+
+    for f, mid, allowed, why in CORPUS:
+        cl = os.path.join(corpus, f)
+        for mode in ('joint', 'tcp'):
+            nc = os.path.join(tmp, f'{f}-{mid}-{mode}.nc')
+            p = run([a.kinepost, 'post', '--machine', mid, '--dialect', 'fanuc', '--mode', mode, cl, '-o', nc])
+            if p.returncode:
+                fails.append(f'post {f} {mid} {mode}: {p.stderr.strip()[-300:]}')
+                continue
+            rep = verify(a.shared, machines, mid, cl, nc, mode)
+            bad = [c for c in rep.get('failed', ['?']) if c not in allowed]
+            c = rep['counts']
+            print(f'corpus {f:45s} {mid:15s} {mode:5s} failed={rep.get("failed")} matched={c["matched"]}/{c["cl_points"]}'
+                  + (f' (allowed: {why})' if rep.get('failed') and not bad else ''))
+            if bad or c['matched'] != c['cl_points']:
+                fails.append(f'verify {f} {mid} {mode}: {rep.get("failed")}')
+
+    # The NX golden: kinepost's rotary travel and largest step next to NX's.
+    nc = os.path.join(tmp, 'va-haas-tcp.nc')
+    run([a.kinepost, 'post', '--machine', 'haas-umc750', '--mode', 'tcp', os.path.join(corpus, 'nx_clsf_mech491_variable_axis_inch_5ax.cls'), '-o', nc])
+    met = os.path.join(a.shared, 'tools/verifier/metrics.py')
+    nx = json.loads(run([sys.executable, met, os.path.join(corpus, 'golden/nx_post_HAAS_UMC750_variable_axis.nc'), 'haas'],
+                        cwd=os.path.dirname(met)).stdout)['rotary']
+    kp = json.loads(run([sys.executable, met, nc, 'fanuc'], cwd=os.path.dirname(met)).stdout)['rotary']
+    for ax in ('B', 'C'):
+        print(f'NX golden {ax}: travel NX {nx[ax]["all_travel"]:.3f} kinepost {kp[ax]["all_travel"]:.3f}; '
+              f'largest feed step NX {nx[ax]["max_feed_step"]:.3f} kinepost {kp[ax]["max_feed_step"]:.3f}')
+    if kp['C']['all_travel'] > nx['C']['all_travel'] + 0.01 or kp['C']['max_feed_step'] > nx['C']['max_feed_step']:
+        fails.append('NX golden: kinepost turns C more, or in a larger step, than NX')
+
+    for f in fails:
+        print('FAIL', f)
+    print(f'{ok + len(CORPUS) * 2 - len(fails)} passed, {len(fails)} failed')
+    return 1 if fails else 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,294 @@
+//! The engine end to end: real CL files, generated paths on every profile in both modes, the real
+//! NX post's program as a golden reference, strict mode, diagnostics that keep going.
+
+use kinepost::cl::{Event, Reader};
+use kinepost::diag::{Code, Diagnostic, Severity};
+use kinepost::kinematics::{Joints, Machine, Setup, Units, Vec3, angle_between, fk};
+use kinepost::machines::Library;
+use kinepost::nc::read::NcReader;
+use kinepost::post::{self, BlockInfo, Mode, Options, Sink, Summary};
+use std::path::Path;
+
+fn machine(id: &str) -> Machine {
+    let lib = Library::load_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap();
+    lib.get(id).unwrap().machine.clone()
+}
+
+fn data(name: &str) -> String {
+    format!("{}/tests/data/{name}", env!("CARGO_MANIFEST_DIR"))
+}
+
+#[derive(Default)]
+struct Collect {
+    nc: String,
+    blocks: Vec<BlockInfo>,
+    diags: Vec<Diagnostic>,
+}
+
+impl Sink for Collect {
+    fn line(&mut self, text: &str, b: Option<&BlockInfo>) -> std::io::Result<()> {
+        self.nc.push_str(text);
+        self.nc.push('\n');
+        if let Some(b) = b {
+            self.diags.extend(b.diagnostics.iter().cloned());
+            self.blocks.push(b.clone());
+        }
+        Ok(())
+    }
+    fn diagnostic(&mut self, d: &Diagnostic) -> std::io::Result<()> {
+        self.diags.push(d.clone());
+        Ok(())
+    }
+}
+
+fn run(m: &Machine, cl: &[u8], o: &Options) -> (Collect, Summary) {
+    let mut sink = Collect::default();
+    let s = post::post(cl, m, o, &mut sink).unwrap();
+    (sink, s)
+}
+
+#[test]
+fn every_copied_corpus_file_reads_without_error_diagnostics() {
+    let mut n = 0;
+    for e in std::fs::read_dir(data("")).unwrap() {
+        let p = e.unwrap().path();
+        if !matches!(p.extension().and_then(|x| x.to_str()), Some("cls" | "ncl")) {
+            continue;
+        }
+        let f = std::io::BufReader::new(std::fs::File::open(&p).unwrap());
+        let (mut records, mut errors) = (0, Vec::new());
+        for ev in Reader::new(f) {
+            match ev.unwrap() {
+                Event::Statement(_) => records += 1,
+                Event::Diagnostic(d) if d.severity == Severity::Error => errors.push(d),
+                Event::Diagnostic(_) => {}
+            }
+        }
+        assert!(records > 10, "{}", p.display());
+        assert!(errors.is_empty(), "{}: {errors:?}", p.display());
+        n += 1;
+    }
+    assert_eq!(n, 8);
+}
+
+/// The CL points of a generated path, and the NC read back and replayed through FK: each CL
+/// point is reproduced, in order, by a block (an independent check of what the text says, beside
+/// the engine's own FK replay).
+fn replay_matches(m: &Machine, cl: &str, nc: &str, mode: Mode, setup: &Setup, tol: f64) {
+    let mut pts = Vec::new();
+    for ev in Reader::new(cl.as_bytes()) {
+        if let Event::Statement(s) = ev.unwrap()
+            && let kinepost::cl::Record::Goto { p, axis: Some(a) } = s.record
+        {
+            pts.push((Vec3::from(p), Vec3::from(a).normalize()));
+        }
+    }
+    let mut r = NcReader::new(nc.as_bytes(), m.units);
+    let mut k = 0;
+    while let Some(b) = r.next_block().unwrap() {
+        if k == pts.len() {
+            break;
+        }
+        let mut j = Joints::default();
+        for i in 0..3 {
+            j.linear[i] = b.axes[i].unwrap_or(0.0);
+        }
+        for (i, rot) in m.rotaries.iter().enumerate() {
+            j.rotary[i] = b.axes[3 + (rot.name as u8 - b'A') as usize].unwrap_or(0.0).to_radians();
+        }
+        let pose = fk(m, &j, setup);
+        let tip = if mode == Mode::Tcp {
+            Vec3::new(j.linear[0], j.linear[1], j.linear[2])
+        } else {
+            pose.tip
+        };
+        if (tip - pts[k].0).norm() <= tol && angle_between(&pose.axis, &pts[k].1).to_degrees() <= 0.01 {
+            k += 1;
+        }
+    }
+    assert_eq!(
+        k,
+        pts.len(),
+        "{}: only {k} of {} CL points reproduced in order",
+        m.id,
+        pts.len()
+    );
+}
+
+#[test]
+fn generated_paths_on_every_profile_post_clean_in_joint_and_tcp_mode() {
+    let lib = Library::load_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap();
+    for p in lib.iter() {
+        let m = &p.machine;
+        let n = if m.rotaries.len() == 3 { 60 } else { 150 };
+        let mut cl = Vec::new();
+        kinepost::testgen::write_path(m, n, 7, m.default_tool_length, &mut cl).unwrap();
+        let cl_text = String::from_utf8(cl.clone()).unwrap();
+        for mode in [Mode::Joint, Mode::Tcp] {
+            let mut o = Options::new(m);
+            o.mode = mode;
+            let (sink, s) = run(m, &cl, &o);
+            let errors: Vec<_> = sink.diags.iter().filter(|d| d.severity == Severity::Error).collect();
+            assert!(errors.is_empty(), "{} {mode:?}: {errors:?}", m.id);
+            assert_eq!(s.cl_points, n as u64, "{} {mode:?}", m.id);
+            assert!(
+                s.max_tip_deviation <= o.tolerance,
+                "{} {mode:?}: FK replay {}",
+                m.id,
+                s.max_tip_deviation
+            );
+            assert!(
+                s.max_axis_deviation_deg <= 0.01,
+                "{} {mode:?}: {}",
+                m.id,
+                s.max_axis_deviation_deg
+            );
+            let setup = Setup::new(m.default_tool_length, Vec3::zeros());
+            replay_matches(m, &cl_text, &sink.nc, mode, &setup, o.tolerance);
+        }
+    }
+}
+
+/// The real NX post (HAAS_UMC750_5AXIS_MILL_IN) on the same CL file: X Y Z agree to 0.0001 in,
+/// C travel is NX's optimum, and no step is larger than NX's.
+#[test]
+fn nx_variable_axis_against_the_real_nx_post() {
+    let m = machine("haas-umc750");
+    let cl = std::fs::read(data("nx_clsf_mech491_variable_axis_inch_5ax.cls")).unwrap();
+    let mut o = Options::new(&m);
+    o.mode = Mode::Tcp;
+    let (sink, s) = run(&m, &cl, &o);
+    assert_eq!(s.errors, 0);
+    assert_eq!(s.cl_points, 348);
+    let golden = std::fs::read_to_string(data("golden/nx_post_HAAS_UMC750_variable_axis.nc")).unwrap();
+    let read = |t: &str| {
+        let mut r = NcReader::new(t.as_bytes(), Units::Inch);
+        let mut v = Vec::new();
+        while let Some(b) = r.next_block().unwrap() {
+            v.push(b);
+        }
+        v
+    };
+    let (g, k) = (read(&golden), read(&sink.nc));
+    // Every golden block's X Y Z appears, in order, in ours.
+    let mut j = 0;
+    for gb in &g {
+        let (Some(gx), Some(gy), Some(gz)) = (gb.axes[0], gb.axes[1], gb.axes[2]) else {
+            continue;
+        };
+        let want = [gx, gy, gz];
+        while j < k.len() && !(0..3).all(|i| (k[j].axes[i].unwrap_or(f64::NAN) - want[i]).abs() <= 1e-4 + 1e-9) {
+            j += 1;
+        }
+        assert!(j < k.len(), "golden line {} ({want:?}) not found in order", gb.line);
+    }
+    let travel = |blocks: &[kinepost::nc::read::NcBlock]| {
+        let (mut t, mut step, mut prev) = (0.0f64, 0.0f64, None::<f64>);
+        for b in blocks {
+            if let Some(c) = b.axes[5] {
+                if let Some(p) = prev {
+                    let d: f64 = (c - p).abs();
+                    t += d;
+                    if !b.rapid {
+                        step = step.max(d);
+                    }
+                }
+                prev = Some(c);
+            }
+        }
+        (t, step)
+    };
+    let (nx_t, nx_step) = travel(&g);
+    let (kp_t, kp_step) = travel(&k);
+    assert!((nx_t - 3856.568).abs() < 0.01, "{nx_t}");
+    assert!(kp_t <= nx_t + 0.01, "C travel {kp_t} vs NX {nx_t}");
+    assert!(kp_step <= nx_step, "largest C step {kp_step} vs NX {nx_step}");
+    let c = s.axes.get(&'C').unwrap();
+    assert!((c.travel.unwrap() - kp_t).abs() < 0.01, "summary agrees with the program");
+}
+
+#[test]
+fn mm_cl_on_an_inch_machine_is_converted() {
+    // NX's own post wrote X-10.7283 for the CL's -272.5 mm.
+    let m = machine("haas-umc750");
+    let cl = std::fs::read(data("nx_clsf_mech491_simple_mill_plane_mm.cls")).unwrap();
+    let (sink, s) = run(&m, &cl, &Options::new(&m));
+    assert_eq!(s.cl_units, "mm");
+    assert!(sink.nc.contains("X-10.7283"), "{}", &sink.nc[..600.min(sink.nc.len())]);
+    assert!(sink.nc.contains("G20"));
+}
+
+#[test]
+fn bad_records_are_diagnostics_with_line_and_column_and_the_rest_goes_on() {
+    let m = machine("spinner-u5-620");
+    let cl = "UNITS/MM\nFEDRAT/500,MMPM\nGOTO/0,0,50,0,0,1\nGOTO/1,2,abc\nGOTO/10,0,50,0,0,1\nFROBNICATE/1\nGOTO/20,0,50,0,0,1\n";
+    let (sink, s) = run(&m, cl.as_bytes(), &Options::new(&m));
+    let bad = sink
+        .diags
+        .iter()
+        .find(|d| d.code == Code::BadRecord)
+        .expect("bad record reported");
+    assert_eq!((bad.line, bad.column), (Some(4), Some(10)), "{bad}");
+    assert!(bad.message.contains("expected a finite number"), "{bad}");
+    let unknown = sink.diags.iter().find(|d| d.code == Code::UnknownRecord).unwrap();
+    assert_eq!(unknown.severity, Severity::Warning);
+    assert_eq!(s.cl_points, 3, "the good records all went through");
+    assert!(sink.nc.trim_end().ends_with("M30\n%") || sink.nc.trim_end().ends_with('%'));
+}
+
+#[test]
+fn strict_mode_fails_cleanly_at_the_first_error() {
+    let m = machine("spinner-u5-620");
+    let cl = "UNITS/MM\nGOTO/0,0,50\nGOTO/1,2\nGOTO/3,4,5\n";
+    let mut o = Options::new(&m);
+    o.strict = true;
+    let mut sink = Collect::default();
+    match post::post(cl.as_bytes(), &m, &o, &mut sink) {
+        Err(post::Error::Strict(d)) => {
+            assert_eq!(d.line, Some(3));
+            assert!(d.message.contains("expected 3 values"), "{d}");
+        }
+        other => panic!("{other:?}"),
+    }
+    assert!(!sink.nc.contains("M30"), "a failed program never ends as if complete");
+}
+
+#[test]
+fn unreachable_poses_name_the_line_and_limits_name_the_axis() {
+    let m = machine("vmc-3axis");
+    let cl = "UNITS/MM\nFEDRAT/500,MMPM\nGOTO/0,0,50,0,0,1\nGOTO/0,0,50,0,0.5,0.866025\nGOTO/0,0,40,0,0,1\nGOTO/900,0,40,0,0,1\n";
+    let (sink, s) = run(&m, cl.as_bytes(), &Options::new(&m));
+    let u = sink.diags.iter().find(|d| d.code == Code::Unreachable).unwrap();
+    assert_eq!(u.line, Some(4));
+    assert!(u.message.contains("30.0"), "{u}");
+    let l = sink.diags.iter().find(|d| d.code == Code::LimitViolation).unwrap();
+    assert_eq!(l.line, Some(6));
+    assert!(l.message.starts_with("X = 900"), "{l}");
+    assert_eq!(s.errors, 2);
+}
+
+#[test]
+fn a_bounded_rotary_unwinds_with_a_marked_retract() {
+    // dmg-dmc75v's C is bounded to ±360°: three turns of C must unwind.
+    let m = machine("dmg-dmc75v");
+    let mut cl = String::from("UNITS/MM\nFEDRAT/800,MMPM\n");
+    let setup = Setup::new(m.default_tool_length, Vec3::zeros());
+    for k in 0..=360 {
+        let c = (k as f64 * 3.0).to_radians();
+        let j = Joints {
+            linear: [20.0, 0.0, 0.0],
+            rotary: [c, (-30f64).to_radians(), 0.0],
+        };
+        let p = fk(&m, &j, &setup);
+        cl.push_str(&format!(
+            "GOTO/{:.6},{:.6},{:.6},{:.9},{:.9},{:.9}\n",
+            p.tip.x, p.tip.y, p.tip.z, p.axis.x, p.axis.y, p.axis.z
+        ));
+    }
+    let (sink, s) = run(&m, cl.as_bytes(), &Options::new(&m));
+    assert_eq!(s.errors, 0, "{:?}", sink.diags);
+    assert!(s.counts.get("unwind").copied().unwrap_or(0) >= 1, "{:?}", s.counts);
+    assert!(sink.nc.contains("UNWIND"));
+    let c = s.axes.get(&'C').unwrap();
+    assert!(c.min >= -360.0 - 1e-9 && c.max <= 360.0 + 1e-9, "C within travel: {c:?}");
+}
