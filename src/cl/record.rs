@@ -175,6 +175,9 @@ struct Arg<'a> {
 /// Parses one statement (continuations joined). `None` when the statement yields no record; then
 /// `diags` says why.
 pub fn parse_statement(stmt: &str, line: u32, diags: &mut Vec<Diagnostic>) -> Option<Record> {
+    if let Some(r) = fast_goto(stmt) {
+        return Some(r);
+    }
     let s = stmt.trim_start();
     let lead = (stmt.len() - s.len()) as u32;
     let (major, rest, rest_col) = match s.find('/') {
@@ -454,6 +457,35 @@ pub fn parse_statement(stmt: &str, line: u32, diags: &mut Vec<Diagnostic>) -> Op
             );
             None
         }
+    }
+}
+
+/// `GOTO/x,y,z[,i,j,k]` with plain numbers, parsed without allocating: nearly every statement
+/// of a large file. Anything else (or anything odd) goes to the general parser.
+#[inline]
+fn fast_goto(stmt: &str) -> Option<Record> {
+    let b = stmt.as_bytes();
+    if b.len() < 6 || !b[..4].eq_ignore_ascii_case(b"GOTO") {
+        return None;
+    }
+    let rest = stmt[4..].trim_start().strip_prefix('/')?;
+    let mut v = [0.0; 6];
+    let mut n = 0;
+    for part in rest.split(',') {
+        if n == 6 {
+            return None;
+        }
+        let x = num(part)?;
+        if !x.is_finite() {
+            return None;
+        }
+        v[n] = x;
+        n += 1;
+    }
+    match n {
+        3 => Some(Record::Goto { p: [v[0], v[1], v[2]], axis: None }),
+        6 => Some(Record::Goto { p: [v[0], v[1], v[2]], axis: Some([v[3], v[4], v[5]]) }),
+        _ => None,
     }
 }
 

@@ -79,9 +79,27 @@ pub struct BlockInfo {
     /// 1-based index of the motion block in the program.
     pub n: u64,
     pub source_line: Option<u32>,
-    /// Axis words as written: name → value (profile units, degrees).
-    pub joints: BTreeMap<char, f64>,
+    /// Axis words as written (X Y Z A B C; profile units, degrees), as a JSON map of the present.
+    pub joints: AxisWords,
     pub diagnostics: Vec<Diagnostic>,
+}
+
+/// X Y Z A B C values of a block, `None` where the block has no such word. A fixed array: one
+/// is built per block, so no allocation.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct AxisWords(pub [Option<f64>; 6]);
+
+impl Serialize for AxisWords {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        use serde::ser::SerializeMap;
+        let mut m = s.serialize_map(Some(self.0.iter().flatten().count()))?;
+        for (k, v) in self.0.iter().enumerate() {
+            if let Some(v) = v {
+                m.serialize_entry(&crate::nc::AXIS_LETTERS[k], v)?;
+            }
+        }
+        m.end()
+    }
 }
 
 /// Where the program goes. The NC file, the NDJSON stream and a golden test are all sinks.
@@ -182,6 +200,9 @@ struct Emitter<'a, S: Sink + ?Sized> {
     strict_error: Option<Diagnostic>,
     warned_no_tool: bool,
     warned_per_rev: bool,
+    /// Longest distance from a rotary's line to anything it moves (tip, pivots): bounds the
+    /// nonlinear error of a joint-space move.
+    lever: f64,
 }
 
 /// Post-processes CL from `input` for machine `m` into `sink`.
@@ -212,6 +233,7 @@ pub fn post<R: BufRead, S: Sink + ?Sized>(input: R, m: &Machine, o: &Options, si
         strict_error: None,
         warned_no_tool: false,
         warned_per_rev: false,
+        lever: 0.0,
     };
     e.program_start()?;
     let mut planner = Planner::new(m, setup);
@@ -606,7 +628,10 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             .fold(0.0, f64::max);
         let mut split = step > self.o.max_rotary_step;
         if !split && self.o.mode == Mode::Joint && step > 0.0 {
-            split = self.nonlinear_error(&a, &b) > 0.8 * self.o.tolerance;
+            // The tip strays from the chord by at most lever · (Σ|Δθ|)² / 8 (the sagitta of the
+            // arcs the rotaries sweep): below the tolerance, no need to sample.
+            let sum: f64 = (0..self.m.rotaries.len()).map(|i| (b.joints.rotary[i] - a.joints.rotary[i]).abs()).sum();
+            split = self.lever * sum * sum / 8.0 > 0.5 * self.o.tolerance && self.nonlinear_error(&a, &b) > 0.8 * self.o.tolerance;
         }
         if split && depth >= 14 && self.o.mode == Mode::Joint && self.nonlinear_error(&a, &b) > self.o.tolerance {
             // Subdivision did not converge: the solution followed runs into a fold.
@@ -936,28 +961,19 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         }
         let comment = comment.or(pt.comment);
         let motion = if rapid { Motion::Rapid } else { Motion::Feed };
-        let text = self.f.motion(motion, &axes, feed, "", comment).map(str::to_string);
         self.at = Some(to);
-        if let Some(text) = text {
-            self.blocks += 1;
-            self.sum.blocks += 1;
-            self.sum.inserted_blocks += inserted as u64;
-            let mut joints = BTreeMap::new();
-            for (k, v) in axes.iter().enumerate() {
-                if let Some(v) = v {
-                    joints.insert(crate::nc::AXIS_LETTERS[k], *v);
-                }
+        match self.f.motion(motion, &axes, feed, "", comment) {
+            Some(text) => {
+                self.blocks += 1;
+                self.sum.blocks += 1;
+                self.sum.inserted_blocks += inserted as u64;
+                let info = BlockInfo { n: self.blocks, source_line: Some(pt.line), joints: AxisWords(axes), diagnostics: diags };
+                self.sink.line(text, Some(&info))?;
             }
-            let info = BlockInfo {
-                n: self.blocks,
-                source_line: Some(pt.line),
-                joints,
-                diagnostics: diags,
-            };
-            self.sink.line(&text, Some(&info))?;
-        } else {
-            for d in diags {
-                self.sink.diagnostic(&d)?;
+            None => {
+                for d in diags {
+                    self.sink.diagnostic(&d)?;
+                }
             }
         }
         Ok(())
