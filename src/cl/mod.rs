@@ -155,7 +155,7 @@ impl<R: BufRead> Reader<R> {
             self.in_comment = text.trim_end().ends_with('$');
             return;
         }
-        let (code, comment) = match text.find("$$") {
+        let (code, comment) = match find_comment(text) {
             Some(i) => (&text[..i], Some(&text[i + 2..])),
             None => (text, None),
         };
@@ -219,6 +219,20 @@ impl<R: BufRead> Iterator for Reader<R> {
 
 fn starts_with_ci(s: &str, prefix: &str) -> bool {
     s.len() >= prefix.len() && s.as_bytes()[..prefix.len()].eq_ignore_ascii_case(prefix.as_bytes())
+}
+
+/// Byte offset of `$$`, scanning bytes (most lines have no `$` at all).
+#[inline]
+fn find_comment(text: &str) -> Option<usize> {
+    let b = text.as_bytes();
+    let mut i = memchr(b'$', b)?;
+    while i + 1 < b.len() {
+        if b[i + 1] == b'$' {
+            return Some(i);
+        }
+        i += 1 + memchr(b'$', &b[i + 1..])?;
+    }
+    None
 }
 
 #[inline]

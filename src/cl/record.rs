@@ -483,8 +483,14 @@ fn fast_goto(stmt: &str) -> Option<Record> {
         n += 1;
     }
     match n {
-        3 => Some(Record::Goto { p: [v[0], v[1], v[2]], axis: None }),
-        6 => Some(Record::Goto { p: [v[0], v[1], v[2]], axis: Some([v[3], v[4], v[5]]) }),
+        3 => Some(Record::Goto {
+            p: [v[0], v[1], v[2]],
+            axis: None,
+        }),
+        6 => Some(Record::Goto {
+            p: [v[0], v[1], v[2]],
+            axis: Some([v[3], v[4], v[5]]),
+        }),
         _ => None,
     }
 }

@@ -630,8 +630,11 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         if !split && self.o.mode == Mode::Joint && step > 0.0 {
             // The tip strays from the chord by at most lever · (Σ|Δθ|)² / 8 (the sagitta of the
             // arcs the rotaries sweep): below the tolerance, no need to sample.
-            let sum: f64 = (0..self.m.rotaries.len()).map(|i| (b.joints.rotary[i] - a.joints.rotary[i]).abs()).sum();
-            split = self.lever * sum * sum / 8.0 > 0.5 * self.o.tolerance && self.nonlinear_error(&a, &b) > 0.8 * self.o.tolerance;
+            let sum: f64 = (0..self.m.rotaries.len())
+                .map(|i| (b.joints.rotary[i] - a.joints.rotary[i]).abs())
+                .sum();
+            split =
+                self.lever * sum * sum / 8.0 > 0.5 * self.o.tolerance && self.nonlinear_error(&a, &b) > 0.8 * self.o.tolerance;
         }
         if split && depth >= 14 && self.o.mode == Mode::Joint && self.nonlinear_error(&a, &b) > self.o.tolerance {
             // Subdivision did not converge: the solution followed runs into a fold.
@@ -967,7 +970,12 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                 self.blocks += 1;
                 self.sum.blocks += 1;
                 self.sum.inserted_blocks += inserted as u64;
-                let info = BlockInfo { n: self.blocks, source_line: Some(pt.line), joints: AxisWords(axes), diagnostics: diags };
+                let info = BlockInfo {
+                    n: self.blocks,
+                    source_line: Some(pt.line),
+                    joints: AxisWords(axes),
+                    diagnostics: diags,
+                };
                 self.sink.line(text, Some(&info))?;
             }
             None => {

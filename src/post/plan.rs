@@ -10,7 +10,6 @@
 use super::source::{MotionPt, ProgEvent};
 use crate::kinematics::{IkOptions, Joints, Machine, Setup, Solution, Solutions, Vec3, angle_between, fk, ik_into};
 use arrayvec::ArrayVec;
-use std::collections::VecDeque;
 
 pub const WINDOW: usize = 512;
 pub const MAX_CANDS: usize = 8;
@@ -26,8 +25,6 @@ const INFEASIBLE: f64 = 1e9;
 pub struct Cand {
     pub sol: Solution,
     pub feasible: bool,
-    /// The CL tool axis of the point (for judging a move across the fold between branches).
-    pub axis: Vec3,
 }
 
 /// Largest deviation (radians) of the joint-space midpoint's tool axis from the CL great circle
@@ -82,10 +79,12 @@ pub enum Out {
 pub struct Planner<'m> {
     m: &'m Machine,
     pub setup: Setup,
-    window: VecDeque<Slot>,
+    /// Contiguous (a Vec, not a ring): each push reads the previous column in place; the
+    /// committed front is drained half a window at a time (amortised O(1) per point).
+    window: Vec<Slot>,
     points: usize,
     /// The last committed candidate: the root the window's costs start from.
-    root: Option<Cand>,
+    root: Option<(Cand, Vec3)>,
     buf: Solutions,
     opt: IkOptions,
 }
@@ -93,7 +92,10 @@ pub struct Planner<'m> {
 /// Rotary travel (degrees) between two candidates, and whether the move changes branch or
 /// unwinds a bounded axis. Unbounded axes compare modulo a turn (the emitter picks the nearest
 /// winding); the free axis of a singular candidate costs nothing (it keeps the previous angle).
-fn transition(m: &Machine, a: &Cand, b: &Cand, rapid: bool) -> f64 {
+/// Returns the cost without the branch penalty, and whether that penalty may apply (it needs
+/// the fold check, which callers skip when the move cannot win anyway).
+#[inline]
+fn transition(m: &Machine, a: &Cand, b: &Cand, rapid: bool) -> (f64, bool) {
     let mut travel = 0.0;
     let mut unwind = false;
     for (i, r) in m.rotaries.iter().enumerate() {
@@ -108,18 +110,23 @@ fn transition(m: &Machine, a: &Cand, b: &Cand, rapid: bool) -> f64 {
         travel += d.abs();
     }
     let mut cost = travel.to_degrees();
-    if !rapid {
-        if a.sol.branch * b.sol.branch < 0 && !crosses_fold(m, &a.sol.joints.rotary, &b.sol.joints.rotary, &a.axis, &b.axis) {
-            cost += BRANCH_PENALTY;
-        }
-        if unwind {
-            cost += UNWIND_PENALTY;
-        }
+    if !rapid && unwind {
+        cost += UNWIND_PENALTY;
     }
     if !b.feasible {
         cost += INFEASIBLE;
     }
-    cost
+    (cost, !rapid && a.sol.branch * b.sol.branch < 0)
+}
+
+/// The full transition cost, fold check included.
+fn transition_cost(m: &Machine, a: &Cand, b: &Cand, rapid: bool, ua: &Vec3, ub: &Vec3) -> f64 {
+    let (c, check) = transition(m, a, b, rapid);
+    if check && !crosses_fold(m, &a.sol.joints.rotary, &b.sol.joints.rotary, ua, ub) {
+        c + BRANCH_PENALTY
+    } else {
+        c
+    }
 }
 
 #[inline]
@@ -130,14 +137,29 @@ pub fn wrap(a: f64) -> f64 {
 }
 
 /// Costs of `col` from its predecessor column, or from the committed root.
-fn relax(m: &Machine, root: &Option<Cand>, prev: Option<&Column>, col: &mut Column) {
+fn relax(m: &Machine, root: &Option<(Cand, Vec3)>, prev: Option<&Column>, col: &mut Column) {
     let rapid = col.pt.rapid;
     for (b, cb) in col.cands.iter().enumerate() {
         let (mut best, mut arg) = (f64::INFINITY, 0u8);
         match prev {
             Some(p) => {
                 for (a, ca) in p.cands.iter().enumerate() {
-                    let c = p.cost[a] + transition(m, ca, cb, rapid);
+                    let (t, check) = transition(m, ca, cb, rapid);
+                    let mut c = p.cost[a] + t;
+                    if c >= best {
+                        continue; // the branch penalty only adds: no need to look at the fold
+                    }
+                    if check
+                        && !crosses_fold(
+                            m,
+                            &ca.sol.joints.rotary,
+                            &cb.sol.joints.rotary,
+                            &p.pt.pose.axis,
+                            &col.pt.pose.axis,
+                        )
+                    {
+                        c += BRANCH_PENALTY;
+                    }
                     if c < best {
                         (best, arg) = (c, a as u8);
                     }
@@ -145,7 +167,7 @@ fn relax(m: &Machine, root: &Option<Cand>, prev: Option<&Column>, col: &mut Colu
             }
             None => {
                 best = match root {
-                    Some(r) => transition(m, r, cb, rapid),
+                    Some((r, ua)) => transition_cost(m, r, cb, rapid, ua, &col.pt.pose.axis),
                     // First point of the program: prefer small angles, within travel.
                     None => {
                         cb.sol.joints.rotary.iter().map(|a| a.abs().to_degrees()).sum::<f64>() * 1e-3
@@ -159,12 +181,72 @@ fn relax(m: &Machine, root: &Option<Cand>, prev: Option<&Column>, col: &mut Colu
     }
 }
 
+/// Candidates of one pose, into `out`: every IK solution, and for bounded rotaries every winding
+/// within travel (unbounded ones stay in (−π, π]: the emitter winds them).
+fn candidates(
+    m: &Machine,
+    setup: &Setup,
+    opt: &IkOptions,
+    buf: &mut Solutions,
+    pt: &MotionPt,
+    out: &mut ArrayVec<Cand, MAX_CANDS>,
+) -> Result<(), crate::kinematics::Error> {
+    ik_into(m, &pt.pose, setup, opt, buf)?;
+    for s in buf.iter() {
+        let lin_ok = crate::kinematics::limit_violation(
+            m,
+            &Joints {
+                rotary: [0.0; 3],
+                ..s.joints
+            },
+            1e-6,
+        )
+        .is_none();
+        // Bounded rotaries: the words within travel for this solution's angle (most have one).
+        let mut ws: [ArrayVec<f64, 8>; 3] = Default::default();
+        let mut combos = 1usize;
+        for (i, r) in m.rotaries.iter().enumerate() {
+            if r.limits.is_some() && s.singular != Some(i) {
+                ws[i] = r.windings(s.actual[i], s.actual[i]);
+                combos *= ws[i].len().max(1);
+            }
+        }
+        for k in 0..combos {
+            let mut v = *s;
+            let mut rest = k;
+            let mut rot_ok = true;
+            for (i, r) in m.rotaries.iter().enumerate() {
+                if r.limits.is_none() || s.singular == Some(i) {
+                    continue;
+                }
+                match ws[i].len() {
+                    0 => rot_ok = false, // out of travel: kept, marked infeasible
+                    n => {
+                        v.joints.rotary[i] = ws[i][rest % n];
+                        rest /= n;
+                    }
+                }
+            }
+            if out
+                .try_push(Cand {
+                    sol: v,
+                    feasible: lin_ok && rot_ok,
+                })
+                .is_err()
+            {
+                return Ok(());
+            }
+        }
+    }
+    Ok(())
+}
+
 impl<'m> Planner<'m> {
     pub fn new(m: &'m Machine, setup: Setup) -> Planner<'m> {
         Planner {
             m,
             setup,
-            window: VecDeque::new(),
+            window: Vec::with_capacity(WINDOW + 64),
             points: 0,
             root: None,
             buf: Solutions::new(),
@@ -172,96 +254,47 @@ impl<'m> Planner<'m> {
         }
     }
 
-    /// Candidates of one pose: every IK solution, and for bounded rotaries every winding within
-    /// travel (unbounded ones stay in (−π, π]: the emitter winds them).
-    fn candidates(&mut self, pt: &MotionPt) -> Result<ArrayVec<Cand, MAX_CANDS>, crate::kinematics::Error> {
-        ik_into(self.m, &pt.pose, &self.setup, &self.opt, &mut self.buf)?;
-        let mut out = ArrayVec::new();
-        for s in self.buf.iter() {
-            let lin_ok = crate::kinematics::limit_violation(
-                self.m,
-                &crate::kinematics::Joints {
-                    rotary: [0.0; 3],
-                    ..s.joints
-                },
-                1e-6,
-            )
-            .is_none();
-            // Windings of bounded rotaries within travel.
-            let mut variants: ArrayVec<Solution, MAX_CANDS> = ArrayVec::new();
-            variants.push(*s);
-            for (i, r) in self.m.rotaries.iter().enumerate() {
-                if r.limits.is_none() || s.singular == Some(i) {
-                    continue;
-                }
-                let mut next: ArrayVec<Solution, MAX_CANDS> = ArrayVec::new();
-                for v in &variants {
-                    let ws = r.windings(s.actual[i], s.actual[i]);
-                    if ws.is_empty() {
-                        let _ = next.try_push(*v); // out of travel: kept, marked infeasible below
-                    }
-                    for w in ws {
-                        let mut v2 = *v;
-                        v2.joints.rotary[i] = w;
-                        let _ = next.try_push(v2);
-                    }
-                }
-                variants = next;
-            }
-            for v in variants {
-                let rot_ok = self
-                    .m
-                    .rotaries
-                    .iter()
-                    .enumerate()
-                    .all(|(i, r)| s.singular == Some(i) || r.within(v.joints.rotary[i], 1e-9));
-                if out
-                    .try_push(Cand {
-                        sol: v,
-                        feasible: lin_ok && rot_ok,
-                        axis: pt.pose.axis,
-                    })
-                    .is_err()
-                {
-                    break;
-                }
-            }
-        }
-        Ok(out)
-    }
-
     pub fn push_event(&mut self, e: ProgEvent, out: &mut impl FnMut(Out)) {
         if self.window.is_empty() {
             out(Out::Event(e));
         } else {
-            self.window.push_back(Slot::Event(e));
+            self.window.push(Slot::Event(e));
         }
     }
 
     pub fn push_point(&mut self, pt: MotionPt, out: &mut impl FnMut(Out)) {
-        let (cands, error) = match self.candidates(&pt) {
-            Ok(c) if !c.is_empty() => (c, None),
-            Ok(_) => (
-                ArrayVec::new(),
-                Some(crate::kinematics::Error::NoSolution {
-                    reason: "no solution".into(),
-                }),
-            ),
-            Err(e) => (ArrayVec::new(), Some(e)),
-        };
-        let mut col = Column {
+        self.window.push(Slot::Point(Column {
             pt,
-            cands,
+            cands: ArrayVec::new(),
             cost: [f64::INFINITY; MAX_CANDS],
             back: [0; MAX_CANDS],
-            error,
+            error: None,
+        }));
+        let slots = self.window.as_mut_slice();
+        let last = slots.len() - 1;
+        let prev_idx = slots[..last]
+            .iter()
+            .rposition(|s| matches!(s, Slot::Point(c) if c.error.is_none()));
+        let (before, after) = slots.split_at_mut(last);
+        let Slot::Point(col) = &mut after[0] else {
+            unreachable!("just pushed a point")
         };
-        let prev = self.window.iter().rev().find_map(|s| match s {
-            Slot::Point(c) if c.error.is_none() => Some(c),
-            _ => None,
-        });
-        relax(self.m, &self.root, prev, &mut col);
-        self.window.push_back(Slot::Point(col));
+        match candidates(self.m, &self.setup, &self.opt, &mut self.buf, &col.pt, &mut col.cands) {
+            Ok(()) if col.cands.is_empty() => {
+                col.error = Some(crate::kinematics::Error::NoSolution {
+                    reason: "no solution".into(),
+                })
+            }
+            Ok(()) => {}
+            Err(e) => col.error = Some(e),
+        }
+        if col.error.is_none() {
+            let prev = prev_idx.and_then(|k| match &before[k] {
+                Slot::Point(c) => Some(c),
+                Slot::Event(_) => None,
+            });
+            relax(self.m, &self.root, prev, col);
+        }
         self.points += 1;
         if self.points >= WINDOW {
             self.commit(WINDOW / 2, out);
@@ -288,30 +321,35 @@ impl<'m> Planner<'m> {
                 next = Some(c.back[pick] as usize);
             }
         }
-        let mut committed = 0;
-        let mut idx = 0;
-        while committed < n {
-            let Some(slot) = self.window.pop_front() else { break };
+        // The slots holding the first `n` points (and the events among them).
+        let mut cut = 0;
+        let mut counted = 0;
+        for slot in &self.window {
+            if counted == n {
+                break;
+            }
+            cut += 1;
+            counted += matches!(slot, Slot::Point(_)) as usize;
+        }
+        for (idx, slot) in self.window.drain(..cut).enumerate() {
             match slot {
                 Slot::Event(e) => out(Out::Event(e)),
                 Slot::Point(c) => {
                     let cand = choice[idx].map(|k| c.cands[k]);
-                    if cand.is_some() {
-                        self.root = cand;
+                    if let Some(cd) = cand {
+                        self.root = Some((cd, c.pt.pose.axis));
                     }
                     out(Out::Point(Committed {
                         pt: c.pt,
                         cand,
                         error: c.error,
                     }));
-                    committed += 1;
                     self.points -= 1;
                 }
             }
-            idx += 1;
         }
         // Re-root the rest on what was committed.
-        let slots = self.window.make_contiguous();
+        let slots = self.window.as_mut_slice();
         let mut prev: Option<usize> = None;
         for i in 0..slots.len() {
             if !matches!(&slots[i], Slot::Point(c) if c.error.is_none()) {
@@ -333,7 +371,7 @@ impl<'m> Planner<'m> {
     pub fn finish(&mut self, out: &mut impl FnMut(Out)) {
         let n = self.points;
         self.commit(n, out);
-        while let Some(slot) = self.window.pop_front() {
+        for slot in self.window.drain(..) {
             if let Slot::Event(e) = slot {
                 out(Out::Event(e));
             }
