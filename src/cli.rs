@@ -53,6 +53,26 @@ pub enum Command {
         #[arg(long, allow_hyphen_values = true)]
         tool_length: Option<f64>,
     },
+    /// Replay an NC program (fanuc-style word address, from anywhere) through FK against its CL
+    /// file: every CL point reproduced in order, blocks between them on the CL segment. JSON
+    /// report on stdout; exit 1 when a check fails.
+    Verify {
+        #[arg(long)]
+        machine: String,
+        #[arg(long)]
+        cl: String,
+        #[arg(long)]
+        nc: String,
+        #[arg(long, default_value = "joint")]
+        mode: String,
+        #[command(flatten)]
+        setup: SetupArgs,
+        /// Position tolerance in profile units (default 0.01 mm / 0.0004 in).
+        #[arg(long)]
+        tolerance: Option<f64>,
+        #[arg(long)]
+        cl_units: Option<String>,
+    },
     /// Read a CL file and report its diagnostics and record counts (JSON summary on stdout).
     Lint {
         /// CL file, or - for standard input.
@@ -234,6 +254,34 @@ fn run(cli: Cli) -> Result<(), String> {
             )
             .and_then(|_| std::io::Write::flush(&mut w))
             .map_err(|e| e.to_string())
+        }
+        Command::Verify { machine, cl, nc, mode, setup, tolerance, cl_units } => {
+            use crate::post::{Mode, verify};
+            let p = lib.get(&machine).map_err(|e| e.to_string())?;
+            let m = &p.machine;
+            let o = verify::VerifyOptions {
+                mode: match mode.as_str() {
+                    "joint" => Mode::Joint,
+                    "tcp" => Mode::Tcp,
+                    other => return Err(format!("--mode {other:?}: expected joint or tcp")),
+                },
+                setup: setup.setup(m)?,
+                tolerance: tolerance.unwrap_or(if m.units == Units::Mm { 0.01 } else { 0.0004 }),
+                angle_tolerance_deg: 0.01,
+                cl_units: match cl_units.as_deref() {
+                    None => None,
+                    Some("mm") => Some(Units::Mm),
+                    Some("inch") => Some(Units::Inch),
+                    Some(u) => return Err(format!("--cl-units {u:?}: expected mm or inch")),
+                },
+            };
+            let rep = verify::verify(open_input(&cl)?, open_input(&nc)?, m, &o).map_err(|e| e.to_string())?;
+            println!("{}", serde_json::to_string_pretty(&rep).map_err(|e| e.to_string())?);
+            if rep.ok {
+                Ok(())
+            } else {
+                Err(format!("{} of {} CL points matched, {} blocks off their CL segment", rep.matched, rep.cl_points, rep.off_segment_blocks))
+            }
         }
         Command::Post(a) => {
             let p = lib.get(&a.machine).map_err(|e| e.to_string())?;

@@ -292,3 +292,27 @@ fn a_bounded_rotary_unwinds_with_a_marked_retract() {
     let c = s.axes.get(&'C').unwrap();
     assert!(c.min >= -360.0 - 1e-9 && c.max <= 360.0 + 1e-9, "C within travel: {c:?}");
 }
+
+#[test]
+fn verify_replays_any_program_and_names_the_cl_lines_it_misses() {
+    use kinepost::post::verify::{VerifyOptions, verify};
+    let m = machine("haas-umc750");
+    let cl = std::fs::read(data("nx_clsf_mech491_variable_axis_inch_5ax.cls")).unwrap();
+    let mut o = Options::new(&m);
+    o.mode = Mode::Tcp;
+    let (sink, _) = run(&m, &cl, &o);
+    let vo = VerifyOptions { mode: Mode::Tcp, setup: Setup::new(3.0, Vec3::zeros()), tolerance: 0.0004, angle_tolerance_deg: 0.01, cl_units: None };
+    let ours = verify(&cl[..], sink.nc.as_bytes(), &m, &vo).unwrap();
+    assert!(ours.ok && ours.matched == 348, "{ours:?}");
+    // The real NX post's program verifies too (a second opinion on the check itself).
+    let golden = std::fs::read(data("golden/nx_post_HAAS_UMC750_variable_axis.nc")).unwrap();
+    let nx = verify(&cl[..], &golden[..], &m, &vo).unwrap();
+    assert!(nx.ok, "{nx:?}");
+    // Tamper with one B word: that CL point is missed and named.
+    let bad = sink.nc.replacen("B-20.8330", "B-20.8630", 1);
+    assert_ne!(bad, sink.nc);
+    let r = verify(&cl[..], bad.as_bytes(), &m, &vo).unwrap();
+    assert!(!r.ok);
+    assert_eq!(r.matched, 347);
+    assert_eq!(r.misses[0].cl_line, 26, "{:?}", r.misses);
+}

@@ -8,6 +8,7 @@
 
 mod plan;
 mod source;
+pub mod verify;
 
 pub use source::{Item, MotionPt, ProgEvent, Source};
 
