@@ -122,6 +122,11 @@ pub struct PostArgs {
     /// Stop at the first error (bad record, unreachable pose, limit) with a non-zero exit.
     #[arg(long)]
     pub strict: bool,
+    /// Orientation tolerance in degrees near a singular direction: the free rotary is held
+    /// while the tool axis stays within it of the CL orientation (e.g. 0.5 for ball-end tools).
+    /// Default 0: exact.
+    #[arg(long, default_value_t = 0.0)]
+    pub singular_tolerance: f64,
     /// Write per-block diagnostics as NDJSON to this file.
     #[arg(long)]
     pub diagnostics: Option<PathBuf>,
@@ -255,7 +260,15 @@ fn run(cli: Cli) -> Result<(), String> {
             .and_then(|_| std::io::Write::flush(&mut w))
             .map_err(|e| e.to_string())
         }
-        Command::Verify { machine, cl, nc, mode, setup, tolerance, cl_units } => {
+        Command::Verify {
+            machine,
+            cl,
+            nc,
+            mode,
+            setup,
+            tolerance,
+            cl_units,
+        } => {
             use crate::post::{Mode, verify};
             let p = lib.get(&machine).map_err(|e| e.to_string())?;
             let m = &p.machine;
@@ -280,7 +293,10 @@ fn run(cli: Cli) -> Result<(), String> {
             if rep.ok {
                 Ok(())
             } else {
-                Err(format!("{} of {} CL points matched, {} blocks off their CL segment", rep.matched, rep.cl_points, rep.off_segment_blocks))
+                Err(format!(
+                    "{} of {} CL points matched, {} blocks off their CL segment",
+                    rep.matched, rep.cl_points, rep.off_segment_blocks
+                ))
             }
         }
         Command::Post(a) => {
@@ -376,6 +392,11 @@ fn post_cmd(m: &kinematics::Machine, a: &PostArgs) -> Result<(), String> {
     o.sequence_numbers = a.sequence_numbers;
     o.program_number = a.program_number;
     o.strict = a.strict;
+    if !(a.singular_tolerance.is_finite() && (0.0..=10.0).contains(&a.singular_tolerance)) {
+        return Err("--singular-tolerance must be between 0 and 10 degrees".into());
+    }
+    o.singular_tolerance = a.singular_tolerance.to_radians();
+    o.header.push(format!("DATE {} UTC", utc_now()));
     o.header.push(format!(
         "SOURCE {}",
         std::path::Path::new(&a.input)
@@ -453,6 +474,12 @@ fn post_cmd(m: &kinematics::Machine, a: &PostArgs) -> Result<(), String> {
             })
         })
         .collect();
+    if s.smoothed_blocks > 0 {
+        eprintln!(
+            "kinepost: singular tolerance {}°: {} blocks held the free rotary, {:.1}° of travel saved, largest deviation {:.4}°",
+            a.singular_tolerance, s.smoothed_blocks, s.smoothing_travel_saved_deg, s.smoothing_max_deviation_deg
+        );
+    }
     eprintln!(
         "kinepost: {} CL points -> {} blocks ({} inserted); {}; FK replay max {:.2e} {} / {:.2e}°; {} errors, {} warnings; est. {:.1} min",
         s.cl_points,
@@ -467,6 +494,24 @@ fn post_cmd(m: &kinematics::Machine, a: &PostArgs) -> Result<(), String> {
         s.cycle_time_s / 60.0
     );
     Ok(())
+}
+
+/// `YYYY-MM-DD HH:MM` of the system clock, UTC (civil-from-days, no calendar crate needed).
+pub fn utc_now() -> String {
+    let secs = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_secs()) as i64;
+    let (days, rem) = (secs.div_euclid(86_400), secs.rem_euclid(86_400));
+    let z = days + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z - era * 146_097;
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let d = doy - (153 * mp + 2) / 5 + 1;
+    let m = if mp < 10 { mp + 3 } else { mp - 9 };
+    let y = yoe + era * 400 + (m <= 2) as i64;
+    format!("{y:04}-{m:02}-{d:02} {:02}:{:02}", rem / 3600, rem % 3600 / 60)
 }
 
 /// One solution as the CLI and the API show it: axis words, branch, flags. Rotary words are those

@@ -158,3 +158,73 @@ fn bad_arguments_are_clear_errors() {
         assert!(err.contains(want), "{args:?}: {err}");
     }
 }
+
+#[test]
+fn post_verify_lint_and_generate_as_a_user_runs_them() {
+    let dir = std::env::temp_dir().join(format!("kinepost-cli-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let cl = dir.join("p.cls");
+    let (code, out, err) = kinepost(&["generate", "--machine", "htm50200-horizontal", "--points", "60"]);
+    assert_eq!(code, 0, "{err}");
+    std::fs::write(&cl, out).unwrap();
+    let (nc, nd) = (dir.join("p.nc"), dir.join("p.ndjson"));
+    let (code, _, err) = kinepost(&[
+        "post",
+        "--machine",
+        "htm50200-horizontal",
+        "--work-offset",
+        "-1500,-1600,-400",
+        "--sequence-numbers",
+        "--diagnostics",
+        nd.to_str().unwrap(),
+        "-o",
+        nc.to_str().unwrap(),
+        cl.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    assert!(err.contains("60 CL points"), "{err}");
+    let text = std::fs::read_to_string(&nc).unwrap();
+    assert!(
+        text.starts_with("%\nO1000\n") && text.trim_end().ends_with("M30\n%"),
+        "{text}"
+    );
+    assert!(
+        text.contains("N5 ") && text.contains("G93"),
+        "joint mode with rotary motion writes inverse time"
+    );
+    let lines: Vec<Value> = std::fs::read_to_string(&nd).unwrap().lines().map(json).collect();
+    assert!(lines.iter().any(|l| l["type"] == "block" && l["source_line"].is_number()));
+    assert_eq!(lines.last().unwrap()["type"], "summary");
+    let (code, out, err) = kinepost(&[
+        "verify",
+        "--machine",
+        "htm50200-horizontal",
+        "--work-offset",
+        "-1500,-1600,-400",
+        "--cl",
+        cl.to_str().unwrap(),
+        "--nc",
+        nc.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    assert_eq!(json(&out)["matched"], 60);
+    // Without the work offset the same program does not reproduce the CL.
+    let (code, _, err) = kinepost(&[
+        "verify",
+        "--machine",
+        "htm50200-horizontal",
+        "--cl",
+        cl.to_str().unwrap(),
+        "--nc",
+        nc.to_str().unwrap(),
+    ]);
+    assert_ne!(code, 0);
+    assert!(err.contains("CL points matched"), "{err}");
+    // lint exits non-zero on a bad record and names it.
+    let bad = dir.join("bad.cls");
+    std::fs::write(&bad, "GOTO/1,2,3\nGOTO/1,x,3\n").unwrap();
+    let (code, _, err) = kinepost(&["lint", bad.to_str().unwrap()]);
+    assert_ne!(code, 0);
+    assert!(err.contains("line 2, column 8"), "{err}");
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -145,6 +145,17 @@ fn generated_paths_on_every_profile_post_clean_in_joint_and_tcp_mode() {
             );
             let setup = Setup::new(m.default_tool_length, Vec3::zeros());
             replay_matches(m, &cl_text, &sink.nc, mode, &setup, o.tolerance);
+            // And the motion between blocks stays on the CL segments (joint mode: the
+            // linearization), by the same check `kinepost verify` runs.
+            let vo = kinepost::post::verify::VerifyOptions {
+                mode,
+                setup,
+                tolerance: o.tolerance,
+                angle_tolerance_deg: 0.01,
+                cl_units: None,
+            };
+            let r = kinepost::post::verify::verify(cl_text.as_bytes(), sink.nc.as_bytes(), m, &vo).unwrap();
+            assert!(r.ok, "{} {mode:?}: {r:?}", m.id);
         }
     }
 }
@@ -301,7 +312,13 @@ fn verify_replays_any_program_and_names_the_cl_lines_it_misses() {
     let mut o = Options::new(&m);
     o.mode = Mode::Tcp;
     let (sink, _) = run(&m, &cl, &o);
-    let vo = VerifyOptions { mode: Mode::Tcp, setup: Setup::new(3.0, Vec3::zeros()), tolerance: 0.0004, angle_tolerance_deg: 0.01, cl_units: None };
+    let vo = VerifyOptions {
+        mode: Mode::Tcp,
+        setup: Setup::new(3.0, Vec3::zeros()),
+        tolerance: 0.0004,
+        angle_tolerance_deg: 0.01,
+        cl_units: None,
+    };
     let ours = verify(&cl[..], sink.nc.as_bytes(), &m, &vo).unwrap();
     assert!(ours.ok && ours.matched == 348, "{ours:?}");
     // The real NX post's program verifies too (a second opinion on the check itself).
@@ -315,4 +332,40 @@ fn verify_replays_any_program_and_names_the_cl_lines_it_misses() {
     assert!(!r.ok);
     assert_eq!(r.matched, 347);
     assert_eq!(r.misses[0].cl_line, 26, "{:?}", r.misses);
+}
+
+#[test]
+fn a_singular_tolerance_holds_the_free_rotary_within_its_bound_and_reports_what_it_saved() {
+    use kinepost::post::verify::{VerifyOptions, verify};
+    let m = machine("haas-umc750");
+    let cl = std::fs::read(data("nx_clsf_mech491_variable_axis_inch_5ax.cls")).unwrap();
+    let mut o = Options::new(&m);
+    o.mode = Mode::Tcp;
+    let (_, exact) = run(&m, &cl, &o);
+    o.singular_tolerance = 0.5f64.to_radians();
+    let (sink, held) = run(&m, &cl, &o);
+    let (ce, ch) = (exact.axes[&'C'].travel.unwrap(), held.axes[&'C'].travel.unwrap());
+    assert!(ch < ce - 100.0, "C travel {ch} vs exact {ce}");
+    assert!(
+        (held.smoothing_travel_saved_deg - (ce - ch)).abs() < 0.5,
+        "reported {} vs {}",
+        held.smoothing_travel_saved_deg,
+        ce - ch
+    );
+    assert!(held.smoothing_max_deviation_deg <= 0.5 + 1e-6 && held.smoothing_max_deviation_deg > 0.4);
+    assert!(held.smoothed_blocks > 0 && held.errors == 0);
+    assert!(
+        sink.diags
+            .iter()
+            .any(|d| d.code == Code::Singular && d.message.contains("held"))
+    );
+    // Tips stay exact; orientation within the stated bound.
+    let vo = VerifyOptions {
+        mode: Mode::Tcp,
+        setup: Setup::new(3.0, Vec3::zeros()),
+        tolerance: 0.0004,
+        angle_tolerance_deg: 0.5 + 1e-3,
+        cl_units: None,
+    };
+    assert!(verify(&cl[..], sink.nc.as_bytes(), &m, &vo).unwrap().ok);
 }

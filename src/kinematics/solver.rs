@@ -129,6 +129,32 @@ pub fn singular_direction(m: &Machine) -> Option<Vec3> {
     }
 }
 
+/// For a two-rotary chain: the solution with the outer rotary held at `outer` (actual, radians)
+/// that comes closest to `pose`'s orientation, with the tip exact, and the angle (radians) by
+/// which its tool axis misses the pose's. What smoothing near a singular direction trades: a
+/// bounded orientation error for a still outer rotary. `None` for other chains.
+pub fn hold_outer(m: &Machine, pose: &Pose, setup: &Setup, outer: f64, branch: i8) -> Option<(Solution, f64)> {
+    let Shape::Two(pair) = &m.solver.shape else { return None };
+    let u = pose.axis.normalize();
+    let a1 = Cs::of(outer);
+    let v = rotate(&pair.s1, a1.c, -a1.s, &u);
+    let a2 = sp1(&pair.s2, &Vec3::z(), &v).unwrap_or(Cs::ZERO);
+    let mut out = Solutions::new();
+    let seq = &m.solver.seq;
+    push(m, &mut out, pose, setup, seq, [a1, a2, Cs::ZERO], None, branch, 0, None);
+    let mut s = out.pop()?;
+    s.actual[seq[0]] = outer;
+    s.joints.rotary[seq[0]] = m.rotaries[seq[0]].word(outer);
+    // The orientation actually reached, through the forward chain.
+    let reached = super::fk::fk_actual(m, &s.joints.linear, &s.actual, setup).axis;
+    Some((s, super::angle_between(&reached, &u)))
+}
+
+/// The rotary (chain index) that turns freely at the singular direction of a two-rotary chain.
+pub fn outer_rotary(m: &Machine) -> Option<usize> {
+    matches!(m.solver.shape, Shape::Two(_)).then(|| m.solver.seq[0])
+}
+
 /// One joint solution.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Solution {

@@ -49,6 +49,10 @@ pub struct Options {
     pub clearance: f64,
     /// Cone (radians) around a singular direction within which blocks are marked `singular`.
     pub singular_cone: f64,
+    /// Orientation tolerance (radians) the free rotary may use near a singular direction: 0 is
+    /// exact (the default); e.g. 0.5° for a ball-end tool holds the rotary still where the tool
+    /// axis passes within that angle of the singular direction.
+    pub singular_tolerance: f64,
     /// Header comment lines (source file name, date …) the caller wants in the program.
     pub header: Vec<String>,
 }
@@ -69,6 +73,7 @@ impl Options {
             max_rotary_step: 10f64.to_radians(),
             clearance: if mm { 50.0 } else { 2.0 },
             singular_cone: 2f64.to_radians(),
+            singular_tolerance: 0.0,
             header: Vec::new(),
         }
     }
@@ -161,6 +166,11 @@ pub struct Summary {
     /// segment passing near a singular direction is followed in joint space (as the control
     /// would between the CL points) instead of swinging the free rotary.
     pub max_singular_deviation_deg: f64,
+    /// With a singular tolerance: blocks whose free rotary was held, the rotary travel that saved,
+    /// and the largest orientation deviation it used.
+    pub smoothed_blocks: u64,
+    pub smoothing_travel_saved_deg: f64,
+    pub smoothing_max_deviation_deg: f64,
     pub errors: u64,
     pub warnings: u64,
 }
@@ -201,9 +211,12 @@ struct Emitter<'a, S: Sink + ?Sized> {
     strict_error: Option<Diagnostic>,
     warned_no_tool: bool,
     warned_per_rev: bool,
-    /// Longest distance from a rotary's line to anything it moves (tip, pivots): bounds the
-    /// nonlinear error of a joint-space move.
-    lever: f64,
+    /// Outer-rotary travel of the exact solutions and of what was written, at CL points: what
+    /// the singular tolerance saved, honestly (a held block's saving is partly paid back later).
+    exact_prev: Option<f64>,
+    exact_travel: f64,
+    held_prev: Option<f64>,
+    held_travel: f64,
 }
 
 /// Post-processes CL from `input` for machine `m` into `sink`.
@@ -234,7 +247,10 @@ pub fn post<R: BufRead, S: Sink + ?Sized>(input: R, m: &Machine, o: &Options, si
         strict_error: None,
         warned_no_tool: false,
         warned_per_rev: false,
-        lever: 0.0,
+        exact_prev: None,
+        exact_travel: 0.0,
+        held_prev: None,
+        held_travel: 0.0,
     };
     e.program_start()?;
     let mut planner = Planner::new(m, setup);
@@ -521,11 +537,45 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             ))?;
             return Ok(());
         };
-        let Some((joints, actual, branch)) = self.resolve(&pt.pose, &cand) else {
+        let Some((mut joints, mut actual, branch)) = self.resolve(&pt.pose, &cand) else {
             return Ok(());
         };
         self.ensure_comp()?;
         let mut diags: Vec<Diagnostic> = Vec::new();
+        let mut pose = pt.pose;
+        let outer = kinematics::outer_rotary(self.m);
+        if let Some(sm) = self.smooth(&pt.pose, &joints, &actual, branch) {
+            diags.push(Diagnostic::new(
+                Code::Singular,
+                Severity::Info,
+                Some(pt.line),
+                format!(
+                    "free rotary held: tool axis {:.4}° off the CL orientation ({:.3}° less turn in this block)",
+                    sm.3, sm.4
+                ),
+            ));
+            if let Some(oi) = outer {
+                let d = wrap(actual[oi] - self.exact_prev.unwrap_or(actual[oi])).abs();
+                self.exact_travel += d;
+                self.exact_prev = Some(actual[oi]);
+            }
+            (joints, actual, pose.axis) = (sm.0, sm.1, sm.2);
+        } else if let Some(oi) = outer {
+            self.exact_travel += wrap(actual[oi] - self.exact_prev.unwrap_or(actual[oi])).abs();
+            self.exact_prev = Some(actual[oi]);
+        }
+        if let Some(oi) = outer {
+            self.held_travel += (actual[oi] - self.held_prev.unwrap_or(actual[oi])).abs();
+            self.held_prev = Some(actual[oi]);
+            if self.o.singular_tolerance > 0.0 {
+                self.sum.smoothing_travel_saved_deg = (self.exact_travel - self.held_travel).to_degrees();
+            }
+        }
+        if cand.feasible
+            && let Some(v) = self.near_limit(&joints)
+        {
+            diags.push(Diagnostic::new(Code::NearLimit, Severity::Info, Some(pt.line), v));
+        }
         if !cand.feasible
             && let Some(v) = kinematics::limit_violation(self.m, &joints, 1e-6)
         {
@@ -539,7 +589,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         let target = At {
             joints,
             actual,
-            pose: pt.pose,
+            pose,
             branch,
         };
         match self.at {
@@ -561,6 +611,104 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         }
         self.block(target, &pt, pt.rapid || self.at.is_none(), diags, pt.inserted, None)?;
         Ok(())
+    }
+
+    /// An axis within 1 % of its travel (1° for rotaries) of an end: worth knowing before the
+    /// machine stops on a limit with the next setup's offsets.
+    fn near_limit(&self, j: &Joints) -> Option<String> {
+        for (i, l) in self.m.linears.iter().enumerate() {
+            if let Some(l) = l {
+                let margin = 0.01 * (l.max - l.min);
+                let v = j.linear[i];
+                if v < l.min + margin || v > l.max - margin {
+                    return Some(format!(
+                        "{} = {:.4} within 1% of its travel [{}, {}]",
+                        kinematics::LINEAR_NAMES[i],
+                        v,
+                        l.min,
+                        l.max
+                    ));
+                }
+            }
+        }
+        for (i, r) in self.m.rotaries.iter().enumerate() {
+            if let Some((lo, hi)) = r.limits {
+                let v = j.rotary[i];
+                let margin = 1f64.to_radians();
+                if v < lo + margin || v > hi - margin {
+                    return Some(format!(
+                        "{} = {:.4}° within 1° of its travel [{}, {}]",
+                        r.name,
+                        v.to_degrees(),
+                        lo.to_degrees(),
+                        hi.to_degrees()
+                    ));
+                }
+            }
+        }
+        None
+    }
+
+    /// With a singular tolerance: the outer (free) rotary moved only as far from where it stands
+    /// as keeps the tool axis within the tolerance of the CL orientation (the tip stays exact).
+    /// Returns joints, actual angles, the axis reached, its deviation and the travel saved (°).
+    fn smooth(
+        &mut self,
+        pose: &Pose,
+        joints: &Joints,
+        actual: &[f64; 3],
+        branch: i8,
+    ) -> Option<(Joints, [f64; 3], Vec3, f64, f64)> {
+        let tol = self.o.singular_tolerance;
+        let prev = self.at?;
+        let oi = kinematics::outer_rotary(self.m)?;
+        if tol <= 0.0 {
+            return None;
+        }
+        let (from, target) = (prev.actual[oi], actual[oi]);
+        if (target - from).abs() < 1e-9 {
+            return None;
+        }
+        let dev = |a: f64| kinematics::hold_outer(self.m, pose, &self.setup, a, branch).map_or(f64::INFINITY, |(_, d)| d);
+        // The smallest step toward the planner's exact choice that stays within the tolerance.
+        let t = if dev(from) <= tol {
+            0.0
+        } else {
+            let (mut lo, mut hi) = (0.0, 1.0);
+            for _ in 0..40 {
+                let mid = 0.5 * (lo + hi);
+                if dev(from + mid * (target - from)) <= tol {
+                    hi = mid
+                } else {
+                    lo = mid
+                }
+            }
+            hi
+        };
+        if t >= 1.0 - 1e-9 {
+            return None;
+        }
+        let a = from + t * (target - from);
+        let (s, d) = kinematics::hold_outer(self.m, pose, &self.setup, a, branch)?;
+        let mut j = s.joints;
+        let mut act = s.actual;
+        for (i, r) in self.m.rotaries.iter().enumerate() {
+            act[i] = if i == oi {
+                a
+            } else {
+                prev.actual[i] + wrap(s.actual[i] - prev.actual[i])
+            };
+            j.rotary[i] = r.word(act[i]);
+        }
+        if kinematics::limit_violation(self.m, &j, 1e-6).is_some() && kinematics::limit_violation(self.m, joints, 1e-6).is_none()
+        {
+            return None; // holding would leave travel: stay exact
+        }
+        let reached = fk(self.m, &j, &self.setup).axis;
+        let saved = ((target - from).abs() - (a - from).abs()).to_degrees();
+        self.sum.smoothed_blocks += 1;
+        self.sum.smoothing_max_deviation_deg = self.sum.smoothing_max_deviation_deg.max(d.to_degrees());
+        Some((j, act, reached, d.to_degrees(), saved))
     }
 
     /// Retract along the tool axis, turn at clearance, re-approach: for an unwind of a bounded
@@ -629,13 +777,30 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             .fold(0.0, f64::max);
         let mut split = step > self.o.max_rotary_step;
         if !split && self.o.mode == Mode::Joint && step > 0.0 {
-            // The tip strays from the chord by at most lever · (Σ|Δθ|)² / 8 (the sagitta of the
-            // arcs the rotaries sweep): below the tolerance, no need to sample.
+            // In W the tip follows R(θ(t))·x(t); |P''| ≤ Σ²·lever + 2·Σ·|Δxyz| (rotaries sweeping
+            // and turning the moving linears), so the chord error is at most that over 8: below
+            // the tolerance there is no need to sample.
             let sum: f64 = (0..self.m.rotaries.len())
                 .map(|i| (b.joints.rotary[i] - a.joints.rotary[i]).abs())
                 .sum();
-            split =
-                self.lever * sum * sum / 8.0 > 0.5 * self.o.tolerance && self.nonlinear_error(&a, &b) > 0.8 * self.o.tolerance;
+            let dlin = (0..3)
+                .map(|i| (b.joints.linear[i] - a.joints.linear[i]).powi(2))
+                .sum::<f64>()
+                .sqrt();
+            // Longest distance from a rotary's line to what it moves (tip, pivots, tool).
+            let lever = a.pose.tip.norm().max(b.pose.tip.norm())
+                + self.setup.work_offset.norm()
+                + self.setup.tool_length.abs()
+                + self.m.rotaries.iter().map(|r| r.pivot.norm()).sum::<f64>();
+            // With angle-error compensation the actual angle is not linear in the interpolated
+            // word: no bound, always sample.
+            let compensated = self.m.rotaries.iter().any(|r| r.angle_error.is_some());
+            let bound = if compensated {
+                f64::INFINITY
+            } else {
+                (sum * sum * lever + 2.0 * sum * dlin) / 8.0
+            };
+            split = bound > 0.5 * self.o.tolerance && self.nonlinear_error(&a, &b) > 0.8 * self.o.tolerance;
         }
         if split && depth >= 14 && self.o.mode == Mode::Joint && self.nonlinear_error(&a, &b) > self.o.tolerance {
             // Subdivision did not converge: the solution followed runs into a fold.

@@ -36,6 +36,10 @@ pub struct Report {
     /// Largest distance of a block between two matched feed points from their CL segment.
     pub max_off_segment: f64,
     pub off_segment_blocks: u64,
+    /// Joint mode: largest distance from the CL segment of the joint-space motion between two
+    /// blocks (sampled at ¼, ½, ¾), and how many block pairs exceed the tolerance.
+    pub max_nonlinear: f64,
+    pub nonlinear_blocks: u64,
     pub misses: Vec<Miss>,
     pub tolerance: f64,
 }
@@ -57,6 +61,23 @@ pub struct VerifyOptions {
 }
 
 /// The pose a block reaches, in profile units: FK of its words (TCP: its X Y Z are the tip).
+fn block_joints(m: &Machine, b: &NcBlock, o: &VerifyOptions) -> Option<Joints> {
+    let s = b.units.factor_to(m.units);
+    let mut j = Joints::default();
+    for i in 0..3 {
+        j.linear[i] = match (b.axes[i], m.linears[i].is_some()) {
+            (Some(v), _) => v * s,
+            (None, true) => return None,
+            (None, false) => 0.0,
+        };
+    }
+    for (i, r) in m.rotaries.iter().enumerate() {
+        j.rotary[i] = b.axes[3 + (r.name as u8 - b'A') as usize].unwrap_or(0.0).to_radians();
+    }
+    let _ = o;
+    Some(j)
+}
+
 fn block_pose(m: &Machine, b: &NcBlock, o: &VerifyOptions) -> Option<(Vec3, Vec3)> {
     let s = b.units.factor_to(m.units);
     let mut j = Joints::default();
@@ -71,7 +92,11 @@ fn block_pose(m: &Machine, b: &NcBlock, o: &VerifyOptions) -> Option<(Vec3, Vec3
         j.rotary[i] = b.axes[3 + (r.name as u8 - b'A') as usize].unwrap_or(0.0).to_radians();
     }
     let p = fk(m, &j, &o.setup);
-    let tip = if o.mode == Mode::Tcp { Vec3::new(j.linear[0], j.linear[1], j.linear[2]) } else { p.tip };
+    let tip = if o.mode == Mode::Tcp {
+        Vec3::new(j.linear[0], j.linear[1], j.linear[2])
+    } else {
+        p.tip
+    };
     Some((tip, p.axis))
 }
 
@@ -79,9 +104,15 @@ pub fn verify<C: BufRead, N: BufRead>(cl: C, nc: N, m: &Machine, o: &VerifyOptio
     let mut src = Source::new(cl, m.units, o.cl_units, o.tolerance, false)?;
     let mut reader = NcReader::new(nc, m.units);
     let mut ahead: VecDeque<(NcBlock, Option<(Vec3, Vec3)>)> = VecDeque::new();
-    let mut rep = Report { machine: m.id.clone(), mode: Some(o.mode), tolerance: o.tolerance, ..Default::default() };
+    let mut rep = Report {
+        machine: m.id.clone(),
+        mode: Some(o.mode),
+        tolerance: o.tolerance,
+        ..Default::default()
+    };
     let mut nc_done = false;
     let mut last: Option<(Vec3, bool)> = None; // previous matched CL tip, and whether it was matched
+    let mut last_block: Option<NcBlock> = None; // the block that matched it
     while let Some(item) = src.next_item()? {
         let Item::Motion(pt) = item else { continue };
         if pt.inserted {
@@ -114,7 +145,9 @@ pub fn verify<C: BufRead, N: BufRead>(cl: C, nc: N, m: &Machine, o: &VerifyOptio
                     found = Some((i, dp, da));
                     break;
                 }
-                if nearest.is_none_or(|(_, p, a)| dp / o.tolerance + da / o.angle_tolerance_deg < p / o.tolerance + a / o.angle_tolerance_deg) {
+                if nearest.is_none_or(|(_, p, a)| {
+                    dp / o.tolerance + da / o.angle_tolerance_deg < p / o.tolerance + a / o.angle_tolerance_deg
+                }) {
                     nearest = Some((ahead[i].0.line, dp, da));
                 }
             }
@@ -140,7 +173,30 @@ pub fn verify<C: BufRead, N: BufRead>(cl: C, nc: N, m: &Machine, o: &VerifyOptio
                             }
                         }
                     }
+                    if o.mode == Mode::Joint
+                        && let Some(first) = &last_block
+                    {
+                        let chain = std::iter::once(first).chain(ahead.iter().take(i + 1).map(|(b, _)| b));
+                        let joints: Vec<Option<Joints>> = chain.map(|b| block_joints(m, b, o)).collect();
+                        for w in joints.windows(2) {
+                            let (Some(ja), Some(jb)) = (w[0], w[1]) else { continue };
+                            for t in [0.25, 0.5, 0.75] {
+                                let mut j = ja;
+                                for k in 0..3 {
+                                    j.linear[k] += t * (jb.linear[k] - ja.linear[k]);
+                                    j.rotary[k] += t * (jb.rotary[k] - ja.rotary[k]);
+                                }
+                                let d = seg_dist(&fk(m, &j, &o.setup).tip, &prev_tip, &pt.pose.tip);
+                                rep.max_nonlinear = rep.max_nonlinear.max(d);
+                                if d > o.tolerance {
+                                    rep.nonlinear_blocks += 1;
+                                    break;
+                                }
+                            }
+                        }
+                    }
                 }
+                last_block = Some(ahead[i].0.clone());
                 ahead.drain(..i);
                 last = Some((pt.pose.tip, true));
             }
@@ -154,9 +210,10 @@ pub fn verify<C: BufRead, N: BufRead>(cl: C, nc: N, m: &Machine, o: &VerifyOptio
                     });
                 }
                 last = Some((pt.pose.tip, false));
+                last_block = None;
             }
         }
     }
-    rep.ok = rep.matched == rep.cl_points && rep.off_segment_blocks == 0;
+    rep.ok = rep.matched == rep.cl_points && rep.off_segment_blocks == 0 && rep.nonlinear_blocks == 0;
     Ok(rep)
 }
