@@ -63,15 +63,16 @@ pub enum Command {
         cl: String,
         #[arg(long)]
         nc: String,
-        #[arg(long, default_value = "joint")]
-        mode: String,
+        #[arg(long, value_enum, default_value = "joint")]
+        mode: ModeArg,
         #[command(flatten)]
         setup: SetupArgs,
         /// Position tolerance in profile units (default 0.01 mm / 0.0004 in).
         #[arg(long)]
         tolerance: Option<f64>,
         #[arg(long)]
-        cl_units: Option<String>,
+        #[arg(value_enum)]
+        cl_units: Option<UnitsArg>,
     },
     /// Read a CL file and report its diagnostics and record counts (JSON summary on stdout).
     Lint {
@@ -89,11 +90,44 @@ pub enum Command {
         setup: SetupArgs,
         /// Units of x y z (default: the profile's).
         #[arg(long)]
-        units: Option<String>,
+        #[arg(value_enum)]
+        units: Option<UnitsArg>,
         /// x y z i j k in the part frame.
         #[arg(num_args = 6, required = true, allow_negative_numbers = true)]
         pose: Vec<f64>,
     },
+}
+
+/// `--mode`: joint or tcp.
+#[derive(clap::ValueEnum, Clone, Copy, Debug)]
+pub enum ModeArg {
+    Joint,
+    Tcp,
+}
+
+impl From<ModeArg> for crate::post::Mode {
+    fn from(m: ModeArg) -> Self {
+        match m {
+            ModeArg::Joint => crate::post::Mode::Joint,
+            ModeArg::Tcp => crate::post::Mode::Tcp,
+        }
+    }
+}
+
+/// `--units` / `--cl-units`: mm or inch.
+#[derive(clap::ValueEnum, Clone, Copy, Debug)]
+pub enum UnitsArg {
+    Mm,
+    Inch,
+}
+
+impl From<UnitsArg> for Units {
+    fn from(u: UnitsArg) -> Self {
+        match u {
+            UnitsArg::Mm => Units::Mm,
+            UnitsArg::Inch => Units::Inch,
+        }
+    }
 }
 
 #[derive(clap::Args, Debug, Clone)]
@@ -104,8 +138,8 @@ pub struct PostArgs {
     #[arg(long)]
     pub dialect: Option<String>,
     /// joint (no TCP on the control) or tcp (X Y Z are the tip, the control does the rest).
-    #[arg(long, default_value = "joint")]
-    pub mode: String,
+    #[arg(long, value_enum, default_value = "joint")]
+    pub mode: ModeArg,
     #[command(flatten)]
     pub setup: SetupArgs,
     /// Chord tolerance in profile units (default 0.01 mm / 0.0004 in).
@@ -113,7 +147,8 @@ pub struct PostArgs {
     pub tolerance: Option<f64>,
     /// Units of the CL file when it does not say (mm or inch).
     #[arg(long)]
-    pub cl_units: Option<String>,
+    #[arg(value_enum)]
+    pub cl_units: Option<UnitsArg>,
     /// N numbers on blocks.
     #[arg(long)]
     pub sequence_numbers: bool,
@@ -269,24 +304,15 @@ fn run(cli: Cli) -> Result<(), String> {
             tolerance,
             cl_units,
         } => {
-            use crate::post::{Mode, verify};
+            use crate::post::verify;
             let p = lib.get(&machine).map_err(|e| e.to_string())?;
             let m = &p.machine;
             let o = verify::VerifyOptions {
-                mode: match mode.as_str() {
-                    "joint" => Mode::Joint,
-                    "tcp" => Mode::Tcp,
-                    other => return Err(format!("--mode {other:?}: expected joint or tcp")),
-                },
+                mode: mode.into(),
                 setup: setup.setup(m)?,
                 tolerance: tolerance.unwrap_or(if m.units == Units::Mm { 0.01 } else { 0.0004 }),
                 angle_tolerance_deg: 0.01,
-                cl_units: match cl_units.as_deref() {
-                    None => None,
-                    Some("mm") => Some(Units::Mm),
-                    Some("inch") => Some(Units::Inch),
-                    Some(u) => return Err(format!("--cl-units {u:?}: expected mm or inch")),
-                },
+                cl_units: cl_units.map(Units::from),
             };
             let rep = verify::verify(open_input(&cl)?, open_input(&nc)?, m, &o).map_err(|e| e.to_string())?;
             println!("{}", serde_json::to_string_pretty(&rep).map_err(|e| e.to_string())?);
@@ -341,12 +367,7 @@ fn run(cli: Cli) -> Result<(), String> {
             let p = lib.get(&machine).map_err(|e| e.to_string())?;
             let m = &p.machine;
             let setup = setup.setup(m)?;
-            let f = match units.as_deref() {
-                None => 1.0,
-                Some("mm") => Units::Mm.factor_to(m.units),
-                Some("inch") => Units::Inch.factor_to(m.units),
-                Some(o) => return Err(format!("--units {o:?}: expected mm or inch")),
-            };
+            let f = units.map_or(1.0, |u| Units::from(u).factor_to(m.units));
             let pose = Pose {
                 tip: Vec3::new(pose[0], pose[1], pose[2]) * f,
                 axis: Vec3::new(pose[3], pose[4], pose[5]),
@@ -361,14 +382,10 @@ fn run(cli: Cli) -> Result<(), String> {
 }
 
 fn post_cmd(m: &kinematics::Machine, a: &PostArgs) -> Result<(), String> {
-    use crate::post::{self, Mode, Options, Sink};
+    use crate::post::{self, Options, Sink};
     use std::io::Write;
     let mut o = Options::new(m);
-    o.mode = match a.mode.as_str() {
-        "joint" => Mode::Joint,
-        "tcp" => Mode::Tcp,
-        other => return Err(format!("--mode {other:?}: expected joint or tcp")),
-    };
+    o.mode = a.mode.into();
     if let Some(d) = &a.dialect {
         o.dialect =
             crate::nc::dialect(d).ok_or_else(|| format!("--dialect {d:?}: known dialects are {:?}", crate::nc::DIALECTS))?;
@@ -383,12 +400,7 @@ fn post_cmd(m: &kinematics::Machine, a: &PostArgs) -> Result<(), String> {
         }
         o.tolerance = t;
     }
-    o.cl_units = match a.cl_units.as_deref() {
-        None => None,
-        Some("mm") => Some(Units::Mm),
-        Some("inch") => Some(Units::Inch),
-        Some(u) => return Err(format!("--cl-units {u:?}: expected mm or inch")),
-    };
+    o.cl_units = a.cl_units.map(Units::from);
     o.sequence_numbers = a.sequence_numbers;
     o.program_number = a.program_number;
     o.strict = a.strict;
