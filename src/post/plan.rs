@@ -143,21 +143,29 @@ fn relax(m: &Machine, root: &Option<(Cand, Vec3)>, prev: Option<&Column>, col: &
         let (mut best, mut arg) = (f64::INFINITY, 0u8);
         match prev {
             Some(p) => {
+                // Moves that need no fold check first, so that `best` is tight before any
+                // (costlier) check runs: the check can only add the branch penalty.
+                let mut deferred: ArrayVec<(usize, f64), MAX_CANDS> = ArrayVec::new();
                 for (a, ca) in p.cands.iter().enumerate() {
                     let (t, check) = transition(m, ca, cb, rapid);
-                    let mut c = p.cost[a] + t;
+                    let c = p.cost[a] + t;
+                    if check {
+                        deferred.push((a, c));
+                    } else if c < best {
+                        (best, arg) = (c, a as u8);
+                    }
+                }
+                for (a, mut c) in deferred {
                     if c >= best {
                         continue; // the branch penalty only adds: no need to look at the fold
                     }
-                    if check
-                        && !crosses_fold(
-                            m,
-                            &ca.sol.joints.rotary,
-                            &cb.sol.joints.rotary,
-                            &p.pt.pose.axis,
-                            &col.pt.pose.axis,
-                        )
-                    {
+                    if !crosses_fold(
+                        m,
+                        &p.cands[a].sol.joints.rotary,
+                        &cb.sol.joints.rotary,
+                        &p.pt.pose.axis,
+                        &col.pt.pose.axis,
+                    ) {
                         c += BRANCH_PENALTY;
                     }
                     if c < best {
