@@ -38,6 +38,26 @@ pub fn fk_actual(m: &Machine, linear: &[f64; 3], actual: &[f64; 3], setup: &Setu
     }
 }
 
+/// The tool axis in W for commanded rotary words: FK's orientation half alone (no positions),
+/// for callers that judge orientations only.
+pub fn tool_axis(m: &Machine, rotary_words: &[f64; 3]) -> Vec3 {
+    let actual = m.actual_angles(rotary_words);
+    let mut a = Vec3::z();
+    for (r, &th) in m.rotaries.iter().zip(&actual).rev() {
+        if r.mount == Mount::Head {
+            let (s, c) = th.sin_cos();
+            a = rotate(&r.axis, c, s, &a);
+        }
+    }
+    for (r, &phi) in m.rotaries.iter().zip(&actual) {
+        if r.mount == Mount::Table {
+            let (s, c) = (-phi).sin_cos();
+            a = rotate(&r.axis, c, s, &a);
+        }
+    }
+    a
+}
+
 /// Tip relative to the controlled point, and the tool axis, both in M, for actual head angles:
 /// `G_h1(θ1) ∘ … ∘ G_hm(θm)(0)` with head pivots shifted by the tool length.
 #[inline]

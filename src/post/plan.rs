@@ -8,7 +8,7 @@
 //! what was committed. Memory is O(WINDOW · candidates), whatever the file's length.
 
 use super::source::{MotionPt, ProgEvent};
-use crate::kinematics::{IkOptions, Joints, Machine, Setup, Solution, Solutions, Vec3, angle_between, fk, ik_into};
+use crate::kinematics::{IkOptions, Joints, Machine, Setup, Solution, Solutions, Vec3, angle_between, ik_into, tool_axis};
 use arrayvec::ArrayVec;
 
 pub const WINDOW: usize = 512;
@@ -36,12 +36,12 @@ pub const FOLD_TOLERANCE: f64 = 0.0175;
 /// from one to the other with small rotary steps. A true branch jump swings the tool far off the
 /// CL orientation halfway.
 pub fn crosses_fold(m: &Machine, ja: &[f64; 3], jb: &[f64; 3], ua: &Vec3, ub: &Vec3) -> bool {
-    let mut mid = Joints::default();
+    let mut mid = [0.0; 3];
     for (i, r) in m.rotaries.iter().enumerate() {
         let d = jb[i] - ja[i];
-        mid.rotary[i] = ja[i] + 0.5 * if r.limits.is_none() { wrap(d) } else { d };
+        mid[i] = ja[i] + 0.5 * if r.limits.is_none() { wrap(d) } else { d };
     }
-    let axis = fk(m, &mid, &Setup::new(0.0, Vec3::zeros())).axis;
+    let axis = tool_axis(m, &mid);
     let s = ua + ub;
     let want = if s.norm() < 1e-9 { *ua } else { s.normalize() };
     angle_between(&axis, &want) <= FOLD_TOLERANCE
