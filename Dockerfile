@@ -1,15 +1,28 @@
-# Placeholder until the HTTP service lands (issue 4): builds the CLI and ships the machine library.
-# The service image (multi-stage, non-root, HEALTHCHECK, mountable machines) is issue 4's.
+# kinepost service image: multi-stage build, small runtime, non-root, health-checked.
+# Machines are baked in at /opt/kinepost/machines; mount another library over it to change them.
 FROM rust:1.95-bookworm AS build
 WORKDIR /src
-COPY . .
-RUN cargo build --release --locked
+COPY Cargo.toml Cargo.lock ./
+COPY .cargo .cargo
+COPY src src
+COPY benches benches
+COPY machines machines
+RUN cargo build --release --locked --bin kinepost
 
 FROM debian:bookworm-slim
-RUN useradd --system --uid 10001 kinepost
+RUN useradd --system --uid 10001 --home-dir /var/lib/kinepost --create-home kinepost
 COPY --from=build /src/target/release/kinepost /usr/local/bin/kinepost
 COPY machines /opt/kinepost/machines
-ENV KINEPOST_MACHINES=/opt/kinepost/machines
+ENV KINEPOST_MACHINES=/opt/kinepost/machines \
+    KINEPOST_BIND=0.0.0.0:8080 \
+    KINEPOST_DATA_DIR=/var/lib/kinepost/data \
+    KINEPOST_LOG_FORMAT=json
 USER kinepost
+WORKDIR /var/lib/kinepost
+VOLUME ["/var/lib/kinepost/data"]
+EXPOSE 8080
+# No curl in the slim image: bash's /dev/tcp asks /healthz.
+HEALTHCHECK --interval=15s --timeout=3s --start-period=5s --retries=3 \
+  CMD ["bash", "-c", "exec 3<>/dev/tcp/127.0.0.1/8080 && printf 'GET /healthz HTTP/1.0\\r\\n\\r\\n' >&3 && grep -q '^ok' <&3"]
 ENTRYPOINT ["kinepost"]
-CMD ["machines"]
+CMD ["serve"]

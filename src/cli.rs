@@ -39,6 +39,8 @@ pub enum Command {
         #[arg(required = true, allow_hyphen_values = true)]
         words: Vec<String>,
     },
+    /// Run the HTTP service (REST API, web form, OpenAPI at /openapi.json, Swagger UI at /docs).
+    Serve(ServeArgs),
     /// Post-process a CL file into NC for a machine; NC on stdout (or --output), summary on stderr.
     Post(PostArgs),
     /// Write a generated 5-axis CL path for a profile (smooth joint motion within travel, through
@@ -96,6 +98,31 @@ pub enum Command {
         #[arg(num_args = 6, required = true, allow_negative_numbers = true)]
         pose: Vec<f64>,
     },
+}
+
+#[derive(clap::Args, Debug, Clone)]
+pub struct ServeArgs {
+    /// Address to listen on.
+    #[arg(long, env = "KINEPOST_BIND", default_value = "127.0.0.1:8080")]
+    pub bind: String,
+    /// Where the service keeps its data (jobs, spool).
+    #[arg(long, env = "KINEPOST_DATA_DIR", default_value = "data")]
+    pub data_dir: PathBuf,
+    /// Largest upload in bytes (streamed, not buffered).
+    #[arg(long, env = "KINEPOST_MAX_UPLOAD", default_value_t = 4 << 30)]
+    pub max_upload: u64,
+    /// Longest a non-streaming request may take, seconds.
+    #[arg(long, env = "KINEPOST_REQUEST_TIMEOUT", default_value_t = 30)]
+    pub request_timeout: u64,
+    /// Post streams at once; more are answered 503 with Retry-After.
+    #[arg(long, env = "KINEPOST_MAX_STREAMS", default_value_t = 64)]
+    pub max_streams: usize,
+    /// Origins allowed by CORS, comma-separated (e.g. a CAM plugin's web view).
+    #[arg(long, env = "KINEPOST_CORS_ORIGINS", value_delimiter = ',')]
+    pub cors_origins: Vec<String>,
+    /// Log format: text or json.
+    #[arg(long, env = "KINEPOST_LOG_FORMAT", default_value = "text")]
+    pub log_format: String,
 }
 
 /// `--mode`: joint or tcp.
@@ -269,13 +296,39 @@ fn lint(input: &str, verbose: bool) -> Result<(), String> {
     }
 }
 
+fn serve(cli: &Cli, a: &ServeArgs) -> Result<(), String> {
+    let filter =
+        tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
+    let builder = tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr);
+    match a.log_format.as_str() {
+        "json" => builder.json().init(),
+        "text" => builder.init(),
+        other => return Err(format!("--log-format {other:?}: expected text or json")),
+    }
+    let cfg = crate::http::Config {
+        bind: a.bind.clone(),
+        machines: cli.machines.clone().unwrap_or_else(machines::default_dir),
+        data_dir: a.data_dir.clone(),
+        max_upload: a.max_upload,
+        request_timeout: std::time::Duration::from_secs(a.request_timeout),
+        max_streams: a.max_streams.max(1),
+        cors_origins: a.cors_origins.clone(),
+        log_json: a.log_format == "json",
+    };
+    let rt = tokio::runtime::Runtime::new().map_err(|e| e.to_string())?;
+    rt.block_on(crate::http::serve(cfg))
+}
+
 fn run(cli: Cli) -> Result<(), String> {
     if let Command::Lint { input, verbose } = &cli.command {
         return lint(input, *verbose);
     }
+    if let Command::Serve(a) = &cli.command {
+        return serve(&cli, a);
+    }
     let lib = library(&cli)?;
     match cli.command {
-        Command::Lint { .. } => unreachable!("handled above"),
+        Command::Lint { .. } | Command::Serve(_) => unreachable!("handled above"),
         Command::Generate {
             machine,
             points,
@@ -382,32 +435,25 @@ fn run(cli: Cli) -> Result<(), String> {
 }
 
 fn post_cmd(m: &kinematics::Machine, a: &PostArgs) -> Result<(), String> {
-    use crate::post::{self, Options, Sink};
+    use crate::post::{self, Settings, Sink};
     use std::io::Write;
-    let mut o = Options::new(m);
-    o.mode = a.mode.into();
-    if let Some(d) = &a.dialect {
-        o.dialect =
-            crate::nc::dialect(d).ok_or_else(|| format!("--dialect {d:?}: known dialects are {:?}", crate::nc::DIALECTS))?;
-    }
-    o.tool_length = a.setup.tool_length;
-    if let Some(w) = &a.setup.work_offset {
-        o.work_offset = parse_triple(w)?;
-    }
-    if let Some(t) = a.tolerance {
-        if !(t.is_finite() && t > 0.0) {
-            return Err("--tolerance must be a positive number".into());
-        }
-        o.tolerance = t;
-    }
-    o.cl_units = a.cl_units.map(Units::from);
-    o.sequence_numbers = a.sequence_numbers;
-    o.program_number = a.program_number;
-    o.strict = a.strict;
-    if !(a.singular_tolerance.is_finite() && (0.0..=10.0).contains(&a.singular_tolerance)) {
-        return Err("--singular-tolerance must be between 0 and 10 degrees".into());
-    }
-    o.singular_tolerance = a.singular_tolerance.to_radians();
+    let settings = Settings {
+        machine: Some(a.machine.clone()),
+        dialect: a.dialect.clone(),
+        mode: Some(match a.mode {
+            ModeArg::Joint => "joint".into(),
+            ModeArg::Tcp => "tcp".into(),
+        }),
+        tool_length: a.setup.tool_length,
+        work_offset: a.setup.work_offset.clone(),
+        tolerance: a.tolerance,
+        sequence_numbers: Some(a.sequence_numbers),
+        program_number: Some(a.program_number),
+        strict: Some(a.strict),
+        singular_tolerance: Some(a.singular_tolerance),
+        cl_units: a.cl_units.map(|u| Units::from(u).as_str().to_string()),
+    };
+    let mut o = settings.options(m)?;
     o.header.push(format!("DATE {} UTC", utc_now()));
     o.header.push(format!(
         "SOURCE {}",

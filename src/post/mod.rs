@@ -79,6 +79,79 @@ impl Options {
     }
 }
 
+/// Post settings as users give them (CLI flags, HTTP query or form fields): plain values,
+/// validated once, here, into [`Options`].
+#[derive(Clone, Debug, Default)]
+pub struct Settings {
+    /// Machine profile id (required over HTTP; the CLI has its own flag).
+    pub machine: Option<String>,
+    /// NC dialect; default: the profile's controller.
+    pub dialect: Option<String>,
+    /// `joint` (default) or `tcp`.
+    pub mode: Option<String>,
+    /// Tool length (gauge line to tip), profile units; default: the CL file's, else the profile's.
+    pub tool_length: Option<f64>,
+    /// Work offset `x,y,z` in profile units.
+    pub work_offset: Option<String>,
+    /// Chord tolerance in profile units (default 0.01 mm / 0.0004 in).
+    pub tolerance: Option<f64>,
+    pub sequence_numbers: Option<bool>,
+    pub program_number: Option<u32>,
+    /// Stop at the first error instead of reporting it and going on.
+    pub strict: Option<bool>,
+    /// Degrees of orientation the free rotary may use near a singular direction (0: exact).
+    pub singular_tolerance: Option<f64>,
+    /// Units of the CL when the file does not say: `mm` or `inch`.
+    pub cl_units: Option<String>,
+}
+
+impl Settings {
+    /// Validated options for machine `m`; the error names the setting.
+    pub fn options(&self, m: &Machine) -> Result<Options, String> {
+        let mut o = Options::new(m);
+        if let Some(d) = &self.dialect {
+            o.dialect =
+                crate::nc::dialect(d).ok_or_else(|| format!("dialect {d:?}: known dialects are {:?}", crate::nc::DIALECTS))?;
+        }
+        o.mode = match self.mode.as_deref() {
+            None | Some("joint") => Mode::Joint,
+            Some("tcp") => Mode::Tcp,
+            Some(x) => return Err(format!("mode {x:?}: expected joint or tcp")),
+        };
+        if let Some(l) = self.tool_length {
+            if !(l.is_finite() && l >= 0.0) {
+                return Err("tool_length must be a finite, non-negative length".into());
+            }
+            o.tool_length = Some(l);
+        }
+        if let Some(w) = &self.work_offset {
+            o.work_offset = crate::cli::parse_triple(w).map_err(|e| format!("work_offset: {e}"))?;
+        }
+        if let Some(t) = self.tolerance {
+            if !(t.is_finite() && t > 0.0) {
+                return Err("tolerance must be a positive number".into());
+            }
+            o.tolerance = t;
+        }
+        o.sequence_numbers = self.sequence_numbers.unwrap_or(false);
+        o.program_number = self.program_number.unwrap_or(1000);
+        o.strict = self.strict.unwrap_or(false);
+        if let Some(t) = self.singular_tolerance {
+            if !(t.is_finite() && (0.0..=10.0).contains(&t)) {
+                return Err("singular_tolerance must be between 0 and 10 degrees".into());
+            }
+            o.singular_tolerance = t.to_radians();
+        }
+        o.cl_units = match self.cl_units.as_deref() {
+            None => None,
+            Some("mm") => Some(Units::Mm),
+            Some("inch") => Some(Units::Inch),
+            Some(u) => return Err(format!("cl_units {u:?}: expected mm or inch")),
+        };
+        Ok(o)
+    }
+}
+
 /// What a sink is told about a motion block, beside its text.
 #[derive(Clone, Debug, Serialize)]
 pub struct BlockInfo {

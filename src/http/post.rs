@@ -1,0 +1,403 @@
+//! `POST /v1/post`: CL in, NC (or NDJSON blocks) out, streaming both ways.
+//!
+//! The engine is synchronous; it runs on a blocking thread, reading the request body through a
+//! bridge as it arrives and writing into a bounded channel that the response body drains, so
+//! memory stays bounded and a client that goes away stops the work. Output is held back until
+//! 16 KiB are ready (or the program ends): an error before that still gets its HTTP status.
+
+use super::AppState;
+use super::error::ApiError;
+use crate::diag::Diagnostic;
+use crate::post::{self, BlockInfo, Settings, Sink, Summary};
+use axum::body::Body;
+use axum::extract::{FromRequest, Multipart, Query, Request, State};
+use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
+use axum::response::{IntoResponse, Response};
+use bytes::Bytes;
+use futures_util::StreamExt;
+use serde::Deserialize;
+use serde_json::json;
+use std::sync::Arc;
+use tokio::sync::{mpsc, oneshot};
+use tokio_util::io::{StreamReader, SyncIoBridge};
+
+/// Bytes of output held back before the response starts (so early errors keep their status).
+const PRELUDE: usize = 16 * 1024;
+/// Chunk size of the streamed output.
+const CHUNK: usize = 32 * 1024;
+
+/// Query (or multipart form) parameters of `POST /v1/post`.
+#[derive(Clone, Debug, Default, Deserialize, utoipa::IntoParams, utoipa::ToSchema)]
+#[serde(deny_unknown_fields)]
+#[into_params(parameter_in = Query)]
+pub struct PostParams {
+    /// Machine profile id (required).
+    pub machine: Option<String>,
+    /// NC dialect; default: the profile's controller.
+    pub dialect: Option<String>,
+    /// `joint` (default) or `tcp`.
+    pub mode: Option<String>,
+    /// Tool length (gauge line to tip), profile units; default: the CL file's, else the profile's.
+    pub tool_length: Option<f64>,
+    /// Work offset `x,y,z` in profile units.
+    pub work_offset: Option<String>,
+    /// Chord tolerance in profile units (default 0.01 mm / 0.0004 in).
+    pub tolerance: Option<f64>,
+    pub sequence_numbers: Option<bool>,
+    pub program_number: Option<u32>,
+    /// Stop at the first error instead of reporting it and going on.
+    pub strict: Option<bool>,
+    /// Degrees of orientation the free rotary may use near a singular direction (0: exact).
+    pub singular_tolerance: Option<f64>,
+    /// Units of the CL when the file does not say: `mm` or `inch`.
+    pub cl_units: Option<String>,
+}
+
+impl PostParams {
+    fn settings(&self) -> Settings {
+        Settings {
+            machine: self.machine.clone(),
+            dialect: self.dialect.clone(),
+            mode: self.mode.clone(),
+            tool_length: self.tool_length,
+            work_offset: self.work_offset.clone(),
+            tolerance: self.tolerance,
+            sequence_numbers: self.sequence_numbers,
+            program_number: self.program_number,
+            strict: self.strict,
+            singular_tolerance: self.singular_tolerance,
+            cl_units: self.cl_units.clone(),
+        }
+    }
+
+    /// A multipart text field, by name.
+    fn set(&mut self, name: &str, v: String) -> Result<(), ApiError> {
+        let bad = |what: &str| ApiError::BadParameter(format!("{name}: {what}"));
+        let num = |v: &str| v.trim().parse::<f64>().map_err(|_| bad("expected a number"));
+        let flag = |v: &str| match v.trim() {
+            "true" | "1" | "on" | "yes" => Ok(true),
+            "false" | "0" | "off" | "no" | "" => Ok(false),
+            _ => Err(bad("expected true or false")),
+        };
+        match name {
+            "machine" => self.machine = Some(v),
+            "dialect" => self.dialect = Some(v).filter(|s| !s.is_empty()),
+            "mode" => self.mode = Some(v).filter(|s| !s.is_empty()),
+            "tool_length" => self.tool_length = if v.trim().is_empty() { None } else { Some(num(&v)?) },
+            "work_offset" => self.work_offset = Some(v).filter(|s| !s.trim().is_empty()),
+            "tolerance" => self.tolerance = if v.trim().is_empty() { None } else { Some(num(&v)?) },
+            "sequence_numbers" => self.sequence_numbers = Some(flag(&v)?),
+            "program_number" => self.program_number = Some(v.trim().parse().map_err(|_| bad("expected a whole number"))?),
+            "strict" => self.strict = Some(flag(&v)?),
+            "singular_tolerance" => self.singular_tolerance = if v.trim().is_empty() { None } else { Some(num(&v)?) },
+            "cl_units" => self.cl_units = Some(v).filter(|s| !s.is_empty()),
+            other => return Err(ApiError::BadParameter(format!("unknown form field {other:?}"))),
+        }
+        Ok(())
+    }
+}
+
+/// Whether the client wants NDJSON blocks instead of the NC text.
+fn wants_ndjson(h: &HeaderMap) -> Result<bool, ApiError> {
+    let Some(a) = h.get(header::ACCEPT).and_then(|v| v.to_str().ok()) else {
+        return Ok(false);
+    };
+    if a.contains("application/x-ndjson") {
+        return Ok(true);
+    }
+    if a.is_empty() || a.contains("text/plain") || a.contains("*/*") || a.contains("text/*") {
+        return Ok(false);
+    }
+    Err(ApiError::NotAcceptable(a.to_string()))
+}
+
+enum Msg {
+    Data(Bytes),
+    /// Failed before anything was sent: the handler answers with this status.
+    Fail(ApiError),
+}
+
+/// The engine's sink on the blocking thread: NC text or NDJSON lines into the channel.
+struct ChannelSink {
+    tx: mpsc::Sender<Msg>,
+    buf: Vec<u8>,
+    ndjson: bool,
+    started: bool,
+}
+
+impl ChannelSink {
+    fn send(&mut self, force: bool) -> std::io::Result<()> {
+        let limit = if self.started { CHUNK } else { PRELUDE };
+        if self.buf.is_empty() || (!force && self.buf.len() < limit) {
+            return Ok(());
+        }
+        let data = Bytes::from(std::mem::replace(&mut self.buf, Vec::with_capacity(CHUNK + 4096)));
+        self.started = true;
+        self.tx
+            .blocking_send(Msg::Data(data))
+            .map_err(|_| std::io::Error::new(std::io::ErrorKind::BrokenPipe, "client went away"))
+    }
+
+    fn json_line(&mut self, v: &serde_json::Value) -> std::io::Result<()> {
+        serde_json::to_writer(&mut self.buf, v)?;
+        self.buf.push(b'\n');
+        self.send(false)
+    }
+}
+
+impl Sink for ChannelSink {
+    fn line(&mut self, text: &str, b: Option<&BlockInfo>) -> std::io::Result<()> {
+        if self.ndjson {
+            let v = match b {
+                Some(b) => {
+                    json!({"type": "block", "n": b.n, "nc": text, "source_line": b.source_line, "joints": b.joints, "diagnostics": b.diagnostics})
+                }
+                None => json!({"type": "block", "nc": text}),
+            };
+            return self.json_line(&v);
+        }
+        self.buf.extend_from_slice(text.as_bytes());
+        self.buf.push(b'\n');
+        self.send(false)
+    }
+
+    fn diagnostic(&mut self, d: &Diagnostic) -> std::io::Result<()> {
+        if self.ndjson {
+            return self.json_line(&json!({"type": "diagnostic", "diagnostic": d}));
+        }
+        Ok(())
+    }
+
+    fn summary(&mut self, s: &Summary) -> std::io::Result<()> {
+        if self.ndjson {
+            return self.json_line(&json!({"type": "summary", "summary": s}));
+        }
+        Ok(())
+    }
+}
+
+fn engine_error(e: post::Error) -> ApiError {
+    match e {
+        post::Error::Strict(d) => ApiError::BadRecord {
+            message: d.to_string(),
+            line: d.line,
+            column: d.column,
+            code: d.code.as_str(),
+        },
+        post::Error::Read(e) => {
+            let text = e.to_string();
+            if text.contains("length limit") || text.contains("too large") {
+                ApiError::TooLarge(0)
+            } else {
+                ApiError::BadParameter(format!("reading the upload: {text}"))
+            }
+        }
+        post::Error::Io(e) => ApiError::Internal(e.to_string()),
+    }
+}
+
+/// Post-process the CL in the request body (raw, or the `file` part of a multipart form).
+#[utoipa::path(
+    post,
+    path = "/v1/post",
+    params(PostParams),
+    request_body(content = String, description = "CL data (APT/CLSF text), raw or as the `file` part of multipart/form-data", content_type = "text/plain"),
+    responses(
+        (status = 200, description = "The NC program (text/plain), or one JSON object per line (application/x-ndjson): header, block…, summary, and error on failure", content_type = "text/plain"),
+        (status = 400, description = "Bad parameter", body = super::error::Problem, content_type = "application/problem+json"),
+        (status = 404, description = "Unknown machine", body = super::error::Problem, content_type = "application/problem+json"),
+        (status = 413, description = "Upload too large", body = super::error::Problem, content_type = "application/problem+json"),
+        (status = 415, description = "Unsupported media type", body = super::error::Problem, content_type = "application/problem+json"),
+        (status = 422, description = "Bad CL record (strict mode) with line and column", body = super::error::Problem, content_type = "application/problem+json"),
+    ),
+    tag = "post"
+)]
+pub async fn post_cl(
+    State(st): State<Arc<AppState>>,
+    Query(query): Query<PostParams>,
+    req: Request,
+) -> Result<Response, ApiError> {
+    let ndjson = wants_ndjson(req.headers())?;
+    let ctype = req
+        .headers()
+        .get(header::CONTENT_TYPE)
+        .and_then(|v| v.to_str().ok())
+        .unwrap_or("text/plain")
+        .to_ascii_lowercase();
+    let (params, filename, body): (PostParams, Option<String>, Body) = if ctype.starts_with("multipart/form-data") {
+        multipart_body(&st, query, req).await?
+    } else if ctype.starts_with("text/plain") || ctype.starts_with("application/octet-stream") || ctype.is_empty() {
+        (query, None, req.into_body())
+    } else {
+        return Err(ApiError::UnsupportedMediaType(ctype));
+    };
+    let id = params
+        .machine
+        .clone()
+        .ok_or_else(|| ApiError::BadParameter("machine: required (e.g. ?machine=haas-umc750)".into()))?;
+    let profile = st.library.get(&id).map_err(|_| ApiError::UnknownMachine(id.clone()))?;
+    let mut opts = params.settings().options(&profile.machine).map_err(ApiError::BadParameter)?;
+    opts.header.push(format!("DATE {} UTC", crate::cli::utc_now()));
+    if let Some(f) = &filename {
+        opts.header.push(format!("SOURCE {f}"));
+    }
+    let (tx, mut rx) = mpsc::channel::<Msg>(8);
+    let reader = SyncIoBridge::new(StreamReader::new(
+        body.into_data_stream().map(|r| r.map_err(std::io::Error::other)),
+    ));
+    let header_line = ndjson.then(|| {
+        json!({"type": "header", "machine": profile.machine.id, "units": profile.machine.units.as_str(), "mode": opts.mode,
+               "dialect": opts.dialect.name, "tolerance": opts.tolerance})
+    });
+    let metrics = st.metrics.clone();
+    metrics.streams.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    tokio::task::spawn_blocking(move || {
+        let mut sink = ChannelSink {
+            tx: tx.clone(),
+            buf: Vec::with_capacity(PRELUDE + 4096),
+            ndjson,
+            started: false,
+        };
+        if let Some(h) = header_line {
+            let _ = sink.json_line(&h);
+        }
+        let input = std::io::BufReader::with_capacity(64 * 1024, reader);
+        let t0 = std::time::Instant::now();
+        let result = post::post(input, &profile.machine, &opts, &mut sink);
+        match result {
+            Ok(s) => {
+                metrics.record_post(&s, t0.elapsed().as_secs_f64());
+                let _ = sink.send(true);
+            }
+            Err(e) => {
+                let err = engine_error(e);
+                if sink.started {
+                    // Already streaming: end with an explicit error, never a silent truncation.
+                    if ndjson {
+                        let _ = sink.json_line(&json!({"type": "error", "error": err.problem()}));
+                    } else {
+                        sink.buf
+                            .extend_from_slice(format!("(ERROR: {})\n", err.to_string().replace(['(', ')'], " ")).as_bytes());
+                    }
+                    let _ = sink.send(true);
+                } else {
+                    let _ = tx.blocking_send(Msg::Fail(err));
+                }
+            }
+        }
+        metrics.streams.fetch_sub(1, std::sync::atomic::Ordering::Relaxed);
+    });
+    let first = match rx.recv().await {
+        Some(Msg::Fail(e)) => return Err(e),
+        Some(Msg::Data(b)) => b,
+        None => Bytes::new(),
+    };
+    let rest = futures_util::stream::unfold(rx, |mut rx| async move {
+        match rx.recv().await {
+            Some(Msg::Data(b)) => Some((Ok::<Bytes, std::io::Error>(b), rx)),
+            Some(Msg::Fail(e)) => Some((Err(std::io::Error::other(e.to_string())), rx)),
+            None => None,
+        }
+    });
+    let stream = futures_util::stream::once(async move { Ok::<Bytes, std::io::Error>(first) }).chain(rest);
+    let mut resp = Response::new(Body::from_stream(stream));
+    *resp.status_mut() = StatusCode::OK;
+    let h = resp.headers_mut();
+    if ndjson {
+        h.insert(header::CONTENT_TYPE, HeaderValue::from_static("application/x-ndjson"));
+    } else {
+        h.insert(header::CONTENT_TYPE, HeaderValue::from_static("text/plain; charset=utf-8"));
+        let stem = filename
+            .as_deref()
+            .and_then(|f| std::path::Path::new(f).file_stem())
+            .and_then(|s| s.to_str())
+            .unwrap_or("program");
+        let safe: String = stem
+            .chars()
+            .filter(|c| c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.'))
+            .take(64)
+            .collect();
+        let safe = if safe.is_empty() { "program".to_string() } else { safe };
+        if let Ok(v) = HeaderValue::from_str(&format!("attachment; filename=\"{safe}.nc\"")) {
+            h.insert(header::CONTENT_DISPOSITION, v);
+        }
+    }
+    Ok(resp.into_response())
+}
+
+/// Reads form fields up to the file part, then hands the file's bytes over as a body stream fed
+/// by a task that owns the form (fields after the file are not read).
+async fn multipart_body(
+    st: &Arc<AppState>,
+    query: PostParams,
+    req: Request,
+) -> Result<(PostParams, Option<String>, Body), ApiError> {
+    let mut mp = Multipart::from_request(req, st)
+        .await
+        .map_err(|e| ApiError::BadParameter(format!("multipart: {e}")))?;
+    let (ptx, prx) = oneshot::channel::<Result<(PostParams, Option<String>), ApiError>>();
+    let (btx, brx) = mpsc::channel::<Result<Bytes, std::io::Error>>(8);
+    tokio::spawn(async move {
+        let mut params = query;
+        let mut ptx = Some(ptx);
+        loop {
+            match mp.next_field().await {
+                Ok(Some(mut field)) => {
+                    let name = field.name().unwrap_or("").to_string();
+                    if field.file_name().is_some() || name == "file" {
+                        let fname = field.file_name().map(str::to_string);
+                        if let Some(p) = ptx.take() {
+                            let _ = p.send(Ok((params.clone(), fname)));
+                        }
+                        loop {
+                            match field.chunk().await {
+                                Ok(Some(b)) => {
+                                    if btx.send(Ok(b)).await.is_err() {
+                                        return;
+                                    }
+                                }
+                                Ok(None) => return,
+                                Err(e) => {
+                                    let _ = btx.send(Err(std::io::Error::other(e.to_string()))).await;
+                                    return;
+                                }
+                            }
+                        }
+                    }
+                    let v = match field.text().await {
+                        Ok(v) => v,
+                        Err(e) => {
+                            if let Some(p) = ptx.take() {
+                                let _ = p.send(Err(ApiError::BadParameter(format!("multipart: {e}"))));
+                            }
+                            return;
+                        }
+                    };
+                    if let Err(e) = params.set(&name, v) {
+                        if let Some(p) = ptx.take() {
+                            let _ = p.send(Err(e));
+                        }
+                        return;
+                    }
+                }
+                Ok(None) => {
+                    if let Some(p) = ptx.take() {
+                        let _ = p.send(Err(ApiError::BadParameter(
+                            "multipart: no file part (name it \"file\")".into(),
+                        )));
+                    }
+                    return;
+                }
+                Err(e) => {
+                    if let Some(p) = ptx.take() {
+                        let _ = p.send(Err(ApiError::BadParameter(format!("multipart: {e}"))));
+                    }
+                    return;
+                }
+            }
+        }
+    });
+    let (params, fname) = prx.await.map_err(|_| ApiError::Internal("multipart reader ended".into()))??;
+    let stream = futures_util::stream::unfold(brx, |mut rx| async move { rx.recv().await.map(|item| (item, rx)) });
+    Ok((params, fname, Body::from_stream(stream)))
+}

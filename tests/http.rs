@@ -1,0 +1,281 @@
+//! The HTTP service over a real socket: every route, streaming order, error paths.
+
+mod common;
+
+use common::{cfg, server};
+use kinepost::http::{Config, openapi_json};
+use serde_json::Value;
+use std::time::Duration;
+
+fn data(name: &str) -> Vec<u8> {
+    std::fs::read(format!("{}/tests/data/{name}", env!("CARGO_MANIFEST_DIR"))).unwrap()
+}
+
+#[tokio::test]
+async fn machines_health_metrics_and_docs() {
+    let base = server(cfg()).await;
+    let c = reqwest::Client::new();
+    let list: Vec<Value> = c
+        .get(format!("{base}/v1/machines"))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    assert_eq!(list.len(), 10);
+    let one: Value = c
+        .get(format!("{base}/v1/machines/htm50200-horizontal"))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    assert_eq!(one["kinematics"], "head-table");
+    assert_eq!(one["rotary"][1]["angle_error"]["range"][1], 40.0);
+    let r = c.get(format!("{base}/v1/machines/no-such")).send().await.unwrap();
+    assert_eq!(r.status(), 404);
+    assert_eq!(r.headers()["content-type"], "application/problem+json");
+    assert!(r.headers().contains_key("x-request-id"));
+    let p: Value = r.json().await.unwrap();
+    assert_eq!(p["type"], "https://kinepost.dev/problems/unknown-machine");
+    assert_eq!(
+        c.get(format!("{base}/healthz")).send().await.unwrap().text().await.unwrap(),
+        "ok"
+    );
+    assert_eq!(c.get(format!("{base}/readyz")).send().await.unwrap().status(), 200);
+    let docs = c.get(format!("{base}/docs/")).send().await.unwrap();
+    assert_eq!(docs.status(), 200);
+    assert!(
+        docs.text().await.unwrap().contains("swagger"),
+        "Swagger UI served from the binary"
+    );
+    let m = c.get(format!("{base}/metrics")).send().await.unwrap().text().await.unwrap();
+    assert!(
+        m.contains("kinepost_http_requests_total{route=\"/v1/machines/{id}\",status=\"404\"} 1"),
+        "{m}"
+    );
+    assert!(m.contains("kinepost_streams_in_flight 0"));
+}
+
+#[tokio::test]
+async fn the_served_openapi_document_is_the_checked_in_one() {
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/openapi/openapi.json");
+    let generated = openapi_json();
+    if std::env::var("KINEPOST_UPDATE_OPENAPI").is_ok() {
+        std::fs::write(path, &generated).unwrap();
+    }
+    let checked_in = std::fs::read_to_string(path).expect("openapi/openapi.json (KINEPOST_UPDATE_OPENAPI=1 writes it)");
+    assert_eq!(
+        generated, checked_in,
+        "openapi/openapi.json is stale: run with KINEPOST_UPDATE_OPENAPI=1"
+    );
+    let base = server(cfg()).await;
+    let served = reqwest::get(format!("{base}/openapi.json"))
+        .await
+        .unwrap()
+        .text()
+        .await
+        .unwrap();
+    assert_eq!(served, generated);
+    let v: Value = serde_json::from_str(&served).unwrap();
+    for p in [
+        "/v1/post",
+        "/v1/machines",
+        "/v1/machines/{id}",
+        "/healthz",
+        "/readyz",
+        "/metrics",
+    ] {
+        assert!(v["paths"][p].is_object(), "{p} documented");
+    }
+}
+
+#[tokio::test]
+async fn post_streams_nc_and_ndjson() {
+    let base = server(cfg()).await;
+    let c = reqwest::Client::new();
+    let cl = data("nx_clsf_mech491_variable_axis_inch_5ax.cls");
+    let r = c
+        .post(format!("{base}/v1/post?machine=haas-umc750&mode=tcp"))
+        .header("content-type", "text/plain")
+        .body(cl.clone())
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 200);
+    assert!(r.headers()["content-disposition"].to_str().unwrap().contains(".nc"));
+    let nc = r.text().await.unwrap();
+    assert!(nc.starts_with("%\nO1000\n") && nc.trim_end().ends_with("M30\n%"));
+    assert!(nc.contains("G43.4 H1") && nc.contains("B-22.2015 C1.0496"));
+    // NDJSON: header, blocks with source lines and joints, summary last.
+    let r = c
+        .post(format!("{base}/v1/post?machine=haas-umc750&mode=tcp"))
+        .header("content-type", "application/octet-stream")
+        .header("accept", "application/x-ndjson")
+        .body(cl)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.headers()["content-type"], "application/x-ndjson");
+    let lines: Vec<Value> = r
+        .text()
+        .await
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert_eq!(lines[0]["type"], "header");
+    assert_eq!(lines[0]["machine"], "haas-umc750");
+    let blocks: Vec<&Value> = lines
+        .iter()
+        .filter(|l| l["type"] == "block" && l["source_line"].is_number())
+        .collect();
+    assert!(blocks.len() > 600);
+    assert!(blocks[0]["joints"]["B"].is_number() && blocks[0]["nc"].as_str().unwrap().starts_with("G0"));
+    let last = lines.last().unwrap();
+    assert_eq!(last["type"], "summary");
+    assert_eq!(last["summary"]["cl_points"], 348);
+    assert!(last["summary"]["max_tip_deviation"].as_f64().unwrap() < 0.0004);
+}
+
+#[tokio::test]
+async fn post_as_a_multipart_form() {
+    let base = server(cfg()).await;
+    let body = format!(
+        "--XYZ\r\nContent-Disposition: form-data; name=\"machine\"\r\n\r\nvmc-3axis\r\n--XYZ\r\nContent-Disposition: form-data; name=\"sequence_numbers\"\r\n\r\ntrue\r\n--XYZ\r\nContent-Disposition: form-data; name=\"file\"; filename=\"plate.ncl\"\r\nContent-Type: text/plain\r\n\r\n{}\r\n--XYZ--\r\n",
+        String::from_utf8(data("creo8_ncl_profilfraesen_profile_mm.ncl")).unwrap()
+    );
+    let r = reqwest::Client::new()
+        .post(format!("{base}/v1/post"))
+        .header("content-type", "multipart/form-data; boundary=XYZ")
+        .body(body)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 200);
+    assert!(r.headers()["content-disposition"].to_str().unwrap().contains("plate.nc"));
+    let nc = r.text().await.unwrap();
+    assert!(nc.contains("(SOURCE PLATE.NCL)") && nc.contains("N5 "), "{}", &nc[..400]);
+}
+
+#[tokio::test]
+async fn errors_before_the_first_byte_have_their_status() {
+    let base = server(Config {
+        max_upload: 2000,
+        ..cfg()
+    })
+    .await;
+    let c = reqwest::Client::new();
+    let post = |q: &str, ct: &str, body: &'static str| {
+        c.post(format!("{base}/v1/post{q}"))
+            .header("content-type", ct.to_string())
+            .body(body)
+            .send()
+    };
+    let status = |r: reqwest::Response| r.status().as_u16();
+    assert_eq!(
+        status(post("", "text/plain", "GOTO/1,2,3").await.unwrap()),
+        400,
+        "machine missing"
+    );
+    assert_eq!(status(post("?machine=nope", "text/plain", "GOTO/1,2,3").await.unwrap()), 404);
+    assert_eq!(
+        status(post("?machine=vmc-3axis", "application/json", "{}").await.unwrap()),
+        415
+    );
+    assert_eq!(
+        status(
+            post("?machine=vmc-3axis&mode=sideways", "text/plain", "GOTO/1,2,3")
+                .await
+                .unwrap()
+        ),
+        400
+    );
+    assert_eq!(
+        status(
+            post("?machine=vmc-3axis&colour=red", "text/plain", "GOTO/1,2,3")
+                .await
+                .unwrap()
+        ),
+        400,
+        "unknown parameter"
+    );
+    let r = c
+        .post(format!("{base}/v1/post?machine=vmc-3axis"))
+        .header("accept", "image/png")
+        .body("GOTO/1,2,3")
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 406);
+    let r = post(
+        "?machine=vmc-3axis&strict=true",
+        "text/plain",
+        "UNITS/MM\nGOTO/1,2,3\nGOTO/1,x,3\n",
+    )
+    .await
+    .unwrap();
+    assert_eq!(r.status(), 422);
+    let p: Value = r.json().await.unwrap();
+    assert_eq!((p["line"].as_u64(), p["column"].as_u64()), (Some(3), Some(8)), "{p}");
+    let big = "GOTO/1,2,3\n".repeat(300);
+    let r = c
+        .post(format!("{base}/v1/post?machine=vmc-3axis"))
+        .header("content-type", "text/plain")
+        .body(big)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 413);
+}
+
+#[tokio::test]
+async fn nc_bytes_arrive_before_the_upload_completes() {
+    let base = server(cfg()).await;
+    // A long upload sent in two halves: the second only after NC bytes have come back.
+    let mut cl = String::from("UNITS/MM\nFEDRAT/500,MMPM\n");
+    for i in 0..4000 {
+        cl.push_str(&format!(
+            "GOTO/{:.3},{:.3},10\n",
+            (i as f64 * 0.01).sin() * 50.0,
+            i as f64 * 0.01
+        ));
+    }
+    let (first, second) = cl.split_at(cl.len() / 2);
+    let (first, second) = (first.to_string(), second.to_string());
+    let (tx, rx) = tokio::sync::mpsc::channel::<Result<String, std::io::Error>>(2);
+    let (got_tx, mut got_rx) = tokio::sync::mpsc::channel::<()>(1);
+    tokio::spawn(async move {
+        tx.send(Ok(first)).await.unwrap();
+        // Hold the rest until the client has seen output.
+        tokio::time::timeout(Duration::from_secs(10), got_rx.recv())
+            .await
+            .expect("NC arrived while the upload was open");
+        tx.send(Ok(second)).await.unwrap();
+    });
+    let stream = futures_util::stream::unfold(rx, |mut rx| async move { rx.recv().await.map(|x| (x, rx)) });
+    let mut r = reqwest::Client::new()
+        .post(format!("{base}/v1/post?machine=vmc-3axis"))
+        .header("content-type", "text/plain")
+        .body(reqwest::Body::wrap_stream(stream))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 200);
+    let mut text = String::new();
+    let mut signalled = false;
+    while let Some(chunk) = r.chunk().await.unwrap() {
+        text.push_str(std::str::from_utf8(&chunk).unwrap());
+        if !signalled {
+            got_tx.send(()).await.unwrap();
+            signalled = true;
+        }
+    }
+    assert!(text.trim_end().ends_with("M30\n%"));
+    // All 4000 points made it: the second half was released only after NC output had arrived,
+    // so the program streamed while the upload was still open.
+    let motions = text.lines().filter(|l| l.contains('X') || l.contains('Y')).count();
+    assert!(motions > 3000, "{motions} motion blocks");
+}
