@@ -201,7 +201,9 @@ pub fn app(state: Arc<AppState>) -> axum::Router {
         .route(
             "/openapi.json",
             get(|| async { ([(header::CONTENT_TYPE, "application/json")], openapi_json()) }),
-        );
+        )
+        .route("/", get(|| async { static_file("index.html") }))
+        .route("/static/{file}", get(|Path(f): Path<String>| async move { static_file(&f) }));
     let cors = if state.config.cors_origins.is_empty() {
         CorsLayer::new()
     } else {
@@ -234,6 +236,17 @@ pub fn app(state: Arc<AppState>) -> axum::Router {
         .layer(PropagateRequestIdLayer::new(x_request_id.clone()))
         .layer(SetRequestIdLayer::new(x_request_id, Counter::default()))
         .with_state(state)
+}
+
+/// The web form's files, compiled into the binary: nothing to deploy, nothing fetched.
+fn static_file(name: &str) -> Response {
+    let (body, ctype): (&'static str, &str) = match name {
+        "index.html" => (include_str!("web/index.html"), "text/html; charset=utf-8"),
+        "app.js" => (include_str!("web/app.js"), "text/javascript; charset=utf-8"),
+        "style.css" => (include_str!("web/style.css"), "text/css; charset=utf-8"),
+        _ => return (StatusCode::NOT_FOUND, "not found").into_response(),
+    };
+    ([(header::CONTENT_TYPE, ctype), (header::CACHE_CONTROL, "no-cache")], body).into_response()
 }
 
 /// Requests by route and status, for `/metrics`.
