@@ -279,3 +279,90 @@ async fn nc_bytes_arrive_before_the_upload_completes() {
     let motions = text.lines().filter(|l| l.contains('X') || l.contains('Y')).count();
     assert!(motions > 3000, "{motions} motion blocks");
 }
+
+#[tokio::test]
+async fn an_error_after_streaming_began_ends_the_program_explicitly() {
+    let base = server(cfg()).await;
+    // Enough good points to start the stream (> 16 KiB of NC), then a bad record in strict mode.
+    let mut cl = String::from("UNITS/MM\nFEDRAT/500,MMPM\n");
+    for i in 0..3000 {
+        cl.push_str(&format!(
+            "GOTO/{:.3},{:.3},10\n",
+            (i as f64 * 0.01).sin() * 50.0,
+            i as f64 * 0.01
+        ));
+    }
+    cl.push_str("GOTO/1,oops,3\nGOTO/1,2,3\n");
+    let r = reqwest::Client::new()
+        .post(format!("{base}/v1/post?machine=vmc-3axis&strict=true"))
+        .header("content-type", "text/plain")
+        .body(cl.clone())
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 200, "streaming had begun");
+    let text = r.text().await.unwrap();
+    let last = text.trim_end().lines().last().unwrap();
+    assert!(last.starts_with("(ERROR:") && last.contains("line 3003"), "{last}");
+    assert!(!text.contains("M30"), "a failed program never ends as if complete");
+    let r = reqwest::Client::new()
+        .post(format!("{base}/v1/post?machine=vmc-3axis&strict=true"))
+        .header("content-type", "text/plain")
+        .header("accept", "application/x-ndjson")
+        .body(cl)
+        .send()
+        .await
+        .unwrap();
+    let text = r.text().await.unwrap();
+    let last: Value = serde_json::from_str(text.trim_end().lines().last().unwrap()).unwrap();
+    assert_eq!(last["type"], "error");
+    assert_eq!(last["error"]["line"], 3003);
+}
+
+#[tokio::test]
+async fn busy_cors_gzip_and_the_web_page() {
+    let base = server(Config {
+        max_streams: 0,
+        cors_origins: vec!["https://cam.example".into()],
+        ..cfg()
+    })
+    .await;
+    let c = reqwest::Client::new();
+    let r = c
+        .post(format!("{base}/v1/post?machine=vmc-3axis"))
+        .header("content-type", "text/plain")
+        .body("GOTO/1,2,3")
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 503);
+    assert_eq!(r.headers()["retry-after"], "5");
+    let r = c
+        .get(format!("{base}/v1/machines"))
+        .header("origin", "https://cam.example")
+        .header("accept-encoding", "gzip")
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.headers()["access-control-allow-origin"], "https://cam.example");
+    assert_eq!(
+        r.headers()["content-encoding"],
+        "gzip",
+        "non-streaming responses are compressed"
+    );
+    let r = c
+        .get(format!("{base}/v1/machines"))
+        .header("origin", "https://evil.example")
+        .send()
+        .await
+        .unwrap();
+    assert!(!r.headers().contains_key("access-control-allow-origin"));
+    let page = c.get(format!("{base}/")).send().await.unwrap();
+    assert!(page.headers()["content-type"].to_str().unwrap().starts_with("text/html"));
+    assert!(page.text().await.unwrap().contains("/static/app.js"));
+    assert_eq!(c.get(format!("{base}/static/app.js")).send().await.unwrap().status(), 200);
+    assert_eq!(
+        c.get(format!("{base}/static/secret.toml")).send().await.unwrap().status(),
+        404
+    );
+}

@@ -1,0 +1,87 @@
+//! Load on the HTTP service, loopback only, bounded in time: CONCURRENCY clients post a mid-size
+//! 5-axis file (generated, 5000 points) for SECONDS. `cargo bench --bench load [-- CONC SECS]`.
+//! Two rounds: prints throughput, p50/p99 latency and RSS after each (stable memory: the second
+//! round ends where the first did).
+
+use kinepost::http::{AppState, Config, Metrics, app};
+use kinepost::machines::Library;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+fn rss_kb() -> u64 {
+    std::fs::read_to_string("/proc/self/status")
+        .ok()
+        .and_then(|s| {
+            s.lines()
+                .find(|l| l.starts_with("VmRSS:"))
+                .and_then(|l| l.split_whitespace().nth(1)?.parse().ok())
+        })
+        .unwrap_or(0)
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().skip(1).filter(|a| !a.starts_with("--")).collect();
+    let conc: usize = args.first().and_then(|a| a.parse().ok()).unwrap_or(32);
+    let secs: u64 = args.get(1).and_then(|a| a.parse().ok()).unwrap_or(10);
+    let rt = tokio::runtime::Builder::new_multi_thread().enable_all().build().unwrap();
+    rt.block_on(async move {
+        let machines = std::path::PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"));
+        let library = Library::load_dir(&machines).unwrap();
+        let m = library.get("haas-umc750").unwrap().machine.clone();
+        let mut cl = Vec::new();
+        kinepost::testgen::write_path(&m, 5000, 3, m.default_tool_length, &mut cl).unwrap();
+        let cl = bytes::Bytes::from(cl);
+        let cfg = Config { machines, data_dir: std::env::temp_dir().join("kinepost-load"), max_streams: conc * 2, ..Config::default() };
+        let state = Arc::new(AppState { library, config: cfg, metrics: Arc::new(Metrics::default()) });
+        let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+        let url = format!("http://{}/v1/post?machine=haas-umc750&mode=tcp", listener.local_addr().unwrap());
+        tokio::spawn(async move { axum::serve(listener, app(state)).await.unwrap() });
+        let rss0 = rss_kb();
+        for round in 1..=2 {
+            let deadline = Instant::now() + Duration::from_secs(secs);
+            let client = reqwest::Client::new();
+            let t0 = Instant::now();
+            let mut tasks = Vec::new();
+            for _ in 0..conc {
+                let (client, url, cl) = (client.clone(), url.clone(), cl.clone());
+                tasks.push(tokio::spawn(async move {
+                    let (mut lat, mut errors, mut bytes) = (Vec::new(), 0u64, 0u64);
+                    while Instant::now() < deadline {
+                        let t = Instant::now();
+                        match client.post(&url).header("content-type", "text/plain").body(cl.clone()).send().await {
+                            Ok(r) if r.status() == 200 => match r.bytes().await {
+                                Ok(b) if b.ends_with(b"M30\n%\n") => {
+                                    bytes += b.len() as u64;
+                                    lat.push(t.elapsed().as_secs_f64());
+                                }
+                                _ => errors += 1,
+                            },
+                            _ => errors += 1,
+                        }
+                    }
+                    (lat, errors, bytes)
+                }));
+            }
+            let (mut lat, mut errors, mut bytes) = (Vec::new(), 0, 0);
+            for t in tasks {
+                let (l, e, b) = t.await.unwrap();
+                lat.extend(l);
+                errors += e;
+                bytes += b;
+            }
+            let wall = t0.elapsed().as_secs_f64();
+            lat.sort_by(f64::total_cmp);
+            let q = |p: f64| lat.get(((lat.len() as f64 - 1.0) * p) as usize).copied().unwrap_or(0.0) * 1000.0;
+            println!(
+                "round {round}: {conc} clients, {wall:.1} s: {} posts of 5000 CL points, {errors} errors; {:.1} posts/s, {:.2} M CL points/s, {:.1} MB/s of NC; latency p50 {:.0} ms, p99 {:.0} ms; RSS {rss0} kB before any load, {} kB after this round",
+                lat.len(),
+                lat.len() as f64 / wall,
+                lat.len() as f64 * 5000.0 / wall / 1e6,
+                bytes as f64 / wall / 1e6,
+                q(0.5),
+                q(0.99),
+                rss_kb(),
+            );
+        }
+    });
+}

@@ -1,0 +1,67 @@
+//! Graceful shutdown with the real binary: SIGTERM during a post stream lets it finish.
+
+use std::io::{BufRead, BufReader};
+use std::process::{Command, Stdio};
+use std::time::Duration;
+
+#[tokio::test]
+async fn sigterm_finishes_the_stream_in_flight_then_exits() {
+    let data = std::env::temp_dir().join(format!("kinepost-shutdown-{}", std::process::id()));
+    let mut child = Command::new(env!("CARGO_BIN_EXE_kinepost"))
+        .args(["serve", "--bind", "127.0.0.1:0", "--data-dir", data.to_str().unwrap()])
+        .env("KINEPOST_MACHINES", concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut err = BufReader::new(child.stderr.take().unwrap());
+    let mut line = String::new();
+    let addr = loop {
+        line.clear();
+        assert!(err.read_line(&mut line).unwrap() > 0, "server exited early");
+        if let Some(rest) = line.split("listening on ").nth(1) {
+            break rest.split_whitespace().next().unwrap().to_string();
+        }
+    };
+    std::thread::spawn(move || for _ in err.lines() {}); // keep draining the log
+
+    let mut cl = String::from("UNITS/MM\nFEDRAT/500,MMPM\n");
+    for i in 0..3000 {
+        cl.push_str(&format!(
+            "GOTO/{:.3},{:.3},10\n",
+            (i as f64 * 0.01).cos() * 40.0,
+            i as f64 * 0.02
+        ));
+    }
+    let (a, b) = cl.split_at(cl.len() / 2);
+    let (a, b) = (a.to_string(), b.to_string());
+    let (tx, rx) = tokio::sync::mpsc::channel::<Result<String, std::io::Error>>(2);
+    let pid = child.id();
+    tokio::spawn(async move {
+        tx.send(Ok(a)).await.unwrap();
+        tokio::time::sleep(Duration::from_millis(300)).await;
+        // Shut down while the upload is half done.
+        Command::new("kill").args(["-TERM", &pid.to_string()]).status().unwrap();
+        tokio::time::sleep(Duration::from_millis(300)).await;
+        tx.send(Ok(b)).await.unwrap();
+    });
+    let body = reqwest::Body::wrap_stream(futures_util::stream::unfold(rx, |mut rx| async move {
+        rx.recv().await.map(|x| (x, rx))
+    }));
+    let r = reqwest::Client::new()
+        .post(format!("{addr}/v1/post?machine=vmc-3axis"))
+        .header("content-type", "text/plain")
+        .body(body)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 200);
+    let text = r.text().await.unwrap();
+    assert!(text.trim_end().ends_with("M30\n%"), "the stream in flight finished");
+    assert!(
+        text.lines().filter(|l| l.contains('Y')).count() > 2900,
+        "all points, including those sent after SIGTERM"
+    );
+    let status = tokio::task::spawn_blocking(move || child.wait()).await.unwrap().unwrap();
+    assert!(status.success(), "exits cleanly after the stream: {status}");
+    let _ = std::fs::remove_dir_all(&data);
+}
