@@ -49,6 +49,9 @@ try {
   await page.waitForSelector('#result:not([hidden])', { timeout: 30000 });
   const rows = await page.locator('#warnings tbody tr').allTextContents();
   check(rows.some((r) => /line \d+unreachable/.test(r)), `unreachable poses listed with their CL lines (${rows.length} rows)`);
+  await page.locator('#warnings tbody tr', { hasText: 'unreachable' }).first().click();
+  const shown = await page.textContent('#cl-line');
+  check(/^CL line \d+: GOTO\//.test(shown), `a row opens its CL line: ${shown.slice(0, 60)}`);
 
   // A bad request shows the server's problem detail.
   await page.fill('#work_offset', '1,2');

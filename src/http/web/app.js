@@ -2,6 +2,7 @@
 // Plain JS, no build step; talks to the same API as CAM plugins (NDJSON stream of /v1/post).
 const $ = (id) => document.getElementById(id);
 let machines = [];
+let clLines = []; // the uploaded file's lines, to show the one a warning points at
 
 async function loadMachines() {
   const r = await fetch('/v1/machines');
@@ -38,6 +39,8 @@ async function submit(ev) {
   $('error').hidden = true;
   $('result').hidden = true; // never show the previous file's result as this one's
   $('status').textContent = 'Post-processing…';
+  $('cl-line').hidden = true;
+  clLines = f.size < 64 * 1024 * 1024 ? (await f.text()).split(/\r?\n/) : [];
   try {
     const r = await fetch('/v1/post?' + q, { method: 'POST', body: f, headers: { 'content-type': 'text/plain', accept: 'application/x-ndjson' } });
     if (!r.ok) {
@@ -67,6 +70,11 @@ async function submit(ev) {
     tb.replaceChildren();
     for (const [n, d] of warn.slice(0, 500)) {
       const tr = document.createElement('tr');
+      if (d.line) {
+        tr.tabIndex = 0;
+        tr.className = 'link';
+        tr.addEventListener('click', () => showClLine(d.line));
+      }
       for (const v of [n, d.line ? `line ${d.line}` : '', d.code, d.message]) {
         const td = document.createElement('td');
         td.textContent = v;
@@ -84,6 +92,13 @@ async function submit(ev) {
   } finally {
     $('go').disabled = false;
   }
+}
+
+function showClLine(n) {
+  const pre = $('cl-line');
+  const text = clLines[n - 1];
+  pre.textContent = text === undefined ? `CL line ${n}` : `CL line ${n}: ${text}`;
+  pre.hidden = false;
 }
 
 function showSummary(s) {
