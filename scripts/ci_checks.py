@@ -31,9 +31,9 @@ def run(cmd, **kw):
     return subprocess.run(cmd, capture_output=True, text=True, **kw)
 
 
-def verify(shared, machines, mid, cl, nc, mode):
+def verify(shared, machines, mid, cl, nc, mode, dialect='fanuc'):
     r = run([sys.executable, os.path.join(shared, 'tools/verifier/verify.py'), '--profile', os.path.join(machines, mid + '.toml'),
-             '--cl', cl, '--nc', nc, '--dialect', 'fanuc', '--mode', mode])
+             '--cl', cl, '--nc', nc, '--dialect', dialect, '--mode', mode])
     return json.loads(r.stdout)
 
 
@@ -41,7 +41,7 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument('--kinepost', required=True)
     ap.add_argument('--shared', required=True)
-    ap.add_argument('--points', type=int, default=300)
+    ap.add_argument('--points', type=int, default=200)
     a = ap.parse_args()
     a.shared, a.kinepost = os.path.abspath(a.shared), os.path.abspath(a.kinepost)
     here = os.path.dirname(os.path.abspath(__file__))
@@ -65,21 +65,22 @@ def main():
         mid = os.path.basename(path)[:-5]
         cl = os.path.join(tmp, mid + '.cls')
         with open(cl, 'w') as out:
-            g = run([a.kinepost, 'generate', '--machine', mid, '--points', str(a.points if 'propeller' not in mid else 150)])
+            g = run([a.kinepost, 'generate', '--machine', mid, '--points', str(a.points if 'propeller' not in mid else 100)])
             out.write(g.stdout)
-        for mode in ('joint', 'tcp'):
-            nc = os.path.join(tmp, f'{mid}-{mode}.nc')
-            p = run([a.kinepost, 'post', '--machine', mid, '--dialect', 'fanuc', '--mode', mode, cl, '-o', nc])
-            if p.returncode:
-                fails.append(f'post {mid} {mode}: {p.stderr.strip()[-300:]}')
-                continue
-            rep = verify(a.shared, machines, mid, cl, nc, mode)
-            if not rep.get('ok'):
-                fails.append(f'verify generated {mid} {mode}: {rep.get("failed")} {rep.get("error", "")}')
-            else:
-                ok += 1
-            print(f'generated {mid:22s} {mode:5s} ok={rep.get("ok")} matched={rep["counts"]["matched"]}/{rep["counts"]["cl_points"]} '
-                  f'max_pos_err={rep["counts"]["max_pos_err"]:.2e} nonlinear={rep["counts"]["max_nonlinear_err"]:.2e}')
+        for dialect in ('fanuc', 'haas', 'siemens', 'heidenhain', 'linuxcnc'):
+            for mode in ('joint', 'tcp'):
+                nc = os.path.join(tmp, f'{mid}-{dialect}-{mode}.nc')
+                p = run([a.kinepost, 'post', '--machine', mid, '--dialect', dialect, '--mode', mode, cl, '-o', nc])
+                if p.returncode:
+                    fails.append(f'post {mid} {dialect} {mode}: {p.stderr.strip()[-300:]}')
+                    continue
+                rep = verify(a.shared, machines, mid, cl, nc, mode, dialect)
+                if not rep.get('ok'):
+                    fails.append(f'verify generated {mid} {dialect} {mode}: {rep.get("failed")} {rep.get("error", "")}')
+                else:
+                    ok += 1
+                print(f'generated {mid:22s} {dialect:10s} {mode:5s} ok={rep.get("ok")} matched={rep["counts"]["matched"]}/{rep["counts"]["cl_points"]} '
+                      f'max_pos_err={rep["counts"]["max_pos_err"]:.2e} nonlinear={rep["counts"]["max_nonlinear_err"]:.2e}')
     print(f'generated paths verified: {ok}')
 
     for f, mid, allowed, why in CORPUS:

@@ -107,8 +107,13 @@ async fn post_streams_nc_and_ndjson() {
     assert_eq!(r.status(), 200);
     assert!(r.headers()["content-disposition"].to_str().unwrap().contains(".nc"));
     let nc = r.text().await.unwrap();
-    assert!(nc.starts_with("%\nO1000\n") && nc.trim_end().ends_with("M30\n%"));
-    assert!(nc.contains("G43.4 H1") && nc.contains("B-22.2015 C1.0496"));
+    // The profile's controller is the default dialect: Haas NGC, TCP with G234.
+    assert!(
+        nc.starts_with("%\nO01000\n") && nc.trim_end().ends_with("M30\n%"),
+        "{}",
+        &nc[..200]
+    );
+    assert!(nc.contains("G234 H1") && nc.contains("B-22.2015 C1.0496"));
     // NDJSON: header, blocks with source lines and joints, summary last.
     let r = c
         .post(format!("{base}/v1/post?machine=haas-umc750&mode=tcp"))

@@ -155,8 +155,8 @@ pub struct AppState {
 #[derive(OpenApi)]
 #[openapi(
     info(title = "kinepost", description = "5-axis CNC postprocessor: CL data in, verified NC out, for any machine profile."),
-    paths(post::post_cl, list_machines, get_machine, healthz, readyz, metrics_route),
-    components(schemas(Problem, MachineDto, LinearDto, RotaryDto, AngleErrorDto, PostParams)),
+    paths(post::post_cl, list_machines, get_machine, list_dialects, healthz, readyz, metrics_route),
+    components(schemas(Problem, MachineDto, LinearDto, RotaryDto, AngleErrorDto, DialectDto, PostParams)),
     tags((name = "post", description = "Post-processing"), (name = "machines", description = "Machine profiles"), (name = "ops", description = "Health and metrics"))
 )]
 pub struct ApiDoc;
@@ -194,6 +194,7 @@ pub fn app(state: Arc<AppState>) -> axum::Router {
     );
     let api = axum::Router::new()
         .route("/v1/machines", get(list_machines))
+        .route("/v1/dialects", get(list_dialects))
         .route("/v1/machines/{id}", get(get_machine))
         .route("/healthz", get(healthz))
         .route("/readyz", get(readyz))
@@ -372,6 +373,52 @@ async fn list_machines(State(st): State<Arc<AppState>>) -> Json<Vec<MachineDto>>
 async fn get_machine(State(st): State<Arc<AppState>>, Path(id): Path<String>) -> Result<Json<MachineDto>, ApiError> {
     let p = st.library.get(&id).map_err(|_| ApiError::UnknownMachine(id))?;
     Ok(Json(MachineDto::from(p.as_ref())))
+}
+
+/// A controller dialect and its words for the things that differ between controls.
+#[derive(Serialize, utoipa::ToSchema)]
+pub struct DialectDto {
+    pub name: String,
+    pub title: String,
+    /// `word_address` or `conversational`.
+    pub style: String,
+    pub tcp_on: String,
+    pub tcp_off: String,
+    /// The inverse-time feed word, if the control has one.
+    pub inverse_time: Option<String>,
+    pub tool_change: Vec<String>,
+    /// Machines whose profile names this dialect as their controller (their default).
+    pub default_for: Vec<String>,
+    pub notes: String,
+}
+
+/// The NC dialects; a post request may name any, the profile's `controller` is the default.
+#[utoipa::path(get, path = "/v1/dialects", responses((status = 200, body = Vec<DialectDto>)), tag = "post")]
+async fn list_dialects(State(st): State<Arc<AppState>>) -> Json<Vec<DialectDto>> {
+    Json(
+        crate::nc::ALL
+            .iter()
+            .map(|d| DialectDto {
+                name: d.name.into(),
+                title: d.title.into(),
+                style: match d.style {
+                    crate::nc::Style::WordAddress => "word_address".into(),
+                    crate::nc::Style::Conversational => "conversational".into(),
+                },
+                tcp_on: d.tcp_on.into(),
+                tcp_off: d.tcp_off.into(),
+                inverse_time: d.inverse_time.map(str::to_string),
+                tool_change: d.tool_change.iter().map(|s| s.to_string()).collect(),
+                default_for: st
+                    .library
+                    .iter()
+                    .filter(|p| p.machine.controller == d.name)
+                    .map(|p| p.machine.id.clone())
+                    .collect(),
+                notes: d.notes.into(),
+            })
+            .collect(),
+    )
 }
 
 /// Alive.

@@ -9,25 +9,43 @@ pub use number::{round_to, write_fixed};
 
 use crate::kinematics::Units;
 
-/// A controller's words for the same things. Only data: adding a word-address dialect is a value.
+/// How a control's blocks are put together.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Style {
+    /// ISO word address: `N10 G1 X1.000 Y2.000 F500.0 (comment)`.
+    WordAddress,
+    /// Heidenhain conversational: `12 L X+1.000 Y+2.000 F500 ; comment`, every line numbered from
+    /// 0, signed numbers, FMAX for rapids.
+    Conversational,
+}
+
+/// A controller's words for the same things. Only data: adding a dialect is a value.
+/// Templates: `{n}` program number, `{n4}`/`{n5}` zero-padded, `{UNITS}` MM|INCH, `{t}` tool,
+/// `{s}` spindle speed.
 #[derive(Clone, Debug)]
 pub struct Dialect {
     pub name: &'static str,
+    pub title: &'static str,
+    pub style: Style,
+    /// Comment delimiters: `(` `)` or `;` and nothing.
     pub comment: (&'static str, &'static str),
-    pub program_start: &'static [&'static str],
-    pub program_end: &'static [&'static str],
+    /// Program start and end lines, and whether each takes a block number.
+    pub begin: &'static [(&'static str, bool)],
+    pub end: &'static [(&'static str, bool)],
     pub units_mm: &'static str,
     pub units_inch: &'static str,
     pub safe_start: &'static str,
     pub rapid: &'static str,
     pub feed: &'static str,
     pub feed_per_min: &'static str,
-    pub inverse_time: &'static str,
-    /// `{t}` is the tool (and length offset) number.
-    pub tool_change: &'static str,
+    /// Inverse-time feed word (G93); `None`: the control has none, and a move with rotaries gets
+    /// the combined machine-axis feed (units and degrees per minute) that gives the same time.
+    pub inverse_time: Option<&'static str>,
+    pub tool_change: &'static [&'static str],
     pub length_comp: &'static str,
     pub tcp_on: &'static str,
     pub tcp_off: &'static str,
+    pub spindle: &'static str,
     pub spindle_cw: &'static str,
     pub spindle_ccw: &'static str,
     pub spindle_off: &'static str,
@@ -35,25 +53,30 @@ pub struct Dialect {
     pub coolant_mist: &'static str,
     pub coolant_through: &'static str,
     pub coolant_off: &'static str,
+    /// N numbers are optional (a job option) on word-address controls.
     pub block_numbers: bool,
+    pub notes: &'static str,
 }
 
 pub const FANUC: Dialect = Dialect {
     name: "fanuc",
+    title: "Fanuc (0i/30i)",
+    style: Style::WordAddress,
     comment: ("(", ")"),
-    program_start: &["%"],
-    program_end: &["M30", "%"],
+    begin: &[("%", false), ("O{n4}", false)],
+    end: &[("M30", true), ("%", false)],
     units_mm: "G21",
     units_inch: "G20",
     safe_start: "G90 G17 G40 G49 G80",
     rapid: "G0",
     feed: "G1",
     feed_per_min: "G94",
-    inverse_time: "G93",
-    tool_change: "T{t} M6",
+    inverse_time: Some("G93"),
+    tool_change: &["T{t} M6"],
     length_comp: "G43 H{t}",
     tcp_on: "G43.4 H{t}",
     tcp_off: "G49",
+    spindle: "S{s}",
     spindle_cw: "M3",
     spindle_ccw: "M4",
     spindle_off: "M5",
@@ -62,16 +85,85 @@ pub const FANUC: Dialect = Dialect {
     coolant_through: "M88",
     coolant_off: "M9",
     block_numbers: true,
+    notes: "TCP with G43.4 (type 1); inverse time G93",
 };
 
+pub const HAAS: Dialect = Dialect {
+    name: "haas",
+    title: "Haas NGC",
+    begin: &[("%", false), ("O{n5}", false)],
+    tcp_on: "G234 H{t}",
+    notes: "TCP with G234 (TCPC); inverse time G93",
+    ..FANUC
+};
+
+pub const LINUXCNC: Dialect = Dialect {
+    name: "linuxcnc",
+    title: "LinuxCNC",
+    begin: &[("%", false)],
+    end: &[("M30", true), ("%", false)],
+    tcp_on: "G43 H{t} (TCP: SWITCH THE KINEMATICS TO TOOL-TIP MODE IN THE MACHINE CONFIG)",
+    tcp_off: "G49",
+    coolant_through: "M8",
+    notes: "no TCP G-code: the machine configuration switches kinematics; inverse time G93",
+    ..FANUC
+};
+
+pub const SIEMENS: Dialect = Dialect {
+    name: "siemens",
+    title: "Siemens Sinumerik 840D",
+    style: Style::WordAddress,
+    comment: ("; ", ""),
+    begin: &[("; PROGRAM {n}", false)],
+    end: &[("M30", true)],
+    units_mm: "G71",
+    units_inch: "G70",
+    safe_start: "G90 G17 G40 G64",
+    tool_change: &["T{t}", "M6", "D1"],
+    length_comp: "",
+    tcp_on: "TRAORI",
+    tcp_off: "TRAFOOF",
+    notes: "TCP with TRAORI; tool offset with D1; inverse time G93; rotaries programmed as linear (not modulo) axes",
+    ..FANUC
+};
+
+pub const HEIDENHAIN: Dialect = Dialect {
+    name: "heidenhain",
+    title: "Heidenhain TNC (conversational)",
+    style: Style::Conversational,
+    comment: ("; ", ""),
+    begin: &[("BEGIN PGM {n} {UNITS}", true)],
+    end: &[("M30", true), ("END PGM {n} {UNITS}", true)],
+    units_mm: "",
+    units_inch: "",
+    safe_start: "",
+    rapid: "FMAX",
+    feed: "",
+    feed_per_min: "",
+    inverse_time: None,
+    tool_change: &["TOOL CALL {t} Z"],
+    length_comp: "",
+    tcp_on: "FUNCTION TCPM F TCP AXIS POS PATHCTRL AXIS",
+    tcp_off: "FUNCTION RESET TCPM",
+    spindle: "TOOL CALL S{s}",
+    spindle_cw: "M3",
+    spindle_ccw: "M4",
+    spindle_off: "M5",
+    coolant_flood: "M8",
+    coolant_mist: "M7",
+    coolant_through: "M8",
+    coolant_off: "M9",
+    block_numbers: true,
+    notes: "TCP with FUNCTION TCPM; no inverse time: rotary moves get the combined machine-axis feed",
+};
+
+pub const ALL: [&Dialect; 5] = [&FANUC, &HAAS, &SIEMENS, &HEIDENHAIN, &LINUXCNC];
+
 pub fn dialect(name: &str) -> Option<&'static Dialect> {
-    match name {
-        "fanuc" => Some(&FANUC),
-        _ => None,
-    }
+    ALL.iter().copied().find(|d| d.name == name)
 }
 
-pub const DIALECTS: &[&str] = &["fanuc"];
+pub const DIALECTS: &[&str] = &["fanuc", "haas", "siemens", "heidenhain", "linuxcnc"];
 
 /// Number formats: linear words 3 decimals in mm, 4 in inch; rotary words 4 decimals; feed 1.
 #[derive(Clone, Copy, Debug)]
@@ -115,6 +207,8 @@ pub enum FeedMode {
 pub struct Formatter {
     pub d: &'static Dialect,
     pub fmt: Formats,
+    /// Next block number, when blocks are numbered: N5, N10 … (word address, optional) or
+    /// 0, 1, 2 … on every line (conversational).
     sequence: Option<u32>,
     motion: Option<Motion>,
     feed_mode: Option<FeedMode>,
@@ -122,41 +216,77 @@ pub struct Formatter {
     /// Last written value of each axis word (X Y Z A B C), as rounded integers.
     axes: [Option<i64>; 6],
     buf: String,
+    program_number: u32,
+    units: &'static str,
 }
 
 pub const AXIS_LETTERS: [char; 6] = ['X', 'Y', 'Z', 'A', 'B', 'C'];
 
 impl Formatter {
     pub fn new(d: &'static Dialect, fmt: Formats, sequence_numbers: bool) -> Formatter {
+        let numbered = d.style == Style::Conversational || (sequence_numbers && d.block_numbers);
         Formatter {
             d,
             fmt,
-            sequence: (sequence_numbers && d.block_numbers).then_some(0),
+            sequence: numbered.then_some(0),
             motion: None,
             feed_mode: None,
             feed: None,
             axes: [None; 6],
             buf: String::with_capacity(128),
+            program_number: 1000,
+            units: "MM",
         }
+    }
+
+    fn conversational(&self) -> bool {
+        self.d.style == Style::Conversational
     }
 
     fn start(&mut self) {
         self.buf.clear();
         if let Some(n) = self.sequence.as_mut() {
-            *n += 5;
-            self.buf.push('N');
-            self.buf.push_str(itoa::Buffer::new().format(*n));
+            if self.d.style == Style::Conversational {
+                self.buf.push_str(itoa::Buffer::new().format(*n));
+                *n += 1;
+            } else {
+                *n += 5;
+                self.buf.push('N');
+                self.buf.push_str(itoa::Buffer::new().format(*n));
+            }
             self.buf.push(' ');
         }
     }
 
-    /// A comment line; characters the dialect cannot hold in a comment are replaced.
+    fn fill(&self, template: &str, t: u32, s: i64) -> String {
+        let mut out = template.to_string();
+        for (k, v) in [
+            ("{n4}", format!("{:04}", self.program_number)),
+            ("{n5}", format!("{:05}", self.program_number)),
+            ("{n}", self.program_number.to_string()),
+            ("{UNITS}", self.units.to_string()),
+            ("{t}", t.to_string()),
+            ("{s}", s.to_string()),
+        ] {
+            out = out.replace(k, &v);
+        }
+        out
+    }
+
+    /// A comment line; characters the dialect cannot hold in a comment are replaced. Numbered
+    /// on a conversational control (every line is).
     pub fn comment(&mut self, text: &str) -> &str {
-        self.buf.clear();
+        if self.conversational() {
+            self.start();
+        } else {
+            self.buf.clear();
+        }
         self.buf.push_str(self.d.comment.0);
         let close = self.d.comment.1.chars().next();
         for c in text.chars().take(120) {
-            self.buf.push(if Some(c) == close || c == '(' || c.is_control() {
+            // Nothing that could end the comment early or open another: parentheses and `;`.
+            let _ = close;
+            self.buf.push(if c == ')' || c == '(' || c == ';' || c.is_control() {
                 ' '
             } else {
                 c.to_ascii_uppercase()
@@ -173,9 +303,55 @@ impl Formatter {
         &self.buf
     }
 
-    pub fn words_t(&mut self, template: &str, tool: u32) -> &str {
-        let w = template.replace("{t}", itoa::Buffer::new().format(tool));
-        self.words(&w)
+    /// A templated line (`T{t} M6`); `None` for an empty template (the control needs no line).
+    pub fn line(&mut self, template: &str, tool: u32, speed: i64) -> Option<String> {
+        if template.is_empty() {
+            return None;
+        }
+        let w = self.fill(template, tool, speed);
+        Some(self.words(&w).to_string())
+    }
+
+    /// Program start: the dialect's opening lines, the header comments, units, safe start.
+    pub fn header(&mut self, program_number: u32, units: Units, comments: &[String]) -> Vec<String> {
+        self.program_number = program_number;
+        self.units = match units {
+            Units::Mm => "MM",
+            Units::Inch => "INCH",
+        };
+        let mut out = Vec::new();
+        for (t, numbered) in self.d.begin {
+            let text = self.fill(t, 0, 0);
+            out.push(if *numbered { self.words(&text).to_string() } else { text });
+        }
+        for c in comments {
+            out.push(self.comment(c).to_string());
+        }
+        let u = match units {
+            Units::Mm => self.d.units_mm,
+            Units::Inch => self.d.units_inch,
+        };
+        for w in [u, self.d.safe_start] {
+            if !w.is_empty() {
+                out.push(self.words(w).to_string());
+            }
+        }
+        out
+    }
+
+    /// Program end: spindle and coolant off, compensation off, the dialect's closing lines.
+    pub fn footer(&mut self) -> Vec<String> {
+        let mut out = Vec::new();
+        for w in [self.d.spindle_off, self.d.coolant_off, self.d.tcp_off] {
+            if !w.is_empty() {
+                out.push(self.words(w).to_string());
+            }
+        }
+        for (t, numbered) in self.d.end {
+            let text = self.fill(t, 0, 0);
+            out.push(if *numbered { self.words(&text).to_string() } else { text });
+        }
+        out
     }
 
     /// Forget the modal state (after a tool change or anything that moves axes unseen).
@@ -196,17 +372,24 @@ impl Formatter {
         extra: &str,
         comment: Option<&str>,
     ) -> Option<&str> {
+        let seq_before = self.sequence;
         self.start();
         let start_len = self.buf.len();
-        if let Some((mode, _)) = feed
+        let conv = self.conversational();
+        if conv {
+            self.buf.push_str("L ");
+        } else if let Some((mode, _)) = feed
             && motion == Motion::Feed
             && self.feed_mode != Some(mode)
         {
-            self.buf.push_str(match mode {
+            let w = match mode {
                 FeedMode::PerMinute => self.d.feed_per_min,
-                FeedMode::InverseTime => self.d.inverse_time,
-            });
-            self.buf.push(' ');
+                FeedMode::InverseTime => self.d.inverse_time.unwrap_or(self.d.feed_per_min),
+            };
+            if !w.is_empty() {
+                self.buf.push_str(w);
+                self.buf.push(' ');
+            }
             self.feed_mode = Some(mode);
             self.feed = None;
         }
@@ -219,6 +402,9 @@ impl Formatter {
             if self.axes[i] != Some(r) {
                 self.axes[i] = Some(r);
                 self.buf.push(AXIS_LETTERS[i]);
+                if conv && r >= 0 {
+                    self.buf.push('+');
+                }
                 write_fixed(&mut self.buf, r, dec);
                 self.buf.push(' ');
                 moved = true;
@@ -226,22 +412,22 @@ impl Formatter {
         }
         if !moved {
             self.buf.truncate(start_len);
-            if self.sequence.is_some() {
-                // Undo the block number we took.
-                if let Some(n) = self.sequence.as_mut() {
-                    *n -= 5;
-                }
-            }
+            self.sequence = seq_before;
             return None;
         }
-        if self.motion != Some(motion) {
+        if conv {
+            if motion == Motion::Rapid {
+                self.buf.push_str(self.d.rapid);
+                self.buf.push(' ');
+            }
+        } else if self.motion != Some(motion) {
             let w = match motion {
                 Motion::Rapid => self.d.rapid,
                 Motion::Feed => self.d.feed,
             };
             self.buf.insert_str(motion_pos, &format!("{w} "));
-            self.motion = Some(motion);
         }
+        self.motion = Some(motion);
         if let Some((mode, f)) = feed
             && motion == Motion::Feed
         {

@@ -387,11 +387,6 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
     }
 
     fn program_start(&mut self) -> std::io::Result<()> {
-        let d = self.o.dialect;
-        for l in d.program_start {
-            self.out(l)?;
-        }
-        self.out(&format!("O{:04}", self.o.program_number))?;
         let mut lines = vec![
             format!("KINEPOST {} FOR {} ({})", env!("CARGO_PKG_VERSION"), self.m.id, self.m.name),
             format!(
@@ -410,29 +405,14 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             lines.push(format!("WORK OFFSET {},{},{}", wo.x, wo.y, wo.z));
         }
         lines.extend(self.o.header.iter().cloned());
-        for l in lines {
-            let c = self.f.comment(&l).to_string();
-            self.out(&c)?;
+        for l in self.f.header(self.o.program_number, self.m.units, &lines) {
+            self.out(&l)?;
         }
-        let units = if self.m.units == Units::Mm { d.units_mm } else { d.units_inch };
-        let l = self.f.words(units).to_string();
-        self.out(&l)?;
-        let l = self.f.words(d.safe_start).to_string();
-        self.out(&l)
+        Ok(())
     }
 
     fn program_end(&mut self) -> std::io::Result<()> {
-        let d = self.o.dialect;
-        for w in [d.spindle_off, d.coolant_off, d.tcp_off] {
-            let l = self.f.words(w).to_string();
-            self.out(&l)?;
-        }
-        for l in d.program_end {
-            let l = if l.starts_with('%') {
-                l.to_string()
-            } else {
-                self.f.words(l).to_string()
-            };
+        for l in self.f.footer() {
             self.out(&l)?;
         }
         Ok(())
@@ -453,14 +433,18 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         match ev {
             ProgEvent::Tool { number, .. } => {
                 if self.comp_on {
-                    let l = self.f.words(d.tcp_off).to_string();
-                    self.out(&l)?;
+                    if let Some(l) = self.f.line(d.tcp_off, number, 0) {
+                        self.out(&l)?;
+                    }
                     self.comp_on = false;
                 }
                 let c = self.f.comment(&format!("TOOL {number}")).to_string();
                 self.out(&c)?;
-                let l = self.f.words_t(d.tool_change, number).to_string();
-                self.out(&l)?;
+                for t in d.tool_change {
+                    if let Some(l) = self.f.line(t, number, 0) {
+                        self.out(&l)?;
+                    }
+                }
                 self.f.reset_modal();
                 self.tool = Some(number);
             }
@@ -469,15 +453,8 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                 let _ = l;
             }
             ProgEvent::Spindle(c) => {
-                let l = match c {
-                    SpindleCmd::Rpm { speed, clockwise } => {
-                        self.rpm = Some(speed);
-                        format!(
-                            "S{} {}",
-                            speed.round() as i64,
-                            if clockwise { d.spindle_cw } else { d.spindle_ccw }
-                        )
-                    }
+                let (speed, cw) = match c {
+                    SpindleCmd::Rpm { speed, clockwise } => (Some(speed), clockwise),
                     SpindleCmd::Surface { speed, clockwise } => {
                         self.note(Diagnostic::new(
                             Code::IgnoredRecord,
@@ -485,19 +462,35 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                             None,
                             "surface speed not converted: written as S",
                         ))?;
-                        format!(
-                            "S{} {}",
-                            speed.round() as i64,
-                            if clockwise { d.spindle_cw } else { d.spindle_ccw }
-                        )
+                        (Some(speed), clockwise)
                     }
-                    SpindleCmd::Off => {
-                        self.rpm = None;
-                        d.spindle_off.to_string()
-                    }
+                    SpindleCmd::Off => (None, true),
                 };
-                let l = self.f.words(&l).to_string();
-                self.out(&l)?;
+                self.rpm = speed;
+                let t = self.tool.unwrap_or(1);
+                match speed {
+                    Some(v) => {
+                        let s = v.round() as i64;
+                        if d.style == crate::nc::Style::Conversational {
+                            // TNC: the speed with a speed-only TOOL CALL, the direction alone.
+                            for w in [d.spindle, if cw { d.spindle_cw } else { d.spindle_ccw }] {
+                                if let Some(l) = self.f.line(w, t, s) {
+                                    self.out(&l)?;
+                                }
+                            }
+                        } else {
+                            let w = format!("{} {}", d.spindle, if cw { d.spindle_cw } else { d.spindle_ccw });
+                            if let Some(l) = self.f.line(&w, t, s) {
+                                self.out(&l)?;
+                            }
+                        }
+                    }
+                    None => {
+                        if let Some(l) = self.f.line(d.spindle_off, t, 0) {
+                            self.out(&l)?;
+                        }
+                    }
+                }
             }
             ProgEvent::Coolant(c) => {
                 let w = match c {
@@ -506,8 +499,9 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                     CoolantCmd::Through => d.coolant_through,
                     CoolantCmd::Off => d.coolant_off,
                 };
-                let l = self.f.words(w).to_string();
-                self.out(&l)?;
+                if let Some(l) = self.f.line(w, 0, 0) {
+                    self.out(&l)?;
+                }
             }
             ProgEvent::Comment(t) => {
                 let c = self.f.comment(&t).to_string();
@@ -548,8 +542,9 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             Mode::Joint => d.length_comp,
             Mode::Tcp => d.tcp_on,
         };
-        let l = self.f.words_t(w, t).to_string();
-        self.out(&l)?;
+        if let Some(l) = self.f.line(w, t, 0) {
+            self.out(&l)?;
+        }
         self.comp_on = true;
         Ok(())
     }
@@ -1074,7 +1069,21 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                 if t <= 0.0 {
                     t = 1e-6;
                 }
-                feed = Some((FeedMode::InverseTime, 1.0 / t));
+                feed = Some(match (self.o.dialect.inverse_time, prev) {
+                    (Some(_), _) | (None, None) => (FeedMode::InverseTime, 1.0 / t),
+                    // No inverse time on this control: the feed along the combined machine axes
+                    // (units and degrees) that takes the same time.
+                    (None, Some(p)) => {
+                        let mut sq = 0.0;
+                        for i in 0..3 {
+                            sq += (to.joints.linear[i] - p.joints.linear[i]).powi(2);
+                        }
+                        for i in 0..m.rotaries.len() {
+                            sq += (to.joints.rotary[i] - p.joints.rotary[i]).to_degrees().powi(2);
+                        }
+                        (FeedMode::PerMinute, sq.sqrt() / t)
+                    }
+                });
             } else {
                 let fz = if limited && t > 0.0 { len / t } else { f };
                 feed = Some((FeedMode::PerMinute, fz.max(0.0)));

@@ -38,7 +38,7 @@ try {
   await download.saveAs(file);
   const nc = readFileSync(file, 'utf8');
   check(download.suggestedFilename() === 'nx_clsf_mech491_variable_axis_inch_5ax.nc', `download name ${download.suggestedFilename()}`);
-  check(nc.startsWith('%\nO1000\n') && nc.trimEnd().endsWith('M30\n%') && nc.includes('G43.4 H1'), 'downloaded NC is a whole TCP program');
+  check(nc.startsWith('%\nO01000\n') && nc.trimEnd().endsWith('M30\n%') && nc.includes('G234 H1'), 'downloaded NC is a whole Haas TCP program');
   check(nc.includes('B-22.2015 C1.0496'), 'first orientation as the real NX post');
   await page.screenshot({ path: path.join(shots, 'form.png'), fullPage: true });
 
