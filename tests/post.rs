@@ -127,6 +127,9 @@ fn generated_paths_on_every_profile_post_clean_in_joint_and_tcp_mode() {
         for mode in [Mode::Joint, Mode::Tcp] {
             let mut o = Options::new(m);
             o.mode = mode;
+            // The engine under test; word address so the replay below can read it (every dialect
+            // is checked by tests/dialects.rs and, in CI, by the shared verifier).
+            o.dialect = &kinepost::nc::FANUC;
             let (sink, s) = run(m, &cl, &o);
             let errors: Vec<_> = sink.diags.iter().filter(|d| d.severity == Severity::Error).collect();
             assert!(errors.is_empty(), "{} {mode:?}: {errors:?}", m.id);
