@@ -372,3 +372,39 @@ fn a_singular_tolerance_holds_the_free_rotary_within_its_bound_and_reports_what_
     };
     assert!(verify(&cl[..], sink.nc.as_bytes(), &m, &vo).unwrap().ok);
 }
+
+/// NX CLSF arcs turn clockwise about their CIRCLE axis: the real NX post writes this lead-in as
+/// `G03 X-10.4331 Y6.4961 I.2953 J0.0` (counter-clockwise about +Z) for an axis of (0,0,-1). The
+/// linearized arc must run that quarter, not the other three.
+#[test]
+fn nx_arcs_turn_the_way_the_nx_post_cuts_them() {
+    let m = machine("haas-umc750");
+    let cl = std::fs::read(data("nx_clsf_mech491_simple_mill_plane_mm.cls")).unwrap();
+    let mut o = Options::new(&m);
+    o.dialect = &kinepost::nc::FANUC;
+    let (sink, _) = run(&m, &cl, &o);
+    let (cx, cy, r) = (-10.4331f64, 6.7913f64, 0.2953f64);
+    let mut on_arc = 0;
+    let mut reader = NcReader::new(sink.nc.as_bytes(), Units::Inch);
+    while let Some(b) = reader.next_block().unwrap() {
+        let (Some(x), Some(y)) = (b.axes[0], b.axes[1]) else {
+            continue;
+        };
+        let d = ((x - cx).powi(2) + (y - cy).powi(2)).sqrt();
+        if (d - r).abs() < 2e-4
+            && (x - cx).abs() < r + 1e-3
+            && y <= cy + 1e-4
+            && x <= cx + 1e-4
+            && !(y == 6.4961 && x == -10.4331)
+        {
+            on_arc += 1; // inside the south-west quarter
+        }
+        if (d - r).abs() < 2e-4 && (y > cy + 1e-3 || x > cx + 1e-3) && (6.0..7.5).contains(&y) && x < -10.0 {
+            panic!("arc point outside the NX quarter: X{x} Y{y} (line {})", b.line);
+        }
+    }
+    assert!(
+        on_arc >= 5,
+        "the lead-in arc is linearized through its quarter ({on_arc} points)"
+    );
+}

@@ -95,11 +95,14 @@ pub enum Record {
     Units(Units),
     Multax(bool),
     ToolAxis([f64; 3]),
-    /// The next GOTO ends an arc about this centre and axis (counter-clockwise about it).
+    /// The next GOTO ends an arc about this centre and axis. `clockwise`: the motion turns
+    /// clockwise about the axis (right-hand rule) — NX CLSF's 11-value form; APT from Creo,
+    /// SOLIDWORKS CAM and CAMWorks turns counter-clockwise about it.
     Circle {
         center: [f64; 3],
         axis: [f64; 3],
         radius: Option<f64>,
+        clockwise: bool,
     },
     Cycle(CycleParams),
     CycleOff,
@@ -429,10 +432,16 @@ pub fn parse_statement(stmt: &str, line: u32, diags: &mut Vec<Diagnostic>) -> Op
                     .at(rest_col),
                 );
             }
+            // NX writes CIRCLE/x,y,z,i,j,k,r,tol,d,a,b and turns clockwise about (i,j,k): its own
+            // post writes G03 for an axis of (0,0,-1), and 98 of 98 of its arcs in the corpus are
+            // tangent to the next move only that way; the other systems' arcs are tangent the
+            // other way (Creo 81/81, SOLIDWORKS CAM 1155/1182).
+            let clockwise = v.len() >= 10;
             Some(Record::Circle {
                 center: [v[0], v[1], v[2]],
                 axis: [v[3], v[4], v[5]],
                 radius: v.get(6).copied(),
+                clockwise,
             })
         }
         "CYCLE" => parse_cycle(&args, line, rest_col, diags),

@@ -57,6 +57,7 @@ pub struct Source<R> {
     rapid_next: bool,
     feed: Option<(f64, FeedUnit)>,
     circle: Option<([f64; 3], [f64; 3], Option<f64>)>,
+    circle_cw: bool,
     cycle: Option<CycleParams>,
     chord_tol: f64,
     ended: bool,
@@ -117,6 +118,7 @@ impl<R: BufRead> Source<R> {
             rapid_next: false,
             feed: None,
             circle: None,
+            circle_cw: false,
             cycle: None,
             chord_tol,
             ended: false,
@@ -236,7 +238,15 @@ impl<R: BufRead> Source<R> {
             Record::ToolAxis(a) => {
                 self.set_axis(a, line);
             }
-            Record::Circle { center, axis, radius } => self.circle = Some((center, axis, radius)),
+            Record::Circle {
+                center,
+                axis,
+                radius,
+                clockwise,
+            } => {
+                self.circle = Some((center, axis, radius));
+                self.circle_cw = clockwise;
+            }
             Record::Cycle(c) => {
                 self.cycle = Some(c);
                 self.diag(
@@ -293,7 +303,8 @@ impl<R: BufRead> Source<R> {
         if n.is_nan() || n <= 1e-12 {
             return;
         }
-        let k = axis / n;
+        // Turning clockwise about k is turning counter-clockwise about -k.
+        let k = if self.circle_cw { -axis / n } else { axis / n };
         let (a, b) = (start - center, end - center);
         let (a_p, b_p) = (a - k * k.dot(&a), b - k * k.dot(&b));
         let r = radius.unwrap_or_else(|| a_p.norm());
