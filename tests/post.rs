@@ -374,8 +374,9 @@ fn a_singular_tolerance_holds_the_free_rotary_within_its_bound_and_reports_what_
 }
 
 /// NX CLSF arcs turn clockwise about their CIRCLE axis: the real NX post writes this lead-in as
-/// `G03 X-10.4331 Y6.4961 I.2953 J0.0` (counter-clockwise about +Z) for an axis of (0,0,-1). The
-/// linearized arc must run that quarter, not the other three.
+/// `G03 X-10.4331 Y6.4961 I.2953 J0.0` (counter-clockwise about +Z) for an axis of (0,0,-1).
+/// Word-address output writes that arc; where arcs are linearized (the conversational dialect,
+/// for now) the chords must run that quarter, not the other three.
 #[test]
 fn nx_arcs_turn_the_way_the_nx_post_cuts_them() {
     let m = machine("haas-umc750");
@@ -383,28 +384,137 @@ fn nx_arcs_turn_the_way_the_nx_post_cuts_them() {
     let mut o = Options::new(&m);
     o.dialect = &kinepost::nc::FANUC;
     let (sink, _) = run(&m, &cl, &o);
+    assert!(
+        sink.nc.contains("G3 X-10.4331 Y6.4961 Z3.9370 I0.2953 J0.0000"),
+        "{}",
+        &sink.nc[..800]
+    );
+    o.dialect = &kinepost::nc::HEIDENHAIN;
+    let (sink, _) = run(&m, &cl, &o);
     let (cx, cy, r) = (-10.4331f64, 6.7913f64, 0.2953f64);
+    let (mut x, mut y) = (None::<f64>, None::<f64>);
     let mut on_arc = 0;
-    let mut reader = NcReader::new(sink.nc.as_bytes(), Units::Inch);
-    while let Some(b) = reader.next_block().unwrap() {
-        let (Some(x), Some(y)) = (b.axes[0], b.axes[1]) else {
-            continue;
-        };
-        let d = ((x - cx).powi(2) + (y - cy).powi(2)).sqrt();
-        if (d - r).abs() < 2e-4
-            && (x - cx).abs() < r + 1e-3
-            && y <= cy + 1e-4
-            && x <= cx + 1e-4
-            && !(y == 6.4961 && x == -10.4331)
-        {
-            on_arc += 1; // inside the south-west quarter
+    for line in sink.nc.lines().filter(|l| l.contains(" L ")) {
+        for w in line.split_whitespace() {
+            if let Some(v) = w.strip_prefix('X') {
+                x = v.parse().ok();
+            }
+            if let Some(v) = w.strip_prefix('Y') {
+                y = v.parse().ok();
+            }
         }
-        if (d - r).abs() < 2e-4 && (y > cy + 1e-3 || x > cx + 1e-3) && (6.0..7.5).contains(&y) && x < -10.0 {
-            panic!("arc point outside the NX quarter: X{x} Y{y} (line {})", b.line);
+        let (Some(x), Some(y)) = (x, y) else { continue };
+        let d = ((x - cx).powi(2) + (y - cy).powi(2)).sqrt();
+        if (d - r).abs() < 2e-4 && (6.0..7.5).contains(&y) && x < -10.0 {
+            assert!(
+                y <= cy + 1e-4 && x <= cx + 1e-4,
+                "arc point outside the NX quarter: X{x} Y{y}: {line}"
+            );
+            on_arc += 1;
         }
     }
     assert!(
         on_arc >= 5,
         "the lead-in arc is linearized through its quarter ({on_arc} points)"
     );
+}
+
+#[test]
+fn the_nc_reader_knows_g2_from_g20() {
+    let nc = "%\nG21\nG0 X1 Y2 Z3\nG2 X2 Y3 I1 J0\nG20\nG1 X1\n%\n";
+    let mut r = NcReader::new(nc.as_bytes(), Units::Mm);
+    let a = r.next_block().unwrap().unwrap();
+    assert_eq!((a.units, a.rapid), (Units::Mm, true));
+    let b = r.next_block().unwrap().unwrap();
+    assert_eq!((b.units, b.rapid), (Units::Mm, false), "G2 is an arc, not inch");
+    let c = r.next_block().unwrap().unwrap();
+    assert_eq!(c.units, Units::Inch, "G20 is inch");
+}
+
+/// The three golden programs of the real NX post (HAAS_UMC750_5AXIS_MILL_IN) against kinepost's,
+/// Haas dialect: every golden motion block's X Y Z appears in order within 0.0001 in, and every
+/// golden arc as an arc of the same sense with the same I J.
+#[test]
+fn haas_dialect_matches_the_nx_golden_programs() {
+    let m = machine("haas-umc750");
+    for (cl, golden, mode) in [
+        (
+            "nx_clsf_mech491_variable_axis_inch_5ax.cls",
+            "nx_post_HAAS_UMC750_variable_axis.nc",
+            Mode::Tcp,
+        ),
+        (
+            "nx_clsf_mech491_simple_mill_plane_mm.cls",
+            "nx_post_HAAS_UMC750_simple_mill_plane.nc",
+            Mode::Joint,
+        ),
+        (
+            "nx_clsf_mech491_simple_mill_plane_zig_mm.cls",
+            "nx_post_HAAS_UMC750_simple_mill_plane_zig.nc",
+            Mode::Joint,
+        ),
+    ] {
+        let mut o = Options::new(&m);
+        o.mode = mode;
+        assert_eq!(o.dialect.name, "haas", "the profile's controller is the default");
+        let (sink, s) = run(&m, &std::fs::read(data(cl)).unwrap(), &o);
+        assert_eq!(s.errors, 0, "{cl}");
+        let gold = std::fs::read_to_string(data(&format!("golden/{golden}"))).unwrap();
+        let read = |t: &str| {
+            let mut r = NcReader::new(t.as_bytes(), Units::Inch);
+            let mut v = Vec::new();
+            while let Some(b) = r
+                .next_block()
+                .unwrap_or_else(|e| panic!("{golden}: {e}: {}", &t[..300.min(t.len())]))
+            {
+                v.push(b);
+            }
+            v
+        };
+        let (g, k) = (read(&gold), read(&sink.nc));
+        let mut j = 0;
+        let mut matched = 0;
+        for gb in &g {
+            let (Some(x), Some(y), Some(z)) = (gb.axes[0], gb.axes[1], gb.axes[2]) else {
+                continue;
+            };
+            while j < k.len()
+                && !k[j].axes[..3]
+                    .iter()
+                    .zip([x, y, z])
+                    .all(|(a, b)| a.is_some_and(|a| (a - b).abs() <= 1e-4 + 1e-9))
+            {
+                j += 1;
+            }
+            assert!(j < k.len(), "{golden} line {}: X{x} Y{y} Z{z} not found in order", gb.line);
+            matched += 1;
+        }
+        assert!(matched > 30, "{golden}: {matched} blocks compared");
+        // Arcs: same sense, same end point and centre offsets.
+        let words = |line: &str, l: char| -> Option<f64> {
+            let i = line.find(l)?;
+            let rest = &line[i + 1..];
+            let end = rest
+                .find(|c: char| !(c.is_ascii_digit() || c == '.' || c == '-'))
+                .unwrap_or(rest.len());
+            rest[..end].parse().ok()
+        };
+        let arcs: Vec<&str> = gold.lines().filter(|l| l.contains("G02") || l.contains("G03")).collect();
+        for ga in &arcs {
+            let ccw = ga.contains("G03");
+            let want = ['X', 'Y', 'I', 'J'].map(|l| words(ga, l));
+            let found = sink.nc.lines().any(|l| {
+                (l.contains(if ccw { "G3 " } else { "G2 " }))
+                    && ['X', 'Y', 'I', 'J'].iter().zip(want).all(|(c, w)| match (words(l, *c), w) {
+                        (Some(a), Some(b)) => (a - b).abs() <= 1e-4 + 1e-9,
+                        (_, None) => true,
+                        (None, Some(_)) => false,
+                    })
+            });
+            assert!(found, "{golden}: arc {ga:?} not written the same way");
+        }
+        if golden.contains("plane") {
+            assert!(!arcs.is_empty());
+        }
+    }
 }

@@ -195,6 +195,11 @@ impl Formats {
 pub enum Motion {
     Rapid,
     Feed,
+    /// Circular, counter-clockwise (G3) or clockwise (G2) in the active plane; its axis words
+    /// are always written (a full circle ends where it starts).
+    Arc {
+        ccw: bool,
+    },
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -379,7 +384,7 @@ impl Formatter {
         if conv {
             self.buf.push_str("L ");
         } else if let Some((mode, _)) = feed
-            && motion == Motion::Feed
+            && motion != Motion::Rapid
             && self.feed_mode != Some(mode)
         {
             let w = match mode {
@@ -395,11 +400,12 @@ impl Formatter {
         }
         let mut moved = false;
         let motion_pos = self.buf.len();
+        let force = matches!(motion, Motion::Arc { .. });
         for (i, v) in axes.iter().enumerate() {
             let Some(v) = v else { continue };
             let dec = if i < 3 { self.fmt.linear } else { self.fmt.rotary };
             let r = round_to(*v, dec);
-            if self.axes[i] != Some(r) {
+            if (force && i < 3) || self.axes[i] != Some(r) {
                 self.axes[i] = Some(r);
                 self.buf.push(AXIS_LETTERS[i]);
                 if conv && r >= 0 {
@@ -424,12 +430,14 @@ impl Formatter {
             let w = match motion {
                 Motion::Rapid => self.d.rapid,
                 Motion::Feed => self.d.feed,
+                Motion::Arc { ccw: true } => "G3",
+                Motion::Arc { ccw: false } => "G2",
             };
             self.buf.insert_str(motion_pos, &format!("{w} "));
         }
         self.motion = Some(motion);
         if let Some((mode, f)) = feed
-            && motion == Motion::Feed
+            && motion != Motion::Rapid
         {
             let r = round_to(f, self.fmt.feed);
             // Inverse time needs F on every block; per-minute feed is modal.

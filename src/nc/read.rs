@@ -63,8 +63,13 @@ impl<R: std::io::BufRead> NcReader<R> {
             let raw = std::mem::take(&mut self.buf);
             let r = self.parse_line(&raw);
             self.buf = raw;
-            if let Some(b) = r? {
-                return Ok(Some(b));
+            match r {
+                Ok(Some(b)) => return Ok(Some(b)),
+                Ok(None) => {}
+                // Text before the program (a tape's leader, an NX listing header before the
+                // first `%`) is not part of it.
+                Err(_) if !self.content && self.percents == 0 => {}
+                Err(e) => return Err(e),
             }
         }
     }
@@ -96,7 +101,6 @@ impl<R: std::io::BufRead> NcReader<R> {
         if code.is_empty() || code.starts_with('O') {
             return Ok(None);
         }
-        self.content = true;
         let mut vals: [Option<f64>; 6] = [None; 6];
         let mut machine_coords = false;
         let mut setting = false;
@@ -129,10 +133,11 @@ impl<R: std::io::BufRead> NcReader<R> {
             }
             let Ok(v) = num.parse::<f64>() else { continue };
             match c {
+                // Keyed by ten times the number: G2 is 20, G20 is 200, G43.4 is 434.
                 'G' => match (v * 10.0).round() as i64 {
                     0 => self.rapid = true,
-                    10 => self.rapid = false,
-                    20 => self.units = Units::Inch,
+                    10 | 20 | 30 => self.rapid = false,
+                    200 => self.units = Units::Inch,
                     210 => self.units = Units::Mm,
                     900 => self.incremental = false,
                     910 => self.incremental = true,
@@ -151,6 +156,8 @@ impl<R: std::io::BufRead> NcReader<R> {
                 _ => {}
             }
         }
+        // The line parsed: from here on the program has begun.
+        self.content = true;
         if vals.iter().all(|v| v.is_none()) || setting {
             return Ok(None);
         }

@@ -10,7 +10,7 @@ mod plan;
 mod source;
 pub mod verify;
 
-pub use source::{Item, MotionPt, ProgEvent, Source};
+pub use source::{ArcSpec, Item, MotionPt, ProgEvent, Source};
 
 use crate::cl::{CoolantCmd, FeedUnit, SpindleCmd};
 use crate::diag::{Code, Diagnostic, Severity};
@@ -286,6 +286,10 @@ struct Emitter<'a, S: Sink + ?Sized> {
     warned_per_rev: bool,
     /// Outer-rotary travel of the exact solutions and of what was written, at CL points: what
     /// the singular tolerance saved, honestly (a held block's saving is partly paid back later).
+    /// Set for the next block: an arc (G3 when true) with its centre words.
+    arc_words: Option<(bool, String)>,
+    /// The active circular-interpolation plane word (G17/G18/G19).
+    plane: &'static str,
     exact_prev: Option<f64>,
     exact_travel: f64,
     held_prev: Option<f64>,
@@ -294,7 +298,7 @@ struct Emitter<'a, S: Sink + ?Sized> {
 
 /// Post-processes CL from `input` for machine `m` into `sink`.
 pub fn post<R: BufRead, S: Sink + ?Sized>(input: R, m: &Machine, o: &Options, sink: &mut S) -> Result<Summary, Error> {
-    let mut src = Source::new(input, m.units, o.cl_units, o.tolerance, o.strict)?;
+    let mut src = Source::new(input, m.units, o.cl_units, o.strict)?;
     let setup = Setup::new(o.tool_length.unwrap_or(m.default_tool_length), o.work_offset);
     let mut e = Emitter {
         m,
@@ -320,6 +324,8 @@ pub fn post<R: BufRead, S: Sink + ?Sized>(input: R, m: &Machine, o: &Options, si
         strict_error: None,
         warned_no_tool: false,
         warned_per_rev: false,
+        arc_words: None,
+        plane: "G17",
         exact_prev: None,
         exact_travel: 0.0,
         held_prev: None,
@@ -668,6 +674,10 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                     });
                 let branch_change = prev.branch * branch < 0
                     && !plan::crosses_fold(self.m, &prev.joints.rotary, &joints.rotary, &prev.pose.axis, &pt.pose.axis);
+                if let (Some(arc), false, false) = (pt.arc, unwind, branch_change) {
+                    self.arc_move(prev, target, &arc, &pt, diags)?;
+                    return Ok(());
+                }
                 if unwind || branch_change {
                     self.reposition(prev, target, unwind, &pt)?;
                 } else {
@@ -777,6 +787,81 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         self.sum.smoothed_blocks += 1;
         self.sum.smoothing_max_deviation_deg = self.sum.smoothing_max_deviation_deg.max(d.to_degrees());
         Some((j, act, reached, d.to_degrees(), saved))
+    }
+
+    /// An arc from `a` to `b`: G2/G3 where the tool axis stays put and the arc's plane is a
+    /// principal plane of the output coordinates (the machine's in joint mode, the part's in TCP
+    /// mode), else chords within the tolerance (with the rotaries still, chords are straight in
+    /// the machine too, so no further check is needed).
+    fn arc_move(&mut self, a: At, b: At, arc: &ArcSpec, pt: &MotionPt, diags: Vec<Diagnostic>) -> Result<(), Error> {
+        let m = self.m;
+        let still = (0..m.rotaries.len()).all(|i| (a.joints.rotary[i] - b.joints.rotary[i]).abs() < 1e-9);
+        let tcp = self.o.mode == Mode::Tcp;
+        let full_linears = m.linears.iter().all(|l| l.is_some());
+        let conversational = self.o.dialect.style == crate::nc::Style::Conversational;
+        let (center, normal, start) = if tcp {
+            (arc.center, arc.normal, a.pose.tip)
+        } else {
+            let c = kinematics::controlled_point(m, &b.actual, &arc.center, &self.setup);
+            let n = kinematics::controlled_point(m, &b.actual, &(arc.center + arc.normal), &self.setup) - c;
+            (c, n, Vec3::from(a.joints.linear))
+        };
+        // G17: normal ±Z (I J), G18: ±Y (I K), G19: ±X (J K).
+        let plane = [(2usize, "G17", [0usize, 1]), (1, "G18", [0, 2]), (0, "G19", [1, 2])]
+            .into_iter()
+            .find(|(k, _, _)| normal[*k].abs() > 1.0 - 1e-9);
+        if let (true, true, false, Some((k, word, ij))) = (still, tcp || full_linears, conversational, plane) {
+            let ccw = normal[k] > 0.0;
+            let d = center - start;
+            let dec = self.f.fmt.linear;
+            let mut words = String::new();
+            for idx in ij {
+                words.push(['I', 'J', 'K'][idx]);
+                crate::nc::write_fixed(&mut words, crate::nc::round_to(d[idx], dec), dec);
+                words.push(' ');
+            }
+            if self.plane != word {
+                let l = self.f.words(word).to_string();
+                self.out(&l)?;
+                self.plane = word;
+            }
+            self.arc_words = Some((ccw, words.trim_end().to_string()));
+            return self.block(b, pt, false, diags, pt.inserted, None);
+        }
+        // Chords: the arc swept in the part frame, tool axis fixed, linears from the rotaries.
+        let step = 2.0 * (1.0 - (self.o.tolerance / arc.radius).min(1.0)).acos();
+        let segs = ((arc.sweep / step.max(1e-6)).ceil() as usize).clamp(1, 100_000);
+        let k = arc.normal;
+        let (ra, rb) = (a.pose.tip - arc.center, b.pose.tip - arc.center);
+        let (h0, h1) = (k.dot(&ra), k.dot(&rb));
+        let ap = ra - k * h0;
+        for i in 1..segs {
+            let t = i as f64 / segs as f64;
+            let (s, c) = (arc.sweep * t).sin_cos();
+            let tip = arc.center + ap * c + k.cross(&ap) * s + k * (h0 + (h1 - h0) * t);
+            let cp = kinematics::controlled_point(m, &b.actual, &tip, &self.setup);
+            let mut j = b.joints;
+            for n in 0..3 {
+                j.linear[n] = if m.linears[n].is_some() { cp[n] } else { 0.0 };
+            }
+            let at = At {
+                joints: j,
+                actual: b.actual,
+                pose: Pose { tip, axis: b.pose.axis },
+                branch: b.branch,
+            };
+            self.block(at, pt, false, Vec::new(), true, None)?;
+        }
+        let mut diags = diags;
+        if segs > 1 {
+            diags.push(Diagnostic::new(
+                Code::ArcLinearized,
+                Severity::Info,
+                Some(pt.line),
+                format!("arc of {:.1}° written as {segs} chords", arc.sweep.to_degrees()),
+            ));
+        }
+        self.block(b, pt, false, diags, pt.inserted, None)
     }
 
     /// Retract along the tool axis, turn at clearance, re-approach: for an unwind of a bounded
@@ -1211,9 +1296,15 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             self.count(d);
         }
         let comment = comment.or(pt.comment);
-        let motion = if rapid { Motion::Rapid } else { Motion::Feed };
+        let arc = self.arc_words.take();
+        let motion = match (&arc, rapid) {
+            (_, true) => Motion::Rapid,
+            (Some((ccw, _)), false) => Motion::Arc { ccw: *ccw },
+            (None, false) => Motion::Feed,
+        };
+        let extra = arc.as_ref().map_or("", |(_, w)| w.as_str());
         self.at = Some(to);
-        match self.f.motion(motion, &axes, feed, "", comment) {
+        match self.f.motion(motion, &axes, feed, extra, comment) {
             Some(text) => {
                 self.blocks += 1;
                 self.sum.blocks += 1;

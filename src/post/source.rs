@@ -23,6 +23,19 @@ pub struct MotionPt {
     /// A point the source inserted (arc or cycle expansion), not a CL GOTO itself.
     pub inserted: bool,
     pub comment: Option<&'static str>,
+    /// This point ends an arc from the previous one (CL CIRCLE): the engine writes G2/G3 where
+    /// the control and the machine's pose allow, else it linearizes within the tolerance.
+    pub arc: Option<ArcSpec>,
+}
+
+/// An arc in the part frame, profile units: motion turns counter-clockwise about `normal`.
+#[derive(Clone, Copy, Debug)]
+pub struct ArcSpec {
+    pub center: Vec3,
+    pub normal: Vec3,
+    pub radius: f64,
+    /// Swept angle (radians, in (0, 2π]).
+    pub sweep: f64,
 }
 
 #[derive(Clone, Debug)]
@@ -59,7 +72,6 @@ pub struct Source<R> {
     circle: Option<([f64; 3], [f64; 3], Option<f64>)>,
     circle_cw: bool,
     cycle: Option<CycleParams>,
-    chord_tol: f64,
     ended: bool,
     pub strict_error: Option<Diagnostic>,
     strict: bool,
@@ -72,9 +84,8 @@ pub enum Error {
 }
 
 impl<R: BufRead> Source<R> {
-    /// `cl_units`: the caller's statement of the CL units (wins over the file's); `chord_tol` in
-    /// profile units, for arcs.
-    pub fn new(input: R, profile_units: Units, cl_units: Option<Units>, chord_tol: f64, strict: bool) -> Result<Self, Error> {
+    /// `cl_units`: the caller's statement of the CL units (wins over the file's).
+    pub fn new(input: R, profile_units: Units, cl_units: Option<Units>, strict: bool) -> Result<Self, Error> {
         let mut reader = Reader::new(input);
         let mut ahead = VecDeque::new();
         let mut found: Option<(Units, &'static str)> = cl_units.map(|u| (u, "option"));
@@ -120,7 +131,6 @@ impl<R: BufRead> Source<R> {
             circle: None,
             circle_cw: false,
             cycle: None,
-            chord_tol,
             ended: false,
             strict_error: None,
             strict,
@@ -279,6 +289,7 @@ impl<R: BufRead> Source<R> {
             feed: self.feed,
             inserted,
             comment,
+            arc: None,
         }));
     }
 
@@ -289,19 +300,25 @@ impl<R: BufRead> Source<R> {
             self.tip = Some(p);
             return;
         }
-        if let (Some((center, axis, radius)), Some(start)) = (self.circle.take(), self.tip) {
-            self.arc(line, start, p, Vec3::from(center), Vec3::from(axis), radius);
-        }
+        let arc = match (self.circle.take(), self.tip) {
+            (Some((center, axis, radius)), Some(start)) if !rapid => {
+                self.arc(line, start, p, Vec3::from(center), Vec3::from(axis), radius)
+            }
+            _ => None,
+        };
         self.push(line, p, rapid, false, None);
+        if let (Some(a), Some(Item::Motion(m))) = (arc, self.out.back_mut()) {
+            m.arc = Some(a);
+        }
         self.tip = Some(p);
     }
 
-    /// Points strictly between `start` and `end` on the arc about `axis` through `center`
-    /// (counter-clockwise about the axis), within the chord tolerance.
-    fn arc(&mut self, line: u32, start: Vec3, end: Vec3, center: Vec3, axis: Vec3, radius: Option<f64>) {
+    /// The arc from `start` to `end` about `axis` through `center` (CL units in, profile units
+    /// out), in the sense the CAM system meant (see `Record::Circle`).
+    fn arc(&mut self, line: u32, start: Vec3, end: Vec3, center: Vec3, axis: Vec3, radius: Option<f64>) -> Option<ArcSpec> {
         let n = axis.norm();
         if n.is_nan() || n <= 1e-12 {
-            return;
+            return None;
         }
         // Turning clockwise about k is turning counter-clockwise about -k.
         let k = if self.circle_cw { -axis / n } else { axis / n };
@@ -309,30 +326,29 @@ impl<R: BufRead> Source<R> {
         let (a_p, b_p) = (a - k * k.dot(&a), b - k * k.dot(&b));
         let r = radius.unwrap_or_else(|| a_p.norm());
         if r.is_nan() || r <= 1e-9 || a_p.norm() < 1e-9 {
-            return;
+            return None;
+        }
+        if (a_p.norm() - b_p.norm()).abs() > 1e-3 * r.max(1.0) {
+            self.diag(
+                Code::BadRecord,
+                Severity::Warning,
+                line,
+                "CIRCLE: start and end are not on one circle about the centre: taken as a straight move".into(),
+            );
+            return None;
         }
         let mut sweep = k.dot(&a_p.cross(&b_p)).atan2(a_p.dot(&b_p));
         if sweep <= 1e-12 {
             sweep += std::f64::consts::TAU;
         }
-        let tol = (self.chord_tol / self.scale).max(1e-9);
-        let step = 2.0 * (1.0 - (tol / r).min(1.0)).acos();
-        let segs = ((sweep / step.max(1e-6)).ceil() as usize).clamp(1, 100_000);
-        let (h0, h1) = (k.dot(&a), k.dot(&b));
-        for i in 1..segs {
-            let t = i as f64 / segs as f64;
-            let th = sweep * t;
-            let (s, c) = th.sin_cos();
-            let v = a_p * c + k.cross(&a_p) * s;
-            let p = center + v * (r / a_p.norm()) + k * (h0 + (h1 - h0) * t);
-            self.push(line, p, false, true, None);
-        }
-        self.diag(
-            Code::ArcLinearized,
-            Severity::Info,
-            line,
-            format!("arc of {:.1}° linearized in {segs} chords", sweep.to_degrees()),
-        );
+        // The plane's centre: where the start point projects onto the axis line.
+        let c_plane = center + k * k.dot(&a);
+        Some(ArcSpec {
+            center: c_plane * self.scale,
+            normal: k,
+            radius: a_p.norm() * self.scale,
+            sweep,
+        })
     }
 
     fn hole(&mut self, line: u32, p: Vec3, c: CycleParams) {

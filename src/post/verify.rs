@@ -101,7 +101,7 @@ fn block_pose(m: &Machine, b: &NcBlock, o: &VerifyOptions) -> Option<(Vec3, Vec3
 }
 
 pub fn verify<C: BufRead, N: BufRead>(cl: C, nc: N, m: &Machine, o: &VerifyOptions) -> Result<Report, Error> {
-    let mut src = Source::new(cl, m.units, o.cl_units, o.tolerance, false)?;
+    let mut src = Source::new(cl, m.units, o.cl_units, false)?;
     let mut reader = NcReader::new(nc, m.units);
     let mut ahead: VecDeque<(NcBlock, Option<(Vec3, Vec3)>)> = VecDeque::new();
     let mut rep = Report {
@@ -162,6 +162,7 @@ pub fn verify<C: BufRead, N: BufRead>(cl: C, nc: N, m: &Machine, o: &VerifyOptio
                 // among them makes it a reposition, exempt).
                 if let Some((prev_tip, true)) = last
                     && !pt.rapid
+                    && pt.arc.is_none()
                     && !ahead.iter().take(i).any(|(b, _)| b.rapid)
                 {
                     for (_, p) in ahead.iter().take(i) {
