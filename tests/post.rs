@@ -518,3 +518,46 @@ fn haas_dialect_matches_the_nx_golden_programs() {
         }
     }
 }
+
+#[test]
+fn rapids_that_turn_rotaries_retract_first_and_turn_alone() {
+    let m = machine("spinner-u5-620");
+    let (s30, c30) = (30f64.to_radians().sin(), 30f64.to_radians().cos());
+    let cl = format!(
+        "UNITS/MM\nFEDRAT/500,MMPM\nGOTO/0,0,10,0,0,1\nGOTO/10,0,10,0,0,1\nRAPID\nGOTO/20,5,30,{s30},0,{c30}\nGOTO/25,5,28,{s30},0,{c30}\n"
+    );
+    let mut o = Options::new(&m);
+    o.dialect = &kinepost::nc::FANUC;
+    let (sink, s) = run(&m, cl.as_bytes(), &o);
+    assert_eq!(s.errors, 0);
+    let lines: Vec<&str> = sink.nc.lines().collect();
+    let i = lines
+        .iter()
+        .position(|l| l.contains("(RETRACT Z)"))
+        .expect("retract before turning");
+    assert!(
+        lines[i].starts_with("G0 Z460.000"),
+        "machine Z to the top of travel: {}",
+        lines[i]
+    );
+    let turn = lines[i + 1];
+    let code = turn.split('(').next().unwrap();
+    assert!(
+        turn.contains("ROTARY REPOSITION")
+            && code.contains('B')
+            && !code.contains('X')
+            && !code.contains('Y')
+            && !code.contains('Z'),
+        "rotaries alone: {turn}"
+    );
+    assert!(
+        lines[i + 2].contains('X') && !lines[i + 2].contains('Z'),
+        "then X Y at the top: {}",
+        lines[i + 2]
+    );
+    assert!(lines[i + 3].starts_with('Z'), "then down: {}", lines[i + 3]);
+    // TCP mode: lift along the tool axis, turn at clearance.
+    o.mode = Mode::Tcp;
+    let (sink, _) = run(&m, cl.as_bytes(), &o);
+    assert!(sink.nc.contains("(RETRACT)") && sink.nc.contains("(ROTARY REPOSITION)"));
+}

@@ -666,6 +666,13 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             pose,
             branch,
         };
+        if let Some(prev) = self.at
+            && pt.rapid
+            && (0..self.m.rotaries.len()).any(|i| (joints.rotary[i] - prev.joints.rotary[i]).abs() > 1f64.to_radians())
+        {
+            self.safe_rapid(prev, target, &pt, diags)?;
+            return Ok(());
+        }
         match self.at {
             Some(prev) if !pt.rapid => {
                 let unwind =
@@ -862,6 +869,56 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             ));
         }
         self.block(b, pt, false, diags, pt.inserted, None)
+    }
+
+    /// A rapid that turns the rotaries: never together with the linears near the part. Joint
+    /// mode: machine Z to the top of its travel, rotaries alone, then X Y, then down. TCP mode
+    /// (or no Z axis): lift along the tool axis, turn at clearance, approach.
+    fn safe_rapid(&mut self, prev: At, to: At, pt: &MotionPt, diags: Vec<Diagnostic>) -> Result<(), Error> {
+        let zmax = self.m.linears[2].as_ref().map(|l| l.max);
+        let (Mode::Joint, Some(zmax)) = (self.o.mode, zmax) else {
+            let r1 = self.lifted(prev, self.o.clearance);
+            let r2 = self.lifted(to, self.o.clearance);
+            self.block(r1, pt, true, diags, true, Some("RETRACT"))?;
+            self.block(r2, pt, true, Vec::new(), true, Some("ROTARY REPOSITION"))?;
+            return self.block(to, pt, true, Vec::new(), pt.inserted, None);
+        };
+        let at = |m: &Machine, s: &Setup, mut j: Joints, actual: [f64; 3], branch: i8| {
+            j.linear[2] = j.linear[2].max(f64::MIN);
+            let pose = fk(m, &j, s);
+            At {
+                joints: j,
+                actual,
+                pose,
+                branch,
+            }
+        };
+        let mut up = prev.joints;
+        up.linear[2] = zmax;
+        let mut turned = up;
+        turned.rotary = to.joints.rotary;
+        let mut over = turned;
+        over.linear[0] = to.joints.linear[0];
+        over.linear[1] = to.joints.linear[1];
+        let (m, s) = (self.m, self.setup);
+        self.block(
+            at(m, &s, up, prev.actual, prev.branch),
+            pt,
+            true,
+            diags,
+            true,
+            Some("RETRACT Z"),
+        )?;
+        self.block(
+            at(m, &s, turned, to.actual, to.branch),
+            pt,
+            true,
+            Vec::new(),
+            true,
+            Some("ROTARY REPOSITION"),
+        )?;
+        self.block(at(m, &s, over, to.actual, to.branch), pt, true, Vec::new(), true, None)?;
+        self.block(to, pt, true, Vec::new(), pt.inserted, None)
     }
 
     /// Retract along the tool axis, turn at clearance, re-approach: for an unwind of a bounded
