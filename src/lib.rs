@@ -1,5 +1,6 @@
 //! kinepost: a 5-axis CNC postprocessor. See ARCHITECTURE.md for the map.
 
+pub mod calib;
 pub mod cl;
 pub mod cli;
 pub mod diag;

@@ -228,3 +228,56 @@ fn post_verify_lint_and_generate_as_a_user_runs_them() {
     assert!(err.contains("line 2, column 8"), "{err}");
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[test]
+fn machines_validate_add_and_fit_offline() {
+    let dir = std::env::temp_dir().join(format!("kinepost-machines-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let shipped = concat!(env!("CARGO_MANIFEST_DIR"), "/machines/vmc-3axis.toml");
+    let (code, out, _) = kinepost(&["machines", "validate", shipped]);
+    assert_eq!(code, 0);
+    assert!(out.starts_with("ok "));
+    let bad = dir.join("bad.toml");
+    std::fs::write(&bad, "id = \"bad\"\nunits = \"cm\"\n").unwrap();
+    let (code, out, _) = kinepost(&["machines", "validate", bad.to_str().unwrap()]);
+    assert_ne!(code, 0);
+    assert!(out.contains("units"), "{out}");
+    // The paper's polynomial from a CSV of angle,error.
+    let paper = [0.1808, -2.95e-2, 2.3e-3, -7e-5, -8e-7];
+    let mut csv = String::from("angle,error\n");
+    for t in 0..=40 {
+        csv.push_str(&format!("{t},{}\n", paper.iter().rev().fold(0.0, |a, k| a * t as f64 + k)));
+    }
+    let input = dir.join("b.csv");
+    std::fs::write(&input, csv).unwrap();
+    let (code, toml_out, err) = kinepost(&[
+        "machines",
+        "fit-angle-error",
+        "--machine",
+        "htm50200-horizontal",
+        "--axis",
+        "B",
+        "--input",
+        input.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    assert!(err.contains("proposed: degree 4"), "{err}");
+    // Apply it explicitly into a library of our own.
+    let lib = dir.join("lib");
+    std::fs::create_dir_all(&lib).unwrap();
+    let proposal = dir.join("htm50200-horizontal.toml");
+    std::fs::write(&proposal, toml_out).unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_kinepost"))
+        .args([
+            "--machines",
+            lib.to_str().unwrap(),
+            "machines",
+            "add",
+            proposal.to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(lib.join("htm50200-horizontal.toml").exists());
+    std::fs::remove_dir_all(&dir).ok();
+}

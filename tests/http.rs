@@ -371,3 +371,116 @@ async fn busy_cors_gzip_and_the_web_page() {
         404
     );
 }
+
+#[tokio::test]
+async fn fk_ik_reachability_and_fits_over_http() {
+    let base = server(cfg()).await;
+    let c = reqwest::Client::new();
+    let post = |path: String, body: Value| c.post(format!("{base}{path}")).json(&body).send();
+    // FK then IK: the words come back among the solutions.
+    let pose: Value = post(
+        "/v1/machines/spinner-u5-620/fk".into(),
+        serde_json::json!({"joints": {"X": 10, "Y": 20, "Z": 30, "B": 30, "C": 45}}),
+    )
+    .await
+    .unwrap()
+    .json()
+    .await
+    .unwrap();
+    let ik: Value = post(
+        "/v1/machines/spinner-u5-620/ik".into(),
+        serde_json::json!({"tip": pose["tip"], "axis": pose["axis"]}),
+    )
+    .await
+    .unwrap()
+    .json()
+    .await
+    .unwrap();
+    assert!(
+        ik["solutions"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|s| (s["B"].as_f64().unwrap() - 30.0).abs() < 1e-9 && (s["C"].as_f64().unwrap() - 45.0).abs() < 1e-9)
+    );
+    // Reachability: a tilted tool on a 3-axis machine misses by its tilt.
+    let v: Value = post(
+        "/v1/machines/vmc-3axis/validate-pose".into(),
+        serde_json::json!({"tip": [0, 0, 0], "axis": [0, 0.5, 0.8660254037844386]}),
+    )
+    .await
+    .unwrap()
+    .json()
+    .await
+    .unwrap();
+    assert_eq!(v["reachable"], false);
+    assert!((v["miss_deg"].as_f64().unwrap() - 30.0).abs() < 1e-6);
+    let r = post(
+        "/v1/machines/spinner-u5-620/fk".into(),
+        serde_json::json!({"joints": {"Q": 1}}),
+    )
+    .await
+    .unwrap();
+    assert_eq!(r.status(), 400);
+    // Angle error: the HTM50200 paper's polynomial back from its samples, as a profile to apply.
+    let paper = [0.1808, -2.95e-2, 2.3e-3, -7e-5, -8e-7];
+    let samples: Vec<[f64; 2]> = (0..=40)
+        .map(|t| [t as f64, paper.iter().rev().fold(0.0, |a, k| a * t as f64 + k)])
+        .collect();
+    let fit: Value = post(
+        "/v1/machines/htm50200-horizontal/angle-error-fit".into(),
+        serde_json::json!({"axis": "B", "samples": samples}),
+    )
+    .await
+    .unwrap()
+    .json()
+    .await
+    .unwrap();
+    assert_eq!(fit["proposed"]["degree"], 4);
+    assert_eq!(fit["fits"].as_array().unwrap().len(), 4);
+    let toml_text = fit["proposed_profile"].as_str().unwrap();
+    let prof = kinepost::machines::parse_profile(toml_text, "proposed", Some("htm50200-horizontal"))
+        .expect("the proposal is a valid profile");
+    assert!(prof.machine.rotaries.iter().any(|r| r.angle_error.is_some()));
+    // Calibration: a machine whose A pivot sits 0.003 in off in y: recovered from test cuts.
+    let lib = kinepost::machines::Library::load_dir(&cfg().machines).unwrap();
+    let nominal = lib.get("fryer-5x-45").unwrap();
+    let shifted = std::fs::read_to_string(cfg().machines.join("fryer-5x-45.toml"))
+        .unwrap()
+        .replace("pivot = [-0.002, -0.001, 5.0]", "pivot = [-0.002, 0.002, 5.0]");
+    let truth = kinepost::machines::parse_profile(&shifted, "truth", None).unwrap();
+    let setup = kinepost::kinematics::Setup::new(3.0, kinepost::kinematics::Vec3::zeros());
+    let mut meas = Vec::new();
+    for cdeg in [0.0, 90.0, 180.0, -90.0] {
+        for adeg in [0.0, 45.0, 90.0] {
+            let words = serde_json::json!({"X": 1.0, "Y": -0.5, "Z": -2.0, "A": adeg, "C": cdeg});
+            let mut j = kinepost::kinematics::Joints {
+                linear: [1.0, -0.5, -2.0],
+                ..Default::default()
+            };
+            j.rotary[nominal.machine.rotary_index('A').unwrap()] = f64::to_radians(adeg);
+            j.rotary[nominal.machine.rotary_index('C').unwrap()] = f64::to_radians(cdeg);
+            let d = kinepost::calib::simulated_deviation(&nominal.machine, &truth.machine, &setup, &j);
+            meas.push(serde_json::json!({"joints": words, "deviation": [d.x, d.y, d.z]}));
+        }
+    }
+    let cal: Value = post(
+        "/v1/machines/fryer-5x-45/calibrate".into(),
+        serde_json::json!({"measurements": meas, "tool_length": 3.0}),
+    )
+    .await
+    .unwrap()
+    .json()
+    .await
+    .unwrap();
+    assert!(
+        cal["rms"].as_f64().unwrap() < 1e-9 && cal["rms_before"].as_f64().unwrap() > 1e-3,
+        "{cal}"
+    );
+    assert!(
+        (cal["offsets"]["A"][1].as_f64().unwrap() - 0.003).abs() < 1e-8,
+        "{}",
+        cal["offsets"]
+    );
+    assert!(cal["proposed_profile"].as_str().unwrap().contains("0.002"));
+}

@@ -4,6 +4,7 @@
 //! in flight.
 
 mod error;
+mod machine_ops;
 mod post;
 
 pub use error::{ApiError, Problem};
@@ -155,8 +156,11 @@ pub struct AppState {
 #[derive(OpenApi)]
 #[openapi(
     info(title = "kinepost", description = "5-axis CNC postprocessor: CL data in, verified NC out, for any machine profile."),
-    paths(post::post_cl, list_machines, get_machine, list_dialects, healthz, readyz, metrics_route),
-    components(schemas(Problem, MachineDto, LinearDto, RotaryDto, AngleErrorDto, DialectDto, PostParams)),
+    paths(post::post_cl, list_machines, get_machine, list_dialects, machine_ops::fk_route, machine_ops::ik_route,
+        machine_ops::validate_pose, machine_ops::angle_error_fit, machine_ops::calibrate, healthz, readyz, metrics_route),
+    components(schemas(Problem, MachineDto, LinearDto, RotaryDto, AngleErrorDto, DialectDto, PostParams, machine_ops::FkRequest,
+        machine_ops::PoseDto, machine_ops::PoseRequest, machine_ops::ReachDto, machine_ops::AngleFitRequest, machine_ops::FitDto,
+        machine_ops::AngleFitResponse, machine_ops::MeasurementDto, machine_ops::CalibrateRequest, machine_ops::CalibrateResponse)),
     tags((name = "post", description = "Post-processing"), (name = "machines", description = "Machine profiles"), (name = "ops", description = "Health and metrics"))
 )]
 pub struct ApiDoc;
@@ -196,6 +200,11 @@ pub fn app(state: Arc<AppState>) -> axum::Router {
         .route("/v1/machines", get(list_machines))
         .route("/v1/dialects", get(list_dialects))
         .route("/v1/machines/{id}", get(get_machine))
+        .route("/v1/machines/{id}/fk", post_route(machine_ops::fk_route))
+        .route("/v1/machines/{id}/ik", post_route(machine_ops::ik_route))
+        .route("/v1/machines/{id}/validate-pose", post_route(machine_ops::validate_pose))
+        .route("/v1/machines/{id}/angle-error-fit", post_route(machine_ops::angle_error_fit))
+        .route("/v1/machines/{id}/calibrate", post_route(machine_ops::calibrate))
         .route("/healthz", get(healthz))
         .route("/readyz", get(readyz))
         .route("/metrics", get(metrics_route))
