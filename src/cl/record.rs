@@ -229,6 +229,12 @@ pub fn parse_statement(stmt: &str, line: u32, diags: &mut Vec<Diagnostic>) -> Op
             }
             let p = [v[0], v[1], v[2]];
             let axis = (n >= 6).then_some([v[3], v[4], v[5]]);
+            if let Some(a) = axis
+                && a.iter().map(|x| x * x).sum::<f64>() < 1e-24
+            {
+                bad(diags, args[3].col, format!("{major_uc}: the tool axis (i,j,k) is zero"));
+                return None;
+            }
             Some(match major_uc.as_str() {
                 "GOTO" => Record::Goto { p, axis },
                 "GODLTA" => Record::GoDelta { d: p, axis },
@@ -496,7 +502,8 @@ fn fast_goto(stmt: &str) -> Option<Record> {
             p: [v[0], v[1], v[2]],
             axis: None,
         }),
-        6 => Some(Record::Goto {
+        // A zero axis goes to the general parser, which reports it with its column.
+        6 if v[3] * v[3] + v[4] * v[4] + v[5] * v[5] >= 1e-24 => Some(Record::Goto {
             p: [v[0], v[1], v[2]],
             axis: Some([v[3], v[4], v[5]]),
         }),
