@@ -3,7 +3,7 @@
 //! return a proposed profile; applying it is a separate, explicit step.
 
 use super::AppState;
-use super::error::ApiError;
+use super::error::{ApiError, ApiJson};
 use crate::calib::{self, Measurement};
 use crate::kinematics::{self, IkOptions, Joints, Machine, Pose, Setup, Units, Vec3};
 use crate::machines::Profile;
@@ -22,6 +22,7 @@ type Words = BTreeMap<String, f64>;
 pub struct FkRequest {
     pub joints: Words,
     pub tool_length: Option<f64>,
+    #[schema(value_type = Option<Vec<f64>>, min_items = 3, max_items = 3)]
     pub work_offset: Option<[f64; 3]>,
 }
 
@@ -35,10 +36,13 @@ pub struct PoseDto {
 #[serde(deny_unknown_fields)]
 pub struct PoseRequest {
     /// Tip point in the part frame.
+    #[schema(value_type = Vec<f64>, min_items = 3, max_items = 3)]
     pub tip: [f64; 3],
     /// Tool axis (tip toward spindle).
+    #[schema(value_type = Vec<f64>, min_items = 3, max_items = 3)]
     pub axis: [f64; 3],
     pub tool_length: Option<f64>,
+    #[schema(value_type = Option<Vec<f64>>, min_items = 3, max_items = 3)]
     pub work_offset: Option<[f64; 3]>,
     /// Units of `tip` (default: the profile's).
     pub units: Option<String>,
@@ -64,9 +68,11 @@ pub struct AngleFitRequest {
     pub axis: String,
     /// Measured (commanded angle, angle error) pairs, degrees.
     #[serde(default)]
+    #[schema(value_type = Vec<Vec<f64>>)]
     pub samples: Vec<[f64; 2]>,
     /// Or (commanded angle, vertical tip error ΔZ) pairs with `pendulum` (the paper's eq. 10).
     #[serde(default)]
+    #[schema(value_type = Vec<Vec<f64>>)]
     pub vertical: Vec<[f64; 2]>,
     pub pendulum: Option<f64>,
 }
@@ -96,6 +102,7 @@ pub struct AngleFitResponse {
 pub struct MeasurementDto {
     pub joints: Words,
     /// Where the tip landed minus where the profile says, part frame, profile units.
+    #[schema(value_type = Vec<f64>, min_items = 3, max_items = 3)]
     pub deviation: [f64; 3],
 }
 
@@ -168,11 +175,11 @@ fn pose(m: &Machine, r: &PoseRequest) -> Result<Pose, ApiError> {
 
 /// Forward kinematics: axis words → tool pose in the part frame.
 #[utoipa::path(post, path = "/v1/machines/{id}/fk", params(("id" = String, Path)), request_body = FkRequest,
-    responses((status = 200, body = PoseDto), (status = 400, body = super::Problem), (status = 404, body = super::Problem)), tag = "machines")]
+    responses((status = 200, body = PoseDto), (status = 400, body = super::Problem, content_type = "application/problem+json"), (status = 404, body = super::Problem, content_type = "application/problem+json"), (status = 415, body = super::Problem, content_type = "application/problem+json"), (status = 422, body = super::Problem, content_type = "application/problem+json")), tag = "machines")]
 pub async fn fk_route(
     State(st): State<Arc<AppState>>,
     Path(id): Path<String>,
-    Json(r): Json<FkRequest>,
+    ApiJson(r): ApiJson<FkRequest>,
 ) -> Result<Json<PoseDto>, ApiError> {
     let p = profile(&st, &id)?;
     let m = &p.machine;
@@ -185,11 +192,11 @@ pub async fn fk_route(
 
 /// Inverse kinematics: every joint solution of a pose, in limits or not.
 #[utoipa::path(post, path = "/v1/machines/{id}/ik", params(("id" = String, Path)), request_body = PoseRequest,
-    responses((status = 200, description = "{\"solutions\": [{axis words…, branch, within_limits, singular}]}"), (status = 422, body = super::Problem), (status = 404, body = super::Problem)), tag = "machines")]
+    responses((status = 200, description = "{\"solutions\": [{axis words…, branch, within_limits, singular}]}", body = Object), (status = 400, body = super::Problem, content_type = "application/problem+json"), (status = 404, body = super::Problem, content_type = "application/problem+json"), (status = 415, body = super::Problem, content_type = "application/problem+json"), (status = 422, body = super::Problem, content_type = "application/problem+json")), tag = "machines")]
 pub async fn ik_route(
     State(st): State<Arc<AppState>>,
     Path(id): Path<String>,
-    Json(r): Json<PoseRequest>,
+    ApiJson(r): ApiJson<PoseRequest>,
 ) -> Result<Json<Value>, ApiError> {
     let p = profile(&st, &id)?;
     let m = &p.machine;
@@ -211,11 +218,11 @@ pub async fn ik_route(
 
 /// Whether a pose can be reached, and within travel: a check before posting.
 #[utoipa::path(post, path = "/v1/machines/{id}/validate-pose", params(("id" = String, Path)), request_body = PoseRequest,
-    responses((status = 200, body = ReachDto), (status = 404, body = super::Problem)), tag = "machines")]
+    responses((status = 200, body = ReachDto), (status = 400, body = super::Problem, content_type = "application/problem+json"), (status = 404, body = super::Problem, content_type = "application/problem+json"), (status = 415, body = super::Problem, content_type = "application/problem+json"), (status = 422, body = super::Problem, content_type = "application/problem+json")), tag = "machines")]
 pub async fn validate_pose(
     State(st): State<Arc<AppState>>,
     Path(id): Path<String>,
-    Json(r): Json<PoseRequest>,
+    ApiJson(r): ApiJson<PoseRequest>,
 ) -> Result<Json<ReachDto>, ApiError> {
     let p = profile(&st, &id)?;
     let m = &p.machine;
@@ -255,11 +262,11 @@ pub async fn validate_pose(
 
 /// Fits a rotary's angle-error polynomial (degrees 2–5) from measurements.
 #[utoipa::path(post, path = "/v1/machines/{id}/angle-error-fit", params(("id" = String, Path)), request_body = AngleFitRequest,
-    responses((status = 200, body = AngleFitResponse), (status = 400, body = super::Problem), (status = 404, body = super::Problem)), tag = "machines")]
+    responses((status = 200, body = AngleFitResponse), (status = 400, body = super::Problem, content_type = "application/problem+json"), (status = 404, body = super::Problem, content_type = "application/problem+json"), (status = 415, body = super::Problem, content_type = "application/problem+json"), (status = 422, body = super::Problem, content_type = "application/problem+json")), tag = "machines")]
 pub async fn angle_error_fit(
     State(st): State<Arc<AppState>>,
     Path(id): Path<String>,
-    Json(r): Json<AngleFitRequest>,
+    ApiJson(r): ApiJson<AngleFitRequest>,
 ) -> Result<Json<AngleFitResponse>, ApiError> {
     let p = profile(&st, &id)?;
     let idx = p
@@ -308,11 +315,11 @@ pub async fn angle_error_fit(
 
 /// Fits pivot offsets from test cuts (measured tip deviations at known joint positions).
 #[utoipa::path(post, path = "/v1/machines/{id}/calibrate", params(("id" = String, Path)), request_body = CalibrateRequest,
-    responses((status = 200, body = CalibrateResponse), (status = 400, body = super::Problem), (status = 404, body = super::Problem)), tag = "machines")]
+    responses((status = 200, body = CalibrateResponse), (status = 400, body = super::Problem, content_type = "application/problem+json"), (status = 404, body = super::Problem, content_type = "application/problem+json"), (status = 415, body = super::Problem, content_type = "application/problem+json"), (status = 422, body = super::Problem, content_type = "application/problem+json")), tag = "machines")]
 pub async fn calibrate(
     State(st): State<Arc<AppState>>,
     Path(id): Path<String>,
-    Json(r): Json<CalibrateRequest>,
+    ApiJson(r): ApiJson<CalibrateRequest>,
 ) -> Result<Json<CalibrateResponse>, ApiError> {
     let p = profile(&st, &id)?;
     let m = &p.machine;

@@ -7,7 +7,7 @@ mod error;
 mod machine_ops;
 mod post;
 
-pub use error::{ApiError, Problem};
+pub use error::{ApiError, ApiJson, Problem};
 pub use post::PostParams;
 
 use crate::machines::{Library, Profile};

@@ -6,11 +6,11 @@
 //! 16 KiB are ready (or the program ends): an error before that still gets its HTTP status.
 
 use super::AppState;
-use super::error::ApiError;
+use super::error::{ApiError, ApiQuery};
 use crate::diag::Diagnostic;
 use crate::post::{self, BlockInfo, Settings, Sink, Summary};
 use axum::body::Body;
-use axum::extract::{FromRequest, Multipart, Query, Request, State};
+use axum::extract::{FromRequest, Multipart, Request, State};
 use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use bytes::Bytes;
@@ -214,7 +214,7 @@ fn engine_error(e: post::Error) -> ApiError {
 )]
 pub async fn post_cl(
     State(st): State<Arc<AppState>>,
-    Query(query): Query<PostParams>,
+    ApiQuery(query): ApiQuery<PostParams>,
     req: Request,
 ) -> Result<Response, ApiError> {
     let ndjson = wants_ndjson(req.headers())?;
