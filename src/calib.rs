@@ -3,7 +3,7 @@
 //! paper). Pure numerics over the kinematics; no IO. Fits propose; applying one is a separate,
 //! explicit step for the caller.
 
-use crate::kinematics::{self, Joints, Machine, MachineSpec, Rotary, Setup, Vec3, fk};
+use crate::kinematics::{self, Joints, Machine, Rotary, Setup, Vec3, fk};
 use nalgebra::{DMatrix, DVector};
 
 #[derive(Debug, thiserror::Error, PartialEq)]
@@ -148,17 +148,7 @@ pub fn fit_pivots(m: &Machine, setup: &Setup, meas: &[Measurement]) -> Result<Pi
                 ..r.clone()
             })
             .collect();
-        Machine::new(MachineSpec {
-            id: m.id.clone(),
-            name: m.name.clone(),
-            units: m.units,
-            controller: m.controller.clone(),
-            description: m.description.clone(),
-            linears: m.linears.clone(),
-            rotaries,
-            default_tool_length: m.default_tool_length,
-        })
-        .map_err(|e| Error::Input(e.to_string()))
+        m.with_rotaries(rotaries).map_err(|e| Error::Input(e.to_string()))
     };
     let residual = |x: &DVector<f64>| -> Result<DVector<f64>, Error> {
         let mm = with(x)?;

@@ -2,7 +2,7 @@
 //! on the papers' own figures.
 
 use kinepost::calib::{self, Measurement};
-use kinepost::kinematics::{Joints, Machine, MachineSpec, Rotary, Setup, Vec3};
+use kinepost::kinematics::{Joints, Machine, Rotary, Setup, Vec3};
 use kinepost::machines::Library;
 
 fn lib() -> Library {
@@ -71,17 +71,7 @@ fn uncalibrated(m: &Machine) -> Machine {
             ..r.clone()
         })
         .collect();
-    Machine::new(MachineSpec {
-        id: m.id.clone(),
-        name: m.name.clone(),
-        units: m.units,
-        controller: m.controller.clone(),
-        description: m.description.clone(),
-        linears: m.linears.clone(),
-        rotaries,
-        default_tool_length: m.default_tool_length,
-    })
-    .unwrap()
+    m.with_rotaries(rotaries).unwrap()
 }
 
 #[test]

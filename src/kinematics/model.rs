@@ -246,6 +246,20 @@ impl Machine {
         })
     }
 
+    /// The same machine with other rotaries (calibrated pivots, say), validated again.
+    pub fn with_rotaries(&self, rotaries: Vec<Rotary>) -> Result<Machine, Error> {
+        Machine::new(MachineSpec {
+            id: self.id.clone(),
+            name: self.name.clone(),
+            units: self.units,
+            controller: self.controller.clone(),
+            description: self.description.clone(),
+            linears: self.linears.clone(),
+            rotaries,
+            default_tool_length: self.default_tool_length,
+        })
+    }
+
     /// Actual rotary angles for commanded words (angle-error compensation applied).
     #[inline]
     pub fn actual_angles(&self, words: &[f64; 3]) -> [f64; 3] {
