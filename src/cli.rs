@@ -561,7 +561,7 @@ fn run(cli: Cli) -> Result<(), String> {
         }
         Command::Post(a) => {
             let p = lib.get(&a.machine).map_err(|e| e.to_string())?;
-            post_cmd(&p.machine, &a)
+            post_cmd(&p, &a)
         }
         Command::Machines { action: Some(a), .. } => {
             let dir = cli.machines.clone().unwrap_or_else(machines::default_dir);
@@ -619,7 +619,8 @@ fn run(cli: Cli) -> Result<(), String> {
     }
 }
 
-fn post_cmd(m: &kinematics::Machine, a: &PostArgs) -> Result<(), String> {
+fn post_cmd(p: &machines::Profile, a: &PostArgs) -> Result<(), String> {
+    let m = &p.machine;
     use crate::post::{self, Settings, Sink};
     use std::io::Write;
     let settings = Settings {
@@ -639,6 +640,7 @@ fn post_cmd(m: &kinematics::Machine, a: &PostArgs) -> Result<(), String> {
         cl_units: a.cl_units.map(|u| Units::from(u).as_str().to_string()),
     };
     let mut o = settings.options(m)?;
+    o.clamps = p.clamps();
     o.header.push(format!("DATE {} UTC", utc_now()));
     o.header.push(format!(
         "SOURCE {}",

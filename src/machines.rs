@@ -66,6 +66,10 @@ pub struct RotaryDoc {
     pub max_feed: Option<f64>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub angle_error: Option<AngleErrorDoc>,
+    /// NC words that lock and unlock the axis (e.g. `["M10", "M11"]`): written around
+    /// positioning moves. Not kinematics: an output option of the machine.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub clamp: Option<[String; 2]>,
 }
 
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
@@ -80,6 +84,17 @@ pub struct AngleErrorDoc {
 pub struct ToolDoc {
     #[serde(default)]
     pub default_length: Option<f64>,
+}
+
+impl Profile {
+    /// Lock/unlock words per rotary, in chain order.
+    pub fn clamps(&self) -> [Option<(String, String)>; 3] {
+        let mut out: [Option<(String, String)>; 3] = Default::default();
+        for (i, r) in self.doc.rotary.iter().enumerate().take(3) {
+            out[i] = r.clamp.as_ref().map(|[lock, unlock]| (lock.clone(), unlock.clone()));
+        }
+        out
+    }
 }
 
 /// A loaded profile: the validated machine plus the document it came from (for listings/API).
@@ -143,6 +158,15 @@ pub fn parse_profile(text: &str, file: &str, stem: Option<&str>) -> Result<Profi
             "head" => Mount::Head,
             other => return Err(invalid(&key("on"), format!("{other:?} must be \"table\" or \"head\""))),
         };
+        if let Some(c) = &r.clamp
+            && c.iter()
+                .any(|w| w.is_empty() || !w.chars().all(|ch| ch.is_ascii_alphanumeric() || ch == ' ' || ch == '.'))
+        {
+            return Err(invalid(
+                &key("clamp"),
+                "give two NC words, lock then unlock, e.g. [\"M10\", \"M11\"]".into(),
+            ));
+        }
         let limits = match (r.min, r.max) {
             (Some(lo), Some(hi)) => Some((lo.to_radians(), hi.to_radians())),
             (None, None) => None,

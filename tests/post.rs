@@ -561,3 +561,40 @@ fn rapids_that_turn_rotaries_retract_first_and_turn_alone() {
     let (sink, _) = run(&m, cl.as_bytes(), &o);
     assert!(sink.nc.contains("(RETRACT)") && sink.nc.contains("(ROTARY REPOSITION)"));
 }
+
+#[test]
+fn clamped_rotaries_unlock_before_they_turn_and_lock_after_positioning() {
+    let lib = Library::load_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap();
+    let p = lib.get("haas-umc750").unwrap();
+    let mut o = Options::new(&p.machine);
+    o.mode = Mode::Tcp;
+    o.clamps = p.clamps();
+    let (sink, _) = run(
+        &p.machine,
+        &std::fs::read(data("nx_clsf_mech491_variable_axis_inch_5ax.cls")).unwrap(),
+        &o,
+    );
+    let lines: Vec<&str> = sink.nc.lines().collect();
+    let first_rotary = lines.iter().position(|l| l.contains('B') && l.starts_with("G0")).unwrap();
+    let unlock_b = lines.iter().position(|l| l.starts_with("M13")).expect("B unlocked");
+    let unlock_c = lines.iter().position(|l| l.starts_with("M11")).expect("C unlocked");
+    assert!(
+        unlock_b < first_rotary && unlock_c < first_rotary,
+        "unlocked before the first move that turns them"
+    );
+    let end = lines.iter().position(|l| l.starts_with("M30")).unwrap();
+    assert!(
+        lines[..end].iter().rev().take(6).any(|l| l.starts_with("M12")) && lines[..end].iter().any(|l| l.starts_with("M10")),
+        "locked at the end"
+    );
+    // A 3-axis program on the same machine never unlocks.
+    let (sink, _) = run(
+        &p.machine,
+        &std::fs::read(data("nx_clsf_mech491_simple_mill_plane_mm.cls")).unwrap(),
+        &Options {
+            clamps: p.clamps(),
+            ..Options::new(&p.machine)
+        },
+    );
+    assert!(!sink.nc.contains("UNLOCK"));
+}

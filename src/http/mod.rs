@@ -315,6 +315,8 @@ pub struct RotaryDto {
     pub max: Option<f64>,
     pub max_feed: Option<f64>,
     pub angle_error: Option<AngleErrorDto>,
+    /// NC words that lock and unlock the axis around positioning, if it is clamped.
+    pub clamp: Option<Vec<String>>,
 }
 
 #[derive(Serialize, utoipa::ToSchema)]
@@ -358,6 +360,7 @@ impl From<&Profile> for MachineDto {
                         coefficients: e.coefficients.clone(),
                         range: e.range,
                     }),
+                    clamp: r.clamp.as_ref().map(|c| c.to_vec()),
                 })
                 .collect(),
             default_tool_length: p.machine.default_tool_length,

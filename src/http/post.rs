@@ -237,6 +237,7 @@ pub async fn post_cl(
         .ok_or_else(|| ApiError::BadParameter("machine: required (e.g. ?machine=haas-umc750)".into()))?;
     let profile = st.library.get(&id).map_err(|_| ApiError::UnknownMachine(id.clone()))?;
     let mut opts = params.settings().options(&profile.machine).map_err(ApiError::BadParameter)?;
+    opts.clamps = profile.clamps();
     opts.header.push(format!("DATE {} UTC", crate::cli::utc_now()));
     if let Some(f) = &filename {
         opts.header.push(format!("SOURCE {f}"));

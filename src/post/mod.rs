@@ -53,6 +53,8 @@ pub struct Options {
     /// exact (the default); e.g. 0.5° for a ball-end tool holds the rotary still where the tool
     /// axis passes within that angle of the singular direction.
     pub singular_tolerance: f64,
+    /// Per rotary (chain order): the words that lock and unlock it, if the machine clamps it.
+    pub clamps: [Option<(String, String)>; 3],
     /// Header comment lines (source file name, date …) the caller wants in the program.
     pub header: Vec<String>,
 }
@@ -74,6 +76,7 @@ impl Options {
             clearance: if mm { 50.0 } else { 2.0 },
             singular_cone: 2f64.to_radians(),
             singular_tolerance: 0.0,
+            clamps: Default::default(),
             header: Vec::new(),
         }
     }
@@ -286,6 +289,8 @@ struct Emitter<'a, S: Sink + ?Sized> {
     warned_per_rev: bool,
     /// Outer-rotary travel of the exact solutions and of what was written, at CL points: what
     /// the singular tolerance saved, honestly (a held block's saving is partly paid back later).
+    /// Which clamped rotaries are locked now (a clamped axis is taken as locked at the start).
+    locked: [bool; 3],
     /// Set for the next block: an arc (G3 when true) with its centre words.
     arc_words: Option<(bool, String)>,
     /// The active circular-interpolation plane word (G17/G18/G19).
@@ -325,6 +330,7 @@ pub fn post<R: BufRead, S: Sink + ?Sized>(input: R, m: &Machine, o: &Options, si
         warned_no_tool: false,
         warned_per_rev: false,
         arc_words: None,
+        locked: [true; 3],
         plane: "G17",
         exact_prev: None,
         exact_travel: 0.0,
@@ -418,6 +424,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
     }
 
     fn program_end(&mut self) -> std::io::Result<()> {
+        self.lock_all()?;
         for l in self.f.footer() {
             self.out(&l)?;
         }
@@ -918,6 +925,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             Some("ROTARY REPOSITION"),
         )?;
         self.block(at(m, &s, over, to.actual, to.branch), pt, true, Vec::new(), true, None)?;
+        self.lock_all()?;
         self.block(to, pt, true, Vec::new(), pt.inserted, None)
     }
 
@@ -1138,6 +1146,47 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         })
     }
 
+    /// Lock every clamped rotary that is unlocked (after positioning, at the end).
+    fn lock_all(&mut self) -> std::io::Result<()> {
+        for i in 0..3 {
+            if let Some((lock, _)) = &self.o.clamps[i]
+                && !self.locked[i]
+            {
+                let (open, close) = self.o.dialect.comment;
+                let l = format!(
+                    "{} {open}{} LOCK{close}",
+                    self.f.words(&lock.clone()),
+                    self.m.rotaries[i].name
+                );
+                self.out(&l)?;
+                self.locked[i] = true;
+            }
+        }
+        Ok(())
+    }
+
+    /// Unlock the clamped rotaries this move turns.
+    fn unlock_moving(&mut self, to: &Joints) -> std::io::Result<()> {
+        // Before the first block the machine stands at home: rotaries at 0.
+        let from = self.at.map_or([0.0; 3], |p| p.joints.rotary);
+        for i in 0..self.m.rotaries.len() {
+            if let Some((_, unlock)) = &self.o.clamps[i]
+                && self.locked[i]
+                && (to.rotary[i] - from[i]).abs() > 1e-12
+            {
+                let (open, close) = self.o.dialect.comment;
+                let l = format!(
+                    "{} {open}{} UNLOCK{close}",
+                    self.f.words(&unlock.clone()),
+                    self.m.rotaries[i].name
+                );
+                self.out(&l)?;
+                self.locked[i] = false;
+            }
+        }
+        Ok(())
+    }
+
     /// Writes one motion block and accounts for it.
     fn block(
         &mut self,
@@ -1353,6 +1402,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             self.count(d);
         }
         let comment = comment.or(pt.comment);
+        self.unlock_moving(&to.joints)?;
         let arc = self.arc_words.take();
         let motion = match (&arc, rapid) {
             (_, true) => Motion::Rapid,
