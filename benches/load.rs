@@ -32,7 +32,7 @@ fn main() {
         kinepost::testgen::write_path(&m, 5000, 3, m.default_tool_length, &mut cl).unwrap();
         let cl = bytes::Bytes::from(cl);
         let cfg = Config { machines, data_dir: std::env::temp_dir().join("kinepost-load"), max_streams: conc * 2, ..Config::default() };
-        let state = Arc::new(AppState { library, config: cfg, metrics: Arc::new(Metrics::default()) });
+        let state = Arc::new(AppState { library, config: cfg, metrics: Arc::new(Metrics::default()), jobs: None });
         let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
         let url = format!("http://{}/v1/post?machine=haas-umc750&mode=tcp", listener.local_addr().unwrap());
         tokio::spawn(async move { axum::serve(listener, app(state)).await.unwrap() });

@@ -301,6 +301,15 @@ pub struct ServeArgs {
     /// Origins allowed by CORS, comma-separated (e.g. a CAM plugin's web view).
     #[arg(long, env = "KINEPOST_CORS_ORIGINS", value_delimiter = ',')]
     pub cors_origins: Vec<String>,
+    /// Jobs run at once (default: one per core).
+    #[arg(long, env = "KINEPOST_WORKERS")]
+    pub workers: Option<usize>,
+    /// Jobs waiting at most; more are answered 503 with Retry-After.
+    #[arg(long, env = "KINEPOST_MAX_QUEUED", default_value_t = 1000)]
+    pub max_queued: u64,
+    /// Hours a finished job and its files are kept.
+    #[arg(long, env = "KINEPOST_JOB_RETENTION_HOURS", default_value_t = 168.0)]
+    pub job_retention_hours: f64,
     /// Log format: text or json.
     #[arg(long, env = "KINEPOST_LOG_FORMAT", default_value = "text")]
     pub log_format: String,
@@ -495,6 +504,12 @@ fn serve(cli: &Cli, a: &ServeArgs) -> Result<(), String> {
         max_streams: a.max_streams.max(1),
         cors_origins: a.cors_origins.clone(),
         log_json: a.log_format == "json",
+        workers: a
+            .workers
+            .unwrap_or_else(|| std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1))
+            .max(1),
+        max_queued: a.max_queued,
+        job_retention: std::time::Duration::from_secs_f64((a.job_retention_hours * 3600.0).clamp(0.0, 1e10)),
     };
     let rt = tokio::runtime::Runtime::new().map_err(|e| e.to_string())?;
     rt.block_on(crate::http::serve(cfg))
@@ -621,7 +636,7 @@ fn run(cli: Cli) -> Result<(), String> {
 
 fn post_cmd(p: &machines::Profile, a: &PostArgs) -> Result<(), String> {
     let m = &p.machine;
-    use crate::post::{self, Settings, Sink};
+    use crate::post::{self, Settings};
     use std::io::Write;
     let settings = Settings {
         machine: Some(a.machine.clone()),
@@ -660,50 +675,10 @@ fn post_cmd(p: &machines::Profile, a: &PostArgs) -> Result<(), String> {
         )),
         None => None,
     };
-    struct CliSink {
-        nc: std::io::BufWriter<Box<dyn Write>>,
-        nd: Option<std::io::BufWriter<Box<dyn Write>>>,
-    }
-    impl Sink for CliSink {
-        fn line(&mut self, text: &str, b: Option<&post::BlockInfo>) -> std::io::Result<()> {
-            self.nc.write_all(text.as_bytes())?;
-            self.nc.write_all(b"\n")?;
-            if let (Some(nd), Some(b)) = (self.nd.as_mut(), b) {
-                serde_json::to_writer(
-                    &mut *nd,
-                    &json!({"type": "block", "n": b.n, "nc": text, "source_line": b.source_line, "joints": b.joints, "diagnostics": b.diagnostics}),
-                )?;
-                nd.write_all(b"\n")?;
-            }
-            Ok(())
-        }
-        fn diagnostic(&mut self, d: &crate::diag::Diagnostic) -> std::io::Result<()> {
-            if let Some(nd) = self.nd.as_mut() {
-                serde_json::to_writer(&mut *nd, &json!({"type": "diagnostic", "diagnostic": d}))?;
-                nd.write_all(b"\n")?;
-            }
-            if d.severity >= crate::diag::Severity::Warning {
-                eprintln!("kinepost: {d}");
-            }
-            Ok(())
-        }
-        fn summary(&mut self, s: &post::Summary) -> std::io::Result<()> {
-            if let Some(nd) = self.nd.as_mut() {
-                serde_json::to_writer(&mut *nd, &json!({"type": "summary", "summary": s}))?;
-                nd.write_all(b"\n")?;
-            }
-            Ok(())
-        }
-    }
-    let mut sink = CliSink {
-        nc: std::io::BufWriter::with_capacity(1 << 16, out),
-        nd: diag.map(std::io::BufWriter::new),
-    };
+    let mut sink = post::FileSink::new(out, diag);
+    sink.echo_warnings = true;
     let res = post::post(input, m, &o, &mut sink);
-    sink.nc.flush().map_err(|e| e.to_string())?;
-    if let Some(nd) = sink.nd.as_mut() {
-        nd.flush().map_err(|e| e.to_string())?;
-    }
+    sink.flush().map_err(|e| e.to_string())?;
     let s = res.map_err(|e| e.to_string())?;
     let rot: Vec<String> = m
         .rotaries

@@ -5,6 +5,7 @@ pub mod cl;
 pub mod cli;
 pub mod diag;
 pub mod http;
+pub mod jobs;
 pub mod kinematics;
 pub mod machines;
 pub mod nc;

@@ -4,6 +4,7 @@
 //! in flight.
 
 mod error;
+mod jobs;
 mod machine_ops;
 mod post;
 
@@ -43,6 +44,24 @@ pub struct Config {
     /// Origins allowed by CORS (CAM plugins' web views); empty: no CORS headers.
     pub cors_origins: Vec<String>,
     pub log_json: bool,
+    /// Jobs run at once (default: one per core).
+    pub workers: usize,
+    /// Jobs waiting at most; more are answered 503 with Retry-After.
+    pub max_queued: u64,
+    /// Finished jobs and their files are removed after this long.
+    pub job_retention: Duration,
+}
+
+impl Config {
+    /// The job queue's part of the settings.
+    pub fn jobs(&self) -> crate::jobs::Config {
+        crate::jobs::Config {
+            data_dir: self.data_dir.clone(),
+            workers: self.workers,
+            max_queued: self.max_queued,
+            retention: self.job_retention,
+        }
+    }
 }
 
 impl Default for Config {
@@ -56,6 +75,9 @@ impl Default for Config {
             max_streams: 64,
             cors_origins: Vec::new(),
             log_json: false,
+            workers: std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1),
+            max_queued: 1000,
+            job_retention: Duration::from_secs(7 * 24 * 3600),
         }
     }
 }
@@ -151,17 +173,21 @@ pub struct AppState {
     pub library: Library,
     pub config: Config,
     pub metrics: Arc<Metrics>,
+    /// The job queue; `None` where a process serves posts only (benches).
+    pub jobs: Option<Arc<crate::jobs::Queue>>,
 }
 
 #[derive(OpenApi)]
 #[openapi(
     info(title = "kinepost", description = "5-axis CNC postprocessor: CL data in, verified NC out, for any machine profile."),
     paths(post::post_cl, list_machines, get_machine, list_dialects, machine_ops::fk_route, machine_ops::ik_route,
-        machine_ops::validate_pose, machine_ops::angle_error_fit, machine_ops::calibrate, healthz, readyz, metrics_route),
+        machine_ops::validate_pose, machine_ops::angle_error_fit, machine_ops::calibrate, healthz, readyz, metrics_route,
+        jobs::submit, jobs::list_jobs, jobs::get_job, jobs::delete_job, jobs::job_nc, jobs::job_diagnostics),
     components(schemas(Problem, MachineDto, LinearDto, RotaryDto, AngleErrorDto, DialectDto, PostParams, machine_ops::FkRequest,
         machine_ops::PoseDto, machine_ops::PoseRequest, machine_ops::ReachDto, machine_ops::AngleFitRequest, machine_ops::FitDto,
-        machine_ops::AngleFitResponse, machine_ops::MeasurementDto, machine_ops::CalibrateRequest, machine_ops::CalibrateResponse)),
-    tags((name = "post", description = "Post-processing"), (name = "machines", description = "Machine profiles"), (name = "ops", description = "Health and metrics"))
+        machine_ops::AngleFitResponse, machine_ops::MeasurementDto, machine_ops::CalibrateRequest, machine_ops::CalibrateResponse,
+        jobs::JobView, jobs::JobProgress, jobs::JobLinks, jobs::JobList)),
+    tags((name = "post", description = "Post-processing"), (name = "machines", description = "Machine profiles"), (name = "jobs", description = "Background jobs for large toolpaths"), (name = "ops", description = "Health and metrics"))
 )]
 pub struct ApiDoc;
 
@@ -193,9 +219,13 @@ pub fn app(state: Arc<AppState>) -> axum::Router {
     let streaming = axum::Router::new().route(
         "/v1/post",
         post_route(post::post_cl)
-            .layer(streams)
+            .layer(streams.clone())
             .layer(middleware::from_fn_with_state(state.clone(), admit_stream)),
-    );
+    )
+    .route("/v1/jobs", post_route(jobs::submit).layer(streams.clone()).get(jobs::list_jobs))
+    .route("/v1/jobs/{id}", get(jobs::get_job).delete(jobs::delete_job))
+    .route("/v1/jobs/{id}/nc", get(jobs::job_nc))
+    .route("/v1/jobs/{id}/diagnostics", get(jobs::job_diagnostics));
     let api = axum::Router::new()
         .route("/v1/machines", get(list_machines))
         .route("/v1/dialects", get(list_dialects))
@@ -469,10 +499,14 @@ pub async fn serve(cfg: Config) -> Result<(), String> {
     let addr = listener.local_addr().map_err(|e| e.to_string())?;
     tracing::info!(%addr, machines = library.len(), "kinepost listening");
     eprintln!("kinepost: listening on http://{addr} ({} machines)", library.len());
+    let queue = crate::jobs::Queue::start(cfg.jobs(), library.clone())
+        .await
+        .map_err(|e| format!("job queue in {}: {e}", cfg.data_dir.display()))?;
     let state = Arc::new(AppState {
         library,
         config: cfg,
         metrics: Arc::new(Metrics::default()),
+        jobs: Some(queue),
     });
     axum::serve(listener, app(state))
         .with_graceful_shutdown(shutdown_signal())

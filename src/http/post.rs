@@ -54,7 +54,7 @@ pub struct PostParams {
 }
 
 impl PostParams {
-    fn settings(&self) -> Settings {
+    pub(super) fn settings(&self) -> Settings {
         Settings {
             machine: self.machine.clone(),
             dialect: self.dialect.clone(),
@@ -68,6 +68,15 @@ impl PostParams {
             singular_tolerance: self.singular_tolerance,
             cl_units: self.cl_units.clone(),
         }
+    }
+
+    /// The machine profile named by `machine` (required).
+    pub(super) fn profile(&self, st: &AppState) -> Result<Arc<crate::machines::Profile>, ApiError> {
+        let id = self
+            .machine
+            .as_deref()
+            .ok_or_else(|| ApiError::BadParameter("machine: required (e.g. ?machine=haas-umc750)".into()))?;
+        st.library.get(id).map_err(|_| ApiError::UnknownMachine(id.to_string()))
     }
 
     /// A multipart text field, by name.
@@ -218,24 +227,8 @@ pub async fn post_cl(
     req: Request,
 ) -> Result<Response, ApiError> {
     let ndjson = wants_ndjson(req.headers())?;
-    let ctype = req
-        .headers()
-        .get(header::CONTENT_TYPE)
-        .and_then(|v| v.to_str().ok())
-        .unwrap_or("text/plain")
-        .to_ascii_lowercase();
-    let (params, filename, body): (PostParams, Option<String>, Body) = if ctype.starts_with("multipart/form-data") {
-        multipart_body(&st, query, req).await?
-    } else if ctype.starts_with("text/plain") || ctype.starts_with("application/octet-stream") || ctype.is_empty() {
-        (query, None, req.into_body())
-    } else {
-        return Err(ApiError::UnsupportedMediaType(ctype));
-    };
-    let id = params
-        .machine
-        .clone()
-        .ok_or_else(|| ApiError::BadParameter("machine: required (e.g. ?machine=haas-umc750)".into()))?;
-    let profile = st.library.get(&id).map_err(|_| ApiError::UnknownMachine(id.clone()))?;
+    let (params, filename, body) = upload(&st, query, req).await?;
+    let profile = params.profile(&st)?;
     let mut opts = params.settings().options(&profile.machine).map_err(ApiError::BadParameter)?;
     opts.clamps = profile.clamps();
     opts.header.push(format!("DATE {} UTC", crate::cli::utc_now()));
@@ -324,6 +317,28 @@ pub async fn post_cl(
         }
     }
     Ok(resp.into_response())
+}
+
+/// The CL upload of `/v1/post` and `/v1/jobs`: a raw body with query parameters, or a multipart
+/// form whose fields come before its `file` part.
+pub(super) async fn upload(
+    st: &Arc<AppState>,
+    query: PostParams,
+    req: Request,
+) -> Result<(PostParams, Option<String>, Body), ApiError> {
+    let ctype = req
+        .headers()
+        .get(header::CONTENT_TYPE)
+        .and_then(|v| v.to_str().ok())
+        .unwrap_or("text/plain")
+        .to_ascii_lowercase();
+    if ctype.starts_with("multipart/form-data") {
+        multipart_body(st, query, req).await
+    } else if ctype.starts_with("text/plain") || ctype.starts_with("application/octet-stream") || ctype.is_empty() {
+        Ok((query, None, req.into_body()))
+    } else {
+        Err(ApiError::UnsupportedMediaType(ctype))
+    }
 }
 
 /// Reads form fields up to the file part, then hands the file's bytes over as a body stream fed

@@ -84,7 +84,7 @@ impl Options {
 
 /// Post settings as users give them (CLI flags, HTTP query or form fields): plain values,
 /// validated once, here, into [`Options`].
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug, Default, Serialize, serde::Deserialize)]
 pub struct Settings {
     /// Machine profile id (required over HTTP; the CLI has its own flag).
     pub machine: Option<String>,
@@ -203,6 +203,66 @@ impl<W: std::io::Write> Sink for TextSink<W> {
     fn line(&mut self, text: &str, _b: Option<&BlockInfo>) -> std::io::Result<()> {
         self.0.write_all(text.as_bytes())?;
         self.0.write_all(b"\n")
+    }
+}
+
+/// NC text into one writer and, optionally, one NDJSON line per block, diagnostic and summary
+/// into another: the CLI's `--output`/`--diagnostics` and a job's spool files are this sink.
+pub struct FileSink<W: std::io::Write, D: std::io::Write> {
+    pub nc: std::io::BufWriter<W>,
+    pub nd: Option<std::io::BufWriter<D>>,
+    /// Print warnings and errors to stderr as they come (the CLI does; a job does not).
+    pub echo_warnings: bool,
+}
+
+impl<W: std::io::Write, D: std::io::Write> FileSink<W, D> {
+    pub fn new(nc: W, nd: Option<D>) -> Self {
+        FileSink {
+            nc: std::io::BufWriter::with_capacity(1 << 16, nc),
+            nd: nd.map(|d| std::io::BufWriter::with_capacity(1 << 16, d)),
+            echo_warnings: false,
+        }
+    }
+
+    pub fn flush(&mut self) -> std::io::Result<()> {
+        use std::io::Write;
+        self.nc.flush()?;
+        if let Some(nd) = self.nd.as_mut() {
+            nd.flush()?;
+        }
+        Ok(())
+    }
+
+    fn json(&mut self, v: &serde_json::Value) -> std::io::Result<()> {
+        use std::io::Write;
+        if let Some(nd) = self.nd.as_mut() {
+            serde_json::to_writer(&mut *nd, v)?;
+            nd.write_all(b"\n")?;
+        }
+        Ok(())
+    }
+}
+
+impl<W: std::io::Write, D: std::io::Write> Sink for FileSink<W, D> {
+    fn line(&mut self, text: &str, b: Option<&BlockInfo>) -> std::io::Result<()> {
+        use std::io::Write;
+        self.nc.write_all(text.as_bytes())?;
+        self.nc.write_all(b"\n")?;
+        if let (true, Some(b)) = (self.nd.is_some(), b) {
+            self.json(&serde_json::json!({"type": "block", "n": b.n, "nc": text, "source_line": b.source_line,
+                "joints": b.joints, "diagnostics": b.diagnostics}))?;
+        }
+        Ok(())
+    }
+    fn diagnostic(&mut self, d: &Diagnostic) -> std::io::Result<()> {
+        self.json(&serde_json::json!({"type": "diagnostic", "diagnostic": d}))?;
+        if self.echo_warnings && d.severity >= crate::diag::Severity::Warning {
+            eprintln!("kinepost: {d}");
+        }
+        Ok(())
+    }
+    fn summary(&mut self, s: &Summary) -> std::io::Result<()> {
+        self.json(&serde_json::json!({"type": "summary", "summary": s}))
     }
 }
 

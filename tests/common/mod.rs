@@ -7,9 +7,10 @@ use std::sync::Arc;
 pub async fn server(cfg: Config) -> String {
     let library = Library::load_dir(&cfg.machines).unwrap();
     let state = Arc::new(AppState {
-        library,
-        config: cfg,
+        library: library.clone(),
+        config: cfg.clone(),
         metrics: Arc::new(Metrics::default()),
+        jobs: Some(kinepost::jobs::Queue::start(cfg.jobs(), library.clone()).await.unwrap()),
     });
     let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
     let addr = listener.local_addr().unwrap();
@@ -17,10 +18,17 @@ pub async fn server(cfg: Config) -> String {
     format!("http://{addr}")
 }
 
+static NEXT: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+
 pub fn cfg() -> Config {
     Config {
         machines: concat!(env!("CARGO_MANIFEST_DIR"), "/machines").into(),
-        data_dir: std::env::temp_dir().join(format!("kinepost-http-{}", std::process::id())),
+        // One data directory per server: each has its own job store.
+        data_dir: std::env::temp_dir().join(format!(
+            "kinepost-http-{}-{}",
+            std::process::id(),
+            NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed)
+        )),
         ..Config::default()
     }
 }
