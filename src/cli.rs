@@ -654,8 +654,7 @@ fn post_cmd(p: &machines::Profile, a: &PostArgs) -> Result<(), String> {
         singular_tolerance: Some(a.singular_tolerance),
         cl_units: a.cl_units.map(|u| Units::from(u).as_str().to_string()),
     };
-    let mut o = settings.options(m)?;
-    o.clamps = p.clamps();
+    let mut o = settings.profile_options(p)?;
     o.header.push(format!("DATE {} UTC", utc_now()));
     o.header.push(format!(
         "SOURCE {}",

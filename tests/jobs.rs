@@ -4,8 +4,7 @@
 mod common;
 
 use serde_json::Value;
-use std::io::{BufRead, BufReader};
-use std::process::{Child, Command, Stdio};
+use std::process::{Child, Command};
 use std::time::{Duration, Instant};
 
 fn generated(machine: &str, points: usize) -> String {
@@ -19,7 +18,7 @@ fn generated(machine: &str, points: usize) -> String {
 async fn wait_for(c: &reqwest::Client, base: &str, id: &str, want: &str, limit: Duration) -> Value {
     let t0 = Instant::now();
     loop {
-        let j: Value = c.get(format!("{base}/v1/jobs/{id}")).send().await.unwrap().json().await.unwrap();
+        let j: Value = common::get_json(&c, &format!("{base}/v1/jobs/{id}")).await;
         if j["state"] == want {
             return j;
         }
@@ -110,24 +109,10 @@ async fn a_job_gives_the_same_program_as_a_post_with_range_etag_idempotency_and_
     for k in ["p1", "p2"] {
         assert_eq!(submit(k).await.unwrap().status(), 202);
     }
-    let page: Value = c
-        .get(format!("{base}/v1/jobs?limit=2"))
-        .send()
-        .await
-        .unwrap()
-        .json()
-        .await
-        .unwrap();
+    let page: Value = common::get_json(&c, &format!("{base}/v1/jobs?limit=2")).await;
     assert_eq!(page["jobs"].as_array().unwrap().len(), 2);
     assert_eq!(page["next_offset"], 2);
-    let page: Value = c
-        .get(format!("{base}/v1/jobs?limit=2&offset=2"))
-        .send()
-        .await
-        .unwrap()
-        .json()
-        .await
-        .unwrap();
+    let page: Value = common::get_json(&c, &format!("{base}/v1/jobs?limit=2&offset=2")).await;
     assert_eq!(page["jobs"][0]["id"], id.as_str(), "newest first");
     assert!(page["next_offset"].is_null());
     let r = c.get(format!("{base}/v1/jobs?state=done")).send().await.unwrap();
@@ -211,22 +196,7 @@ impl Drop for Server {
 }
 
 fn start(data: &std::path::Path) -> (Server, String) {
-    let mut child = Command::new(env!("CARGO_BIN_EXE_kinepost"))
-        .args(["serve", "--bind", "127.0.0.1:0", "--workers", "1", "--data-dir", data.to_str().unwrap()])
-        .env("KINEPOST_MACHINES", concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let mut err = BufReader::new(child.stderr.take().unwrap());
-    let mut line = String::new();
-    let addr = loop {
-        line.clear();
-        assert!(err.read_line(&mut line).unwrap() > 0, "server exited early");
-        if let Some(rest) = line.split("listening on ").nth(1) {
-            break rest.split_whitespace().next().unwrap().to_string();
-        }
-    };
-    std::thread::spawn(move || for _ in err.lines() {});
+    let (child, addr) = common::spawn_binary(data, &["--workers", "1"]);
     (Server(child), addr)
 }
 
@@ -252,7 +222,7 @@ async fn kill_9_mid_run_loses_no_accepted_job_and_the_output_verifies() {
     // Kill while the big one is part done and the others wait.
     let t0 = Instant::now();
     loop {
-        let j: Value = c.get(format!("{base}/v1/jobs/{}", ids[0])).send().await.unwrap().json().await.unwrap();
+        let j: Value = common::get_json(&c, &format!("{base}/v1/jobs/{}", ids[0])).await;
         let read = j["progress"]["bytes_read"].as_u64().unwrap();
         if j["state"] == "running" && read > 0 {
             assert!(read < big.len() as u64, "killed mid-run: {j}");

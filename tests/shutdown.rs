@@ -1,28 +1,14 @@
 //! Graceful shutdown with the real binary: SIGTERM during a post stream lets it finish.
 
-use std::io::{BufRead, BufReader};
-use std::process::{Command, Stdio};
+mod common;
+
+use std::process::Command;
 use std::time::Duration;
 
 #[tokio::test]
 async fn sigterm_finishes_the_stream_in_flight_then_exits() {
     let data = std::env::temp_dir().join(format!("kinepost-shutdown-{}", std::process::id()));
-    let mut child = Command::new(env!("CARGO_BIN_EXE_kinepost"))
-        .args(["serve", "--bind", "127.0.0.1:0", "--data-dir", data.to_str().unwrap()])
-        .env("KINEPOST_MACHINES", concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let mut err = BufReader::new(child.stderr.take().unwrap());
-    let mut line = String::new();
-    let addr = loop {
-        line.clear();
-        assert!(err.read_line(&mut line).unwrap() > 0, "server exited early");
-        if let Some(rest) = line.split("listening on ").nth(1) {
-            break rest.split_whitespace().next().unwrap().to_string();
-        }
-    };
-    std::thread::spawn(move || for _ in err.lines() {}); // keep draining the log
+    let (mut child, addr) = common::spawn_binary(&data, &[]);
 
     let mut cl = String::from("UNITS/MM\nFEDRAT/500,MMPM\n");
     for i in 0..3000 {

@@ -3,7 +3,7 @@
 
 use super::AppState;
 use super::error::{ApiError, ApiQuery};
-use super::post::{PostParams, upload};
+use super::post::{PostParams, nc_attachment, upload, upload_error};
 use crate::jobs::{self, Job, Queue, State as JobState};
 use axum::Json;
 use axum::body::Body;
@@ -126,9 +126,8 @@ impl From<jobs::Error> for ApiError {
             jobs::Error::NotFound(id) => ApiError::NotFound(format!("no job {id}")),
             jobs::Error::Full(n) => ApiError::Busy(format!("the job queue is full ({n} jobs waiting)")),
             jobs::Error::WrongState { id, state } => ApiError::Conflict(format!("job {id} is {state}")),
-            jobs::Error::Upload(m) if m.contains("length limit") || m.contains("too large") => ApiError::TooLarge(0),
-            jobs::Error::Upload(m) => ApiError::BadParameter(format!("reading the upload: {m}")),
-            e @ (jobs::Error::Db(_) | jobs::Error::Io(_)) => ApiError::Internal(e.to_string()),
+            jobs::Error::Upload(m) => upload_error(m),
+            e @ (jobs::Error::Db(_) | jobs::Error::Io(_) | jobs::Error::Corrupt(_)) => ApiError::Internal(e.to_string()),
         }
     }
 }
@@ -177,7 +176,7 @@ pub async fn submit(
     // Settings are checked now, so a job never fails for a typo hours later.
     let profile = params.profile(&st)?;
     let settings = params.settings();
-    settings.options(&profile.machine).map_err(ApiError::BadParameter)?;
+    settings.profile_options(&profile).map_err(ApiError::BadParameter)?;
     let input = StreamReader::new(body.into_data_stream().map(|r| r.map_err(std::io::Error::other)));
     let (job, _created) = q.submit(settings, filename, key, input).await?;
     let location = format!("/v1/jobs/{}", job.id);
@@ -318,17 +317,7 @@ async fn output(State(st): State<Arc<AppState>>, id: String, diagnostics: bool, 
         HeaderValue::from_static(if diagnostics { "application/x-ndjson" } else { "text/plain; charset=utf-8" }),
     );
     if !diagnostics {
-        let stem = job
-            .filename
-            .as_deref()
-            .and_then(|f| std::path::Path::new(f).file_stem())
-            .and_then(|s| s.to_str())
-            .map(|s| s.chars().filter(|c| c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.')).take(64).collect::<String>())
-            .filter(|s| !s.is_empty())
-            .unwrap_or_else(|| job.id.clone());
-        if let Ok(v) = HeaderValue::from_str(&format!("attachment; filename=\"{stem}.nc\"")) {
-            h.insert(header::CONTENT_DISPOSITION, v);
-        }
+        h.insert(header::CONTENT_DISPOSITION, nc_attachment(job.filename.as_deref(), &job.id));
     }
     Ok(resp)
 }

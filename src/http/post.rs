@@ -193,15 +193,17 @@ fn engine_error(e: post::Error) -> ApiError {
             column: d.column,
             code: d.code.as_str(),
         },
-        post::Error::Read(e) => {
-            let text = e.to_string();
-            if text.contains("length limit") || text.contains("too large") {
-                ApiError::TooLarge(0)
-            } else {
-                ApiError::BadParameter(format!("reading the upload: {text}"))
-            }
-        }
+        post::Error::Read(e) => upload_error(e.to_string()),
         post::Error::Io(e) => ApiError::Internal(e.to_string()),
+    }
+}
+
+/// A failed read of the request body: over the body limit (413), else a broken upload (400).
+pub(super) fn upload_error(text: String) -> ApiError {
+    if text.contains("length limit") || text.contains("too large") {
+        ApiError::TooLarge(0)
+    } else {
+        ApiError::BadParameter(format!("reading the upload: {text}"))
     }
 }
 
@@ -229,8 +231,7 @@ pub async fn post_cl(
     let ndjson = wants_ndjson(req.headers())?;
     let (params, filename, body) = upload(&st, query, req).await?;
     let profile = params.profile(&st)?;
-    let mut opts = params.settings().options(&profile.machine).map_err(ApiError::BadParameter)?;
-    opts.clamps = profile.clamps();
+    let mut opts = params.settings().profile_options(&profile).map_err(ApiError::BadParameter)?;
     opts.header.push(format!("DATE {} UTC", crate::cli::utc_now()));
     if let Some(f) = &filename {
         opts.header.push(format!("SOURCE {f}"));
@@ -301,22 +302,24 @@ pub async fn post_cl(
         h.insert(header::CONTENT_TYPE, HeaderValue::from_static("application/x-ndjson"));
     } else {
         h.insert(header::CONTENT_TYPE, HeaderValue::from_static("text/plain; charset=utf-8"));
-        let stem = filename
-            .as_deref()
-            .and_then(|f| std::path::Path::new(f).file_stem())
-            .and_then(|s| s.to_str())
-            .unwrap_or("program");
-        let safe: String = stem
-            .chars()
-            .filter(|c| c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.'))
-            .take(64)
-            .collect();
-        let safe = if safe.is_empty() { "program".to_string() } else { safe };
-        if let Ok(v) = HeaderValue::from_str(&format!("attachment; filename=\"{safe}.nc\"")) {
-            h.insert(header::CONTENT_DISPOSITION, v);
-        }
+        h.insert(header::CONTENT_DISPOSITION, nc_attachment(filename.as_deref(), "program"));
     }
     Ok(resp.into_response())
+}
+
+/// `Content-Disposition` for an NC download named after the uploaded file: its stem, reduced to
+/// characters safe in a header and a file name, else `fallback`.
+pub(super) fn nc_attachment(upload: Option<&str>, fallback: &str) -> HeaderValue {
+    let safe: String = upload
+        .and_then(|f| std::path::Path::new(f).file_stem())
+        .and_then(|s| s.to_str())
+        .unwrap_or("")
+        .chars()
+        .filter(|c| c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.'))
+        .take(64)
+        .collect();
+    let stem = if safe.is_empty() { fallback } else { &safe };
+    HeaderValue::from_str(&format!("attachment; filename=\"{stem}.nc\"")).unwrap_or(HeaderValue::from_static("attachment"))
 }
 
 /// The CL upload of `/v1/post` and `/v1/jobs`: a raw body with query parameters, or a multipart

@@ -30,6 +30,9 @@ pub enum Error {
     Io(#[from] std::io::Error),
     #[error("reading the upload: {0}")]
     Upload(String),
+    /// A row the store cannot read back (written by another version, or damaged).
+    #[error("job store: {0}")]
+    Corrupt(String),
     #[error("no job {0}")]
     NotFound(String),
     #[error("the queue is full ({0} jobs waiting)")]
@@ -159,7 +162,7 @@ impl Queue {
             tokio::select! {
                 r = &mut task => break r,
                 _ = tokio::time::sleep(Duration::from_millis(200)) => {
-                    let (b, n) = (progress.bytes.load(Ordering::Relaxed), progress.blocks.load(Ordering::Relaxed));
+                    let (b, n) = progress.snapshot();
                     // A job no longer `running` in the store was cancelled (maybe by another node).
                     if let Ok(false) = self.store.progress(&id, b, n).await {
                         cancel.store(true, Ordering::Relaxed);
@@ -170,7 +173,7 @@ impl Queue {
         if let Ok(mut m) = self.running.lock() {
             m.remove(&id);
         }
-        let (b, n) = (progress.bytes.load(Ordering::Relaxed), progress.blocks.load(Ordering::Relaxed));
+        let (b, n) = progress.snapshot();
         let _ = self.store.progress(&id, b, n).await;
         let outcome = match result {
             Ok(Ok(s)) => self.store.succeed(&id, &s).await,
@@ -191,6 +194,13 @@ impl Queue {
 struct Progress {
     bytes: AtomicU64,
     blocks: AtomicU64,
+}
+
+impl Progress {
+    /// Bytes read and blocks written so far.
+    fn snapshot(&self) -> (u64, u64) {
+        (self.bytes.load(Ordering::Relaxed), self.blocks.load(Ordering::Relaxed))
+    }
 }
 
 /// Counts what the engine has read, for progress.
@@ -243,8 +253,7 @@ fn execute(
     let profile = library
         .get(&job.machine)
         .map_err(|_| format!("unknown machine {:?}", job.machine))?;
-    let mut opts = job.settings.options(&profile.machine)?;
-    opts.clamps = profile.clamps();
+    let mut opts = job.settings.profile_options(&profile)?;
     opts.header.push(format!("JOB {}", job.id));
     if let Some(f) = &job.filename {
         opts.header.push(format!("SOURCE {f}"));
@@ -271,21 +280,13 @@ fn execute(
         Err(e) => {
             // The diagnostics of a failed job end with the error: never a silent truncation.
             let msg = e.to_string();
-            let _ = serde_json::to_writer(
-                sink.files.nd.as_mut().expect("job sink has diagnostics"),
-                &serde_json::json!({"type": "error", "error": msg}),
-            );
-            let _ = std::io::Write::write_all(sink.files.nd.as_mut().expect("job sink has diagnostics"), b"\n");
+            let _ = sink.files.json(&serde_json::json!({"type": "error", "error": msg}));
             Err(msg)
         }
     };
-    sink.files.flush().map_err(io)?;
-    let (nc, nd) = (
-        sink.files.nc.into_inner().map_err(|e| io(e.into_error()))?,
-        sink.files.nd.take().map(|w| w.into_inner()),
-    );
+    let (nc, nd) = sink.files.into_inner().map_err(io)?;
     nc.sync_all().map_err(io)?;
-    if let Some(Ok(nd)) = nd {
+    if let Some(nd) = nd {
         nd.sync_all().map_err(io)?;
     }
     res

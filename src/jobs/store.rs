@@ -129,9 +129,9 @@ fn row_job(r: &SqliteRow) -> Result<Job, Error> {
     let u = |name: &str| -> Result<u64, Error> { Ok(r.try_get::<i64, _>(name)?.max(0) as u64) };
     Ok(Job {
         id: r.try_get("id")?,
-        state: State::parse(&state).ok_or_else(|| Error::Upload(format!("corrupt job state {state:?}")))?,
+        state: State::parse(&state).ok_or_else(|| Error::Corrupt(format!("job state {state:?}")))?,
         machine: r.try_get("machine")?,
-        settings: serde_json::from_str(&settings).map_err(|e| Error::Upload(format!("corrupt job settings: {e}")))?,
+        settings: serde_json::from_str(&settings).map_err(|e| Error::Corrupt(format!("job settings: {e}")))?,
         filename: r.try_get("filename")?,
         idempotency_key: r.try_get("idempotency_key")?,
         input_bytes: u("input_bytes")?,

@@ -109,6 +109,14 @@ pub struct Settings {
 }
 
 impl Settings {
+    /// Options for a loaded profile: [`Settings::options`] plus what the profile adds beyond
+    /// its kinematics (rotary clamp words).
+    pub fn profile_options(&self, p: &crate::machines::Profile) -> Result<Options, String> {
+        let mut o = self.options(&p.machine)?;
+        o.clamps = p.clamps();
+        Ok(o)
+    }
+
     /// Validated options for machine `m`; the error names the setting.
     pub fn options(&self, m: &Machine) -> Result<Options, String> {
         let mut o = Options::new(m);
@@ -233,7 +241,15 @@ impl<W: std::io::Write, D: std::io::Write> FileSink<W, D> {
         Ok(())
     }
 
-    fn json(&mut self, v: &serde_json::Value) -> std::io::Result<()> {
+    /// Unwraps the writers, flushed (so the caller can fsync them).
+    pub fn into_inner(self) -> std::io::Result<(W, Option<D>)> {
+        let nc = self.nc.into_inner().map_err(|e| e.into_error())?;
+        let nd = self.nd.map(|w| w.into_inner().map_err(|e| e.into_error())).transpose()?;
+        Ok((nc, nd))
+    }
+
+    /// One line of the NDJSON (nothing without it).
+    pub fn json(&mut self, v: &serde_json::Value) -> std::io::Result<()> {
         use std::io::Write;
         if let Some(nd) = self.nd.as_mut() {
             serde_json::to_writer(&mut *nd, v)?;

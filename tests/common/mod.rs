@@ -1,4 +1,5 @@
 //! A real kinepost server on an ephemeral loopback port, for integration tests.
+#![allow(dead_code)] // each test crate uses part of it
 
 use kinepost::http::{AppState, Config, Metrics, app};
 use kinepost::machines::Library;
@@ -31,4 +32,33 @@ pub fn cfg() -> Config {
         )),
         ..Config::default()
     }
+}
+
+/// The real binary serving `data` on an ephemeral loopback port: the child and its base URL,
+/// its log drained in the background.
+pub fn spawn_binary(data: &std::path::Path, extra: &[&str]) -> (std::process::Child, String) {
+    use std::io::{BufRead, BufReader};
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_kinepost"))
+        .args(["serve", "--bind", "127.0.0.1:0", "--data-dir", data.to_str().unwrap()])
+        .args(extra)
+        .env("KINEPOST_MACHINES", concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut err = BufReader::new(child.stderr.take().unwrap());
+    let mut line = String::new();
+    let addr = loop {
+        line.clear();
+        assert!(err.read_line(&mut line).unwrap() > 0, "server exited early");
+        if let Some(rest) = line.split("listening on ").nth(1) {
+            break rest.split_whitespace().next().unwrap().to_string();
+        }
+    };
+    std::thread::spawn(move || for _ in err.lines() {});
+    (child, addr)
+}
+
+/// GET a JSON document.
+pub async fn get_json(c: &reqwest::Client, url: &str) -> serde_json::Value {
+    c.get(url).send().await.unwrap().json().await.unwrap()
 }
