@@ -10,7 +10,9 @@ COPY machines machines
 RUN cargo build --release --locked --bin kinepost
 
 FROM debian:bookworm-slim
-RUN useradd --system --uid 10001 --home-dir /var/lib/kinepost --create-home kinepost
+RUN useradd --system --uid 10001 --home-dir /var/lib/kinepost --create-home kinepost \
+    && mkdir -p /var/lib/kinepost/data /var/lib/kinepost/spool \
+    && chown kinepost /var/lib/kinepost/data /var/lib/kinepost/spool
 COPY --from=build /src/target/release/kinepost /usr/local/bin/kinepost
 COPY machines /opt/kinepost/machines
 ENV KINEPOST_MACHINES=/opt/kinepost/machines \

@@ -14,6 +14,13 @@ pub enum Error {
     Singular(String),
 }
 
+/// nalgebra's plain `svd` never returns on a matrix holding inf or NaN; bounded, it says so.
+const SVD_MAX_ITER: usize = 500;
+
+fn no_convergence() -> Error {
+    Error::Input("the measurements hold values too large or not finite to fit".into())
+}
+
 /// One fitted polynomial Δ(θ) = Σ c_i θ^i (degrees) and how well it fits.
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct PolyFit {
@@ -59,7 +66,10 @@ pub fn fit_angle_error(samples: &[(f64, f64)], degrees: std::ops::RangeInclusive
         }
         let a = DMatrix::from_fn(samples.len(), deg + 1, |r, c| ((samples[r].0 - mid) / half).powi(c as i32));
         let b = DVector::from_iterator(samples.len(), samples.iter().map(|s| s.1));
-        let svd = a.clone().svd(true, true);
+        let svd = a
+            .clone()
+            .try_svd(true, true, f64::EPSILON, SVD_MAX_ITER)
+            .ok_or_else(no_convergence)?;
         let x = svd.solve(&b, 1e-12).map_err(|e| Error::Singular(e.to_string()))?;
         // Back from the scaled variable: Σ x_j ((θ − m)/h)^j expanded in powers of θ.
         let mut coeffs = vec![0.0; deg + 1];
@@ -171,7 +181,9 @@ pub fn fit_pivots(m: &Machine, setup: &Setup, meas: &[Measurement]) -> Result<Pi
             xp[c] += h;
             jac.set_column(c, &((residual(&xp)? - &r) / h));
         }
-        let svd = jac.svd(true, true);
+        let svd = jac
+            .try_svd(true, true, f64::EPSILON, SVD_MAX_ITER)
+            .ok_or_else(no_convergence)?;
         if svd.singular_values.min() < 1e-9 * svd.singular_values.max().max(1e-300) {
             let weak = (0..nrot).map(|k| m.rotaries[k].name).collect::<String>();
             return Err(Error::Singular(format!(

@@ -307,12 +307,29 @@ pub struct ServeArgs {
     /// Jobs waiting at most; more are answered 503 with Retry-After.
     #[arg(long, env = "KINEPOST_MAX_QUEUED", default_value_t = 1000)]
     pub max_queued: u64,
+    /// Jobs one client address may have queued or running (429 beyond); 0: no limit.
+    #[arg(long, env = "KINEPOST_MAX_JOBS_PER_CLIENT", default_value_t = 100)]
+    pub max_jobs_per_client: u64,
     /// Hours a finished job and its files are kept.
     #[arg(long, env = "KINEPOST_JOB_RETENTION_HOURS", default_value_t = 168.0)]
     pub job_retention_hours: f64,
     /// Log format: text or json.
     #[arg(long, env = "KINEPOST_LOG_FORMAT", default_value = "text")]
     pub log_format: String,
+    /// Bearer token for writes to machine profiles over the API; without one, they are off.
+    /// Prefer the environment variable (a flag shows in `ps`).
+    #[arg(long, env = "KINEPOST_ADMIN_TOKEN", hide_env_values = true)]
+    pub admin_token: Option<String>,
+    /// PostgreSQL URL (postgres://…) for replicas sharing one job queue and machine catalog;
+    /// without it, SQLite in the data directory.
+    #[arg(long, env = "KINEPOST_DATABASE_URL", hide_env_values = true)]
+    pub database_url: Option<String>,
+    /// Spool directory for job inputs and outputs, shared by replicas (default DATA_DIR/spool).
+    #[arg(long, env = "KINEPOST_SPOOL_DIR")]
+    pub spool_dir: Option<std::path::PathBuf>,
+    /// Seconds without a report after which another replica takes a running job over.
+    #[arg(long, env = "KINEPOST_JOB_LEASE_SECS", default_value_t = 30.0)]
+    pub job_lease_secs: f64,
 }
 
 /// `--mode`: joint or tcp.
@@ -419,8 +436,11 @@ pub fn parse_triple(s: &str) -> Result<Vec3, String> {
         .map(|p| p.trim().parse::<f64>().map_err(|_| format!("{p:?} is not a number")))
         .collect::<Result<_, _>>()?;
     match v.as_slice() {
-        [x, y, z] if v.iter().all(|c| c.is_finite()) => Ok(Vec3::new(*x, *y, *z)),
-        _ => Err(format!("expected three finite numbers x,y,z, got {s:?}")),
+        [x, y, z] if v.iter().all(|c| c.abs() <= crate::kinematics::MAX_COORD) => Ok(Vec3::new(*x, *y, *z)),
+        _ => Err(format!(
+            "expected three numbers x,y,z within ±{:e}, got {s:?}",
+            crate::kinematics::MAX_COORD
+        )),
     }
 }
 
@@ -509,7 +529,12 @@ fn serve(cli: &Cli, a: &ServeArgs) -> Result<(), String> {
             .unwrap_or_else(|| std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1))
             .max(1),
         max_queued: a.max_queued,
+        max_jobs_per_client: a.max_jobs_per_client,
         job_retention: std::time::Duration::from_secs_f64((a.job_retention_hours * 3600.0).clamp(0.0, 1e10)),
+        admin_token: a.admin_token.clone().filter(|t| !t.is_empty()),
+        database_url: a.database_url.clone().filter(|u| !u.is_empty()),
+        spool_dir: a.spool_dir.clone(),
+        job_lease: std::time::Duration::from_secs_f64(a.job_lease_secs.clamp(1.0, 86400.0)),
     };
     let rt = tokio::runtime::Runtime::new().map_err(|e| e.to_string())?;
     rt.block_on(crate::http::serve(cfg))

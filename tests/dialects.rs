@@ -179,3 +179,90 @@ fn iso_dialects_read_back_with_an_independent_gcode_parser() {
         }
     }
 }
+
+/// Every word of a line as (letter, value): `X+12.500` and `X12.5` alike; `DR+` is ('D', None).
+fn words(line: &str) -> Vec<(char, Option<f64>)> {
+    line.split_whitespace()
+        .filter_map(|w| {
+            let mut c = w.chars();
+            let l = c.next()?;
+            Some((l, c.as_str().parse::<f64>().ok()))
+        })
+        .collect()
+}
+
+/// The same corpus arcs on the same machine, as Fanuc `G2/G3 I J` and as Heidenhain `CC` + `C`:
+/// the same arcs, the same ends, the same turning sense, and every `C` block truly on its circle.
+#[test]
+fn heidenhain_arcs_are_the_iso_arcs_as_cc_and_c() {
+    let lib = Library::load_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap();
+    let m = lib.get("dmg-dmc75v").unwrap().machine.clone();
+    let mut total = 0;
+    for file in [
+        "nx_clsf_mech491_simple_mill_plane_mm.cls",
+        "nx_clsf_mech491_simple_mill_plane_zig_mm.cls",
+        "creo8_ncl_profilfraesen_profile_mm.ncl",
+    ] {
+        let cl = std::fs::read(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data")).join(file)).unwrap();
+        let run = |d: &str| {
+            let mut o = Options::new(&m);
+            o.dialect = kinepost::nc::dialect(d).unwrap();
+            let mut sink = Collect::default();
+            post::post(&cl[..], &m, &o, &mut sink).unwrap();
+            sink.nc
+        };
+        // ISO: (ccw, end x, end y) of each arc.
+        let mut iso = Vec::new();
+        let mut g = 0.0;
+        for line in run("fanuc").lines() {
+            let w = words(line);
+            for (l, v) in &w {
+                if *l == 'G' && matches!(v, Some(x) if [0.0, 1.0, 2.0, 3.0].contains(x)) {
+                    g = v.unwrap();
+                }
+            }
+            let at = |k: char| w.iter().find(|(l, _)| *l == k).and_then(|(_, v)| *v);
+            if (g == 2.0 || g == 3.0) && at('X').is_some() {
+                iso.push((g == 3.0, at('X').unwrap(), at('Y').unwrap()));
+            }
+        }
+        // Heidenhain: track the position; each C checked against its CC.
+        let (mut pos, mut cc) = ([f64::NAN; 2], None::<[f64; 2]>);
+        let mut hh = Vec::new();
+        for line in run("heidenhain").lines() {
+            let toks: Vec<&str> = line.split_whitespace().skip(1).collect();
+            let w = words(&toks.join(" "));
+            let at = |k: char| w.iter().skip(1).find(|(l, _)| *l == k).and_then(|(_, v)| *v);
+            match toks.first() {
+                Some(&"CC") => cc = Some([at('X').unwrap(), at('Y').unwrap()]),
+                Some(&"C") => {
+                    let c = cc.take().expect("a C block follows its CC");
+                    let end = [at('X').unwrap_or(pos[0]), at('Y').unwrap_or(pos[1])];
+                    let r0 = ((pos[0] - c[0]).powi(2) + (pos[1] - c[1]).powi(2)).sqrt();
+                    let r1 = ((end[0] - c[0]).powi(2) + (end[1] - c[1]).powi(2)).sqrt();
+                    assert!(
+                        (r0 - r1).abs() < 2e-3,
+                        "{file}: {line}: radius {r0} at the start, {r1} at the end"
+                    );
+                    assert!(at('Z').is_none(), "a flat arc names no Z: {line}");
+                    let ccw = toks.contains(&"DR+");
+                    assert!(ccw || toks.contains(&"DR-"), "{line}");
+                    hh.push((ccw, end[0], end[1]));
+                    pos = end;
+                }
+                Some(&"L") => {
+                    pos = [at('X').unwrap_or(pos[0]), at('Y').unwrap_or(pos[1])];
+                }
+                _ => {}
+            }
+        }
+        assert!(!iso.is_empty(), "{file} has arcs");
+        assert_eq!(iso.len(), hh.len(), "{file}: every ISO arc is a Heidenhain arc");
+        for (a, b) in iso.iter().zip(&hh) {
+            assert_eq!(a.0, b.0, "{file}: the same turning sense");
+            assert!((a.1 - b.1).abs() < 1e-3 && (a.2 - b.2).abs() < 1e-3, "{file}: {a:?} vs {b:?}");
+        }
+        total += hh.len();
+    }
+    assert_eq!(total, 52);
+}

@@ -364,8 +364,39 @@ async fn busy_cors_gzip_and_the_web_page() {
     assert!(!r.headers().contains_key("access-control-allow-origin"));
     let page = c.get(format!("{base}/")).send().await.unwrap();
     assert!(page.headers()["content-type"].to_str().unwrap().starts_with("text/html"));
-    assert!(page.text().await.unwrap().contains("/static/app.js"));
+    let html = page.text().await.unwrap();
+    assert!(html.contains("/static/app.js"));
     assert_eq!(c.get(format!("{base}/static/app.js")).send().await.unwrap().status(), 200);
+    // Every module the page imports is served here, as JavaScript: nothing from the internet.
+    let map_start = html.find(r#"<script type="importmap">"#).expect("import map") + 25;
+    let map_end = map_start + html[map_start..].find("</script>").unwrap();
+    let map: serde_json::Value = serde_json::from_str(&html[map_start..map_end]).unwrap();
+    let mut urls: Vec<String> = map["imports"]
+        .as_object()
+        .unwrap()
+        .values()
+        .map(|v| v.as_str().unwrap().to_string())
+        .collect();
+    urls.extend(
+        [
+            "/static/view.js",
+            "/static/vendor/three/three.core.js",
+            "/static/vendor/three/LICENSE",
+        ]
+        .map(String::from),
+    );
+    for u in &urls {
+        assert!(u.starts_with("/static/"), "{u}");
+        let r = c.get(format!("{base}{u}")).send().await.unwrap();
+        assert_eq!(r.status(), 200, "{u}");
+        let ct = r.headers()["content-type"].to_str().unwrap().to_string();
+        let body = r.text().await.unwrap();
+        assert!(
+            u.ends_with("LICENSE") && body.contains("MIT License") || ct.starts_with("text/javascript"),
+            "{u}: {ct}"
+        );
+    }
+    assert!(!html.contains("http://") && !html.contains("https://"));
     assert_eq!(
         c.get(format!("{base}/static/secret.toml")).send().await.unwrap().status(),
         404

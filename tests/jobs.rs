@@ -3,40 +3,11 @@
 
 mod common;
 
+use common::Fetch;
+
 use serde_json::Value;
 use std::process::{Child, Command};
 use std::time::{Duration, Instant};
-
-fn generated(machine: &str, points: usize) -> String {
-    let lib = kinepost::machines::Library::load_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/machines").as_ref()).unwrap();
-    let p = lib.get(machine).unwrap();
-    let mut out = Vec::new();
-    kinepost::testgen::write_path(&p.machine, points, 7, p.machine.default_tool_length, &mut out).unwrap();
-    String::from_utf8(out).unwrap()
-}
-
-async fn wait_for(c: &reqwest::Client, base: &str, id: &str, want: &str, limit: Duration) -> Value {
-    let t0 = Instant::now();
-    loop {
-        let j: Value = common::get_json(&c, &format!("{base}/v1/jobs/{id}")).await;
-        if j["state"] == want {
-            return j;
-        }
-        assert!(
-            !(j["state"] == "failed" || j["state"] == "cancelled") || want == j["state"],
-            "job ended {j}"
-        );
-        assert!(t0.elapsed() < limit, "job still {} after {limit:?}: {j}", j["state"]);
-        tokio::time::sleep(Duration::from_millis(50)).await;
-    }
-}
-
-/// NC without the lines that name the run (date, job id, source).
-fn body_lines(nc: &str) -> Vec<&str> {
-    nc.lines()
-        .filter(|l| !(l.contains("DATE ") || l.contains("JOB ") || l.contains("SOURCE ")))
-        .collect()
-}
 
 #[tokio::test]
 async fn a_job_gives_the_same_program_as_a_post_with_range_etag_idempotency_and_paging() {
@@ -45,7 +16,7 @@ async fn a_job_gives_the_same_program_as_a_post_with_range_etag_idempotency_and_
     let _ = std::fs::remove_dir_all(&cfg.data_dir);
     let base = common::server(cfg.clone()).await;
     let c = reqwest::Client::new();
-    let cl = generated("dmg-dmc75v", 2000);
+    let cl = common::generated("dmg-dmc75v", 2000, 7);
 
     let submit = |key: &'static str| {
         c.post(format!("{base}/v1/jobs?machine=dmg-dmc75v&sequence_numbers=true"))
@@ -65,10 +36,17 @@ async fn a_job_gives_the_same_program_as_a_post_with_range_etag_idempotency_and_
     let again: Value = submit("part-17").await.unwrap().json().await.unwrap();
     assert_eq!(again["id"], id.as_str());
 
-    let done = wait_for(&c, &base, &id, "succeeded", Duration::from_secs(60)).await;
+    let done = common::wait_job(&c, &base, &id, "succeeded", Duration::from_secs(60)).await;
     assert_eq!(done["progress"]["percent"], 100.0);
     assert_eq!(done["summary"]["cl_points"], 2000);
     assert_eq!(done["attempts"], 1);
+    let metrics = c.get(format!("{base}/metrics")).text_ok().await;
+    assert!(metrics.contains("kinepost_jobs{state=\"succeeded\"} 1"), "{metrics}");
+    assert!(metrics.contains("kinepost_jobs{state=\"queued\"} 0"));
+    assert!(
+        metrics.contains("kinepost_job_duration_seconds_count{outcome=\"succeeded\"} 1"),
+        "{metrics}"
+    );
     let nc_url = format!("{base}{}", done["links"]["nc"].as_str().unwrap());
     let r = c.get(&nc_url).send().await.unwrap();
     assert_eq!(r.status(), 200);
@@ -79,13 +57,13 @@ async fn a_job_gives_the_same_program_as_a_post_with_range_etag_idempotency_and_
         .post(format!("{base}/v1/post?machine=dmg-dmc75v&sequence_numbers=true"))
         .header("content-type", "text/plain")
         .body(cl.clone())
-        .send()
-        .await
-        .unwrap()
-        .text()
-        .await
-        .unwrap();
-    assert_eq!(body_lines(&nc), body_lines(&direct), "a job writes what a post streams");
+        .text_ok()
+        .await;
+    assert_eq!(
+        common::body_lines(&nc),
+        common::body_lines(&direct),
+        "a job writes what a post streams"
+    );
 
     let r = c.get(&nc_url).header("range", "bytes=0-9").send().await.unwrap();
     assert_eq!(r.status(), 206);
@@ -93,14 +71,7 @@ async fn a_job_gives_the_same_program_as_a_post_with_range_etag_idempotency_and_
     let r = c.get(&nc_url).header("if-none-match", &etag).send().await.unwrap();
     assert_eq!(r.status(), 304);
 
-    let diags = c
-        .get(format!("{base}/v1/jobs/{id}/diagnostics"))
-        .send()
-        .await
-        .unwrap()
-        .text()
-        .await
-        .unwrap();
+    let diags = c.get(format!("{base}/v1/jobs/{id}/diagnostics")).text_ok().await;
     let last: Value = serde_json::from_str(diags.lines().last().unwrap()).unwrap();
     assert_eq!(last["type"], "summary");
     assert!(diags.lines().filter(|l| l.contains("\"type\":\"block\"")).count() >= 2000);
@@ -133,7 +104,7 @@ async fn a_job_gives_the_same_program_as_a_post_with_range_etag_idempotency_and_
         .await
         .unwrap();
     assert_eq!(r.status(), 400);
-    assert_eq!(c.get(format!("{base}/v1/jobs/0123")).send().await.unwrap().status(), 404);
+    assert_eq!(c.get(format!("{base}/v1/jobs/0123")).status_ok().await, 404);
     let _ = std::fs::remove_dir_all(&cfg.data_dir);
 }
 
@@ -145,22 +116,18 @@ async fn cancel_stops_a_job_and_nothing_half_done_is_served() {
     let _ = std::fs::remove_dir_all(&cfg.data_dir);
     let base = common::server(cfg.clone()).await;
     let c = reqwest::Client::new();
-    let cl = generated("haas-umc750", 100_000);
+    let cl = common::generated("haas-umc750", 100_000, 7);
     let mut ids = Vec::new();
     for _ in 0..2 {
         let j: Value = c
             .post(format!("{base}/v1/jobs?machine=haas-umc750"))
             .body(cl.clone())
-            .send()
-            .await
-            .unwrap()
-            .json()
-            .await
-            .unwrap();
+            .json_ok()
+            .await;
         ids.push(j["id"].as_str().unwrap().to_string());
     }
     // The first runs (one worker), the second waits: cancel both.
-    wait_for(&c, &base, &ids[0], "running", Duration::from_secs(30)).await;
+    common::wait_job(&c, &base, &ids[0], "running", Duration::from_secs(30)).await;
     for id in &ids {
         let r = c.delete(format!("{base}/v1/jobs/{id}")).send().await.unwrap();
         assert_eq!(r.status(), 200);
@@ -173,14 +140,17 @@ async fn cancel_stops_a_job_and_nothing_half_done_is_served() {
     // The running one stops promptly: its temporary outputs go.
     let t0 = Instant::now();
     let spool = cfg.data_dir.join("spool");
-    while std::fs::read_dir(&spool).unwrap().any(|e| e.unwrap().file_name().to_string_lossy().ends_with(".tmp")) {
+    while std::fs::read_dir(&spool)
+        .unwrap()
+        .any(|e| e.unwrap().file_name().to_string_lossy().ends_with(".tmp"))
+    {
         assert!(t0.elapsed() < Duration::from_secs(10), "cancelled job still writing");
         tokio::time::sleep(Duration::from_millis(50)).await;
     }
     // A finished job can be removed, files and all.
     let r = c.delete(format!("{base}/v1/jobs/{}", ids[0])).send().await.unwrap();
     assert_eq!(r.status(), 204);
-    assert_eq!(c.get(format!("{base}/v1/jobs/{}", ids[0])).send().await.unwrap().status(), 404);
+    assert_eq!(c.get(format!("{base}/v1/jobs/{}", ids[0])).status_ok().await, 404);
     assert!(!spool.join(format!("{}.cl", ids[0])).exists());
     let _ = std::fs::remove_dir_all(&cfg.data_dir);
 }
@@ -206,8 +176,8 @@ async fn kill_9_mid_run_loses_no_accepted_job_and_the_output_verifies() {
     let _ = std::fs::remove_dir_all(&data);
     let (mut child, base) = start(&data);
     let c = reqwest::Client::new();
-    let big = generated("spinner-u5-620", 250_000);
-    let small = generated("spinner-u5-620", 500);
+    let big = common::generated("spinner-u5-620", 250_000, 7);
+    let small = common::generated("spinner-u5-620", 500, 7);
     let mut ids = Vec::new();
     for cl in [&big, &small, &small] {
         let r = c
@@ -238,19 +208,12 @@ async fn kill_9_mid_run_loses_no_accepted_job_and_the_output_verifies() {
     let (_child, base) = start(&data);
     let mut done = Vec::new();
     for id in &ids {
-        done.push(wait_for(&c, &base, id, "succeeded", Duration::from_secs(300)).await);
+        done.push(common::wait_job(&c, &base, id, "succeeded", Duration::from_secs(300)).await);
     }
     assert_eq!(done[0]["attempts"], 2, "the cut-off run ran again from the start");
     assert_eq!(done[0]["summary"]["cl_points"], 250_000);
     // The program is whole, and reproduces every CL point under the FK.
-    let nc = c
-        .get(format!("{base}/v1/jobs/{}/nc", ids[0]))
-        .send()
-        .await
-        .unwrap()
-        .text()
-        .await
-        .unwrap();
+    let nc = c.get(format!("{base}/v1/jobs/{}/nc", ids[0])).text_ok().await;
     assert!(nc.trim_end().ends_with("M30\n%"));
     std::fs::write(data.join("big.cl"), &big).unwrap();
     std::fs::write(data.join("big.nc"), &nc).unwrap();
@@ -266,4 +229,193 @@ async fn kill_9_mid_run_loses_no_accepted_job_and_the_output_verifies() {
     let report: Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(report["matched"], 250_000);
     let _ = std::fs::remove_dir_all(&data);
+}
+
+/// FK of a preview point's axis words (joint mode), against the tip and axis it claims.
+fn check_point_fk(m: &kinepost::kinematics::Machine, tool_length: f64, axes: &[Value], p: &Value) {
+    use kinepost::kinematics::{Joints, Setup, Vec3, fk};
+    let mut jt = Joints::default();
+    for (a, v) in axes.iter().zip(p["j"].as_array().unwrap()) {
+        let v = v.as_f64().unwrap();
+        let name = a["name"].as_str().unwrap().chars().next().unwrap();
+        match name {
+            'X' | 'Y' | 'Z' => jt.linear[(name as u8 - b'X') as usize] = v,
+            _ => {
+                let i = m.rotaries.iter().position(|r| r.name == name).unwrap();
+                jt.rotary[i] = v.to_radians();
+            }
+        }
+    }
+    let pose = fk(m, &jt, &Setup::new(tool_length, Vec3::zeros()));
+    let v3 = |k: &str| {
+        let a = p[k].as_array().unwrap();
+        Vec3::new(a[0].as_f64().unwrap(), a[1].as_f64().unwrap(), a[2].as_f64().unwrap())
+    };
+    // Joints rounded to 1e-4 (mm and degrees) on a lever of up to ~1 m: ~2e-3.
+    assert!((pose.tip - v3("tip")).norm() < 5e-3, "tip of {p}: FK {:?}", pose.tip);
+    assert!((pose.axis - v3("axis")).norm() < 1e-4, "axis of {p}: FK {:?}", pose.axis);
+}
+
+#[tokio::test]
+async fn a_preview_draws_the_decimated_path_its_joints_and_every_warning() {
+    let base = common::server(common::cfg()).await;
+    let c = reqwest::Client::new();
+    let lib = kinepost::machines::Library::load_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/machines").as_ref()).unwrap();
+
+    // A long path: decimated to the cap, first and last block kept, every point on its joints.
+    let cl = common::generated("spinner-u5-620", 30_000, 7);
+    let r = c
+        .post(format!("{base}/v1/jobs?machine=spinner-u5-620"))
+        .body(cl)
+        .send()
+        .await
+        .unwrap();
+    let id = r.json::<Value>().await.unwrap()["id"].as_str().unwrap().to_string();
+    let r = c.get(format!("{base}/v1/jobs/{id}/preview")).send().await.unwrap();
+    assert!(matches!(r.status().as_u16(), 200 | 409), "{}", r.status());
+    let done = common::wait_job(&c, &base, &id, "succeeded", Duration::from_secs(120)).await;
+    let url = format!("{base}{}", done["links"]["preview"].as_str().unwrap());
+    let r = c.get(&url).send().await.unwrap();
+    assert_eq!(r.headers()["content-type"], "application/json");
+    let etag = r.headers()["etag"].to_str().unwrap().to_string();
+    let p: Value = r.json().await.unwrap();
+    assert_eq!(c.get(&url).header("if-none-match", etag).status_ok().await, 304);
+    let blocks = done["summary"]["blocks"].as_u64().unwrap();
+    let pts = p["points"].as_array().unwrap();
+    assert_eq!(p["blocks"], blocks);
+    assert!(
+        blocks >= 30_000 && pts.len() <= 10_000 && pts.len() >= 2_500,
+        "{} of {blocks}",
+        pts.len()
+    );
+    assert!(p["stride"].as_u64().unwrap() >= 4);
+    assert_eq!(pts[0]["n"], 1);
+    assert_eq!(pts.last().unwrap()["n"], blocks);
+    assert!(
+        pts.windows(2)
+            .all(|w| w[0]["n"].as_u64() < w[1]["n"].as_u64() && w[0]["t"].as_f64() <= w[1]["t"].as_f64())
+    );
+    let cycle = done["summary"]["cycle_time_s"].as_f64().unwrap();
+    assert!((pts.last().unwrap()["t"].as_f64().unwrap() - cycle).abs() < 1e-3 * cycle.max(1.0));
+    let prof = lib.get("spinner-u5-620").unwrap();
+    let m = &prof.machine;
+    let axes = p["axes"].as_array().unwrap();
+    let names: String = axes.iter().map(|a| a["name"].as_str().unwrap()).collect();
+    assert_eq!(names, "XYZBC");
+    for r in &m.rotaries {
+        let a = axes.iter().find(|a| a["name"] == r.name.to_string()).unwrap();
+        match r.limits {
+            Some((lo, hi)) => assert_eq!(a["limits"], serde_json::json!([lo.to_degrees(), hi.to_degrees()])),
+            None => assert!(a["limits"].is_null()),
+        }
+    }
+    assert!(pts.iter().any(|q| q["rapid"] == true) && pts.iter().any(|q| q["rapid"] == false));
+    let tl = done["summary"]["tool_length"].as_f64().unwrap();
+    for q in pts {
+        check_point_fk(m, tl, axes, q);
+    }
+    for mk in p["marks"].as_array().unwrap() {
+        check_point_fk(m, tl, axes, mk);
+        assert!(mk["cl"].as_str().unwrap().starts_with("GOTO/"), "{mk}");
+    }
+
+    // A 5-axis CL file on a 3-axis machine: every unreachable pose is a note at its CL tip,
+    // quoting its CL line.
+    let cl = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/tests/data/nx_clsf_mech491_variable_axis_inch_5ax.cls"
+    ))
+    .unwrap();
+    let r = c
+        .post(format!("{base}/v1/jobs?machine=vmc-3axis"))
+        .body(cl.clone())
+        .send()
+        .await
+        .unwrap();
+    let id = r.json::<Value>().await.unwrap()["id"].as_str().unwrap().to_string();
+    let done = common::wait_job(&c, &base, &id, "succeeded", Duration::from_secs(60)).await;
+    let p: Value = common::get_json(&c, &format!("{base}/v1/jobs/{id}/preview")).await;
+    let unreachable: Vec<&Value> = p["notes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|n| n["diagnostic"]["code"] == "unreachable")
+        .collect();
+    assert_eq!(
+        unreachable.len() as u64,
+        done["summary"]["counts"]["unreachable"].as_u64().unwrap()
+    );
+    assert!(!unreachable.is_empty());
+    let lines: Vec<&str> = cl.lines().collect();
+    for n in unreachable {
+        let line = n["diagnostic"]["line"].as_u64().unwrap() as usize;
+        assert_eq!(n["cl"].as_str().unwrap(), lines[line - 1].trim_end());
+        assert!(n["tip"].is_array() && n["axis"].is_array());
+    }
+    assert_eq!(p["units"], "mm");
+    assert!(p["axes"].as_array().unwrap().iter().all(|a| a["kind"] == "linear"));
+
+    // Unknown, and not finished yet.
+    assert_eq!(
+        c.get(format!("{base}/v1/jobs/{}/preview", "0".repeat(32))).status_ok().await,
+        404
+    );
+}
+
+#[tokio::test]
+async fn finished_jobs_expire_with_their_files() {
+    let mut cfg = common::cfg();
+    cfg.job_retention = Duration::from_secs(1);
+    let base = common::server(cfg.clone()).await;
+    let c = reqwest::Client::new();
+    let r = c
+        .post(format!("{base}/v1/jobs?machine=dmg-dmc75v"))
+        .body(common::generated("dmg-dmc75v", 200, 7))
+        .send()
+        .await
+        .unwrap();
+    let id = r.json::<Value>().await.unwrap()["id"].as_str().unwrap().to_string();
+    common::wait_job(&c, &base, &id, "succeeded", Duration::from_secs(60)).await;
+    let spool = cfg.data_dir.join("spool");
+    let files = || -> usize {
+        std::fs::read_dir(&spool)
+            .unwrap()
+            .flatten()
+            .filter(|e| e.file_name().to_string_lossy().starts_with(&id))
+            .count()
+    };
+    assert_eq!(files(), 4, "input, NC, NDJSON, preview");
+    let t0 = Instant::now();
+    while c.get(format!("{base}/v1/jobs/{id}")).status_ok().await != 404 {
+        assert!(t0.elapsed() < Duration::from_secs(10), "the job outlived its retention");
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+    assert_eq!(files(), 0, "its files went with it");
+    assert_eq!(c.get(format!("{base}/v1/jobs/{id}/nc")).status_ok().await, 404);
+}
+
+#[tokio::test]
+async fn one_client_cannot_fill_the_queue() {
+    let mut cfg = common::cfg();
+    cfg.max_jobs_per_client = 2;
+    cfg.workers = 1;
+    let base = common::server(cfg).await;
+    let c = reqwest::Client::new();
+    let submit = |points: usize| {
+        c.post(format!("{base}/v1/jobs?machine=dmg-dmc75v"))
+            .body(common::generated("dmg-dmc75v", points, 7))
+            .send()
+    };
+    let long: Value = submit(200_000).await.unwrap().json().await.unwrap();
+    let second = submit(100).await.unwrap();
+    assert_eq!(second.status(), 202);
+    let r = submit(100).await.unwrap();
+    assert_eq!(r.status(), 429);
+    assert_eq!(r.headers()["retry-after"], "5");
+    let p: Value = r.json().await.unwrap();
+    assert!(p["detail"].as_str().unwrap().contains("127.0.0.1 has 2 jobs"), "{p}");
+    // Room again once one of them is gone.
+    let id = long["id"].as_str().unwrap();
+    assert_eq!(c.delete(format!("{base}/v1/jobs/{id}")).status_ok().await, 200);
+    assert_eq!(submit(100).await.unwrap().status(), 202);
 }

@@ -200,6 +200,31 @@ fn random_pose(id: &str, t: [f64; 3], dir: [f64; 2], s: [f64; 4]) -> Result<(), 
     Ok(())
 }
 
+/// Coordinates up to `MAX_COORD` (scaled by 10^-e): IK returns (it once spun forever in an SVD fed
+/// with overflowed numbers), and what it returns is finite.
+fn extreme(id: &str, t: [f64; 3], d: [f64; 3], s: [f64; 4], e: i32) -> Result<(), TestCaseError> {
+    let m = machine(id);
+    let big = kinematics::MAX_COORD / 10f64.powi(e);
+    let pose = Pose {
+        tip: Vec3::new(t[0], t[1], t[2]) * big,
+        axis: Vec3::new(d[0], d[1], d[2] + 1e-3),
+    };
+    let setup = Setup::new(s[0].abs() * big, Vec3::new(s[1], s[2], s[3]) * big);
+    if let Ok(sols) = ik(&m, &pose, &setup, &IkOptions::default()) {
+        for sol in sols.iter() {
+            prop_assert!(
+                sol.joints
+                    .linear
+                    .iter()
+                    .chain(sol.joints.rotary.iter())
+                    .all(|v| v.is_finite()),
+                "{id}: non-finite solution {sol:?}"
+            );
+        }
+    }
+    Ok(())
+}
+
 /// `KINEPOST_PROPTEST_SCALE=50` runs fifty times the cases (for soak runs, not CI).
 fn cases(n: u32) -> u32 {
     n * std::env::var("KINEPOST_PROPTEST_SCALE")
@@ -218,6 +243,10 @@ macro_rules! profile_props {
                     #[test]
                     fn joints_fk_ik_contains_joints(t in prop::array::uniform6(0.0f64..1.0), s in prop::array::uniform4(0.0f64..1.0)) {
                         round_trip($id, t, s)?;
+                    }
+                    #[test]
+                    fn extreme_inputs_return_finite_solutions_or_errors(t in prop::array::uniform3(-1.0f64..1.0), d in prop::array::uniform3(-1.0f64..1.0), s in prop::array::uniform4(-1.0f64..1.0), e in 0i32..10) {
+                        extreme($id, t, d, s, e)?;
                     }
                     #[test]
                     fn pose_ik_fk_reproduces_pose(t in prop::array::uniform3(0.0f64..1.0), d in prop::array::uniform2(0.0f64..1.0), s in prop::array::uniform4(0.0f64..1.0)) {
@@ -677,12 +706,29 @@ fn invalid_poses_are_errors_not_panics() {
             tip: Vec3::zeros(),
             axis: Vec3::new(f64::INFINITY, 0.0, 1.0),
         },
+        Pose {
+            tip: Vec3::new(0.0, -2.0 * kinematics::MAX_COORD, 0.0),
+            axis: Vec3::z(),
+        },
     ] {
         assert!(matches!(
             ik(&m, &pose, &setup, &IkOptions::default()),
             Err(kinematics::Error::InvalidPose { .. })
         ));
     }
+    // Schemathesis found this one: a work offset of -f64::MAX overflowed to inf inside the
+    // solver and nalgebra's SVD never returned, hanging a server thread.
+    let p3 = machine("propeller-3r2l");
+    let r = ik(
+        &p3,
+        &Pose {
+            tip: Vec3::new(-6.307825680014814e16, 3.16e-77, -1.25e-221),
+            axis: Vec3::new(-0.0005293209536042197, -1.5, -9.29e-262),
+        },
+        &Setup::new(100.0, Vec3::new(-f64::MAX, -3.2e-172, -4.758281671465856e140)),
+        &IkOptions::default(),
+    );
+    assert!(matches!(r, Err(kinematics::Error::InvalidPose { .. })), "{r:?}");
     // An unnormalised axis is taken as its direction.
     let s = ik(
         &m,

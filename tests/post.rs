@@ -389,34 +389,18 @@ fn nx_arcs_turn_the_way_the_nx_post_cuts_them() {
         "{}",
         &sink.nc[..800]
     );
+    // Heidenhain: the same arc as CC + C. From X-10.7283 Y6.7913 (180° about the centre) to
+    // X-10.4331 Y6.4961 (270°) counter-clockwise (DR+): through the lower-left quarter, as NX cut.
     o.dialect = &kinepost::nc::HEIDENHAIN;
     let (sink, _) = run(&m, &cl, &o);
-    let (cx, cy, r) = (-10.4331f64, 6.7913f64, 0.2953f64);
-    let (mut x, mut y) = (None::<f64>, None::<f64>);
-    let mut on_arc = 0;
-    for line in sink.nc.lines().filter(|l| l.contains(" L ")) {
-        for w in line.split_whitespace() {
-            if let Some(v) = w.strip_prefix('X') {
-                x = v.parse().ok();
-            }
-            if let Some(v) = w.strip_prefix('Y') {
-                y = v.parse().ok();
-            }
-        }
-        let (Some(x), Some(y)) = (x, y) else { continue };
-        let d = ((x - cx).powi(2) + (y - cy).powi(2)).sqrt();
-        if (d - r).abs() < 2e-4 && (6.0..7.5).contains(&y) && x < -10.0 {
-            assert!(
-                y <= cy + 1e-4 && x <= cx + 1e-4,
-                "arc point outside the NX quarter: X{x} Y{y}: {line}"
-            );
-            on_arc += 1;
-        }
-    }
-    assert!(
-        on_arc >= 5,
-        "the lead-in arc is linearized through its quarter ({on_arc} points)"
-    );
+    let lines: Vec<&str> = sink.nc.lines().collect();
+    let k = lines
+        .iter()
+        .position(|l| l.ends_with(" CC X-10.4331 Y+6.7913"))
+        .expect("the centre");
+    assert!(lines[k - 1].contains("Z+3.9370"), "{}", lines[k - 1]);
+    assert!(lines[k - 2].contains("X-10.7283 Y+6.7913"), "{}", lines[k - 2]);
+    assert!(lines[k + 1].ends_with(" C X-10.4331 Y+6.4961 DR+"), "{}", lines[k + 1]);
 }
 
 #[test]

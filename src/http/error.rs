@@ -32,6 +32,22 @@ pub enum ApiError {
     Busy(String),
     #[error("{0}")]
     Internal(String),
+    /// A profile the loader rejects; `key` names what to fix when the loader knows it.
+    #[error("{message}")]
+    BadProfile { message: String, key: Option<String> },
+    #[error("{0}")]
+    Unauthorized(String),
+    #[error("{0}")]
+    Forbidden(String),
+    /// `If-Match` names another version than the current one.
+    #[error("{0}")]
+    PreconditionFailed(String),
+    /// A per-client limit (jobs queued or running).
+    #[error("{0}")]
+    TooManyRequests(String),
+    /// The server's disk is full: the request was not accepted (retry later or elsewhere).
+    #[error("{0}")]
+    InsufficientStorage(String),
 }
 
 /// The problem document (RFC 9457) with kinepost's extensions.
@@ -51,6 +67,9 @@ pub struct Problem {
     /// The diagnostic code, for errors that come from the engine.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub code: Option<String>,
+    /// The profile key to fix (`rotary[0].axis`), for an invalid machine profile.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub key: Option<String>,
 }
 
 pub const PROBLEM_BASE: &str = "https://kinepost.dev/problems/";
@@ -72,10 +91,24 @@ impl ApiError {
             ApiError::Conflict(_) => (StatusCode::CONFLICT, "conflict", "Conflict"),
             ApiError::Busy(_) => (StatusCode::SERVICE_UNAVAILABLE, "busy", "Server busy"),
             ApiError::Internal(_) => (StatusCode::INTERNAL_SERVER_ERROR, "internal", "Internal error"),
+            ApiError::BadProfile { .. } => (StatusCode::UNPROCESSABLE_ENTITY, "bad-profile", "Invalid machine profile"),
+            ApiError::Unauthorized(_) => (StatusCode::UNAUTHORIZED, "unauthorized", "Unauthorized"),
+            ApiError::Forbidden(_) => (StatusCode::FORBIDDEN, "forbidden", "Forbidden"),
+            ApiError::PreconditionFailed(_) => (StatusCode::PRECONDITION_FAILED, "precondition-failed", "Precondition failed"),
+            ApiError::TooManyRequests(_) => (StatusCode::TOO_MANY_REQUESTS, "too-many-requests", "Too many requests"),
+            ApiError::InsufficientStorage(_) => (
+                StatusCode::INSUFFICIENT_STORAGE,
+                "insufficient-storage",
+                "Insufficient storage",
+            ),
         };
         let (line, column, code) = match self {
             ApiError::BadRecord { line, column, code, .. } => (*line, *column, Some(code.to_string())),
             _ => (None, None, None),
+        };
+        let key = match self {
+            ApiError::BadProfile { key, .. } => key.clone(),
+            _ => None,
         };
         Problem {
             kind: format!("{PROBLEM_BASE}{slug}"),
@@ -85,6 +118,7 @@ impl ApiError {
             line,
             column,
             code,
+            key,
         }
     }
 }
@@ -96,8 +130,17 @@ impl IntoResponse for ApiError {
         let mut r = (status, serde_json::to_string(&p).unwrap_or_default()).into_response();
         r.headers_mut()
             .insert(header::CONTENT_TYPE, HeaderValue::from_static("application/problem+json"));
-        if matches!(self, ApiError::Busy(_)) {
+        if matches!(
+            self,
+            ApiError::Busy(_) | ApiError::InsufficientStorage(_) | ApiError::TooManyRequests(_)
+        ) {
             r.headers_mut().insert(header::RETRY_AFTER, HeaderValue::from_static("5"));
+        }
+        if matches!(self, ApiError::Unauthorized(_)) {
+            r.headers_mut().insert(
+                header::WWW_AUTHENTICATE,
+                HeaderValue::from_static("Bearer realm=\"kinepost\""),
+            );
         }
         r
     }
@@ -132,6 +175,27 @@ impl<T: serde::de::DeserializeOwned, S: Send + Sync> axum::extract::FromRequestP
         match axum::extract::Query::<T>::from_request_parts(parts, state).await {
             Ok(axum::extract::Query(v)) => Ok(ApiQuery(v)),
             Err(e) => Err(ApiError::BadParameter(e.body_text())),
+        }
+    }
+}
+
+impl From<crate::machines::Error> for ApiError {
+    fn from(e: crate::machines::Error) -> Self {
+        use crate::machines::Error as E;
+        match e {
+            E::NotFound(id) => ApiError::UnknownMachine(id),
+            E::Invalid { ref key, .. } => ApiError::BadProfile {
+                key: (!key.is_empty()).then(|| key.clone()),
+                message: e.to_string(),
+            },
+            E::Parse { .. } => ApiError::BadProfile {
+                key: None,
+                message: e.to_string(),
+            },
+            E::Exists { .. } => ApiError::Conflict(e.to_string()),
+            E::Precondition { .. } => ApiError::PreconditionFailed(e.to_string()),
+            E::ReadOnly => ApiError::Forbidden(e.to_string()),
+            E::Io { .. } | E::Store(_) => ApiError::Internal(e.to_string()),
         }
     }
 }

@@ -4,7 +4,7 @@
 use super::AppState;
 use super::error::{ApiError, ApiQuery};
 use super::post::{PostParams, nc_attachment, upload, upload_error};
-use crate::jobs::{self, Job, Queue, State as JobState};
+use crate::jobs::{self, Job, Output, Queue, State as JobState};
 use axum::Json;
 use axum::body::Body;
 use axum::extract::{Path, Request, State};
@@ -23,6 +23,8 @@ pub struct JobView {
     /// `queued`, `running`, `succeeded`, `failed` or `cancelled`.
     pub state: String,
     pub machine: String,
+    /// The profile version the job runs with (see `GET /v1/machines/{id}/versions`).
+    pub machine_version: Option<i64>,
     pub filename: Option<String>,
     pub idempotency_key: Option<String>,
     pub created_ms: i64,
@@ -30,6 +32,8 @@ pub struct JobView {
     pub finished_ms: Option<i64>,
     /// Runs started; more than one: a restart cut a run off and it ran again from the start.
     pub attempts: i64,
+    /// The node (replica) that runs or ran it.
+    pub node: Option<String>,
     pub progress: JobProgress,
     /// The engine's summary, when the job succeeded.
     #[schema(value_type = Option<Object>)]
@@ -55,6 +59,7 @@ pub struct JobLinks {
     pub this: String,
     pub nc: Option<String>,
     pub diagnostics: Option<String>,
+    pub preview: Option<String>,
 }
 
 impl From<Job> for JobView {
@@ -70,19 +75,21 @@ impl From<Job> for JobView {
         JobView {
             links: JobLinks {
                 nc: (j.state == JobState::Succeeded).then(|| format!("{base}/nc")),
-                diagnostics: matches!(j.state, JobState::Succeeded | JobState::Failed)
-                    .then(|| format!("{base}/diagnostics")),
+                diagnostics: matches!(j.state, JobState::Succeeded | JobState::Failed).then(|| format!("{base}/diagnostics")),
+                preview: matches!(j.state, JobState::Succeeded | JobState::Failed).then(|| format!("{base}/preview")),
                 this: base,
             },
             id: j.id,
             state: j.state.as_str().to_string(),
             machine: j.machine,
+            machine_version: j.machine_version,
             filename: j.filename,
             idempotency_key: j.idempotency_key,
             created_ms: j.created_ms,
             started_ms: j.started_ms,
             finished_ms: j.finished_ms,
             attempts: j.attempts,
+            node: j.owner,
             progress: JobProgress {
                 input_bytes: j.input_bytes,
                 bytes_read: j.bytes_read,
@@ -125,8 +132,11 @@ impl From<jobs::Error> for ApiError {
         match e {
             jobs::Error::NotFound(id) => ApiError::NotFound(format!("no job {id}")),
             jobs::Error::Full(n) => ApiError::Busy(format!("the job queue is full ({n} jobs waiting)")),
+            e @ jobs::Error::ClientLimit { .. } => ApiError::TooManyRequests(e.to_string()),
             jobs::Error::WrongState { id, state } => ApiError::Conflict(format!("job {id} is {state}")),
             jobs::Error::Upload(m) => upload_error(m),
+            e @ jobs::Error::NoSpace(_) => ApiError::InsufficientStorage(e.to_string()),
+            jobs::Error::Machines(m) => m.into(),
             e @ (jobs::Error::Db(_) | jobs::Error::Io(_) | jobs::Error::Corrupt(_)) => ApiError::Internal(e.to_string()),
         }
     }
@@ -141,11 +151,10 @@ fn job_id(id: &str) -> Result<&str, ApiError> {
 }
 
 /// Submit CL data as a job: the same inputs as `POST /v1/post`. Answers once the input is on disk.
-/// An `Idempotency-Key` header (1–200 characters) returns the same job for the same key.
 #[utoipa::path(
     post,
     path = "/v1/jobs",
-    params(PostParams),
+    params(PostParams, ("Idempotency-Key" = Option<String>, Header, description = "1–200 characters; the same key returns the same job")),
     request_body(content = String, description = "CL data (APT/CLSF text), raw or as the `file` part of multipart/form-data", content_type = "text/plain"),
     responses(
         (status = 202, description = "Accepted: on disk, queued", body = JobView),
@@ -153,6 +162,8 @@ fn job_id(id: &str) -> Result<&str, ApiError> {
         (status = 404, description = "Unknown machine", body = super::error::Problem, content_type = "application/problem+json"),
         (status = 413, description = "Upload too large", body = super::error::Problem, content_type = "application/problem+json"),
         (status = 415, description = "Unsupported media type", body = super::error::Problem, content_type = "application/problem+json"),
+        (status = 429, description = "This client has its limit of jobs queued or running (Retry-After)", body = super::error::Problem, content_type = "application/problem+json"),
+        (status = 507, description = "The spool's disk is full: not accepted (Retry-After)", body = super::error::Problem, content_type = "application/problem+json"),
         (status = 503, description = "Queue full (Retry-After)", body = super::error::Problem, content_type = "application/problem+json"),
     ),
     tag = "jobs"
@@ -172,13 +183,18 @@ pub async fn submit(
     if key.as_ref().is_some_and(|k| k.is_empty() || k.len() > 200) {
         return Err(ApiError::BadParameter("Idempotency-Key: 1 to 200 characters".into()));
     }
+    // The peer address: behind a proxy every client is the proxy (set the limit accordingly).
+    let client = req
+        .extensions()
+        .get::<axum::extract::ConnectInfo<std::net::SocketAddr>>()
+        .map(|c| c.0.ip().to_string());
     let (params, filename, body) = upload(&st, query, req).await?;
     // Settings are checked now, so a job never fails for a typo hours later.
-    let profile = params.profile(&st)?;
+    let current = params.profile(&st)?;
     let settings = params.settings();
-    settings.profile_options(&profile).map_err(ApiError::BadParameter)?;
+    settings.profile_options(&current.profile).map_err(ApiError::BadParameter)?;
     let input = StreamReader::new(body.into_data_stream().map(|r| r.map_err(std::io::Error::other)));
-    let (job, _created) = q.submit(settings, filename, key, input).await?;
+    let (job, _created) = q.submit(settings, current.version, filename, key, client, input).await?;
     let location = format!("/v1/jobs/{}", job.id);
     let mut resp = (StatusCode::ACCEPTED, Json(JobView::from(job))).into_response();
     if let Ok(v) = HeaderValue::from_str(&location) {
@@ -201,14 +217,13 @@ pub async fn get_job(State(st): State<Arc<AppState>>, Path(id): Path<String>) ->
     responses((status = 200, body = JobList), (status = 400, body = super::error::Problem, content_type = "application/problem+json"),
         (status = 503, body = super::error::Problem, content_type = "application/problem+json")),
     tag = "jobs")]
-pub async fn list_jobs(
-    State(st): State<Arc<AppState>>,
-    ApiQuery(p): ApiQuery<ListParams>,
-) -> Result<Json<JobList>, ApiError> {
+pub async fn list_jobs(State(st): State<Arc<AppState>>, ApiQuery(p): ApiQuery<ListParams>) -> Result<Json<JobList>, ApiError> {
     let state = match p.state.as_deref() {
         None | Some("") => None,
         Some(s) => Some(JobState::parse(s).ok_or_else(|| {
-            ApiError::BadParameter(format!("state: expected queued, running, succeeded, failed or cancelled, got {s:?}"))
+            ApiError::BadParameter(format!(
+                "state: expected queued, running, succeeded, failed or cancelled, got {s:?}"
+            ))
         })?),
     };
     let limit = p.limit.unwrap_or(50);
@@ -254,7 +269,7 @@ pub async fn delete_job(State(st): State<Arc<AppState>>, Path(id): Path<String>)
         (status = 503, body = super::error::Problem, content_type = "application/problem+json")),
     tag = "jobs")]
 pub async fn job_nc(st: State<Arc<AppState>>, Path(id): Path<String>, req: Request) -> Result<Response, ApiError> {
-    output(st, id, false, req).await
+    output(st, id, Output::Nc, req).await
 }
 
 /// The NDJSON diagnostics of a finished job: blocks, diagnostics, then the summary or the error.
@@ -268,41 +283,60 @@ pub async fn job_nc(st: State<Arc<AppState>>, Path(id): Path<String>, req: Reque
         (status = 503, body = super::error::Problem, content_type = "application/problem+json")),
     tag = "jobs")]
 pub async fn job_diagnostics(st: State<Arc<AppState>>, Path(id): Path<String>, req: Request) -> Result<Response, ApiError> {
-    output(st, id, true, req).await
+    output(st, id, Output::Diagnostics, req).await
 }
 
-async fn output(State(st): State<Arc<AppState>>, id: String, diagnostics: bool, req: Request) -> Result<Response, ApiError> {
+/// A decimated picture of a finished job for display: the path (tool tip and axis, rapid or
+/// feed), every axis word against block number and time with the profile's limits, and every
+/// block with a warning, an error, an unwind or a branch change, quoting its NC and CL lines.
+/// At most 10 000 points (every `stride`-th block, plus the first, the last and each change
+/// between rapid and feed) and 5 000 marks.
+#[utoipa::path(get, path = "/v1/jobs/{id}/preview", params(("id" = String, Path)),
+    responses((status = 200, description = "The preview", body = crate::post::preview::Preview),
+        (status = 304, description = "Not modified (If-None-Match)"),
+        (status = 404, description = "No such job, or a job finished before previews existed", body = super::error::Problem, content_type = "application/problem+json"),
+        (status = 409, description = "Not finished", body = super::error::Problem, content_type = "application/problem+json"),
+        (status = 503, body = super::error::Problem, content_type = "application/problem+json")),
+    tag = "jobs")]
+pub async fn job_preview(st: State<Arc<AppState>>, Path(id): Path<String>, req: Request) -> Result<Response, ApiError> {
+    output(st, id, Output::Preview, req).await
+}
+
+async fn output(State(st): State<Arc<AppState>>, id: String, what: Output, req: Request) -> Result<Response, ApiError> {
     let q = queue(&st)?;
     let job = q.store.get(job_id(&id)?).await?;
+    let (name, tag, ctype) = match what {
+        Output::Nc => ("the NC program", "n", "text/plain; charset=utf-8"),
+        Output::Diagnostics => ("diagnostics", "d", "application/x-ndjson"),
+        Output::Preview => ("a preview", "p", "application/json"),
+    };
     let ready = match job.state {
         JobState::Succeeded => true,
-        JobState::Failed => diagnostics,
+        JobState::Failed => what != Output::Nc,
         _ => false,
     };
     if !ready {
         return Err(ApiError::Conflict(format!(
-            "job {} is {}: {} only when it has {}",
+            "job {} is {}: {name} only when it has {}",
             job.id,
             job.state,
-            if diagnostics { "diagnostics" } else { "the NC program" },
-            if diagnostics { "finished" } else { "succeeded" }
+            if what == Output::Nc { "succeeded" } else { "finished" }
         )));
     }
-    let path = q.store.output_path(&job.id, diagnostics);
-    let len = tokio::fs::metadata(&path)
-        .await
-        .map_err(|e| ApiError::Internal(format!("job output: {e}")))?
-        .len();
+    let path = q.store.output_path(&job.id, what);
+    let len = match tokio::fs::metadata(&path).await {
+        Ok(m) => m.len(),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound && what == Output::Preview => {
+            return Err(ApiError::NotFound(format!(
+                "job {} has no preview (it finished before previews were made)",
+                job.id
+            )));
+        }
+        Err(e) => return Err(ApiError::Internal(format!("job output: {e}"))),
+    };
     // Outputs never change once published: id, kind and length make a strong validator.
-    let etag = format!("\"{}-{}-{len}\"", job.id, if diagnostics { "d" } else { "n" });
-    if req
-        .headers()
-        .get(header::IF_NONE_MATCH)
-        .and_then(|v| v.to_str().ok())
-        .is_some_and(|v| v.split(',').any(|t| t.trim() == etag || t.trim() == "*"))
-    {
-        let mut r = StatusCode::NOT_MODIFIED.into_response();
-        r.headers_mut().insert(header::ETAG, HeaderValue::from_str(&etag).expect("ascii etag"));
+    let etag = format!("\"{}-{tag}-{len}\"", job.id);
+    if let Some(r) = super::not_modified(req.headers(), &etag) {
         return Ok(r);
     }
     let mut resp = tower_http::services::ServeFile::new(&path)
@@ -312,11 +346,8 @@ async fn output(State(st): State<Arc<AppState>>, id: String, diagnostics: bool, 
         .map(Body::new);
     let h = resp.headers_mut();
     h.insert(header::ETAG, HeaderValue::from_str(&etag).expect("ascii etag"));
-    h.insert(
-        header::CONTENT_TYPE,
-        HeaderValue::from_static(if diagnostics { "application/x-ndjson" } else { "text/plain; charset=utf-8" }),
-    );
-    if !diagnostics {
+    h.insert(header::CONTENT_TYPE, HeaderValue::from_static(ctype));
+    if what == Output::Nc {
         h.insert(header::CONTENT_DISPOSITION, nc_attachment(job.filename.as_deref(), &job.id));
     }
     Ok(resp)

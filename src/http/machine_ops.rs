@@ -125,13 +125,28 @@ pub struct CalibrateResponse {
 }
 
 fn profile(st: &AppState, id: &str) -> Result<Arc<Profile>, ApiError> {
-    st.library.get(id).map_err(|_| ApiError::UnknownMachine(id.into()))
+    st.machines
+        .get(id)
+        .map(|c| c.profile)
+        .map_err(|_| ApiError::UnknownMachine(id.into()))
+}
+
+/// Fits take milliseconds to seconds with a full request body: they run on the blocking pool, so
+/// one big fit cannot stall the connections sharing its runtime thread.
+async fn off_runtime<T: Send + 'static>(f: impl FnOnce() -> T + Send + 'static) -> Result<T, ApiError> {
+    tokio::task::spawn_blocking(f)
+        .await
+        .map_err(|e| ApiError::Internal(format!("fit task: {e}")))
 }
 
 fn setup(m: &Machine, tool_length: Option<f64>, wo: Option<[f64; 3]>) -> Result<Setup, ApiError> {
     let l = tool_length.unwrap_or(m.default_tool_length);
-    if !l.is_finite() || wo.is_some_and(|w| !w.iter().all(|v| v.is_finite())) {
-        return Err(ApiError::BadParameter("tool_length and work_offset must be finite".into()));
+    let inside = |v: &f64| v.abs() <= kinematics::MAX_COORD; // false for NaN too
+    if !inside(&l) || wo.is_some_and(|w| !w.iter().all(inside)) {
+        return Err(ApiError::BadParameter(format!(
+            "tool_length and work_offset must be finite and within ±{:e}",
+            kinematics::MAX_COORD
+        )));
     }
     Ok(Setup::new(l, Vec3::from(wo.unwrap_or_default())))
 }
@@ -139,8 +154,11 @@ fn setup(m: &Machine, tool_length: Option<f64>, wo: Option<[f64; 3]>) -> Result<
 fn joints(m: &Machine, words: &Words) -> Result<Joints, ApiError> {
     let mut j = Joints::default();
     for (k, v) in words {
-        if !v.is_finite() {
-            return Err(ApiError::BadParameter(format!("joints.{k} must be finite")));
+        if !(v.abs() <= kinematics::MAX_COORD) {
+            return Err(ApiError::BadParameter(format!(
+                "joints.{k} must be finite and within ±{:e}",
+                kinematics::MAX_COORD
+            )));
         }
         match k.as_str() {
             "X" | "Y" | "Z" => {
@@ -287,7 +305,8 @@ pub async fn angle_error_fit(
             ));
         }
     }
-    let fits = calib::fit_angle_error(&samples, 2..=5).map_err(|e| ApiError::BadParameter(e.to_string()))?;
+    let (fits, samples) = off_runtime(move || (calib::fit_angle_error(&samples, 2..=5), samples)).await?;
+    let fits = fits.map_err(|e| ApiError::BadParameter(e.to_string()))?;
     let chosen = calib::choose(&fits)
         .ok_or_else(|| ApiError::BadParameter("no fit".into()))?
         .clone();
@@ -334,7 +353,10 @@ pub async fn calibrate(
             })
         })
         .collect::<Result<Vec<_>, ApiError>>()?;
-    let fit = calib::fit_pivots(m, &s, &meas).map_err(|e| ApiError::BadParameter(e.to_string()))?;
+    let pm = p.clone();
+    let fit = off_runtime(move || calib::fit_pivots(&pm.machine, &s, &meas))
+        .await?
+        .map_err(|e| ApiError::BadParameter(e.to_string()))?;
     let mut doc = p.doc.clone();
     for (name, off) in &fit.offsets {
         if let Some(rd) = doc.rotary.iter_mut().find(|x| x.name == name.to_string()) {

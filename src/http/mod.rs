@@ -6,12 +6,13 @@
 mod error;
 mod jobs;
 mod machine_ops;
+mod machines;
 mod post;
 
 pub use error::{ApiError, ApiJson, Problem};
 pub use post::PostParams;
 
-use crate::machines::{Library, Profile};
+use crate::machines::Library;
 use axum::Json;
 use axum::extract::{MatchedPath, Path, Request, State};
 use axum::http::{HeaderName, HeaderValue, StatusCode, header};
@@ -48,8 +49,18 @@ pub struct Config {
     pub workers: usize,
     /// Jobs waiting at most; more are answered 503 with Retry-After.
     pub max_queued: u64,
+    /// Jobs one client address may have queued or running (429 beyond); 0: no limit.
+    pub max_jobs_per_client: u64,
     /// Finished jobs and their files are removed after this long.
     pub job_retention: Duration,
+    /// Bearer token that machine-profile writes must carry; `None`: writes are off.
+    pub admin_token: Option<String>,
+    /// PostgreSQL for replicas sharing one queue; `None`: SQLite in `data_dir`.
+    pub database_url: Option<String>,
+    /// The spool replicas share; `None`: `data_dir/spool`.
+    pub spool_dir: Option<PathBuf>,
+    /// A running job whose node stops reporting for this long is taken over (replicas).
+    pub job_lease: Duration,
 }
 
 impl Config {
@@ -59,7 +70,11 @@ impl Config {
             data_dir: self.data_dir.clone(),
             workers: self.workers,
             max_queued: self.max_queued,
+            max_per_client: self.max_jobs_per_client,
             retention: self.job_retention,
+            database_url: self.database_url.clone(),
+            spool_dir: self.spool_dir.clone(),
+            lease: self.job_lease,
         }
     }
 }
@@ -77,7 +92,12 @@ impl Default for Config {
             log_json: false,
             workers: std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1),
             max_queued: 1000,
+            max_jobs_per_client: 100,
             job_retention: Duration::from_secs(7 * 24 * 3600),
+            admin_token: None,
+            database_url: None,
+            spool_dir: None,
+            job_lease: Duration::from_secs(30),
         }
     }
 }
@@ -89,13 +109,53 @@ pub struct Metrics {
     pub streams: AtomicU64,
     cl_points: AtomicU64,
     blocks: AtomicU64,
-    posts: AtomicU64,
-    /// Sum of post durations in microseconds, and the count per duration bucket (seconds).
-    post_micros: AtomicU64,
-    buckets: [AtomicU64; 8],
+    posts: Histogram,
+    /// Job run durations by outcome (succeeded, failed, cancelled).
+    jobs: Mutex<BTreeMap<&'static str, Histogram>>,
 }
 
-const BUCKETS: [f64; 8] = [0.01, 0.05, 0.1, 0.5, 1.0, 5.0, 30.0, 300.0];
+const BUCKETS: [f64; 10] = [0.01, 0.05, 0.1, 0.5, 1.0, 5.0, 30.0, 300.0, 1800.0, 7200.0];
+
+/// A Prometheus histogram of seconds: cumulative bucket counts, sum, count.
+#[derive(Default)]
+struct Histogram {
+    count: AtomicU64,
+    micros: AtomicU64,
+    buckets: [AtomicU64; BUCKETS.len()],
+}
+
+impl Histogram {
+    fn record(&self, secs: f64) {
+        self.count.fetch_add(1, Ordering::Relaxed);
+        self.micros.fetch_add((secs.max(0.0) * 1e6) as u64, Ordering::Relaxed);
+        for (b, limit) in self.buckets.iter().zip(BUCKETS) {
+            if secs <= limit {
+                b.fetch_add(1, Ordering::Relaxed);
+            }
+        }
+    }
+
+    fn render(&self, o: &mut String, name: &str, labels: &str) {
+        use std::fmt::Write;
+        let sep = if labels.is_empty() { "" } else { "," };
+        for (b, limit) in self.buckets.iter().zip(BUCKETS) {
+            let _ = writeln!(
+                o,
+                "{name}_bucket{{{labels}{sep}le=\"{limit}\"}} {}",
+                b.load(Ordering::Relaxed)
+            );
+        }
+        let n = self.count.load(Ordering::Relaxed);
+        let _ = writeln!(o, "{name}_bucket{{{labels}{sep}le=\"+Inf\"}} {n}");
+        let braces = if labels.is_empty() {
+            String::new()
+        } else {
+            format!("{{{labels}}}")
+        };
+        let _ = writeln!(o, "{name}_sum{braces} {}", self.micros.load(Ordering::Relaxed) as f64 / 1e6);
+        let _ = writeln!(o, "{name}_count{braces} {n}");
+    }
+}
 
 impl Metrics {
     fn record_request(&self, route: &str, status: u16) {
@@ -107,16 +167,18 @@ impl Metrics {
     pub fn record_post(&self, s: &crate::post::Summary, secs: f64) {
         self.cl_points.fetch_add(s.cl_points, Ordering::Relaxed);
         self.blocks.fetch_add(s.blocks, Ordering::Relaxed);
-        self.posts.fetch_add(1, Ordering::Relaxed);
-        self.post_micros.fetch_add((secs * 1e6) as u64, Ordering::Relaxed);
-        for (b, limit) in self.buckets.iter().zip(BUCKETS) {
-            if secs <= limit {
-                b.fetch_add(1, Ordering::Relaxed);
-            }
+        self.posts.record(secs);
+    }
+
+    /// A job run ended (`outcome`: its state), after `secs` of running.
+    pub fn record_job(&self, outcome: &'static str, secs: f64) {
+        if let Ok(mut m) = self.jobs.lock() {
+            m.entry(outcome).or_default().record(secs);
         }
     }
 
-    pub fn render(&self) -> String {
+    /// The text format; `jobs`: jobs by state in the store (queue depth), when there is one.
+    pub fn render(&self, jobs: &[(crate::jobs::State, u64)]) -> String {
         use std::fmt::Write;
         let mut o = String::new();
         o.push_str("# HELP kinepost_http_requests_total HTTP requests by route and status.\n# TYPE kinepost_http_requests_total counter\n");
@@ -150,27 +212,27 @@ impl Metrics {
             self.streams.load(Ordering::Relaxed),
         );
         o.push_str("# HELP kinepost_post_duration_seconds Duration of completed posts.\n# TYPE kinepost_post_duration_seconds histogram\n");
-        for (b, limit) in self.buckets.iter().zip(BUCKETS) {
-            let _ = writeln!(
-                o,
-                "kinepost_post_duration_seconds_bucket{{le=\"{limit}\"}} {}",
-                b.load(Ordering::Relaxed)
-            );
+        self.posts.render(&mut o, "kinepost_post_duration_seconds", "");
+        if !jobs.is_empty() {
+            o.push_str("# HELP kinepost_jobs Jobs in the store by state (queued: the queue depth; all replicas).\n# TYPE kinepost_jobs gauge\n");
+            for st in crate::jobs::State::ALL {
+                let n = jobs.iter().find(|(s, _)| *s == st).map_or(0, |(_, n)| *n);
+                let _ = writeln!(o, "kinepost_jobs{{state=\"{st}\"}} {n}");
+            }
         }
-        let n = self.posts.load(Ordering::Relaxed);
-        let _ = writeln!(o, "kinepost_post_duration_seconds_bucket{{le=\"+Inf\"}} {n}");
-        let _ = writeln!(
-            o,
-            "kinepost_post_duration_seconds_sum {}",
-            self.post_micros.load(Ordering::Relaxed) as f64 / 1e6
-        );
-        let _ = writeln!(o, "kinepost_post_duration_seconds_count {n}");
+        o.push_str("# HELP kinepost_job_duration_seconds Job runs ended on this node, by outcome.\n# TYPE kinepost_job_duration_seconds histogram\n");
+        if let Ok(m) = self.jobs.lock() {
+            for (outcome, h) in m.iter() {
+                h.render(&mut o, "kinepost_job_duration_seconds", &format!("outcome=\"{outcome}\""));
+            }
+        }
         o
     }
 }
 
 pub struct AppState {
-    pub library: Library,
+    /// The live machine library (profile files, then API versions).
+    pub machines: Arc<crate::machines::Catalog>,
     pub config: Config,
     pub metrics: Arc<Metrics>,
     /// The job queue; `None` where a process serves posts only (benches).
@@ -180,16 +242,31 @@ pub struct AppState {
 #[derive(OpenApi)]
 #[openapi(
     info(title = "kinepost", description = "5-axis CNC postprocessor: CL data in, verified NC out, for any machine profile."),
-    paths(post::post_cl, list_machines, get_machine, list_dialects, machine_ops::fk_route, machine_ops::ik_route,
+    paths(post::post_cl, machines::list_machines, machines::get_machine, machines::create_machine, machines::put_machine,
+        machines::delete_machine, machines::list_versions, machines::get_version, list_dialects, machine_ops::fk_route, machine_ops::ik_route,
         machine_ops::validate_pose, machine_ops::angle_error_fit, machine_ops::calibrate, healthz, readyz, metrics_route,
-        jobs::submit, jobs::list_jobs, jobs::get_job, jobs::delete_job, jobs::job_nc, jobs::job_diagnostics),
-    components(schemas(Problem, MachineDto, LinearDto, RotaryDto, AngleErrorDto, DialectDto, PostParams, machine_ops::FkRequest,
+        jobs::submit, jobs::list_jobs, jobs::get_job, jobs::delete_job, jobs::job_nc, jobs::job_diagnostics, jobs::job_preview),
+    components(schemas(Problem, machines::MachineDto, machines::LinearDto, machines::RotaryDto, machines::AngleErrorDto,
+        machines::VersionsDto, machines::VersionDto, DialectDto, PostParams, machine_ops::FkRequest,
         machine_ops::PoseDto, machine_ops::PoseRequest, machine_ops::ReachDto, machine_ops::AngleFitRequest, machine_ops::FitDto,
         machine_ops::AngleFitResponse, machine_ops::MeasurementDto, machine_ops::CalibrateRequest, machine_ops::CalibrateResponse,
         jobs::JobView, jobs::JobProgress, jobs::JobLinks, jobs::JobList)),
+    modifiers(&AdminToken),
     tags((name = "post", description = "Post-processing"), (name = "machines", description = "Machine profiles"), (name = "jobs", description = "Background jobs for large toolpaths"), (name = "ops", description = "Health and metrics"))
 )]
 pub struct ApiDoc;
+
+/// The bearer token that machine-profile writes carry (`KINEPOST_ADMIN_TOKEN`).
+struct AdminToken;
+
+impl utoipa::Modify for AdminToken {
+    fn modify(&self, api: &mut utoipa::openapi::OpenApi) {
+        use utoipa::openapi::security::{Http, HttpAuthScheme, SecurityScheme};
+        api.components
+            .get_or_insert_with(Default::default)
+            .add_security_scheme("admin", SecurityScheme::Http(Http::new(HttpAuthScheme::Bearer)));
+    }
+}
 
 /// The OpenAPI document as served and as checked in (`openapi/openapi.json`).
 pub fn openapi_json() -> String {
@@ -216,25 +293,38 @@ pub fn app(state: Arc<AppState>) -> axum::Router {
             state.config.max_upload.min(usize::MAX as u64) as usize,
         ));
     // Streams are neither compressed (CompressionLayer holds them back) nor timed out.
-    let streaming = axum::Router::new().route(
-        "/v1/post",
-        post_route(post::post_cl)
-            .layer(streams.clone())
-            .layer(middleware::from_fn_with_state(state.clone(), admit_stream)),
-    )
-    .route("/v1/jobs", post_route(jobs::submit).layer(streams.clone()).get(jobs::list_jobs))
-    .route("/v1/jobs/{id}", get(jobs::get_job).delete(jobs::delete_job))
-    .route("/v1/jobs/{id}/nc", get(jobs::job_nc))
-    .route("/v1/jobs/{id}/diagnostics", get(jobs::job_diagnostics));
+    let streaming = axum::Router::new()
+        .route(
+            "/v1/post",
+            post_route(post::post_cl)
+                .layer(streams.clone())
+                .layer(middleware::from_fn_with_state(state.clone(), admit_stream)),
+        )
+        .route(
+            "/v1/jobs",
+            post_route(jobs::submit).layer(streams.clone()).get(jobs::list_jobs),
+        )
+        .route("/v1/jobs/{id}", get(jobs::get_job).delete(jobs::delete_job))
+        .route("/v1/jobs/{id}/nc", get(jobs::job_nc))
+        .route("/v1/jobs/{id}/diagnostics", get(jobs::job_diagnostics));
     let api = axum::Router::new()
-        .route("/v1/machines", get(list_machines))
+        .route("/v1/machines", get(machines::list_machines).post(machines::create_machine))
         .route("/v1/dialects", get(list_dialects))
-        .route("/v1/machines/{id}", get(get_machine))
+        .route(
+            "/v1/machines/{id}",
+            get(machines::get_machine)
+                .put(machines::put_machine)
+                .delete(machines::delete_machine),
+        )
+        .route("/v1/machines/{id}/versions", get(machines::list_versions))
+        .route("/v1/machines/{id}/versions/{version}", get(machines::get_version))
         .route("/v1/machines/{id}/fk", post_route(machine_ops::fk_route))
         .route("/v1/machines/{id}/ik", post_route(machine_ops::ik_route))
         .route("/v1/machines/{id}/validate-pose", post_route(machine_ops::validate_pose))
         .route("/v1/machines/{id}/angle-error-fit", post_route(machine_ops::angle_error_fit))
         .route("/v1/machines/{id}/calibrate", post_route(machine_ops::calibrate))
+        // A preview is a few MB of JSON read whole: compressed, unlike the streams.
+        .route("/v1/jobs/{id}/preview", get(jobs::job_preview))
         .route("/healthz", get(healthz))
         .route("/readyz", get(readyz))
         .route("/metrics", get(metrics_route))
@@ -243,7 +333,11 @@ pub fn app(state: Arc<AppState>) -> axum::Router {
             get(|| async { ([(header::CONTENT_TYPE, "application/json")], openapi_json()) }),
         )
         .route("/", get(|| async { static_file("index.html") }))
-        .route("/static/{file}", get(|Path(f): Path<String>| async move { static_file(&f) }));
+        .route("/static/{file}", get(|Path(f): Path<String>| async move { static_file(&f) }))
+        .route(
+            "/static/vendor/three/{file}",
+            get(|Path(f): Path<String>| async move { vendor_file(&f) }),
+        );
     let cors = if state.config.cors_origins.is_empty() {
         CorsLayer::new()
     } else {
@@ -284,9 +378,46 @@ fn static_file(name: &str) -> Response {
         "index.html" => (include_str!("web/index.html"), "text/html; charset=utf-8"),
         "app.js" => (include_str!("web/app.js"), "text/javascript; charset=utf-8"),
         "style.css" => (include_str!("web/style.css"), "text/css; charset=utf-8"),
+        "view.js" => (include_str!("web/view.js"), "text/javascript; charset=utf-8"),
         _ => return (StatusCode::NOT_FOUND, "not found").into_response(),
     };
     ([(header::CONTENT_TYPE, ctype), (header::CACHE_CONTROL, "no-cache")], body).into_response()
+}
+
+/// three.js, vendored from npm (see `web/vendor/three/README`): the page's 3D view loads it by
+/// an import map, so nothing is fetched from the internet. It changes only with a release.
+fn vendor_file(name: &str) -> Response {
+    let body: &'static str = match name {
+        "three.module.js" => include_str!("web/vendor/three/three.module.js"),
+        "three.core.js" => include_str!("web/vendor/three/three.core.js"),
+        "OrbitControls.js" => include_str!("web/vendor/three/OrbitControls.js"),
+        "LICENSE" => include_str!("web/vendor/three/LICENSE"),
+        _ => return (StatusCode::NOT_FOUND, "not found").into_response(),
+    };
+    let ctype = if name == "LICENSE" {
+        "text/plain; charset=utf-8"
+    } else {
+        "text/javascript; charset=utf-8"
+    };
+    (
+        [
+            (header::CONTENT_TYPE, ctype),
+            (header::CACHE_CONTROL, "public, max-age=86400"),
+        ],
+        body,
+    )
+        .into_response()
+}
+
+/// `304 Not Modified`, carrying the ETag, when `If-None-Match` names `etag` (or `*`): for every
+/// route whose representations never change under one ETag.
+fn not_modified(headers: &axum::http::HeaderMap, etag: &str) -> Option<Response> {
+    let hit = headers
+        .get(header::IF_NONE_MATCH)
+        .and_then(|v| v.to_str().ok())
+        .is_some_and(|v| v.split(',').any(|t| t.trim() == etag || t.trim() == "*"));
+    let etag = HeaderValue::from_str(etag).ok()?;
+    hit.then(|| (StatusCode::NOT_MODIFIED, [(header::ETAG, etag)]).into_response())
 }
 
 /// Requests by route and status, for `/metrics`.
@@ -306,115 +437,6 @@ async fn admit_stream(State(st): State<Arc<AppState>>, req: Request, next: Next)
         return ApiError::Busy(format!("{} post streams running", st.config.max_streams)).into_response();
     }
     next.run(req).await
-}
-
-/// A machine profile as the API shows it: the profile's own numbers, plus its kinematics kind.
-#[derive(Serialize, utoipa::ToSchema)]
-pub struct MachineDto {
-    pub id: String,
-    pub name: String,
-    /// `mm` or `inch`.
-    pub units: String,
-    /// Default NC dialect.
-    pub controller: String,
-    pub description: String,
-    /// table-table, head-head, head-table, 4-axis, 3-axis, 3-rotary/2-linear …
-    pub kinematics: String,
-    pub linear: Vec<LinearDto>,
-    pub rotary: Vec<RotaryDto>,
-    pub default_tool_length: f64,
-}
-
-#[derive(Serialize, utoipa::ToSchema)]
-pub struct LinearDto {
-    pub name: String,
-    pub min: f64,
-    pub max: f64,
-    pub max_feed: Option<f64>,
-}
-
-#[derive(Serialize, utoipa::ToSchema)]
-pub struct RotaryDto {
-    pub name: String,
-    /// `table` or `head`.
-    pub on: String,
-    pub axis: [f64; 3],
-    pub pivot: [f64; 3],
-    /// Degrees; absent for an unbounded axis.
-    pub min: Option<f64>,
-    pub max: Option<f64>,
-    pub max_feed: Option<f64>,
-    pub angle_error: Option<AngleErrorDto>,
-    /// NC words that lock and unlock the axis around positioning, if it is clamped.
-    pub clamp: Option<Vec<String>>,
-}
-
-#[derive(Serialize, utoipa::ToSchema)]
-pub struct AngleErrorDto {
-    pub coefficients: Vec<f64>,
-    pub range: [f64; 2],
-}
-
-impl From<&Profile> for MachineDto {
-    fn from(p: &Profile) -> Self {
-        let d = &p.doc;
-        MachineDto {
-            id: p.machine.id.clone(),
-            name: p.machine.name.clone(),
-            units: p.machine.units.as_str().into(),
-            controller: p.machine.controller.clone(),
-            description: p.machine.description.clone(),
-            kinematics: p.machine.kinematics_kind(),
-            linear: d
-                .linear
-                .iter()
-                .map(|l| LinearDto {
-                    name: l.name.clone(),
-                    min: l.min,
-                    max: l.max,
-                    max_feed: l.max_feed,
-                })
-                .collect(),
-            rotary: d
-                .rotary
-                .iter()
-                .map(|r| RotaryDto {
-                    name: r.name.clone(),
-                    on: r.on.clone(),
-                    axis: r.axis,
-                    pivot: r.pivot,
-                    min: r.min,
-                    max: r.max,
-                    max_feed: r.max_feed,
-                    angle_error: r.angle_error.as_ref().map(|e| AngleErrorDto {
-                        coefficients: e.coefficients.clone(),
-                        range: e.range,
-                    }),
-                    clamp: r.clamp.as_ref().map(|c| c.to_vec()),
-                })
-                .collect(),
-            default_tool_length: p.machine.default_tool_length,
-        }
-    }
-}
-
-/// Every machine profile, geometry included.
-#[utoipa::path(get, path = "/v1/machines", responses((status = 200, body = Vec<MachineDto>)), tag = "machines")]
-async fn list_machines(State(st): State<Arc<AppState>>) -> Json<Vec<MachineDto>> {
-    Json(st.library.iter().map(|p| MachineDto::from(p.as_ref())).collect())
-}
-
-/// One machine profile.
-#[utoipa::path(
-    get,
-    path = "/v1/machines/{id}",
-    params(("id" = String, Path, description = "Profile id, e.g. haas-umc750")),
-    responses((status = 200, body = MachineDto), (status = 404, body = Problem, content_type = "application/problem+json")),
-    tag = "machines"
-)]
-async fn get_machine(State(st): State<Arc<AppState>>, Path(id): Path<String>) -> Result<Json<MachineDto>, ApiError> {
-    let p = st.library.get(&id).map_err(|_| ApiError::UnknownMachine(id))?;
-    Ok(Json(MachineDto::from(p.as_ref())))
 }
 
 /// A controller dialect and its words for the things that differ between controls.
@@ -452,10 +474,11 @@ async fn list_dialects(State(st): State<Arc<AppState>>) -> Json<Vec<DialectDto>>
                 inverse_time: d.inverse_time.map(str::to_string),
                 tool_change: d.tool_change.iter().map(|s| s.to_string()).collect(),
                 default_for: st
-                    .library
+                    .machines
+                    .list()
                     .iter()
-                    .filter(|p| p.machine.controller == d.name)
-                    .map(|p| p.machine.id.clone())
+                    .filter(|c| c.profile.machine.controller == d.name)
+                    .map(|c| c.profile.machine.id.clone())
                     .collect(),
                 notes: d.notes.into(),
             })
@@ -472,7 +495,7 @@ async fn healthz() -> &'static str {
 /// Ready: machines loaded and the data directory writable.
 #[utoipa::path(get, path = "/readyz", responses((status = 200, description = "ready"), (status = 503, body = Problem, content_type = "application/problem+json")), tag = "ops")]
 async fn readyz(State(st): State<Arc<AppState>>) -> Result<Response, ApiError> {
-    if st.library.is_empty() {
+    if st.machines.is_empty() {
         return Err(ApiError::Busy("no machine profiles loaded".into()));
     }
     let probe = st.config.data_dir.join(".readyz");
@@ -480,13 +503,24 @@ async fn readyz(State(st): State<Arc<AppState>>) -> Result<Response, ApiError> {
         .and_then(|_| std::fs::write(&probe, b"ok"))
         .and_then(|_| std::fs::remove_file(&probe))
         .map_err(|e| ApiError::Busy(format!("data directory {} not writable: {e}", st.config.data_dir.display())))?;
-    Ok((StatusCode::OK, format!("ready: {} machines", st.library.len())).into_response())
+    let node = st
+        .jobs
+        .as_ref()
+        .map_or(String::new(), |q| format!(", node {}", q.store.node()));
+    Ok((StatusCode::OK, format!("ready: {} machines{node}", st.machines.len())).into_response())
 }
 
 /// Prometheus metrics.
 #[utoipa::path(get, path = "/metrics", responses((status = 200, description = "Prometheus text format", content_type = "text/plain")), tag = "ops")]
 async fn metrics_route(State(st): State<Arc<AppState>>) -> impl IntoResponse {
-    ([(header::CONTENT_TYPE, "text/plain; version=0.0.4")], st.metrics.render())
+    let jobs = match &st.jobs {
+        Some(q) => q.store.counts().await.unwrap_or_default(),
+        None => Vec::new(),
+    };
+    (
+        [(header::CONTENT_TYPE, "text/plain; version=0.0.4")],
+        st.metrics.render(&jobs),
+    )
 }
 
 /// Loads the library and binds; runs until SIGINT/SIGTERM, then lets streams in flight finish.
@@ -499,19 +533,25 @@ pub async fn serve(cfg: Config) -> Result<(), String> {
     let addr = listener.local_addr().map_err(|e| e.to_string())?;
     tracing::info!(%addr, machines = library.len(), "kinepost listening");
     eprintln!("kinepost: listening on http://{addr} ({} machines)", library.len());
-    let queue = crate::jobs::Queue::start(cfg.jobs(), library.clone())
+    let (queue, machines) = crate::jobs::Queue::start(cfg.jobs(), &library)
         .await
         .map_err(|e| format!("job queue in {}: {e}", cfg.data_dir.display()))?;
+    let metrics = Arc::new(Metrics::default());
+    let m = metrics.clone();
+    queue.observe(Box::new(move |outcome, secs| m.record_job(outcome, secs)));
     let state = Arc::new(AppState {
-        library,
+        machines,
         config: cfg,
-        metrics: Arc::new(Metrics::default()),
+        metrics,
         jobs: Some(queue),
     });
-    axum::serve(listener, app(state))
-        .with_graceful_shutdown(shutdown_signal())
-        .await
-        .map_err(|e| e.to_string())
+    axum::serve(
+        listener,
+        app(state).into_make_service_with_connect_info::<std::net::SocketAddr>(),
+    )
+    .with_graceful_shutdown(shutdown_signal())
+    .await
+    .map_err(|e| e.to_string())
 }
 
 async fn shutdown_signal() {

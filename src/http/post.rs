@@ -71,12 +71,12 @@ impl PostParams {
     }
 
     /// The machine profile named by `machine` (required).
-    pub(super) fn profile(&self, st: &AppState) -> Result<Arc<crate::machines::Profile>, ApiError> {
+    pub(super) fn profile(&self, st: &AppState) -> Result<crate::machines::Current, ApiError> {
         let id = self
             .machine
             .as_deref()
             .ok_or_else(|| ApiError::BadParameter("machine: required (e.g. ?machine=haas-umc750)".into()))?;
-        st.library.get(id).map_err(|_| ApiError::UnknownMachine(id.to_string()))
+        st.machines.get(id).map_err(|_| ApiError::UnknownMachine(id.to_string()))
     }
 
     /// A multipart text field, by name.
@@ -230,7 +230,7 @@ pub async fn post_cl(
 ) -> Result<Response, ApiError> {
     let ndjson = wants_ndjson(req.headers())?;
     let (params, filename, body) = upload(&st, query, req).await?;
-    let profile = params.profile(&st)?;
+    let profile = params.profile(&st)?.profile;
     let mut opts = params.settings().profile_options(&profile).map_err(ApiError::BadParameter)?;
     opts.header.push(format!("DATE {} UTC", crate::cli::utc_now()));
     if let Some(f) = &filename {

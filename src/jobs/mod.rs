@@ -11,9 +11,10 @@
 
 mod store;
 
-pub use store::{Job, State, Store};
+pub use store::{Job, Output, State, Store};
 
-use crate::machines::Library;
+use crate::machines::{Catalog, Library, Profile};
+use crate::post::preview::{Caps, PreviewBuilder};
 use crate::post::{self, BlockInfo, FileSink, Sink, Summary};
 use std::collections::HashMap;
 use std::io::Read;
@@ -30,6 +31,9 @@ pub enum Error {
     Io(#[from] std::io::Error),
     #[error("reading the upload: {0}")]
     Upload(String),
+    /// The spool's disk is full: nothing was accepted.
+    #[error("no room for the upload in the job spool: {0}")]
+    NoSpace(String),
     /// A row the store cannot read back (written by another version, or damaged).
     #[error("job store: {0}")]
     Corrupt(String),
@@ -37,8 +41,13 @@ pub enum Error {
     NotFound(String),
     #[error("the queue is full ({0} jobs waiting)")]
     Full(u64),
+    /// One client may not fill the queue for everyone.
+    #[error("{client} has {active} jobs queued or running (the limit per client)")]
+    ClientLimit { client: String, active: u64 },
     #[error("job {id} is {state}")]
     WrongState { id: String, state: State },
+    #[error("machine catalog: {0}")]
+    Machines(#[from] crate::machines::Error),
 }
 
 /// Queue settings.
@@ -49,40 +58,75 @@ pub struct Config {
     pub workers: usize,
     /// Jobs waiting at most; more are refused (the service answers 503).
     pub max_queued: u64,
+    /// Jobs one client (address) may have queued or running; 0: no limit.
+    pub max_per_client: u64,
     /// Finished jobs and their files are removed after this long.
     pub retention: Duration,
+    /// PostgreSQL shared by replicas; `None`: SQLite in `data_dir`.
+    pub database_url: Option<String>,
+    /// The spool (inputs and outputs); replicas share one. Default `data_dir/spool`.
+    pub spool_dir: Option<PathBuf>,
+    /// A running job whose node has not reported for this long is taken over by another.
+    pub lease: Duration,
 }
 
 /// The store plus the workers' shared state: which jobs run here, and their cancel flags.
 pub struct Queue {
     pub store: Store,
     pub config: Config,
-    library: Library,
+    machines: Arc<Catalog>,
     running: Mutex<HashMap<String, Arc<AtomicBool>>>,
     wake: tokio::sync::Notify,
+    /// Told how each run ended and how long it ran (the service's metrics).
+    observer: std::sync::OnceLock<Observer>,
 }
 
+/// A run's outcome (`succeeded`, `failed`, `cancelled`) and its seconds.
+pub type Observer = Box<dyn Fn(&'static str, f64) + Send + Sync>;
+
 impl Queue {
-    /// Opens the store, puts jobs cut off by a crash back in the queue, and starts the workers
-    /// and the cleaner on the current runtime.
-    pub async fn start(config: Config, library: Library) -> Result<Arc<Queue>, Error> {
-        let store = Store::open(&config.data_dir).await?;
+    /// Opens the store and the machine catalog in it (the profile files of `files` as first
+    /// versions), puts jobs cut off by a crash back in the queue, and starts the workers and the
+    /// cleaner on the current runtime.
+    pub async fn start(config: Config, files: &Library) -> Result<(Arc<Queue>, Arc<Catalog>), Error> {
+        let store = Store::open(
+            &config.data_dir,
+            config.database_url.as_deref(),
+            config.spool_dir.as_deref(),
+            config.lease,
+        )
+        .await?;
+        let machines = Catalog::open(files, store.pool().clone()).await?;
+        if store.backend() == store::Backend::Postgres {
+            // Replicas: each sees the others' profile writes within a second.
+            let m = machines.clone();
+            tokio::spawn(async move {
+                loop {
+                    tokio::time::sleep(Duration::from_secs(1)).await;
+                    if let Err(e) = m.refresh().await {
+                        tracing::warn!(error = %e, "refreshing machine profiles");
+                    }
+                }
+            });
+        }
         let requeued = store.recover().await?;
+        store.started().await;
         if requeued > 0 {
             tracing::warn!(requeued, "jobs cut off by a restart run again from the start");
         }
         let q = Arc::new(Queue {
             store,
             config,
-            library,
+            machines: machines.clone(),
             running: Mutex::new(HashMap::new()),
             wake: tokio::sync::Notify::new(),
+            observer: std::sync::OnceLock::new(),
         });
         for _ in 0..q.config.workers.max(1) {
             tokio::spawn(q.clone().worker());
         }
         tokio::spawn(q.clone().cleaner());
-        Ok(q)
+        Ok((q, machines))
     }
 
     /// Accepts a job: the input is streamed to the spool and fsynced before the row commits.
@@ -90,8 +134,10 @@ impl Queue {
     pub async fn submit(
         &self,
         settings: post::Settings,
+        machine_version: i64,
         filename: Option<String>,
         idempotency_key: Option<String>,
+        client: Option<String>,
         input: impl tokio::io::AsyncRead + Unpin,
     ) -> Result<(Job, bool), Error> {
         if let Some(k) = &idempotency_key
@@ -103,9 +149,28 @@ impl Queue {
         if waiting >= self.config.max_queued {
             return Err(Error::Full(waiting));
         }
-        let r = self.store.insert(settings, filename, idempotency_key, input).await?;
+        if let Some(c) = &client
+            && self.config.max_per_client > 0
+        {
+            let active = self.store.active_for(c).await?;
+            if active >= self.config.max_per_client {
+                return Err(Error::ClientLimit {
+                    client: c.clone(),
+                    active,
+                });
+            }
+        }
+        let r = self
+            .store
+            .insert(settings, machine_version, client, filename, idempotency_key, input)
+            .await?;
         self.wake.notify_one();
         Ok(r)
+    }
+
+    /// Sets who hears of finished runs (once).
+    pub fn observe(&self, f: Observer) {
+        let _ = self.observer.set(f);
     }
 
     /// Cancels a queued or running job (a running one stops at its next progress check).
@@ -139,8 +204,7 @@ impl Queue {
                 Ok(_) => {}
                 Err(e) => tracing::error!(error = %e, "expiring jobs"),
             }
-            tokio::time::sleep(Duration::from_secs(60).min(self.config.retention.max(Duration::from_secs(1))))
-                .await;
+            tokio::time::sleep(Duration::from_secs(60).min(self.config.retention.max(Duration::from_secs(1)))).await;
         }
     }
 
@@ -151,11 +215,17 @@ impl Queue {
             m.insert(id.clone(), cancel.clone());
         }
         let progress = Arc::new(Progress::default());
+        let started = std::time::Instant::now();
+        // The version it was submitted with, even if the profile changed or went since.
+        let profile = match job.machine_version {
+            Some(v) => self.machines.version(&job.machine, v).await,
+            None => self.machines.get(&job.machine).map(|c| c.profile),
+        }
+        .map_err(|e| format!("machine {:?}: {e}", job.machine));
         let task = {
             let (job, cancel, progress) = (job.clone(), cancel.clone(), progress.clone());
-            let library = self.library.clone();
             let spool = self.store.spool().to_path_buf();
-            tokio::task::spawn_blocking(move || execute(&library, &spool, &job, &cancel, &progress))
+            tokio::task::spawn_blocking(move || execute(profile?, &spool, &job, &cancel, &progress))
         };
         tokio::pin!(task);
         let result = loop {
@@ -175,14 +245,25 @@ impl Queue {
         }
         let (b, n) = progress.snapshot();
         let _ = self.store.progress(&id, b, n).await;
+        let secs = started.elapsed().as_secs_f64();
+        // Read once: the label and the handling must agree even if a cancel lands in between.
+        let cancelled = cancel.load(Ordering::Relaxed);
+        let label = match &result {
+            Ok(Ok(_)) => "succeeded",
+            Ok(Err(_)) if cancelled => "cancelled",
+            _ => "failed",
+        };
+        if let Some(f) = self.observer.get() {
+            f(label, secs);
+        }
         let outcome = match result {
-            Ok(Ok(s)) => self.store.succeed(&id, &s).await,
-            Ok(Err(_)) if cancel.load(Ordering::Relaxed) => {
-                self.store.remove_outputs(&id);
+            Ok(Ok(s)) => self.store.succeed(&job, &s).await,
+            Ok(Err(_)) if cancelled => {
+                self.store.remove_outputs(&job);
                 Ok(())
             }
-            Ok(Err(msg)) => self.store.fail(&id, &msg).await,
-            Err(join) => self.store.fail(&id, &format!("the engine stopped: {join}")).await,
+            Ok(Err(msg)) => self.store.fail(&job, &msg).await,
+            Err(join) => self.store.fail(&job, &format!("the engine stopped: {join}")).await,
         };
         if let Err(e) = outcome {
             tracing::error!(job = %id, error = %e, "recording a job's end");
@@ -217,9 +298,11 @@ impl<R: Read> Read for Counting<R> {
     }
 }
 
-/// The spool files' sink, counting blocks and stopping when the job is cancelled.
+/// The spool files' sink (and the preview beside them), counting blocks and stopping when the
+/// job is cancelled.
 struct JobSink<'a> {
     files: FileSink<std::fs::File, std::fs::File>,
+    preview: PreviewBuilder,
     progress: &'a Progress,
     cancel: &'a AtomicBool,
 }
@@ -230,9 +313,17 @@ impl Sink for JobSink<'_> {
         if n % 1024 == 0 && self.cancel.load(Ordering::Relaxed) {
             return Err(std::io::Error::other("cancelled"));
         }
+        if let Some(b) = b {
+            self.preview.block(text, b);
+        }
         self.files.line(text, b)
     }
     fn diagnostic(&mut self, d: &crate::diag::Diagnostic) -> std::io::Result<()> {
+        self.preview.note(d, None);
+        self.files.diagnostic(d)
+    }
+    fn diagnostic_at(&mut self, d: &crate::diag::Diagnostic, pose: &crate::kinematics::Pose) -> std::io::Result<()> {
+        self.preview.note(d, Some(pose));
         self.files.diagnostic(d)
     }
     fn summary(&mut self, s: &Summary) -> std::io::Result<()> {
@@ -243,16 +334,13 @@ impl Sink for JobSink<'_> {
 /// One job on a blocking thread: spool input → `.tmp` outputs, fsynced. The error is the
 /// message a user reads in the job's `error`.
 fn execute(
-    library: &Library,
+    profile: Arc<Profile>,
     spool: &std::path::Path,
     job: &Job,
     cancel: &AtomicBool,
     progress: &Arc<Progress>,
 ) -> Result<Summary, String> {
-    let paths = store::Paths::new(spool, &job.id);
-    let profile = library
-        .get(&job.machine)
-        .map_err(|_| format!("unknown machine {:?}", job.machine))?;
+    let paths = store::Paths::new(spool, &job.id, job.attempts);
     let mut opts = job.settings.profile_options(&profile)?;
     opts.header.push(format!("JOB {}", job.id));
     if let Some(f) = &job.filename {
@@ -271,6 +359,7 @@ fn execute(
     let nd = std::fs::File::create(&paths.diag_tmp).map_err(io)?;
     let mut sink = JobSink {
         files: FileSink::new(nc, Some(nd)),
+        preview: PreviewBuilder::new(&profile.machine, opts.mode, Caps::default()),
         progress,
         cancel,
     };
@@ -288,6 +377,13 @@ fn execute(
     nc.sync_all().map_err(io)?;
     if let Some(nd) = nd {
         nd.sync_all().map_err(io)?;
+    }
+    if !cancel.load(Ordering::Relaxed) {
+        let mut source = std::io::BufReader::with_capacity(64 * 1024, std::fs::File::open(&paths.input).map_err(io)?);
+        let preview = sink.preview.finish(res.as_ref().ok(), Some(&mut source));
+        let mut f = std::io::BufWriter::new(std::fs::File::create(&paths.preview_tmp).map_err(io)?);
+        serde_json::to_writer(&mut f, &preview).map_err(|e| io(e.into()))?;
+        f.into_inner().map_err(|e| io(e.into_error()))?.sync_all().map_err(io)?;
     }
     res
 }

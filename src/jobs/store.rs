@@ -1,10 +1,15 @@
-//! The job table (SQLite through sqlx, runtime queries only) and the spool directory.
+//! The job table and the spool directory. One store, two backends through sqlx's `Any` driver
+//! (runtime queries only, `$N` parameters that both understand): SQLite in the data directory for
+//! one node, PostgreSQL (`KINEPOST_DATABASE_URL`) for replicas sharing a spool directory. The
+//! SQL is the same except where the backends differ in kind: claiming (`FOR UPDATE SKIP LOCKED`)
+//! and start-up recovery (one node may requeue every running job; replicas go by leases).
 
 use super::Error;
 use crate::post::{Settings, Summary};
 use serde::{Deserialize, Serialize};
+use sqlx::AnyPool;
 use sqlx::Row;
-use sqlx::sqlite::{SqliteConnectOptions, SqliteJournalMode, SqlitePool, SqlitePoolOptions, SqliteRow, SqliteSynchronous};
+use sqlx::any::{AnyPoolOptions, AnyRow};
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 use tokio::io::AsyncWriteExt;
@@ -20,7 +25,13 @@ pub enum State {
 }
 
 impl State {
-    pub const ALL: [State; 5] = [State::Queued, State::Running, State::Succeeded, State::Failed, State::Cancelled];
+    pub const ALL: [State; 5] = [
+        State::Queued,
+        State::Running,
+        State::Succeeded,
+        State::Failed,
+        State::Cancelled,
+    ];
 
     pub fn as_str(self) -> &'static str {
         match self {
@@ -53,6 +64,9 @@ pub struct Job {
     pub id: String,
     pub state: State,
     pub machine: String,
+    /// The profile version the job was submitted with (and runs with). `None` in rows written
+    /// before profiles had versions: those run with the current one.
+    pub machine_version: Option<i64>,
     pub settings: Settings,
     pub filename: Option<String>,
     pub idempotency_key: Option<String>,
@@ -64,56 +78,100 @@ pub struct Job {
     pub blocks: u64,
     /// Runs started: more than one means a restart cut a run off.
     pub attempts: i64,
+    /// The node running it (or that ran it last).
+    pub owner: Option<String>,
     pub summary: Option<serde_json::Value>,
     pub error: Option<String>,
     pub nc_bytes: Option<u64>,
 }
 
 /// A job's files in the spool.
+/// What a finished job publishes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Output {
+    /// The NC program (succeeded jobs).
+    Nc,
+    /// The NDJSON of blocks, diagnostics and the summary or the error (finished jobs).
+    Diagnostics,
+    /// The decimated path, joints and marks (`post::preview`) for display (finished jobs).
+    Preview,
+}
+
 pub(super) struct Paths {
     pub input: PathBuf,
     pub nc: PathBuf,
-    pub nc_tmp: PathBuf,
     pub diag: PathBuf,
+    pub preview: PathBuf,
+    /// Where one run writes, before it publishes: a run cut off and its successor (perhaps on
+    /// another replica) never write the same file.
+    pub nc_tmp: PathBuf,
     pub diag_tmp: PathBuf,
+    pub preview_tmp: PathBuf,
 }
 
 impl Paths {
-    pub fn new(spool: &Path, id: &str) -> Paths {
+    pub fn new(spool: &Path, id: &str, attempt: i64) -> Paths {
         Paths {
             input: spool.join(format!("{id}.cl")),
             nc: spool.join(format!("{id}.nc")),
-            nc_tmp: spool.join(format!("{id}.nc.tmp")),
             diag: spool.join(format!("{id}.ndjson")),
-            diag_tmp: spool.join(format!("{id}.ndjson.tmp")),
+            preview: spool.join(format!("{id}.preview.json")),
+            nc_tmp: spool.join(format!("{id}.nc.{attempt}.tmp")),
+            diag_tmp: spool.join(format!("{id}.ndjson.{attempt}.tmp")),
+            preview_tmp: spool.join(format!("{id}.preview.json.{attempt}.tmp")),
         }
     }
 }
 
+/// Which database the store is on.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Backend {
+    Sqlite,
+    Postgres,
+}
+
 pub struct Store {
-    pool: SqlitePool,
+    pool: AnyPool,
+    backend: Backend,
     spool: PathBuf,
+    /// This process, as the owner of the jobs it runs.
+    node: String,
+    /// A running job whose owner has not reported for this long is taken over.
+    lease: Duration,
+    startup: tokio::sync::Mutex<Option<sqlx::pool::PoolConnection<sqlx::Any>>>,
 }
 
 const SCHEMA: &str = "CREATE TABLE IF NOT EXISTS jobs (
     id TEXT PRIMARY KEY,
     state TEXT NOT NULL,
     machine TEXT NOT NULL,
+    machine_version BIGINT,
     settings TEXT NOT NULL,
     filename TEXT,
     idempotency_key TEXT UNIQUE,
-    input_bytes INTEGER NOT NULL,
-    created_ms INTEGER NOT NULL,
-    started_ms INTEGER,
-    finished_ms INTEGER,
-    bytes_read INTEGER NOT NULL DEFAULT 0,
-    blocks INTEGER NOT NULL DEFAULT 0,
-    attempts INTEGER NOT NULL DEFAULT 0,
+    input_bytes BIGINT NOT NULL,
+    created_ms BIGINT NOT NULL,
+    started_ms BIGINT,
+    finished_ms BIGINT,
+    bytes_read BIGINT NOT NULL DEFAULT 0,
+    blocks BIGINT NOT NULL DEFAULT 0,
+    attempts BIGINT NOT NULL DEFAULT 0,
     summary TEXT,
     error TEXT,
-    nc_bytes INTEGER
+    nc_bytes BIGINT,
+    owner TEXT,
+    heartbeat_ms BIGINT,
+    client TEXT
 );
 CREATE INDEX IF NOT EXISTS jobs_state ON jobs (state, created_ms)";
+
+/// Columns added after the first release of the table, for stores made before them.
+const ADDED: [(&str, &str); 4] = [
+    ("machine_version", "BIGINT"),
+    ("owner", "TEXT"),
+    ("heartbeat_ms", "BIGINT"),
+    ("client", "TEXT"),
+];
 
 fn now_ms() -> i64 {
     std::time::SystemTime::now()
@@ -122,7 +180,7 @@ fn now_ms() -> i64 {
         .unwrap_or(0)
 }
 
-fn row_job(r: &SqliteRow) -> Result<Job, Error> {
+fn row_job(r: &AnyRow) -> Result<Job, Error> {
     let state: String = r.try_get("state")?;
     let settings: String = r.try_get("settings")?;
     let summary: Option<String> = r.try_get("summary")?;
@@ -131,6 +189,7 @@ fn row_job(r: &SqliteRow) -> Result<Job, Error> {
         id: r.try_get("id")?,
         state: State::parse(&state).ok_or_else(|| Error::Corrupt(format!("job state {state:?}")))?,
         machine: r.try_get("machine")?,
+        machine_version: r.try_get("machine_version")?,
         settings: serde_json::from_str(&settings).map_err(|e| Error::Corrupt(format!("job settings: {e}")))?,
         filename: r.try_get("filename")?,
         idempotency_key: r.try_get("idempotency_key")?,
@@ -144,6 +203,7 @@ fn row_job(r: &SqliteRow) -> Result<Job, Error> {
         summary: summary.and_then(|s| serde_json::from_str(&s).ok()),
         error: r.try_get("error")?,
         nc_bytes: r.try_get::<Option<i64>, _>("nc_bytes")?.map(|v| v.max(0) as u64),
+        owner: r.try_get("owner")?,
     })
 }
 
@@ -156,28 +216,130 @@ fn sync_dir(dir: &Path) -> std::io::Result<()> {
 }
 
 impl Store {
-    pub async fn open(data_dir: &Path) -> Result<Store, Error> {
-        let spool = data_dir.join("spool");
+    /// Opens (and creates) the store: PostgreSQL when `database_url` is given, else SQLite in
+    /// `data_dir`. The spool is `spool` (shared between replicas) or `data_dir/spool`.
+    pub async fn open(
+        data_dir: &Path,
+        database_url: Option<&str>,
+        spool: Option<&Path>,
+        lease: Duration,
+    ) -> Result<Store, Error> {
+        sqlx::any::install_default_drivers();
+        let spool = spool.map_or_else(|| data_dir.join("spool"), Path::to_path_buf);
         tokio::fs::create_dir_all(&spool).await?;
-        let opts = SqliteConnectOptions::new()
-            .filename(data_dir.join("jobs.sqlite"))
-            .create_if_missing(true)
-            .journal_mode(SqliteJournalMode::Wal)
-            .synchronous(SqliteSynchronous::Full)
-            .busy_timeout(Duration::from_secs(10));
-        let pool = SqlitePoolOptions::new().max_connections(4).connect_with(opts).await?;
+        let (pool, backend) = match database_url {
+            Some(url) if url.starts_with("postgres:") || url.starts_with("postgresql:") => {
+                let pool = AnyPoolOptions::new()
+                    .max_connections(8)
+                    .acquire_timeout(Duration::from_secs(10))
+                    .connect(url)
+                    .await?;
+                (pool, Backend::Postgres)
+            }
+            Some(url) => return Err(Error::Corrupt(format!("database URL {url:?}: expected postgres://…"))),
+            None => {
+                tokio::fs::create_dir_all(data_dir).await?;
+                let url = format!("sqlite://{}?mode=rwc", data_dir.join("jobs.sqlite").display());
+                // Durable before fast: WAL, fsync on every commit; writers wait rather than fail.
+                let pool = AnyPoolOptions::new()
+                    .max_connections(4)
+                    .after_connect(|conn, _| {
+                        Box::pin(async move {
+                            use sqlx::Executor;
+                            conn.execute("PRAGMA journal_mode = WAL").await?;
+                            conn.execute("PRAGMA synchronous = FULL").await?;
+                            conn.execute("PRAGMA busy_timeout = 10000").await?;
+                            Ok(())
+                        })
+                    })
+                    .connect(&url)
+                    .await?;
+                (pool, Backend::Sqlite)
+            }
+        };
+        // Replicas starting together would race on CREATE TABLE (PostgreSQL's catalog is not
+        // IF-NOT-EXISTS-safe under concurrency) and on seeding the machine catalog: one at a
+        // time, under an advisory lock held until `started()`.
+        let startup = match backend {
+            Backend::Postgres => {
+                let mut conn = pool.acquire().await?;
+                sqlx::query("SELECT pg_advisory_lock(7311000001)").execute(&mut *conn).await?;
+                Some(conn)
+            }
+            Backend::Sqlite => None,
+        };
         for stmt in SCHEMA.split(';') {
             sqlx::query(stmt).execute(&pool).await?;
         }
-        Ok(Store { pool, spool })
+        for (col, ty) in ADDED {
+            let has: i64 = match backend {
+                Backend::Sqlite => {
+                    sqlx::query_scalar("SELECT COUNT(*) FROM pragma_table_info('jobs') WHERE name = $1")
+                        .bind(col)
+                        .fetch_one(&pool)
+                        .await?
+                }
+                Backend::Postgres => {
+                    sqlx::query_scalar(
+                        "SELECT COUNT(*) FROM information_schema.columns WHERE table_name = 'jobs' AND column_name = $1",
+                    )
+                    .bind(col)
+                    .fetch_one(&pool)
+                    .await?
+                }
+            };
+            if has == 0 {
+                sqlx::query(sqlx::AssertSqlSafe(format!("ALTER TABLE jobs ADD COLUMN {col} {ty}")))
+                    .execute(&pool)
+                    .await?;
+            }
+        }
+        Ok(Store {
+            pool,
+            backend,
+            spool,
+            node: format!(
+                "{}-{}",
+                std::env::var("HOSTNAME").unwrap_or_else(|_| "node".into()),
+                &uuid::Uuid::new_v4().simple().to_string()[..8]
+            ),
+            lease,
+            startup: tokio::sync::Mutex::new(startup),
+        })
+    }
+
+    /// Start-up is over (schema, recovery, catalog seeding): the next replica may start.
+    pub async fn started(&self) {
+        if let Some(mut conn) = self.startup.lock().await.take() {
+            let _ = sqlx::query("SELECT pg_advisory_unlock(7311000001)").execute(&mut *conn).await;
+        }
+    }
+
+    /// The connection pool, shared with the machine catalog (one store).
+    pub fn pool(&self) -> &AnyPool {
+        &self.pool
+    }
+
+    pub fn backend(&self) -> Backend {
+        self.backend
+    }
+
+    /// This process's name as a job owner.
+    pub fn node(&self) -> &str {
+        &self.node
     }
 
     pub fn spool(&self) -> &Path {
         &self.spool
     }
 
-    /// Jobs cut off mid-run go back to the queue; stale temporary files go.
+    /// One node: every job found running was cut off by this node's end; they go back to the
+    /// queue and stale temporaries go. Replicas share the store: nothing is taken from a live
+    /// peer here; a dead peer's jobs are taken over by lease in `claim`.
     pub async fn recover(&self) -> Result<u64, Error> {
+        if self.backend != Backend::Sqlite {
+            return Ok(0);
+        }
         let n = sqlx::query(
             "UPDATE jobs SET state = 'queued', started_ms = NULL, bytes_read = 0, blocks = 0 WHERE state = 'running'",
         )
@@ -194,7 +356,7 @@ impl Store {
     }
 
     pub async fn by_key(&self, key: &str) -> Result<Option<Job>, Error> {
-        let r = sqlx::query("SELECT * FROM jobs WHERE idempotency_key = ?")
+        let r = sqlx::query("SELECT * FROM jobs WHERE idempotency_key = $1")
             .bind(key)
             .fetch_optional(&self.pool)
             .await?;
@@ -202,7 +364,7 @@ impl Store {
     }
 
     pub async fn get(&self, id: &str) -> Result<Job, Error> {
-        let r = sqlx::query("SELECT * FROM jobs WHERE id = ?")
+        let r = sqlx::query("SELECT * FROM jobs WHERE id = $1")
             .bind(id)
             .fetch_optional(&self.pool)
             .await?;
@@ -214,19 +376,29 @@ impl Store {
 
     /// Newest first.
     pub async fn list(&self, state: Option<State>, limit: u32, offset: u64) -> Result<Vec<Job>, Error> {
-        let rows = sqlx::query(
-            "SELECT * FROM jobs WHERE (?1 IS NULL OR state = ?1) ORDER BY created_ms DESC, id LIMIT ?2 OFFSET ?3",
-        )
-        .bind(state.map(State::as_str))
-        .bind(limit as i64)
-        .bind(offset.min(i64::MAX as u64) as i64)
-        .fetch_all(&self.pool)
-        .await?;
+        let offset = offset.min(i64::MAX as u64) as i64;
+        let rows = match state {
+            Some(st) => {
+                sqlx::query("SELECT * FROM jobs WHERE state = $1 ORDER BY created_ms DESC, id LIMIT $2 OFFSET $3")
+                    .bind(st.as_str())
+                    .bind(limit as i64)
+                    .bind(offset)
+                    .fetch_all(&self.pool)
+                    .await?
+            }
+            None => {
+                sqlx::query("SELECT * FROM jobs ORDER BY created_ms DESC, id LIMIT $1 OFFSET $2")
+                    .bind(limit as i64)
+                    .bind(offset)
+                    .fetch_all(&self.pool)
+                    .await?
+            }
+        };
         rows.iter().map(row_job).collect()
     }
 
     pub async fn count(&self, state: State) -> Result<u64, Error> {
-        let n: i64 = sqlx::query_scalar("SELECT COUNT(*) FROM jobs WHERE state = ?")
+        let n: i64 = sqlx::query_scalar("SELECT COUNT(*) FROM jobs WHERE state = $1")
             .bind(state.as_str())
             .fetch_one(&self.pool)
             .await?;
@@ -236,12 +408,14 @@ impl Store {
     pub(super) async fn insert(
         &self,
         settings: Settings,
+        machine_version: i64,
+        client: Option<String>,
         filename: Option<String>,
         key: Option<String>,
         mut input: impl tokio::io::AsyncRead + Unpin,
     ) -> Result<(Job, bool), Error> {
         let id = uuid::Uuid::new_v4().simple().to_string();
-        let p = Paths::new(&self.spool, &id);
+        let p = Paths::new(&self.spool, &id, 0);
         let tmp = self.spool.join(format!("{id}.cl.tmp"));
         let copied = async {
             let mut f = tokio::fs::File::create(&tmp).await?;
@@ -255,6 +429,9 @@ impl Store {
             Ok(n) => n,
             Err(e) => {
                 let _ = tokio::fs::remove_file(&tmp).await;
+                if e.kind() == std::io::ErrorKind::StorageFull || e.kind() == std::io::ErrorKind::QuotaExceeded {
+                    return Err(Error::NoSpace(e.to_string()));
+                }
                 return Err(Error::Upload(e.to_string()));
             }
         };
@@ -262,16 +439,18 @@ impl Store {
         sync_dir(&self.spool)?;
         let machine = settings.machine.clone().unwrap_or_default();
         let res = sqlx::query(
-            "INSERT INTO jobs (id, state, machine, settings, filename, idempotency_key, input_bytes, created_ms)
-             VALUES (?, 'queued', ?, ?, ?, ?, ?, ?)",
+            "INSERT INTO jobs (id, state, machine, machine_version, settings, filename, idempotency_key, input_bytes, created_ms, client)
+             VALUES ($1, 'queued', $2, $3, $4, $5, $6, $7, $8, $9)",
         )
         .bind(&id)
         .bind(&machine)
+        .bind(machine_version)
         .bind(serde_json::to_string(&settings).unwrap_or_default())
         .bind(&filename)
         .bind(&key)
         .bind(n.min(i64::MAX as u64) as i64)
         .bind(now_ms())
+        .bind(&client)
         .execute(&self.pool)
         .await;
         match res {
@@ -289,77 +468,114 @@ impl Store {
         }
     }
 
-    /// Takes the oldest queued job; SQLite serializes writers, so two workers never get one job.
+    /// Takes the oldest queued job, or a running one whose owner stopped reporting (a replica
+    /// that died). SQLite serializes writers; PostgreSQL skips rows another replica is claiming,
+    /// so two workers never get one job.
     pub(super) async fn claim(&self) -> Result<Option<Job>, Error> {
-        let r = sqlx::query(
-            "UPDATE jobs SET state = 'running', started_ms = ?, attempts = attempts + 1, bytes_read = 0, blocks = 0
-             WHERE id = (SELECT id FROM jobs WHERE state = 'queued' ORDER BY created_ms, id LIMIT 1) AND state = 'queued'
-             RETURNING *",
-        )
-        .bind(now_ms())
-        .fetch_optional(&self.pool)
-        .await?;
+        let lock = match self.backend {
+            Backend::Sqlite => "",
+            Backend::Postgres => "FOR UPDATE SKIP LOCKED",
+        };
+        let now = now_ms();
+        let stale = now - self.lease.as_millis().min(i64::MAX as u128) as i64;
+        let sql = format!(
+            "UPDATE jobs SET state = 'running', started_ms = $1, heartbeat_ms = $1, owner = $2, attempts = attempts + 1,
+                 bytes_read = 0, blocks = 0
+             WHERE id = (SELECT id FROM jobs WHERE state = 'queued' OR (state = 'running' AND heartbeat_ms < $3)
+                         ORDER BY created_ms, id LIMIT 1 {lock})
+               AND (state = 'queued' OR (state = 'running' AND heartbeat_ms < $3))
+             RETURNING *"
+        );
+        let r = sqlx::query(sqlx::AssertSqlSafe(sql))
+            .bind(now)
+            .bind(&self.node)
+            .bind(stale)
+            .fetch_optional(&self.pool)
+            .await?;
         r.as_ref().map(row_job).transpose()
     }
 
-    /// Records progress; `false` when the job is no longer running (cancelled).
+    /// Records progress and renews this node's lease; `false` when the job is no longer this
+    /// node's to run (cancelled, or taken over).
     pub(super) async fn progress(&self, id: &str, bytes: u64, blocks: u64) -> Result<bool, Error> {
-        let n = sqlx::query("UPDATE jobs SET bytes_read = ?, blocks = ? WHERE id = ? AND state = 'running'")
-            .bind(bytes as i64)
-            .bind(blocks as i64)
-            .bind(id)
-            .execute(&self.pool)
-            .await?
-            .rows_affected();
+        let n = sqlx::query(
+            "UPDATE jobs SET bytes_read = $1, blocks = $2, heartbeat_ms = $3 WHERE id = $4 AND state = 'running' AND owner = $5",
+        )
+        .bind(bytes as i64)
+        .bind(blocks as i64)
+        .bind(now_ms())
+        .bind(id)
+        .bind(&self.node)
+        .execute(&self.pool)
+        .await?
+        .rows_affected();
         Ok(n > 0)
     }
 
-    /// Publishes the outputs (rename, then the row), unless the job was cancelled meanwhile.
-    pub(super) async fn succeed(&self, id: &str, s: &Summary) -> Result<(), Error> {
-        if self.get(id).await?.state != State::Running {
-            self.remove_outputs(id);
+    fn still_mine(&self, j: &Job) -> bool {
+        j.state == State::Running && j.owner.as_deref() == Some(self.node.as_str())
+    }
+
+    /// Publishes one run's outputs (rename, then the row), unless the job was cancelled or taken
+    /// over meanwhile.
+    pub(super) async fn succeed(&self, job: &Job, s: &Summary) -> Result<(), Error> {
+        let id = &job.id;
+        if !self.still_mine(&self.get(id).await?) {
+            self.remove_outputs(job);
             return Ok(());
         }
-        let p = Paths::new(&self.spool, id);
+        let p = Paths::new(&self.spool, id, job.attempts);
         tokio::fs::rename(&p.nc_tmp, &p.nc).await?;
         tokio::fs::rename(&p.diag_tmp, &p.diag).await?;
+        tokio::fs::rename(&p.preview_tmp, &p.preview).await?;
         sync_dir(&self.spool)?;
         let nc_bytes = tokio::fs::metadata(&p.nc).await?.len();
         sqlx::query(
-            "UPDATE jobs SET state = 'succeeded', finished_ms = ?, summary = ?, nc_bytes = ? WHERE id = ? AND state = 'running'",
+            "UPDATE jobs SET state = 'succeeded', finished_ms = $1, summary = $2, nc_bytes = $3
+             WHERE id = $4 AND state = 'running' AND owner = $5",
         )
         .bind(now_ms())
         .bind(serde_json::to_string(s).unwrap_or_default())
         .bind(nc_bytes as i64)
         .bind(id)
+        .bind(&self.node)
         .execute(&self.pool)
         .await?;
         Ok(())
     }
 
-    /// A failed job keeps its diagnostics (ending with the error), never its partial program.
-    pub(super) async fn fail(&self, id: &str, msg: &str) -> Result<(), Error> {
-        let p = Paths::new(&self.spool, id);
+    /// A failed job keeps its diagnostics (ending with the error) and its preview (up to where it
+    /// stopped), never its partial program.
+    pub(super) async fn fail(&self, job: &Job, msg: &str) -> Result<(), Error> {
+        let id = &job.id;
+        if !self.still_mine(&self.get(id).await?) {
+            self.remove_outputs(job);
+            return Ok(());
+        }
+        let p = Paths::new(&self.spool, id, job.attempts);
         let _ = tokio::fs::remove_file(&p.nc_tmp).await;
         let _ = tokio::fs::rename(&p.diag_tmp, &p.diag).await;
-        sqlx::query("UPDATE jobs SET state = 'failed', finished_ms = ?, error = ? WHERE id = ? AND state = 'running'")
-            .bind(now_ms())
-            .bind(msg)
-            .bind(id)
-            .execute(&self.pool)
-            .await?;
+        let _ = tokio::fs::rename(&p.preview_tmp, &p.preview).await;
+        sqlx::query(
+            "UPDATE jobs SET state = 'failed', finished_ms = $1, error = $2 WHERE id = $3 AND state = 'running' AND owner = $4",
+        )
+        .bind(now_ms())
+        .bind(msg)
+        .bind(id)
+        .bind(&self.node)
+        .execute(&self.pool)
+        .await?;
         Ok(())
     }
 
     pub(super) async fn cancel(&self, id: &str) -> Result<Job, Error> {
-        let n = sqlx::query(
-            "UPDATE jobs SET state = 'cancelled', finished_ms = ? WHERE id = ? AND state IN ('queued', 'running')",
-        )
-        .bind(now_ms())
-        .bind(id)
-        .execute(&self.pool)
-        .await?
-        .rows_affected();
+        let n =
+            sqlx::query("UPDATE jobs SET state = 'cancelled', finished_ms = $1 WHERE id = $2 AND state IN ('queued', 'running')")
+                .bind(now_ms())
+                .bind(id)
+                .execute(&self.pool)
+                .await?
+                .rows_affected();
         let j = self.get(id).await?;
         if n == 0 {
             return Err(Error::WrongState {
@@ -379,44 +595,84 @@ impl Store {
                 state: j.state,
             });
         }
-        sqlx::query("DELETE FROM jobs WHERE id = ?").bind(id).execute(&self.pool).await?;
+        sqlx::query("DELETE FROM jobs WHERE id = $1")
+            .bind(id)
+            .execute(&self.pool)
+            .await?;
         self.remove_files(id);
         Ok(())
     }
 
-    pub(super) fn remove_outputs(&self, id: &str) {
-        let p = Paths::new(&self.spool, id);
-        for f in [&p.nc_tmp, &p.diag_tmp] {
+    /// One run's temporaries.
+    pub(super) fn remove_outputs(&self, job: &Job) {
+        let p = Paths::new(&self.spool, &job.id, job.attempts);
+        for f in [&p.nc_tmp, &p.diag_tmp, &p.preview_tmp] {
             let _ = std::fs::remove_file(f);
         }
     }
 
+    /// Every file of a job: input, outputs, any run's temporaries.
     fn remove_files(&self, id: &str) {
-        let p = Paths::new(&self.spool, id);
-        for f in [&p.input, &p.nc, &p.nc_tmp, &p.diag, &p.diag_tmp] {
-            let _ = std::fs::remove_file(f);
+        let prefix = format!("{id}.");
+        if let Ok(dir) = std::fs::read_dir(&self.spool) {
+            for e in dir.flatten() {
+                if e.file_name().to_string_lossy().starts_with(&prefix) {
+                    let _ = std::fs::remove_file(e.path());
+                }
+            }
         }
     }
 
     /// Removes jobs finished longer ago than `retention`, files first.
     pub(super) async fn expire(&self, retention: Duration) -> Result<u64, Error> {
         let cutoff = now_ms() - retention.as_millis().min(i64::MAX as u128) as i64;
-        let ids: Vec<String> = sqlx::query_scalar(
-            "SELECT id FROM jobs WHERE state IN ('succeeded', 'failed', 'cancelled') AND finished_ms < ?",
-        )
-        .bind(cutoff)
-        .fetch_all(&self.pool)
-        .await?;
+        let ids: Vec<String> =
+            sqlx::query_scalar("SELECT id FROM jobs WHERE state IN ('succeeded', 'failed', 'cancelled') AND finished_ms < $1")
+                .bind(cutoff)
+                .fetch_all(&self.pool)
+                .await?;
         for id in &ids {
             self.remove_files(id);
-            sqlx::query("DELETE FROM jobs WHERE id = ?").bind(id).execute(&self.pool).await?;
+            sqlx::query("DELETE FROM jobs WHERE id = $1")
+                .bind(id)
+                .execute(&self.pool)
+                .await?;
         }
         Ok(ids.len() as u64)
     }
 
-    /// Where a finished job's output lives (the NC program or the NDJSON diagnostics).
-    pub fn output_path(&self, id: &str, diagnostics: bool) -> PathBuf {
-        let p = Paths::new(&self.spool, id);
-        if diagnostics { p.diag } else { p.nc }
+    /// A client's jobs still queued or running.
+    pub async fn active_for(&self, client: &str) -> Result<u64, Error> {
+        let n: i64 = sqlx::query_scalar("SELECT COUNT(*) FROM jobs WHERE client = $1 AND state IN ('queued', 'running')")
+            .bind(client)
+            .fetch_one(&self.pool)
+            .await?;
+        Ok(n.max(0) as u64)
+    }
+
+    /// Jobs by state, for `/metrics`.
+    pub async fn counts(&self) -> Result<Vec<(State, u64)>, Error> {
+        let rows = sqlx::query("SELECT state, COUNT(*) FROM jobs GROUP BY state")
+            .fetch_all(&self.pool)
+            .await?;
+        let mut out = Vec::new();
+        for r in rows {
+            let st: String = r.try_get(0)?;
+            let n: i64 = r.try_get(1)?;
+            if let Some(st) = State::parse(&st) {
+                out.push((st, n.max(0) as u64));
+            }
+        }
+        Ok(out)
+    }
+
+    /// Where a finished job's output lives.
+    pub fn output_path(&self, id: &str, o: Output) -> PathBuf {
+        let p = Paths::new(&self.spool, id, 0);
+        match o {
+            Output::Nc => p.nc,
+            Output::Diagnostics => p.diag,
+            Output::Preview => p.preview,
+        }
     }
 }

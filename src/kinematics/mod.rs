@@ -32,6 +32,10 @@ pub struct Pose {
     pub axis: Vec3,
 }
 
+/// Largest coordinate (mm or inch) kinematics takes: a million-metre pose is a typing error, and
+/// far beyond it arithmetic overflows into inf, which no solver can use.
+pub const MAX_COORD: f64 = 1e9;
+
 /// What a job adds to a profile: tool length (gauge line to tip) and work offset (origin of W in
 /// M at home), both in profile units.
 #[derive(Clone, Copy, Debug, PartialEq)]

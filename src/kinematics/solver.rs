@@ -208,9 +208,21 @@ pub fn ik(m: &Machine, pose: &Pose, setup: &Setup, opt: &IkOptions) -> Result<So
 pub fn ik_into(m: &Machine, pose: &Pose, setup: &Setup, opt: &IkOptions, out: &mut Solutions) -> Result<(), Error> {
     out.clear();
     let n2 = pose.axis.norm_squared();
-    if !(n2.is_finite() && n2 > 1e-24 && pose.tip.iter().all(|v| v.is_finite())) {
+    let inside = |v: &f64| v.abs() <= super::MAX_COORD; // false for NaN too
+    if !(n2.is_finite() && n2 > 1e-24 && pose.tip.iter().all(inside)) {
         return Err(Error::InvalidPose {
-            problem: "tip and axis must be finite and the axis non-zero".into(),
+            problem: format!(
+                "tip and axis must be finite, the tip within ±{:e}, the axis non-zero",
+                super::MAX_COORD
+            ),
+        });
+    }
+    if !(inside(&setup.tool_length) && setup.work_offset.iter().all(inside)) {
+        return Err(Error::InvalidPose {
+            problem: format!(
+                "tool length and work offset must be finite and within ±{:e}",
+                super::MAX_COORD
+            ),
         });
     }
     // CL readers hand over unit axes; normalise only what is not unit to rounding.
@@ -627,6 +639,9 @@ fn three(
 /// parametrisation is ill-conditioned (the inner angle moves ~1e5× faster than the outer one), so
 /// the best double for the outer angle can leave 1e-8 of tip error; in full joint space the same
 /// problem is well-conditioned and two steps bring it to rounding level.
+/// Enough for any 6×5 the polish sees; a matrix that needs more is not worth polishing with.
+const SVD_MAX_ITER: usize = 200;
+
 fn polish(m: &Machine, pose: &Pose, setup: &Setup, sol: &mut Solution) {
     use nalgebra::{SMatrix, SVector};
     let lin: ArrayVec<usize, 3> = (0..3).filter(|&i| m.linears[i].is_some()).collect();
@@ -653,6 +668,9 @@ fn polish(m: &Machine, pose: &Pose, setup: &Setup, sol: &mut Solution) {
         x[lin.len() + k] = sol.actual[k];
     }
     let mut r = residual(&x);
+    if !r.iter().all(|v| v.is_finite()) {
+        return;
+    }
     let scale = 1.0 + pose.tip.norm() + setup.tool_length.abs();
     for _ in 0..3 {
         if r.norm() <= 1e-12 * scale {
@@ -668,7 +686,10 @@ fn polish(m: &Machine, pose: &Pose, setup: &Setup, sol: &mut Solution) {
         }
         // Minimum-norm least squares: directions the pose barely sees (near a singularity) get
         // no step, so the polish cannot slide along them to another, equally exact solution.
-        let svd = jac.svd(true, true);
+        // Bounded: nalgebra's plain `svd` never returns on a matrix holding inf or NaN.
+        let Some(svd) = jac.try_svd(true, true, f64::EPSILON, SVD_MAX_ITER) else {
+            return;
+        };
         let cutoff = 1e-8 * svd.singular_values.max();
         let Ok(step) = svd.solve(&(-r), cutoff) else { return };
         if step.norm() > 1e-6 * (1.0 + x.norm()) {

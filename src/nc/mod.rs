@@ -382,7 +382,8 @@ impl Formatter {
         let start_len = self.buf.len();
         let conv = self.conversational();
         if conv {
-            self.buf.push_str("L ");
+            self.buf
+                .push_str(if matches!(motion, Motion::Arc { .. }) { "C " } else { "L " });
         } else if let Some((mode, _)) = feed
             && motion != Motion::Rapid
             && self.feed_mode != Some(mode)
@@ -405,7 +406,9 @@ impl Formatter {
             let Some(v) = v else { continue };
             let dec = if i < 3 { self.fmt.linear } else { self.fmt.rotary };
             let r = round_to(*v, dec);
-            if (force && i < 3) || self.axes[i] != Some(r) {
+            // An ISO arc names its end point whole; a Heidenhain `C` only the plane's (a Z
+            // there would ask for a helix).
+            if (force && i < if conv { 2 } else { 3 }) || self.axes[i] != Some(r) {
                 self.axes[i] = Some(r);
                 self.buf.push(AXIS_LETTERS[i]);
                 if conv && r >= 0 {

@@ -7,6 +7,7 @@
 //! over tolerance is an error diagnostic.
 
 mod plan;
+pub mod preview;
 mod source;
 pub mod verify;
 
@@ -130,8 +131,11 @@ impl Settings {
             Some(x) => return Err(format!("mode {x:?}: expected joint or tcp")),
         };
         if let Some(l) = self.tool_length {
-            if !(l.is_finite() && l >= 0.0) {
-                return Err("tool_length must be a finite, non-negative length".into());
+            if !((0.0..=crate::kinematics::MAX_COORD).contains(&l)) {
+                return Err(format!(
+                    "tool_length must be a length from 0 to {:e}",
+                    crate::kinematics::MAX_COORD
+                ));
             }
             o.tool_length = Some(l);
         }
@@ -172,6 +176,12 @@ pub struct BlockInfo {
     /// Axis words as written (X Y Z A B C; profile units, degrees), as a JSON map of the present.
     pub joints: AxisWords,
     pub diagnostics: Vec<Diagnostic>,
+    pub rapid: bool,
+    /// The pose this block reaches, in the part frame (profile units): what a preview draws.
+    pub tip: [f64; 3],
+    pub axis: [f64; 3],
+    /// Estimated duration of this block, seconds (the cycle-time estimate's share).
+    pub time_s: f64,
 }
 
 /// X Y Z A B C values of a block, `None` where the block has no such word. A fixed array: one
@@ -198,6 +208,10 @@ pub trait Sink {
     /// A diagnostic not attached to a block (reader problems, program-level notes).
     fn diagnostic(&mut self, _d: &Diagnostic) -> std::io::Result<()> {
         Ok(())
+    }
+    /// A diagnostic about a CL pose (part frame, profile units) that got no block.
+    fn diagnostic_at(&mut self, d: &Diagnostic, _pose: &Pose) -> std::io::Result<()> {
+        self.diagnostic(d)
     }
     fn summary(&mut self, _s: &Summary) -> std::io::Result<()> {
         Ok(())
@@ -265,8 +279,10 @@ impl<W: std::io::Write, D: std::io::Write> Sink for FileSink<W, D> {
         self.nc.write_all(text.as_bytes())?;
         self.nc.write_all(b"\n")?;
         if let (true, Some(b)) = (self.nd.is_some(), b) {
-            self.json(&serde_json::json!({"type": "block", "n": b.n, "nc": text, "source_line": b.source_line,
-                "joints": b.joints, "diagnostics": b.diagnostics}))?;
+            self.json(
+                &serde_json::json!({"type": "block", "n": b.n, "nc": text, "source_line": b.source_line,
+                "joints": b.joints, "diagnostics": b.diagnostics}),
+            )?;
         }
         Ok(())
     }
@@ -458,6 +474,12 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
     fn note(&mut self, d: Diagnostic) -> std::io::Result<()> {
         self.count(&d);
         self.sink.diagnostic(&d)
+    }
+
+    /// A diagnostic about a CL pose that got no block (unreachable): where it is, for a preview.
+    fn note_at(&mut self, d: Diagnostic, pose: &Pose) -> std::io::Result<()> {
+        self.count(&d);
+        self.sink.diagnostic_at(&d, pose)
     }
 
     fn count(&mut self, d: &Diagnostic) {
@@ -686,12 +708,15 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                 Some(e) => e.to_string(),
                 None => "no solution".into(),
             };
-            self.note(Diagnostic::new(
-                Code::Unreachable,
-                Severity::Error,
-                Some(pt.line),
-                format!("pose unreachable on {}: {what}; block skipped", self.m.id),
-            ))?;
+            self.note_at(
+                Diagnostic::new(
+                    Code::Unreachable,
+                    Severity::Error,
+                    Some(pt.line),
+                    format!("pose unreachable on {}: {what}; block skipped", self.m.id),
+                ),
+                &pt.pose,
+            )?;
             return Ok(());
         };
         let Some((mut joints, mut actual, branch)) = self.resolve(&pt.pose, &cand) else {
@@ -879,9 +904,9 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         Some((j, act, reached, d.to_degrees(), saved))
     }
 
-    /// An arc from `a` to `b`: G2/G3 where the tool axis stays put and the arc's plane is a
-    /// principal plane of the output coordinates (the machine's in joint mode, the part's in TCP
-    /// mode), else chords within the tolerance (with the rotaries still, chords are straight in
+    /// An arc from `a` to `b`: G2/G3 (Heidenhain: CC + C) where the tool axis stays put and the
+    /// arc's plane is a principal plane of the output coordinates (the machine's in joint mode,
+    /// the part's in TCP mode), else chords within the tolerance (with the rotaries still, chords are straight in
     /// the machine too, so no further check is needed).
     fn arc_move(&mut self, a: At, b: At, arc: &ArcSpec, pt: &MotionPt, diags: Vec<Diagnostic>) -> Result<(), Error> {
         let m = self.m;
@@ -916,6 +941,29 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                 self.plane = word;
             }
             self.arc_words = Some((ccw, words.trim_end().to_string()));
+            return self.block(b, pt, false, diags, pt.inserted, None);
+        }
+        // Heidenhain: `CC` (the centre, absolute) then `C` to the end point with `DR+`/`DR-`, for a
+        // flat arc in the working plane (XY: the tool along Z); anything else as chords.
+        let end = if tcp { b.pose.tip } else { Vec3::from(b.joints.linear) };
+        if let (true, true, true, Some((2, _, _))) = (still, tcp || full_linears, conversational, plane)
+            && (end[2] - start[2]).abs() < 1e-9
+        {
+            let ccw = normal[2] > 0.0;
+            let dec = self.f.fmt.linear;
+            let mut cc = String::from("CC");
+            for (idx, name) in [(0usize, 'X'), (1, 'Y')] {
+                let r = crate::nc::round_to(center[idx], dec);
+                cc.push(' ');
+                cc.push(name);
+                if r >= 0 {
+                    cc.push('+');
+                }
+                crate::nc::write_fixed(&mut cc, r, dec);
+            }
+            let l = self.f.words(&cc).to_string();
+            self.out(&l)?;
+            self.arc_words = Some((ccw, if ccw { "DR+" } else { "DR-" }.to_string()));
             return self.block(b, pt, false, diags, pt.inserted, None);
         }
         // Chords: the arc swept in the part frame, tool axis fixed, linears from the rotaries.
@@ -1497,6 +1545,10 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                     source_line: Some(pt.line),
                     joints: AxisWords(axes),
                     diagnostics: diags,
+                    rapid,
+                    tip: to.pose.tip.into(),
+                    axis: to.pose.axis.into(),
+                    time_s: time * 60.0,
                 };
                 self.sink.line(text, Some(&info))?;
             }

@@ -7,15 +7,26 @@ use std::sync::Arc;
 
 pub async fn server(cfg: Config) -> String {
     let library = Library::load_dir(&cfg.machines).unwrap();
+    let (queue, machines) = kinepost::jobs::Queue::start(cfg.jobs(), &library).await.unwrap();
+    let metrics = Arc::new(Metrics::default());
+    let m = metrics.clone();
+    queue.observe(Box::new(move |outcome, secs| m.record_job(outcome, secs)));
     let state = Arc::new(AppState {
-        library: library.clone(),
+        machines,
         config: cfg.clone(),
-        metrics: Arc::new(Metrics::default()),
-        jobs: Some(kinepost::jobs::Queue::start(cfg.jobs(), library.clone()).await.unwrap()),
+        metrics,
+        jobs: Some(queue),
     });
     let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
     let addr = listener.local_addr().unwrap();
-    tokio::spawn(async move { axum::serve(listener, app(state)).await.unwrap() });
+    tokio::spawn(async move {
+        axum::serve(
+            listener,
+            app(state).into_make_service_with_connect_info::<std::net::SocketAddr>(),
+        )
+        .await
+        .unwrap()
+    });
     format!("http://{addr}")
 }
 
@@ -61,4 +72,73 @@ pub fn spawn_binary(data: &std::path::Path, extra: &[&str]) -> (std::process::Ch
 /// GET a JSON document.
 pub async fn get_json(c: &reqwest::Client, url: &str) -> serde_json::Value {
     c.get(url).send().await.unwrap().json().await.unwrap()
+}
+
+/// A generated 5-axis path (`testgen`) for a shipped profile, as CL bytes.
+pub fn generated(machine: &str, points: usize, seed: u64) -> Vec<u8> {
+    let lib = Library::load_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/machines").as_ref()).unwrap();
+    let m = &lib.get(machine).unwrap().machine;
+    let mut out = Vec::new();
+    kinepost::testgen::write_path(m, points, seed, m.default_tool_length, &mut out).unwrap();
+    out
+}
+
+/// NC without the lines that name the run (date, job id, source): what two runs share.
+pub fn body_lines(nc: &str) -> Vec<&str> {
+    nc.lines()
+        .filter(|l| !(l.contains("DATE ") || l.contains("JOB ") || l.contains("SOURCE ")))
+        .collect()
+}
+
+/// Polls a job until its state is `want`; ending in another state, or `limit` passing, fails.
+pub async fn wait_job(c: &reqwest::Client, base: &str, id: &str, want: &str, limit: std::time::Duration) -> serde_json::Value {
+    let j = poll_job(c, base, id, limit, |s| {
+        s == want || matches!(s, "succeeded" | "failed" | "cancelled")
+    })
+    .await;
+    assert_eq!(j["state"], want, "job ended otherwise: {j}");
+    j
+}
+
+/// Polls a job until it has ended, in whatever state.
+pub async fn wait_finished(c: &reqwest::Client, base: &str, id: &str, limit: std::time::Duration) -> serde_json::Value {
+    poll_job(c, base, id, limit, |s| !matches!(s, "queued" | "running")).await
+}
+
+async fn poll_job(
+    c: &reqwest::Client,
+    base: &str,
+    id: &str,
+    limit: std::time::Duration,
+    done: impl Fn(&str) -> bool,
+) -> serde_json::Value {
+    let t0 = std::time::Instant::now();
+    loop {
+        let j = get_json(c, &format!("{base}/v1/jobs/{id}")).await;
+        if done(j["state"].as_str().unwrap_or_default()) {
+            return j;
+        }
+        assert!(t0.elapsed() < limit, "job still {} after {limit:?}: {j}", j["state"]);
+        tokio::time::sleep(std::time::Duration::from_millis(50)).await;
+    }
+}
+
+/// Send and read in one step, failing the test on a transport error: the chain every test wrote.
+#[allow(async_fn_in_trait)] // test helpers: awaited in place, never spawned
+pub trait Fetch {
+    async fn status_ok(self) -> reqwest::StatusCode;
+    async fn text_ok(self) -> String;
+    async fn json_ok(self) -> serde_json::Value;
+}
+
+impl Fetch for reqwest::RequestBuilder {
+    async fn status_ok(self) -> reqwest::StatusCode {
+        self.send().await.unwrap().status()
+    }
+    async fn text_ok(self) -> String {
+        self.send().await.unwrap().text().await.unwrap()
+    }
+    async fn json_ok(self) -> serde_json::Value {
+        self.send().await.unwrap().json().await.unwrap()
+    }
 }

@@ -1,8 +1,17 @@
-// The shop-floor form: pick a machine, drop a CL file, get the NC and what kinepost noticed.
-// Plain JS, no build step; talks to the same API as CAM plugins (NDJSON stream of /v1/post).
+// The shop-floor form: pick a machine, drop a CL file, watch the job, get the NC and see what
+// kinepost noticed. Plain JS modules, no build step; the same API as CAM plugins (/v1/jobs).
+// A result opens by URL (/?job=ID), so a link to it can be passed around the shop floor.
+import { markers, plots, view3d } from './view.js';
+
 const $ = (id) => document.getElementById(id);
 let machines = [];
-let clLines = []; // the uploaded file's lines, to show the one a warning points at
+let shown = null; // { id, preview, list, view }
+let token = 0; // the job on screen; a newer one stops the older's polling
+
+async function problem(r) {
+  const p = await r.json().catch(() => ({ detail: r.statusText }));
+  return new Error((p.detail || p.title || r.statusText) + (p.line ? ` (CL line ${p.line}${p.column ? ', column ' + p.column : ''})` : ''));
+}
 
 async function loadMachines() {
   const r = await fetch('/v1/machines');
@@ -29,6 +38,11 @@ function setFile(f) {
   $('drop-text').textContent = f.name;
 }
 
+function fail(e) {
+  $('error').textContent = e.message;
+  $('error').hidden = false;
+}
+
 async function submit(ev) {
   ev.preventDefault();
   const f = $('file').files[0];
@@ -38,67 +52,121 @@ async function submit(ev) {
   $('go').disabled = true;
   $('error').hidden = true;
   $('result').hidden = true; // never show the previous file's result as this one's
-  $('status').textContent = 'Post-processing…';
-  $('cl-line').hidden = true;
-  clLines = f.size < 64 * 1024 * 1024 ? (await f.text()).split(/\r?\n/) : [];
   try {
-    const r = await fetch('/v1/post?' + q, { method: 'POST', body: f, headers: { 'content-type': 'text/plain', accept: 'application/x-ndjson' } });
-    if (!r.ok) {
-      const p = await r.json().catch(() => ({ detail: r.statusText }));
-      throw new Error(p.detail + (p.line ? ` (CL line ${p.line}${p.column ? ', column ' + p.column : ''})` : ''));
-    }
-    const lines = (await r.text()).split('\n').filter((l) => l).map((l) => JSON.parse(l));
-    const nc = [];
-    const warn = [];
-    let summary = null;
-    let failed = null;
-    for (const l of lines) {
-      if (l.type === 'block') {
-        nc.push(l.nc);
-        for (const d of l.diagnostics || []) if (d.severity !== 'info') warn.push([l.n, d]);
-      } else if (l.type === 'diagnostic' && l.diagnostic.severity !== 'info') warn.push(['', l.diagnostic]);
-      else if (l.type === 'summary') summary = l.summary;
-      else if (l.type === 'error') failed = l.error;
-    }
-    const name = f.name.replace(/\.[^.]*$/, '') + '.nc';
+    const body = new FormData();
+    body.append('file', f);
+    const r = await fetch('/v1/jobs?' + q, { method: 'POST', body });
+    if (!r.ok) throw await problem(r);
+    const job = await r.json();
+    history.pushState({ job: job.id }, '', '/?job=' + job.id);
+    await showJob(job.id);
+  } catch (e) {
+    fail(e);
+  } finally {
+    $('go').disabled = false;
+  }
+}
+
+/** A job's result view: progress while it runs, then summary, 3D view, plots and warnings. */
+async function showJob(id) {
+  const mine = ++token;
+  $('result').hidden = false;
+  $('details').hidden = true;
+  $('download').hidden = true;
+  $('cl-line').hidden = true;
+  $('permalink').href = '/?job=' + id;
+  $('permalink').textContent = location.origin + '/?job=' + id;
+  const bar = $('progress');
+  bar.hidden = false;
+  bar.value = 0;
+  $('status').className = '';
+  let job;
+  for (;;) {
+    const r = await fetch('/v1/jobs/' + encodeURIComponent(id));
+    if (!r.ok) throw await problem(r);
+    job = await r.json();
+    if (mine !== token) return;
+    bar.value = job.progress.percent;
+    if (['succeeded', 'failed', 'cancelled'].includes(job.state)) break;
+    $('status').textContent = job.state === 'queued' ? 'Queued…' : `Post-processing… ${job.progress.percent.toFixed(0)} % (${job.progress.blocks} blocks)`;
+    await new Promise((res) => setTimeout(res, 250));
+  }
+  bar.hidden = true;
+  if (machines.some((m) => m.id === job.machine)) {
+    $('machine').value = job.machine;
+    showMachine();
+  }
+  const s = job.summary;
+  if (job.state === 'succeeded') {
+    const name = (job.filename || 'program').replace(/\.[^.]*$/, '') + '.nc';
     const a = $('download');
-    a.href = URL.createObjectURL(new Blob([nc.join('\n') + '\n'], { type: 'text/plain' }));
+    a.href = job.links.nc;
     a.download = name;
     a.textContent = `Download ${name}`;
-    showSummary(summary);
-    const tb = $('warnings').querySelector('tbody');
-    tb.replaceChildren();
-    for (const [n, d] of warn.slice(0, 500)) {
+    a.hidden = false;
+    $('status').className = 'ok';
+    $('status').textContent = `${s.blocks} blocks from ${s.cl_points} CL points`;
+  } else {
+    $('status').className = 'error';
+    $('status').textContent = job.state === 'failed' ? `Stopped: ${job.error}` : 'Cancelled';
+  }
+  showSummary(s);
+  if (!job.links.preview) return;
+  const r = await fetch(job.links.preview);
+  if (!r.ok) throw await problem(r);
+  const preview = await r.json();
+  if (mine !== token) return;
+  $('details').hidden = false;
+  showPreview(id, preview);
+}
+
+function showPreview(id, p) {
+  if (shown && shown.view) shown.view.dispose();
+  const list = markers(p);
+  shown = { id, preview: p, list, view: null };
+  $('path-info').textContent = `${p.points.length} of ${p.blocks} blocks drawn` +
+    (p.stride > 1 ? ` (every ${p.stride}th, plus rapid/feed changes and the ends)` : '') +
+    `; ${p.marks.length + p.notes.length} marked` + (p.marks_dropped + p.notes_dropped ? `, ${p.marks_dropped + p.notes_dropped} more not shown (see the diagnostics)` : '');
+  shown.view = view3d($('view3d'), p, list, pick);
+  drawPlots();
+  const tb = $('warnings').querySelector('tbody');
+  tb.replaceChildren();
+  list.forEach((m, i) => {
+    for (const d of m.diagnostics) {
+      if (d.severity === 'info' && !['unwind', 'branch_change'].includes(d.code)) continue;
       const tr = document.createElement('tr');
-      if (d.line) {
-        tr.tabIndex = 0;
-        tr.className = 'link';
-        tr.addEventListener('click', () => showClLine(d.line));
-      }
-      for (const v of [n, d.line ? `line ${d.line}` : '', d.code, d.message]) {
+      tr.tabIndex = 0;
+      tr.className = 'link';
+      tr.dataset.marker = i;
+      tr.addEventListener('click', () => pick(m));
+      tr.addEventListener('keydown', (e) => { if (e.key === 'Enter') pick(m); });
+      for (const v of [m.n ?? '', m.line ? `line ${m.line}` : '', d.code, d.message]) {
         const td = document.createElement('td');
         td.textContent = v;
         tr.appendChild(td);
       }
       tb.appendChild(tr);
     }
-    $('status').className = failed ? 'error' : 'ok';
-    $('status').textContent = failed ? `Stopped: ${failed.detail}` : `${summary.blocks} blocks from ${summary.cl_points} CL points`;
-    $('result').hidden = false;
-  } catch (e) {
-    $('error').textContent = e.message;
-    $('error').hidden = false;
-    $('status').textContent = '';
-  } finally {
-    $('go').disabled = false;
-  }
+  });
+  window.kinepostView = { id, markers: list, markerScreen: (i) => shown.view.markerScreen(i) };
 }
 
-function showClLine(n) {
+function drawPlots() {
+  if (shown) plots($('plots'), shown.preview, shown.list, $('xaxis').value, pick);
+}
+
+/** A marker picked (in the 3D view, a plot or the table): its block, CL line and diagnostics. */
+function pick(m) {
+  const lines = [];
+  if (m.line) lines.push(`CL line ${m.line}: ${m.cl ?? ''}`);
+  lines.push(m.n ? `NC block ${m.n}: ${m.nc}` : 'No NC block: the pose was skipped');
+  for (const d of m.diagnostics) lines.push(`${d.severity} ${d.code}: ${d.message}`);
   const pre = $('cl-line');
-  const text = clLines[n - 1];
-  pre.textContent = text === undefined ? `CL line ${n}` : `CL line ${n}: ${text}`;
+  pre.textContent = lines.join('\n');
   pre.hidden = false;
+  const i = shown.list.indexOf(m);
+  for (const tr of $('warnings').querySelectorAll('tbody tr')) tr.classList.toggle('selected', Number(tr.dataset.marker) === i);
+  shown.view.select(m);
 }
 
 function showSummary(s) {
@@ -127,11 +195,19 @@ function showSummary(s) {
   }
 }
 
+function fromUrl() {
+  const id = new URLSearchParams(location.search).get('job');
+  if (id) showJob(id).catch(fail);
+  else $('result').hidden = true;
+}
+
 $('machine').addEventListener('change', showMachine);
+$('xaxis').addEventListener('change', drawPlots);
 $('file').addEventListener('change', () => $('file').files[0] && ($('drop-text').textContent = $('file').files[0].name));
 $('post-form').addEventListener('submit', submit);
 const drop = $('drop');
 drop.addEventListener('dragover', (e) => { e.preventDefault(); drop.classList.add('over'); });
 drop.addEventListener('dragleave', () => drop.classList.remove('over'));
 drop.addEventListener('drop', (e) => { e.preventDefault(); drop.classList.remove('over'); if (e.dataTransfer.files[0]) setFile(e.dataTransfer.files[0]); });
-loadMachines();
+window.addEventListener('popstate', fromUrl);
+loadMachines().then(fromUrl);

@@ -9,6 +9,9 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
+pub mod catalog;
+pub use catalog::{Catalog, Current, Expect};
+
 #[derive(Debug, thiserror::Error)]
 pub enum Error {
     #[error("{file}: {message}")]
@@ -19,6 +22,15 @@ pub enum Error {
     Io { path: String, source: std::io::Error },
     #[error("no machine profile {0:?}")]
     NotFound(String),
+    #[error("machine {id:?} exists (version {version}): replace it with PUT")]
+    Exists { id: String, version: i64 },
+    /// `If-Match` named another version than the current one (or the profile is gone).
+    #[error("machine {id:?} is at {}: the write was based on another", current.map_or("no version (deleted or never created)".to_string(), |v| format!("version {v}")))]
+    Precondition { id: String, current: Option<i64> },
+    #[error("machine profiles are read-only in this process (no store)")]
+    ReadOnly,
+    #[error("machine store: {0}")]
+    Store(String),
 }
 
 /// The TOML document of one profile, exactly as `machine-model.md` shows it.

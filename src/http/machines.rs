@@ -1,0 +1,401 @@
+//! `/v1/machines`: the machine library over HTTP. Reads for everyone; writes (create, replace,
+//! delete) with the admin bearer token, each a new version in the store, with ETags and
+//! `If-Match` so two editors never overwrite each other unknowingly.
+
+use super::AppState;
+use super::error::{ApiError, Problem};
+use crate::machines::{Current, Expect, Profile, ProfileDoc};
+use axum::Json;
+use axum::extract::{Path, Request, State};
+use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
+use axum::response::{IntoResponse, Response};
+use serde::Serialize;
+use std::sync::Arc;
+
+/// A machine profile as the API shows it: the profile's own numbers, plus its kinematics kind.
+#[derive(Serialize, utoipa::ToSchema)]
+pub struct MachineDto {
+    pub id: String,
+    pub name: String,
+    /// `mm` or `inch`.
+    pub units: String,
+    /// Default NC dialect.
+    pub controller: String,
+    pub description: String,
+    /// table-table, head-head, head-table, 4-axis, 3-axis, 3-rotary/2-linear …
+    pub kinematics: String,
+    pub linear: Vec<LinearDto>,
+    pub rotary: Vec<RotaryDto>,
+    pub default_tool_length: f64,
+    /// This profile's version: each write over the API makes a new one (`…/versions`).
+    pub version: i64,
+    /// `file` (the library directory) or `api`.
+    pub source: String,
+}
+
+#[derive(Serialize, utoipa::ToSchema)]
+pub struct LinearDto {
+    pub name: String,
+    pub min: f64,
+    pub max: f64,
+    pub max_feed: Option<f64>,
+}
+
+#[derive(Serialize, utoipa::ToSchema)]
+pub struct RotaryDto {
+    pub name: String,
+    /// `table` or `head`.
+    pub on: String,
+    pub axis: [f64; 3],
+    pub pivot: [f64; 3],
+    /// Degrees; absent for an unbounded axis.
+    pub min: Option<f64>,
+    pub max: Option<f64>,
+    pub max_feed: Option<f64>,
+    pub angle_error: Option<AngleErrorDto>,
+    /// NC words that lock and unlock the axis around positioning, if it is clamped.
+    pub clamp: Option<Vec<String>>,
+}
+
+#[derive(Serialize, utoipa::ToSchema)]
+pub struct AngleErrorDto {
+    pub coefficients: Vec<f64>,
+    pub range: [f64; 2],
+}
+
+impl From<&Current> for MachineDto {
+    fn from(c: &Current) -> Self {
+        let p: &Profile = &c.profile;
+        let d = &p.doc;
+        MachineDto {
+            version: c.version,
+            source: c.source.as_str().into(),
+            id: p.machine.id.clone(),
+            name: p.machine.name.clone(),
+            units: p.machine.units.as_str().into(),
+            controller: p.machine.controller.clone(),
+            description: p.machine.description.clone(),
+            kinematics: p.machine.kinematics_kind(),
+            linear: d
+                .linear
+                .iter()
+                .map(|l| LinearDto {
+                    name: l.name.clone(),
+                    min: l.min,
+                    max: l.max,
+                    max_feed: l.max_feed,
+                })
+                .collect(),
+            rotary: d
+                .rotary
+                .iter()
+                .map(|r| RotaryDto {
+                    name: r.name.clone(),
+                    on: r.on.clone(),
+                    axis: r.axis,
+                    pivot: r.pivot,
+                    min: r.min,
+                    max: r.max,
+                    max_feed: r.max_feed,
+                    angle_error: r.angle_error.as_ref().map(|e| AngleErrorDto {
+                        coefficients: e.coefficients.clone(),
+                        range: e.range,
+                    }),
+                    clamp: r.clamp.as_ref().map(|c| c.to_vec()),
+                })
+                .collect(),
+            default_tool_length: p.machine.default_tool_length,
+        }
+    }
+}
+
+/// Every machine profile, geometry included.
+#[utoipa::path(get, path = "/v1/machines", responses((status = 200, body = Vec<MachineDto>)), tag = "machines")]
+pub(super) async fn list_machines(State(st): State<Arc<AppState>>) -> Json<Vec<MachineDto>> {
+    Json(st.machines.list().iter().map(MachineDto::from).collect())
+}
+
+fn etag_header(c: &Current) -> HeaderValue {
+    HeaderValue::from_str(&c.etag()).unwrap_or(HeaderValue::from_static("\"\""))
+}
+
+fn wants_toml(h: &HeaderMap) -> bool {
+    h.get(header::ACCEPT)
+        .and_then(|v| v.to_str().ok())
+        .is_some_and(|a| a.contains("application/toml"))
+}
+
+fn toml_response(status: StatusCode, text: String) -> Response {
+    (status, [(header::CONTENT_TYPE, "application/toml; charset=utf-8")], text).into_response()
+}
+
+/// One machine profile: JSON, or its TOML exactly as stored with `Accept: application/toml`.
+#[utoipa::path(
+    get,
+    path = "/v1/machines/{id}",
+    params(("id" = String, Path, description = "Profile id, e.g. haas-umc750")),
+    responses((status = 200, description = "The profile; its TOML as stored with Accept: application/toml",
+            content((MachineDto = "application/json"), (String = "application/toml")),
+            headers(("ETag" = String, description = "The version, e.g. \"haas-umc750-v3\""))),
+        (status = 304, description = "Not modified (If-None-Match)"),
+        (status = 404, body = Problem, content_type = "application/problem+json")),
+    tag = "machines"
+)]
+pub(super) async fn get_machine(
+    State(st): State<Arc<AppState>>,
+    Path(id): Path<String>,
+    headers: HeaderMap,
+) -> Result<Response, ApiError> {
+    let c = st.machines.get(&id)?;
+    if let Some(r) = super::not_modified(&headers, &c.etag()) {
+        return Ok(r);
+    }
+    let etag = etag_header(&c);
+    let mut r = if wants_toml(&headers) {
+        toml_response(StatusCode::OK, version_text(&st, &c).await?)
+    } else {
+        Json(MachineDto::from(&c)).into_response()
+    };
+    r.headers_mut().insert(header::ETAG, etag);
+    Ok(r)
+}
+
+/// The stored TOML of the current version (files-only processes: the document re-serialized).
+async fn version_text(st: &AppState, c: &Current) -> Result<String, ApiError> {
+    match st.machines.text(&c.profile.machine.id, c.version).await {
+        Ok(t) => Ok(t),
+        Err(crate::machines::Error::ReadOnly) => toml::to_string(&c.profile.doc).map_err(|e| ApiError::Internal(e.to_string())),
+        Err(e) => Err(e.into()),
+    }
+}
+
+/// Writes carry `Authorization: Bearer <KINEPOST_ADMIN_TOKEN>`; without a configured token
+/// there are no writes at all.
+fn authorize(st: &AppState, h: &HeaderMap) -> Result<(), ApiError> {
+    let Some(want) = st.config.admin_token.as_deref() else {
+        return Err(ApiError::Forbidden(
+            "machine profile writes are off: start the service with KINEPOST_ADMIN_TOKEN set".into(),
+        ));
+    };
+    let got = h
+        .get(header::AUTHORIZATION)
+        .and_then(|v| v.to_str().ok())
+        .and_then(|v| v.strip_prefix("Bearer "))
+        .map(str::trim);
+    match got {
+        Some(t) if constant_time_eq(t.as_bytes(), want.as_bytes()) => Ok(()),
+        Some(_) => Err(ApiError::Unauthorized("the bearer token is not the admin token".into())),
+        None => Err(ApiError::Unauthorized(
+            "writes need Authorization: Bearer <admin token>".into(),
+        )),
+    }
+}
+
+/// Compares without an early exit, so timing tells nothing about how much of a guess matched.
+fn constant_time_eq(a: &[u8], b: &[u8]) -> bool {
+    let mut diff = a.len() ^ b.len();
+    for (i, x) in a.iter().enumerate() {
+        diff |= (*x ^ b.get(i % b.len().max(1)).copied().unwrap_or(0)) as usize;
+    }
+    diff == 0
+}
+
+/// `If-Match` → what the write expects (checked in the store's transaction); none: anything.
+fn expectation(h: &HeaderMap, id: &str) -> Result<Expect, ApiError> {
+    let Some(v) = h.get(header::IF_MATCH) else {
+        return Ok(Expect::Any);
+    };
+    let v = v
+        .to_str()
+        .map_err(|_| ApiError::BadParameter("If-Match: expected an ETag".into()))?
+        .trim();
+    if v == "*" {
+        return Ok(Expect::Present);
+    }
+    let version = v
+        .strip_prefix(&format!("\"{id}-v"))
+        .and_then(|r| r.strip_suffix('"'))
+        .and_then(|n| n.parse::<i64>().ok())
+        .ok_or_else(|| ApiError::PreconditionFailed(format!("If-Match {v}: not an ETag of machine {id:?}")))?;
+    Ok(Expect::Version(version))
+}
+
+/// The profile in the body: TOML (`application/toml`), or the same document as JSON.
+async fn profile_text(req: Request) -> Result<String, ApiError> {
+    let ctype = req
+        .headers()
+        .get(header::CONTENT_TYPE)
+        .and_then(|v| v.to_str().ok())
+        .unwrap_or("")
+        .to_ascii_lowercase();
+    let json = ctype.starts_with("application/json");
+    if !(json || ctype.starts_with("application/toml") || ctype.starts_with("text/toml")) {
+        return Err(ApiError::UnsupportedMediaType(format!(
+            "{ctype}: send the profile as application/toml or application/json"
+        )));
+    }
+    let bytes = axum::body::to_bytes(req.into_body(), 1 << 20)
+        .await
+        .map_err(|_| ApiError::TooLarge(1 << 20))?;
+    let text = String::from_utf8(bytes.to_vec()).map_err(|_| ApiError::BadProfile {
+        message: "the profile is not UTF-8".into(),
+        key: None,
+    })?;
+    if !json {
+        return Ok(text);
+    }
+    let doc: ProfileDoc = serde_json::from_str(&text).map_err(|e| ApiError::BadProfile {
+        message: format!("request body: {e}"),
+        key: None,
+    })?;
+    toml::to_string(&doc).map_err(|e| ApiError::Internal(format!("profile as TOML: {e}")))
+}
+
+fn written(status: StatusCode, c: &Current) -> Response {
+    let mut r = (status, Json(MachineDto::from(c))).into_response();
+    r.headers_mut().insert(header::ETAG, etag_header(c));
+    if let Ok(v) = HeaderValue::from_str(&format!("/v1/machines/{}", c.profile.machine.id)) {
+        r.headers_mut().insert(header::LOCATION, v);
+    }
+    r
+}
+
+/// Adds a machine profile: validated by the same loader as the files (errors name the key).
+#[utoipa::path(post, path = "/v1/machines",
+    request_body(description = "The profile, as in `machines/*.toml`, or the same document as JSON",
+        content((String = "application/toml"), (Object = "application/json"))),
+    responses((status = 201, body = MachineDto, headers(("ETag" = String), ("Location" = String))),
+        (status = 401, body = Problem, content_type = "application/problem+json"),
+        (status = 403, description = "Writes are off (no admin token configured)", body = Problem, content_type = "application/problem+json"),
+        (status = 409, description = "The id exists", body = Problem, content_type = "application/problem+json"),
+        (status = 413, body = Problem, content_type = "application/problem+json"),
+        (status = 415, body = Problem, content_type = "application/problem+json"),
+        (status = 422, description = "Invalid profile: `key` names what to fix", body = Problem, content_type = "application/problem+json")),
+    security(("admin" = [])),
+    tag = "machines")]
+pub(super) async fn create_machine(State(st): State<Arc<AppState>>, req: Request) -> Result<Response, ApiError> {
+    authorize(&st, req.headers())?;
+    let text = profile_text(req).await?;
+    let (c, _) = st.machines.put(&text, None, Expect::Absent).await?;
+    tracing::info!(machine = %c.profile.machine.id, version = c.version, "machine profile created");
+    Ok(written(StatusCode::CREATED, &c))
+}
+
+/// Replaces (or creates) a machine profile; with `If-Match`, only if it is still that version.
+#[utoipa::path(put, path = "/v1/machines/{id}", params(("id" = String, Path),
+        ("If-Match" = Option<String>, Header, description = "The ETag read; the write fails (412) if the profile changed since")),
+    request_body(description = "The profile (TOML, or the same document as JSON); its `id` must be the path's",
+        content((String = "application/toml"), (Object = "application/json"))),
+    responses((status = 200, description = "Replaced: a new version", body = MachineDto, headers(("ETag" = String))),
+        (status = 201, description = "Created", body = MachineDto, headers(("ETag" = String), ("Location" = String))),
+        (status = 401, body = Problem, content_type = "application/problem+json"),
+        (status = 403, body = Problem, content_type = "application/problem+json"),
+        (status = 412, description = "If-Match names another version", body = Problem, content_type = "application/problem+json"),
+        (status = 413, body = Problem, content_type = "application/problem+json"),
+        (status = 415, body = Problem, content_type = "application/problem+json"),
+        (status = 422, body = Problem, content_type = "application/problem+json")),
+    security(("admin" = [])),
+    tag = "machines")]
+pub(super) async fn put_machine(
+    State(st): State<Arc<AppState>>,
+    Path(id): Path<String>,
+    req: Request,
+) -> Result<Response, ApiError> {
+    authorize(&st, req.headers())?;
+    let expect = expectation(req.headers(), &id)?;
+    let text = profile_text(req).await?;
+    let (c, created) = st.machines.put(&text, Some(&id), expect).await?;
+    tracing::info!(machine = %id, version = c.version, "machine profile written");
+    Ok(written(if created { StatusCode::CREATED } else { StatusCode::OK }, &c))
+}
+
+/// Deletes a machine profile (a version marking the deletion; jobs already queued keep theirs).
+#[utoipa::path(delete, path = "/v1/machines/{id}", params(("id" = String, Path),
+        ("If-Match" = Option<String>, Header, description = "Delete only this version")),
+    responses((status = 204, description = "Deleted"),
+        (status = 401, body = Problem, content_type = "application/problem+json"),
+        (status = 403, body = Problem, content_type = "application/problem+json"),
+        (status = 404, body = Problem, content_type = "application/problem+json"),
+        (status = 412, body = Problem, content_type = "application/problem+json")),
+    security(("admin" = [])),
+    tag = "machines")]
+pub(super) async fn delete_machine(
+    State(st): State<Arc<AppState>>,
+    Path(id): Path<String>,
+    headers: HeaderMap,
+) -> Result<StatusCode, ApiError> {
+    authorize(&st, &headers)?;
+    let expect = expectation(&headers, &id)?;
+    let v = st.machines.delete(&id, expect).await?;
+    tracing::info!(machine = %id, version = v, "machine profile deleted");
+    Ok(StatusCode::NO_CONTENT)
+}
+
+#[derive(Serialize, utoipa::ToSchema)]
+pub struct VersionDto {
+    pub version: i64,
+    /// `file` or `api`.
+    pub source: String,
+    pub created_ms: i64,
+    /// This version deleted the profile.
+    pub deleted: bool,
+}
+
+#[derive(Serialize, utoipa::ToSchema)]
+pub struct VersionsDto {
+    pub id: String,
+    /// The version served now; absent when the profile is deleted.
+    pub current: Option<i64>,
+    /// Oldest first.
+    pub versions: Vec<VersionDto>,
+}
+
+/// A profile's history: every version, who made it (file or API) and when.
+#[utoipa::path(get, path = "/v1/machines/{id}/versions", params(("id" = String, Path)),
+    responses((status = 200, body = VersionsDto), (status = 404, body = Problem, content_type = "application/problem+json")),
+    tag = "machines")]
+pub(super) async fn list_versions(
+    State(st): State<Arc<AppState>>,
+    Path(id): Path<String>,
+) -> Result<Json<VersionsDto>, ApiError> {
+    let versions = match st.machines.versions(&id).await {
+        Err(crate::machines::Error::ReadOnly) => Vec::new(),
+        r => r?,
+    };
+    let current = st.machines.get(&id).ok();
+    if versions.is_empty() && current.is_none() {
+        return Err(ApiError::UnknownMachine(id));
+    }
+    Ok(Json(VersionsDto {
+        current: current.map(|c| c.version),
+        versions: versions
+            .into_iter()
+            .map(|v| VersionDto {
+                version: v.version,
+                source: v.source.as_str().into(),
+                created_ms: v.created_ms,
+                deleted: v.deleted,
+            })
+            .collect(),
+        id,
+    }))
+}
+
+/// One version's TOML, exactly as written: what a job that used it ran with.
+#[utoipa::path(get, path = "/v1/machines/{id}/versions/{version}", params(("id" = String, Path), ("version" = i64, Path)),
+    responses((status = 200, body = String, content_type = "application/toml"),
+        (status = 404, description = "No such version, or a deletion", body = Problem, content_type = "application/problem+json")),
+    tag = "machines")]
+pub(super) async fn get_version(
+    State(st): State<Arc<AppState>>,
+    Path((id, version)): Path<(String, String)>,
+) -> Result<Response, ApiError> {
+    let v: i64 = version
+        .parse()
+        .map_err(|_| ApiError::NotFound(format!("no version {version:?} of {id:?}")))?;
+    match st.machines.text(&id, v).await {
+        Ok(t) => Ok(toml_response(StatusCode::OK, t)),
+        Err(crate::machines::Error::ReadOnly) => Err(ApiError::NotFound("no version store in this process".into())),
+        Err(e) => Err(ApiError::NotFound(e.to_string())),
+    }
+}

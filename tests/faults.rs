@@ -1,0 +1,280 @@
+//! Faults, with real processes: `kill -9` during an upload and during a stream, a client that
+//! goes away mid-stream, and a full disk under the data directory. After each: nothing accepted
+//! lost, nothing partial served as complete, and the server serves again.
+
+mod common;
+
+use common::Fetch;
+
+use futures_util::StreamExt;
+use serde_json::Value;
+use std::time::{Duration, Instant};
+
+/// A request body the test feeds chunk by chunk (and can stop feeding).
+fn trickle() -> (tokio::sync::mpsc::Sender<Vec<u8>>, reqwest::Body) {
+    let (tx, rx) = tokio::sync::mpsc::channel::<Vec<u8>>(2);
+    let stream = futures_util::stream::unfold(rx, |mut rx| async move {
+        rx.recv().await.map(|b| (Ok::<_, std::io::Error>(b), rx))
+    });
+    (tx, reqwest::Body::wrap_stream(stream))
+}
+
+/// A server process that dies with the test, even a failed one.
+struct Killed(std::process::Child);
+
+impl Drop for Killed {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+fn spool_files(data: &std::path::Path) -> Vec<String> {
+    std::fs::read_dir(data.join("spool"))
+        .map(|d| d.flatten().map(|e| e.file_name().to_string_lossy().into_owned()).collect())
+        .unwrap_or_default()
+}
+
+async fn metric(c: &reqwest::Client, base: &str, name: &str) -> f64 {
+    let text = c.get(format!("{base}/metrics")).text_ok().await;
+    text.lines()
+        .find(|l| l.starts_with(name) && l[name.len()..].starts_with(' '))
+        .and_then(|l| l.rsplit(' ').next()?.parse().ok())
+        .unwrap_or_else(|| panic!("no metric {name} in\n{text}"))
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn kill_9_during_an_upload_and_a_stream_loses_nothing_accepted() {
+    let data = std::env::temp_dir().join(format!("kinepost-faults-kill-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&data);
+    let (child, base) = common::spawn_binary(&data, &[]);
+    let mut child = Killed(child);
+    let c = reqwest::Client::new();
+
+    // One job accepted before the faults: it must be there, and run, afterwards.
+    let r = c
+        .post(format!("{base}/v1/jobs?machine=dmg-dmc75v"))
+        .body(common::generated("dmg-dmc75v", 500, 5))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 202);
+    let accepted = r.json::<Value>().await.unwrap()["id"].as_str().unwrap().to_string();
+
+    // An upload half sent when the server dies: never accepted, so never listed.
+    let (tx, body) = trickle();
+    let url = format!("{base}/v1/jobs?machine=dmg-dmc75v");
+    let c2 = c.clone();
+    let upload = tokio::spawn(async move { c2.post(url).body(body).send().await });
+    let cl = common::generated("dmg-dmc75v", 20_000, 5);
+    for chunk in cl.chunks(64 * 1024).take(8) {
+        tx.send(chunk.to_vec()).await.unwrap();
+    }
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    assert!(
+        spool_files(&data).iter().any(|f| f.ends_with(".cl.tmp")),
+        "the upload is being spooled"
+    );
+    // And a post streaming its program out.
+    let mut stream = c
+        .post(format!("{base}/v1/post?machine=dmg-dmc75v"))
+        .body(common::generated("dmg-dmc75v", 100_000, 5))
+        .send()
+        .await
+        .unwrap()
+        .bytes_stream();
+    assert!(!stream.next().await.unwrap().unwrap().is_empty());
+    child.0.kill().unwrap();
+    child.0.wait().unwrap();
+    let got = upload.await.unwrap();
+    assert!(got.is_err() || got.unwrap().status() != 202, "a cut upload is not accepted");
+    let mut rest = 0usize;
+    while let Some(Ok(b)) = stream.next().await {
+        rest += b.len();
+    }
+    let _ = rest; // the stream ends short; the client sees no `M30`, never a whole program
+
+    let (child, base) = common::spawn_binary(&data, &[]);
+    let child = Killed(child);
+    // Answering at all means start-up recovery is done.
+    let list = common::get_json(&c, &format!("{base}/v1/jobs")).await;
+    assert!(
+        !spool_files(&data).iter().any(|f| f.ends_with(".tmp")),
+        "{:?}",
+        spool_files(&data)
+    );
+    let ids: Vec<&str> = list["jobs"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|j| j["id"].as_str().unwrap())
+        .collect();
+    assert_eq!(ids, vec![accepted.as_str()], "exactly the accepted job survives");
+    common::wait_job(&c, &base, &accepted, "succeeded", Duration::from_secs(60)).await;
+    let nc = c
+        .post(format!("{base}/v1/post?machine=dmg-dmc75v"))
+        .body(common::generated("dmg-dmc75v", 50, 5))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(nc.status(), 200, "and it serves again");
+    assert!(nc.text().await.unwrap().contains("END PGM"), "a whole program (Heidenhain)");
+    drop(child);
+    let _ = std::fs::remove_dir_all(&data);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_client_that_goes_away_stops_the_work() {
+    let base = common::server(common::cfg()).await;
+    let c = reqwest::Client::new();
+
+    let cl = common::generated("dmg-dmc75v", 300_000, 5);
+    // Gone during the upload (a quarter of the declared length sent), then gone during the
+    // download (all sent, 100 kB of the program read): each time the socket just closes.
+    for (send, read) in [(cl.len() / 4, 0), (cl.len(), 100_000)] {
+        let sock = tokio::net::TcpStream::connect(base.trim_start_matches("http://"))
+            .await
+            .unwrap();
+        let (mut rd, mut wr) = sock.into_split();
+        let (head, body) = (
+            format!(
+                "POST /v1/post?machine=dmg-dmc75v HTTP/1.1\r\nHost: x\r\nContent-Type: text/plain\r\nContent-Length: {}\r\n\r\n",
+                cl.len()
+            ),
+            cl[..send].to_vec(),
+        );
+        let writer = tokio::spawn(async move {
+            use tokio::io::AsyncWriteExt;
+            wr.write_all(head.as_bytes()).await?;
+            wr.write_all(&body).await?;
+            Ok::<_, std::io::Error>(wr)
+        });
+        let mut got = 0;
+        let mut buf = vec![0u8; 1 << 16];
+        while got < read {
+            use tokio::io::AsyncReadExt;
+            let n = rd.read(&mut buf).await.unwrap();
+            assert!(n > 0, "the server closed first");
+            got += n;
+        }
+        if read == 0 {
+            tokio::time::sleep(Duration::from_millis(300)).await;
+            assert_eq!(metric(&c, &base, "kinepost_streams_in_flight").await, 1.0, "the post runs");
+        }
+        writer.abort();
+        let _ = writer.await;
+        drop(rd);
+        let t0 = Instant::now();
+        while metric(&c, &base, "kinepost_streams_in_flight").await != 0.0 {
+            assert!(
+                t0.elapsed() < Duration::from_secs(5),
+                "the engine runs on for nobody ({send} bytes sent)"
+            );
+            tokio::time::sleep(Duration::from_millis(20)).await;
+        }
+    }
+    // Neither post finished: no CL points counted as post-processed.
+    assert_eq!(metric(&c, &base, "kinepost_cl_points_total").await, 0.0);
+    let r = c
+        .post(format!("{base}/v1/post?machine=dmg-dmc75v"))
+        .body(common::generated("dmg-dmc75v", 20, 5))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 200);
+}
+
+/// A 4 MiB tmpfs as the data directory. Needs root (`mount`); CI sets KINEPOST_REQUIRE_TMPFS=1 so
+/// that this never skips there.
+struct Tmpfs(std::path::PathBuf);
+
+impl Tmpfs {
+    fn mount() -> Option<Tmpfs> {
+        let dir = std::env::temp_dir().join(format!("kinepost-full-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let ok = std::process::Command::new("mount")
+            .args(["-t", "tmpfs", "-o", "size=4m", "tmpfs"])
+            .arg(&dir)
+            .stderr(std::process::Stdio::null())
+            .status()
+            .is_ok_and(|s| s.success());
+        if !ok {
+            assert!(
+                std::env::var("KINEPOST_REQUIRE_TMPFS").is_err(),
+                "cannot mount a tmpfs (root needed)"
+            );
+            eprintln!("SKIPPED: mounting a tmpfs needs root");
+            return None;
+        }
+        Some(Tmpfs(dir))
+    }
+}
+
+impl Drop for Tmpfs {
+    fn drop(&mut self) {
+        let _ = std::process::Command::new("umount").arg("-l").arg(&self.0).status();
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_full_disk_refuses_uploads_fails_jobs_cleanly_and_recovers() {
+    let Some(fs) = Tmpfs::mount() else { return };
+    let mut cfg = common::cfg();
+    cfg.data_dir = fs.0.join("data");
+    let base = common::server(cfg.clone()).await;
+    // No kept-alive connections: the server answers the refused upload before reading it all and
+    // then closes that connection, which a pooled client might pick for the next request.
+    let c = reqwest::Client::builder().pool_max_idle_per_host(0).build().unwrap();
+
+    // An upload larger than the disk: 507, nothing accepted, nothing left behind.
+    let big = common::generated("dmg-dmc75v", 80_000, 5);
+    assert!(big.len() > 5 << 20);
+    let r = c
+        .post(format!("{base}/v1/jobs?machine=dmg-dmc75v"))
+        .body(big)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 507);
+    let p: Value = r.json().await.unwrap();
+    assert!(p["detail"].as_str().unwrap().contains("No space left"), "{p}");
+    assert!(spool_files(&cfg.data_dir).is_empty(), "{:?}", spool_files(&cfg.data_dir));
+    assert!(
+        common::get_json(&c, &format!("{base}/v1/jobs")).await["jobs"]
+            .as_array()
+            .unwrap()
+            .is_empty()
+    );
+
+    // A job whose input fits but whose outputs do not: failed, its NC never served.
+    let mid = common::generated("dmg-dmc75v", 12_000, 5);
+    let r = c
+        .post(format!("{base}/v1/jobs?machine=dmg-dmc75v"))
+        .body(mid)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 202);
+    let id = r.json::<Value>().await.unwrap()["id"].as_str().unwrap().to_string();
+    let j = common::wait_job(&c, &base, &id, "failed", Duration::from_secs(60)).await;
+    assert!(j["error"].as_str().unwrap().contains("No space left"), "{j}");
+    assert_eq!(c.get(format!("{base}/v1/jobs/{id}/nc")).status_ok().await, 409);
+    assert!(
+        !spool_files(&cfg.data_dir)
+            .iter()
+            .any(|f| f.ends_with(".nc") || f.ends_with(".tmp"))
+    );
+
+    // Room again (the failed job removed): the next job runs.
+    assert_eq!(c.delete(format!("{base}/v1/jobs/{id}")).status_ok().await, 204);
+    let r = c
+        .post(format!("{base}/v1/jobs?machine=dmg-dmc75v"))
+        .body(common::generated("dmg-dmc75v", 300, 5))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 202);
+    let id = r.json::<Value>().await.unwrap()["id"].as_str().unwrap().to_string();
+    common::wait_job(&c, &base, &id, "succeeded", Duration::from_secs(60)).await;
+}
