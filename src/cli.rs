@@ -396,6 +396,10 @@ pub struct PostArgs {
     /// Default 0: exact.
     #[arg(long, default_value_t = 0.0)]
     pub singular_tolerance: f64,
+    /// Drilling cycles as the control's canned cycles (G81/G82/G83, CYCLE81–83, CYCL DEF 200)
+    /// where the hole runs along the machine's Z; default: expanded into moves.
+    #[arg(long)]
+    pub canned_cycles: bool,
     /// Write per-block diagnostics as NDJSON to this file.
     #[arg(long)]
     pub diagnostics: Option<PathBuf>,
@@ -678,6 +682,7 @@ fn post_cmd(p: &machines::Profile, a: &PostArgs) -> Result<(), String> {
         strict: Some(a.strict),
         singular_tolerance: Some(a.singular_tolerance),
         cl_units: a.cl_units.map(|u| Units::from(u).as_str().to_string()),
+        cycles: a.canned_cycles.then(|| "canned".into()),
     };
     let mut o = settings.profile_options(p)?;
     o.header.push(format!("DATE {} UTC", utc_now()));

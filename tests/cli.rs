@@ -146,7 +146,7 @@ fn bad_arguments_are_clear_errors() {
         (vec!["fk", "--machine", "spinner-u5-620", "B=abc"], "not a number"),
         (
             vec!["fk", "--machine", "spinner-u5-620", "--work-offset", "1,2", "B=1"],
-            "three finite numbers",
+            "three numbers x,y,z within",
         ),
         (
             vec!["ik", "--machine", "spinner-u5-620", "1", "2", "3", "0", "0", "0"],

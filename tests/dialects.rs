@@ -80,38 +80,41 @@ fn tokens(line: &str) -> Vec<(String, Option<(f64, f64)>)> {
     out
 }
 
+/// Compares a program with `tests/golden/{name}` within output rounding (the version line left
+/// out); `KINEPOST_UPDATE_GOLDEN=1` rewrites the file.
+fn assert_golden(name: &str, got: &str) {
+    let path = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/tests/golden")).join(name);
+    // The version line changes with every release: not part of the comparison.
+    let strip = |s: &str| {
+        s.lines()
+            .filter(|l| !l.contains("KINEPOST "))
+            .map(str::to_string)
+            .collect::<Vec<_>>()
+    };
+    if std::env::var("KINEPOST_UPDATE_GOLDEN").is_ok() {
+        std::fs::write(&path, got).unwrap();
+    }
+    let want = std::fs::read_to_string(&path).unwrap_or_else(|_| panic!("{name} missing: KINEPOST_UPDATE_GOLDEN=1 writes it"));
+    let (g, w) = (strip(got), strip(&want));
+    assert_eq!(g.len(), w.len(), "{name}: line count");
+    for (i, (a, b)) in g.iter().zip(&w).enumerate() {
+        let (ta, tb) = (tokens(a), tokens(b));
+        let same = ta.len() == tb.len()
+            && ta.iter().zip(&tb).all(|(x, y)| match (&x.1, &y.1) {
+                (Some((va, tol)), Some((vb, _))) => (va - vb).abs() <= *tol,
+                (None, None) => x.0 == y.0,
+                _ => false,
+            });
+        assert!(same, "{name} line {}: got {a:?}, golden {b:?}", i + 1);
+    }
+}
+
 #[test]
 fn golden_programs_per_dialect() {
-    let update = std::env::var("KINEPOST_UPDATE_GOLDEN").is_ok();
     for (d, m) in CASES {
         for mode in [Mode::Joint, Mode::Tcp] {
             let name = format!("{d}-{m}-{}.nc", if mode == Mode::Joint { "joint" } else { "tcp" });
-            let path = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/tests/golden")).join(&name);
-            let got = program(d, m, mode, 40).nc;
-            // The version line changes with every release: not part of the comparison.
-            let strip = |s: &str| {
-                s.lines()
-                    .filter(|l| !l.contains("KINEPOST "))
-                    .map(str::to_string)
-                    .collect::<Vec<_>>()
-            };
-            if update {
-                std::fs::write(&path, &got).unwrap();
-            }
-            let want =
-                std::fs::read_to_string(&path).unwrap_or_else(|_| panic!("{name} missing: KINEPOST_UPDATE_GOLDEN=1 writes it"));
-            let (g, w) = (strip(&got), strip(&want));
-            assert_eq!(g.len(), w.len(), "{name}: line count");
-            for (i, (a, b)) in g.iter().zip(&w).enumerate() {
-                let (ta, tb) = (tokens(a), tokens(b));
-                let same = ta.len() == tb.len()
-                    && ta.iter().zip(&tb).all(|(x, y)| match (&x.1, &y.1) {
-                        (Some((va, tol)), Some((vb, _))) => (va - vb).abs() <= *tol,
-                        (None, None) => x.0 == y.0,
-                        _ => false,
-                    });
-                assert!(same, "{name} line {}: got {a:?}, golden {b:?}", i + 1);
-            }
+            assert_golden(&name, &program(d, m, mode, 40).nc);
         }
     }
 }
@@ -265,4 +268,345 @@ fn heidenhain_arcs_are_the_iso_arcs_as_cc_and_c() {
         total += hh.len();
     }
     assert_eq!(total, 52);
+}
+
+/// Holes on the top face (drill, a deeper one, peck, spot with dwell; G98 and G99 returns) and on
+/// a face tilted 45° about X, then a cut. Written for these tests.
+const HOLES: &str = "PARTNO/CANNED CYCLES
+UNITS/MM
+LOADTL/1
+SPINDL/RPM,3000,CLW
+FEDRAT/MMPM,1000
+RAPID
+GOTO/0,0,50,0,0,1
+CYCLE/DRILL,FEDTO,5,MMPM,200,RAPTO,3,RTRCTO,25
+GOTO/10,10,0,0,0,1
+GOTO/20,10,0,0,0,1
+GOTO/30,10,-2,0,0,1
+CYCLE/OFF
+CYCLE/DEEP,FEDTO,30,STEP,4,MMPM,150,RAPTO,2
+GOTO/10,-10,0,0,0,1
+GOTO/20,-10,0,0,0,1
+CYCLE/OFF
+CYCLE/DRILL,FEDTO,3,MMPM,100,RAPTO,2,RTRCTO,20,DWELL,0.5
+GOTO/40,0,0,0,0,1
+CYCLE/OFF
+RAPID
+GOTO/0,-60,60,0,-0.70710678,0.70710678
+CYCLE/DRILL,FEDTO,8,MMPM,200,RAPTO,3,RTRCTO,15
+GOTO/0,-20,10,0,-0.70710678,0.70710678
+GOTO/10,-20,10,0,-0.70710678,0.70710678
+CYCLE/OFF
+RAPID
+GOTO/10,-60,60,0,-0.70710678,0.70710678
+FEDRAT/MMPM,500
+GOTO/10,-30,30,0,-0.70710678,0.70710678
+END
+FINI
+";
+
+fn canned(machine: &str, dialect: Option<&str>, mode: Mode) -> (Collect, post::Summary, Vec<kinepost::diag::Diagnostic>) {
+    #[derive(Default)]
+    struct WithDiags(Collect, Vec<kinepost::diag::Diagnostic>);
+    impl Sink for WithDiags {
+        fn line(&mut self, text: &str, b: Option<&BlockInfo>) -> std::io::Result<()> {
+            if let Some(b) = b {
+                self.1.extend(b.diagnostics.iter().cloned());
+            }
+            self.0.line(text, b)
+        }
+        fn diagnostic(&mut self, d: &kinepost::diag::Diagnostic) -> std::io::Result<()> {
+            self.1.push(d.clone());
+            Ok(())
+        }
+    }
+    let lib = Library::load_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap();
+    let m = lib.get(machine).unwrap().machine.clone();
+    let mut o = Options::new(&m);
+    o.mode = mode;
+    o.canned_cycles = true;
+    if let Some(d) = dialect {
+        o.dialect = kinepost::nc::dialect(d).unwrap();
+    }
+    let mut sink = WithDiags::default();
+    let s = post::post(HOLES.as_bytes(), &m, &o, &mut sink).unwrap();
+    (sink.0, s, sink.1)
+}
+
+/// One hole as a control drills it: position, Z of top (where known), R plane, bottom, the level
+/// it returns to, feed, peck, dwell (seconds).
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct DrilledHole {
+    x: f64,
+    y: f64,
+    r: f64,
+    bottom: f64,
+    back: f64,
+    feed: f64,
+    peck: f64,
+    dwell: f64,
+}
+
+/// The holes of an ISO program: G81/G82/G83 blocks and the X/Y blocks that repeat them.
+fn iso_holes(nc: &str, dwell_ms: bool) -> Vec<DrilledHole> {
+    let (mut out, mut on, mut z, mut g98) = (Vec::new(), None::<DrilledHole>, f64::NAN, true);
+    for line in nc.lines() {
+        let w = words(line);
+        let at = |k: char| w.iter().find(|(l, _)| *l == k).and_then(|(_, v)| *v);
+        let gs: Vec<f64> = w.iter().filter(|(l, _)| *l == 'G').filter_map(|(_, v)| *v).collect();
+        if gs.contains(&98.0) {
+            g98 = true;
+        }
+        if gs.contains(&99.0) {
+            g98 = false;
+        }
+        if gs.iter().any(|g| [0.0, 1.0, 80.0].contains(g)) {
+            on = None;
+        }
+        if let Some(&g) = gs.iter().find(|g| [81.0, 82.0, 83.0].contains(*g)) {
+            let r = at('R').unwrap();
+            on = Some(DrilledHole {
+                x: f64::NAN,
+                y: f64::NAN,
+                r,
+                bottom: at('Z').unwrap(),
+                back: if g98 { z } else { r },
+                feed: at('F').unwrap(),
+                peck: if g == 83.0 { at('Q').unwrap() } else { 0.0 },
+                dwell: if g == 82.0 {
+                    at('P').unwrap() / if dwell_ms { 1000.0 } else { 1.0 }
+                } else {
+                    0.0
+                },
+            });
+        } else if on.is_none()
+            && let Some(v) = at('Z')
+        {
+            z = v;
+        }
+        if let Some(h) = on.as_mut()
+            && (at('X').is_some() || at('Y').is_some())
+        {
+            h.x = at('X').unwrap_or(h.x);
+            h.y = at('Y').unwrap_or(h.y);
+            out.push(*h);
+        }
+    }
+    out
+}
+
+/// The holes of a Siemens program: `MCALL CYCLE8x(…)` and the positions that call it.
+fn siemens_holes(nc: &str) -> Vec<DrilledHole> {
+    let (mut out, mut on, mut feed) = (Vec::new(), None::<DrilledHole>, f64::NAN);
+    let (mut x, mut y) = (f64::NAN, f64::NAN);
+    for line in nc.lines() {
+        if let Some(args) = line.strip_prefix("MCALL CYCLE") {
+            let n: u32 = args[..2].parse().unwrap();
+            let a: Vec<f64> = args[3..args.len() - 1].split(',').map(|v| v.parse().unwrap_or(0.0)).collect();
+            on = Some(DrilledHole {
+                x: f64::NAN,
+                y: f64::NAN,
+                r: a[1] + a[2],
+                bottom: a[3],
+                back: a[0],
+                feed,
+                peck: if n == 83 { a[1] - a[5] } else { 0.0 },
+                dwell: if n == 82 { a[5] } else { 0.0 },
+            });
+            continue;
+        }
+        if line == "MCALL" {
+            on = None;
+        }
+        let w = words(line);
+        let at = |k: char| w.iter().find(|(l, _)| *l == k).and_then(|(_, v)| *v);
+        feed = at('F').unwrap_or(feed);
+        x = at('X').unwrap_or(x);
+        y = at('Y').unwrap_or(y);
+        if let Some(h) = on.as_mut()
+            && (at('X').is_some() || at('Y').is_some())
+        {
+            (h.x, h.y) = (x, y);
+            out.push(*h);
+        }
+    }
+    out
+}
+
+/// The holes of a Heidenhain program: `CYCL DEF 200` with its Q parameters, called by `M99`.
+fn heidenhain_holes(nc: &str) -> Vec<DrilledHole> {
+    let (mut out, mut q) = (Vec::new(), std::collections::HashMap::<u32, f64>::new());
+    let (mut x, mut y) = (f64::NAN, f64::NAN);
+    for line in nc.lines() {
+        if let Some(rest) = line.trim().strip_prefix('Q') {
+            let (n, v) = rest.split_once('=').unwrap();
+            let v = v.split_whitespace().next().unwrap();
+            q.insert(n.parse().unwrap(), v.parse().unwrap());
+            continue;
+        }
+        let toks: Vec<&str> = line.split_whitespace().skip(1).collect();
+        if toks.first() != Some(&"L") {
+            continue;
+        }
+        let w = words(&toks[1..].join(" "));
+        let at = |k: char| w.iter().find(|(l, _)| *l == k).and_then(|(_, v)| *v);
+        x = at('X').unwrap_or(x);
+        y = at('Y').unwrap_or(y);
+        if toks.contains(&"M99") {
+            let top = q[&203];
+            out.push(DrilledHole {
+                x,
+                y,
+                r: top + q[&200],
+                bottom: top + q[&201],
+                back: top + q[&204],
+                feed: q[&206],
+                peck: if q[&202] < -q[&201] { q[&202] } else { 0.0 },
+                dwell: q[&211],
+            });
+        }
+    }
+    out
+}
+
+fn same_holes(what: &str, got: &[DrilledHole], want: &[DrilledHole]) {
+    assert_eq!(got.len(), want.len(), "{what}: {got:?}");
+    for (g, w) in got.iter().zip(want) {
+        let close = |a: f64, b: f64| (a - b).abs() <= 2e-3;
+        let ok = close(g.x, w.x)
+            && close(g.y, w.y)
+            && close(g.r, w.r)
+            && close(g.bottom, w.bottom)
+            && close(g.back, w.back)
+            && close(g.feed, w.feed)
+            && close(g.peck, w.peck)
+            && close(g.dwell, w.dwell);
+        assert!(ok, "{what}: {g:?}, Fanuc drills {w:?}");
+    }
+}
+
+/// Canned output on every profile: the ISO programs replayed through `kinepost verify` (its
+/// reader expands G81/G82/G83 into the moves a control makes) reach every CL point; holes that
+/// run along the machine's Z are cycles, the rest stay moves and say why.
+#[test]
+fn canned_cycles_reach_every_hole_on_every_profile() {
+    use kinepost::post::verify::{VerifyOptions, verify};
+    let lib = Library::load_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap();
+    // Holes drilled as cycles per profile: tables turn the part under a fixed Z spindle (all 8);
+    // where a head tilts the tool (head-table, head-head, the 3-rotary machine's inner rotaries)
+    // only the 6 top-face holes run along Z.
+    for (id, want) in [
+        ("spinner-u5-620", 8),
+        ("haas-umc750", 8),
+        ("mikron-ucp710", 8),
+        ("dmu-nutating-45", 8),
+        ("vmc-4axis-a", 8),
+        ("dmg-dmc75v", 6),
+        ("fryer-5x-45", 6),
+        ("propeller-3r2l", 6),
+    ] {
+        let p = lib.get(id).unwrap();
+        let m = &p.machine;
+        for d in ["fanuc", "haas", "linuxcnc"] {
+            let (sink, sum, diags) = canned(id, Some(d), Mode::Joint);
+            assert_eq!(sum.errors, 0, "{id} {d}: {diags:?}");
+            assert_eq!(sum.canned_holes, want, "{id} {d}");
+            assert_eq!(iso_holes(&sink.nc, d == "fanuc").len() as u64, want, "{id} {d}:\n{}", sink.nc);
+            if want < 8 {
+                assert!(
+                    diags.iter().any(|x| x.message.contains("does not run along the machine's Z")),
+                    "{id}: {diags:?}"
+                );
+            }
+            let vo = VerifyOptions {
+                mode: Mode::Joint,
+                setup: kinepost::kinematics::Setup::new(sum.tool_length, kinepost::kinematics::Vec3::zeros()),
+                tolerance: if m.units == kinepost::kinematics::Units::Mm {
+                    0.01
+                } else {
+                    0.0004
+                },
+                angle_tolerance_deg: 0.01,
+                cl_units: None,
+            };
+            let r = verify(HOLES.as_bytes(), sink.nc.as_bytes(), m, &vo).unwrap();
+            assert!(r.ok && r.matched == 12, "{id} {d}: {r:?}\n{}", sink.nc);
+        }
+    }
+}
+
+/// Siemens and Heidenhain write the same holes as Fanuc (which the test above replays through
+/// FK): same positions, levels, feed, peck and dwell. Golden files keep their form.
+#[test]
+fn every_dialect_drills_the_same_holes() {
+    let (fanuc, ..) = canned("spinner-u5-620", Some("fanuc"), Mode::Joint);
+    let want = iso_holes(&fanuc.nc, true);
+    assert_eq!(want.len(), 8);
+    assert!(want.iter().any(|h| h.peck > 0.0) && want.iter().any(|h| h.dwell > 0.0));
+    assert!(
+        want.iter().any(|h| h.back > h.r + 1.0) && want.iter().any(|h| h.back == h.r),
+        "G98 and G99"
+    );
+    for d in ["haas", "linuxcnc"] {
+        same_holes(
+            d,
+            &iso_holes(&canned("spinner-u5-620", Some(d), Mode::Joint).0.nc, false),
+            &want,
+        );
+    }
+    same_holes(
+        "siemens",
+        &siemens_holes(&canned("spinner-u5-620", Some("siemens"), Mode::Joint).0.nc),
+        &want,
+    );
+    same_holes(
+        "heidenhain",
+        &heidenhain_holes(&canned("spinner-u5-620", Some("heidenhain"), Mode::Joint).0.nc),
+        &want,
+    );
+    for d in ["fanuc", "siemens", "heidenhain"] {
+        assert_golden(
+            &format!("cycles-{d}-spinner-u5-620.nc"),
+            &canned("spinner-u5-620", Some(d), Mode::Joint).0.nc,
+        );
+    }
+}
+
+/// A wrong canned cycle is caught: an R plane below the hole's top never reaches the CL point,
+/// a moved repeat hole misses its own.
+#[test]
+fn verify_catches_a_wrong_canned_cycle() {
+    use kinepost::post::verify::{VerifyOptions, verify};
+    let lib = Library::load_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap();
+    let m = lib.get("spinner-u5-620").unwrap().machine.clone();
+    let (sink, sum, _) = canned("spinner-u5-620", Some("fanuc"), Mode::Joint);
+    let vo = VerifyOptions {
+        mode: Mode::Joint,
+        setup: kinepost::kinematics::Setup::new(sum.tool_length, kinepost::kinematics::Vec3::zeros()),
+        tolerance: 0.01,
+        angle_tolerance_deg: 0.01,
+        cl_units: None,
+    };
+    let first = iso_holes(&sink.nc, true)[0];
+    let r_word = format!("R{:.3}", first.r);
+    let low = sink.nc.replacen(&r_word, &format!("R{:.3}", first.r - 4.0), 1);
+    assert_ne!(low, sink.nc);
+    let r = verify(HOLES.as_bytes(), low.as_bytes(), &m, &vo).unwrap();
+    assert!(!r.ok && r.misses[0].cl_line == 9, "{r:?}");
+    // The repeat of the first cycle: the line after it holds only X.
+    let lines: Vec<&str> = sink.nc.lines().collect();
+    let k = lines.iter().position(|l| l.contains("G81")).unwrap() + 1;
+    assert!(lines[k].starts_with('X') && !lines[k].contains('Z'), "{}", lines[k]);
+    let moved = sink.nc.replacen(lines[k], &lines[k].replace('X', "X1"), 1);
+    let r = verify(HOLES.as_bytes(), moved.as_bytes(), &m, &vo).unwrap();
+    assert!(!r.ok && r.misses[0].cl_line == 10, "{r:?}");
+}
+
+/// TCP mode keeps drilling cycles as moves (controls refuse most cycles under TCP), and says so.
+#[test]
+fn canned_cycles_in_tcp_mode_stay_moves() {
+    let (_, sum, diags) = canned("spinner-u5-620", None, Mode::Tcp);
+    assert_eq!(sum.canned_holes, 0);
+    assert_eq!(sum.errors, 0);
+    assert!(diags.iter().any(|d| d.message.contains("joint mode only")), "{diags:?}");
 }

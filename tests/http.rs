@@ -2,7 +2,7 @@
 
 mod common;
 
-use common::{cfg, server};
+use common::{Fetch, cfg, server};
 use kinepost::http::{Config, openapi_json};
 use serde_json::Value;
 use std::time::Duration;
@@ -163,6 +163,24 @@ async fn post_as_a_multipart_form() {
     assert!(r.headers()["content-disposition"].to_str().unwrap().contains("plate.nc"));
     let nc = r.text().await.unwrap();
     assert!(nc.contains("(SOURCE PLATE.NCL)") && nc.contains("N5 "), "{}", &nc[..400]);
+}
+
+#[tokio::test]
+async fn drilling_cycles_as_canned_cycles_on_request() {
+    let base = server(cfg()).await;
+    let c = reqwest::Client::new();
+    let post = |q: &'static str| {
+        c.post(format!("{base}/v1/post?machine=vmc-3axis{q}"))
+            .header("content-type", "text/plain")
+            .body(data("creo8_ncl_bohren_drill_mm.ncl"))
+    };
+    let nc = post("&cycles=canned").text_ok().await;
+    assert!(nc.contains("G99 G83 X") && nc.contains("\nG80\n"), "{nc}");
+    let nc = post("").text_ok().await;
+    assert!(!nc.contains("G83"), "expanded by default: {nc}");
+    assert_eq!(post("&cycles=sometimes").status_ok().await, 400);
+    let d = c.get(format!("{base}/v1/dialects")).json_ok().await;
+    assert!(d[0]["canned_cycles"].as_str().unwrap().contains("G81"), "{d}");
 }
 
 #[tokio::test]

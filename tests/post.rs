@@ -415,6 +415,27 @@ fn the_nc_reader_knows_g2_from_g20() {
     assert_eq!(c.units, Units::Inch, "G20 is inch");
 }
 
+/// Canned cycles read as the moves a control makes: position at the current level, rapid to R,
+/// feed to Z, back to the initial level (G98) or R (G99); repeats drill at each new X Y; G80 ends.
+#[test]
+fn the_nc_reader_expands_canned_cycles() {
+    let nc = "G0 X0 Y0 Z50\nG98 G81 X10 Y5 Z-5 R2 F100\nX20\nG99 G83 X30 Z-8 R1 Q2\nG80\nG0 Z60\n";
+    let mut r = NcReader::new(nc.as_bytes(), Units::Mm);
+    let mut got = Vec::new();
+    while let Some(b) = r.next_block().unwrap() {
+        got.push((b.axes[0].unwrap(), b.axes[1].unwrap(), b.axes[2].unwrap(), b.rapid));
+    }
+    #[rustfmt::skip]
+    let want = [
+        (0.0, 0.0, 50.0, true),
+        (10.0, 5.0, 50.0, true), (10.0, 5.0, 2.0, true), (10.0, 5.0, -5.0, false), (10.0, 5.0, 50.0, true),
+        (20.0, 5.0, 50.0, true), (20.0, 5.0, 2.0, true), (20.0, 5.0, -5.0, false), (20.0, 5.0, 50.0, true),
+        (30.0, 5.0, 50.0, true), (30.0, 5.0, 1.0, true), (30.0, 5.0, -8.0, false), (30.0, 5.0, 1.0, true),
+        (30.0, 5.0, 60.0, true),
+    ];
+    assert_eq!(got, want);
+}
+
 /// The three golden programs of the real NX post (HAAS_UMC750_5AXIS_MILL_IN) against kinepost's,
 /// Haas dialect: every golden motion block's X Y Z appears in order within 0.0001 in, and every
 /// golden arc as an arc of the same sense with the same I J.

@@ -453,6 +453,8 @@ pub struct DialectDto {
     pub tool_change: Vec<String>,
     /// Machines whose profile names this dialect as their controller (their default).
     pub default_for: Vec<String>,
+    /// How drilling cycles are written with `cycles=canned`.
+    pub canned_cycles: String,
     pub notes: String,
 }
 
@@ -480,6 +482,7 @@ async fn list_dialects(State(st): State<Arc<AppState>>) -> Json<Vec<DialectDto>>
                     .filter(|c| c.profile.machine.controller == d.name)
                     .map(|c| c.profile.machine.id.clone())
                     .collect(),
+                canned_cycles: d.cycles.describe().into(),
                 notes: d.notes.into(),
             })
             .collect(),

@@ -51,6 +51,9 @@ pub struct PostParams {
     pub singular_tolerance: Option<f64>,
     /// Units of the CL when the file does not say: `mm` or `inch`.
     pub cl_units: Option<String>,
+    /// Drilling cycles: `expand` (default: moves) or `canned` (the control's canned cycles where
+    /// the hole runs along the machine's Z in joint mode; elsewhere still expanded).
+    pub cycles: Option<String>,
 }
 
 impl PostParams {
@@ -67,6 +70,7 @@ impl PostParams {
             strict: self.strict,
             singular_tolerance: self.singular_tolerance,
             cl_units: self.cl_units.clone(),
+            cycles: self.cycles.clone(),
         }
     }
 
@@ -100,6 +104,7 @@ impl PostParams {
             "strict" => self.strict = Some(flag(&v)?),
             "singular_tolerance" => self.singular_tolerance = if v.trim().is_empty() { None } else { Some(num(&v)?) },
             "cl_units" => self.cl_units = Some(v).filter(|s| !s.is_empty()),
+            "cycles" => self.cycles = Some(v).filter(|s| !s.is_empty()),
             other => return Err(ApiError::BadParameter(format!("unknown form field {other:?}"))),
         }
         Ok(())

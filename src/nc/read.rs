@@ -22,8 +22,23 @@ pub enum Error {
     Io(#[from] std::io::Error),
 }
 
+/// An ISO canned drilling cycle in force (G81–G89 until G80 or another motion word).
+#[derive(Clone, Copy, Debug)]
+struct Cycle {
+    /// Z of the hole's bottom and of the R plane, and the level before the cycle began (G98
+    /// returns there, G99 to R).
+    bottom: Option<f64>,
+    r: Option<f64>,
+    initial: Option<f64>,
+}
+
 pub struct NcReader<R> {
     input: R,
+    /// Blocks one line expanded into (a canned cycle's moves), handed out in order.
+    pending: std::collections::VecDeque<NcBlock>,
+    cycle: Option<Cycle>,
+    /// G98 (true, the default) or G99.
+    return_initial: bool,
     line: u32,
     buf: String,
     axes: [Option<f64>; 6],
@@ -40,6 +55,9 @@ impl<R: std::io::BufRead> NcReader<R> {
     pub fn new(input: R, default_units: Units) -> Self {
         NcReader {
             input,
+            pending: std::collections::VecDeque::new(),
+            cycle: None,
+            return_initial: true,
             line: 0,
             buf: String::new(),
             axes: [None; 6],
@@ -55,6 +73,9 @@ impl<R: std::io::BufRead> NcReader<R> {
     /// The next motion block, skipping everything else.
     pub fn next_block(&mut self) -> Result<Option<NcBlock>, Error> {
         loop {
+            if let Some(b) = self.pending.pop_front() {
+                return Ok(Some(b));
+            }
             self.buf.clear();
             if self.input.read_line(&mut self.buf)? == 0 {
                 return Ok(None);
@@ -64,7 +85,7 @@ impl<R: std::io::BufRead> NcReader<R> {
             let r = self.parse_line(&raw);
             self.buf = raw;
             match r {
-                Ok(Some(b)) => return Ok(Some(b)),
+                Ok(Some(b)) => self.pending.push_back(b),
                 Ok(None) => {}
                 // Text before the program (a tape's leader, an NX listing header before the
                 // first `%`) is not part of it.
@@ -104,6 +125,8 @@ impl<R: std::io::BufRead> NcReader<R> {
         let mut vals: [Option<f64>; 6] = [None; 6];
         let mut machine_coords = false;
         let mut setting = false;
+        let mut r_word = None;
+        let mut starts_cycle = false;
         let b = code.as_bytes();
         let mut i = 0;
         while i < b.len() {
@@ -135,8 +158,20 @@ impl<R: std::io::BufRead> NcReader<R> {
             match c {
                 // Keyed by ten times the number: G2 is 20, G20 is 200, G43.4 is 434.
                 'G' => match (v * 10.0).round() as i64 {
-                    0 => self.rapid = true,
-                    10 | 20 | 30 => self.rapid = false,
+                    0 => {
+                        self.rapid = true;
+                        self.cycle = None;
+                    }
+                    10 | 20 | 30 => {
+                        self.rapid = false;
+                        self.cycle = None;
+                    }
+                    800 => self.cycle = None,
+                    980 => self.return_initial = true,
+                    990 => self.return_initial = false,
+                    // Drilling cycles whose motion is rapid to R, feed to Z, back out: the tap,
+                    // bore and fine-bore variants differ only in spindle and retract feed.
+                    730 | 810 | 820 | 830 | 840 | 850 | 860 | 890 => starts_cycle = true,
                     200 => self.units = Units::Inch,
                     210 => self.units = Units::Mm,
                     900 => self.incremental = false,
@@ -153,8 +188,20 @@ impl<R: std::io::BufRead> NcReader<R> {
                 'A' => vals[3] = Some(v),
                 'B' => vals[4] = Some(v),
                 'C' => vals[5] = Some(v),
+                'R' => r_word = Some(v),
                 _ => {}
             }
+        }
+        if starts_cycle {
+            let initial = match self.cycle {
+                Some(c) => c.initial,
+                None => self.axes[2],
+            };
+            self.cycle = Some(Cycle {
+                bottom: None,
+                r: None,
+                initial,
+            });
         }
         // The line parsed: from here on the program has begun.
         self.content = true;
@@ -175,6 +222,36 @@ impl<R: std::io::BufRead> NcReader<R> {
                 line: self.line,
                 problem: "G91 incremental motion is not supported".into(),
             });
+        }
+        if let Some(c) = self.cycle.as_mut() {
+            // Z and R words set the cycle's levels; the block drills at its X Y (and rotaries).
+            c.bottom = vals[2].or(c.bottom);
+            c.r = r_word.or(c.r);
+            let c = *c;
+            let (Some(bottom), Some(r)) = (c.bottom, c.r) else {
+                return Err(Error::Unsupported {
+                    line: self.line,
+                    problem: "canned cycle without Z or R".into(),
+                });
+            };
+            for k in [0, 1, 3, 4, 5] {
+                if vals[k].is_some() {
+                    self.axes[k] = vals[k];
+                }
+            }
+            let back = if self.return_initial { c.initial.unwrap_or(r) } else { r };
+            for (z, rapid) in [(self.axes[2].unwrap_or(back), true), (r, true), (bottom, false), (back, true)] {
+                self.axes[2] = Some(z);
+                self.pending.push_back(NcBlock {
+                    line: self.line,
+                    rapid,
+                    axes: self.axes,
+                    units: self.units,
+                    tcp: self.tcp,
+                    comment: comment.trim().to_string(),
+                });
+            }
+            return Ok(None);
         }
         for (k, v) in vals.iter().enumerate() {
             if v.is_some() {

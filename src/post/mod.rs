@@ -11,12 +11,12 @@ pub mod preview;
 mod source;
 pub mod verify;
 
-pub use source::{ArcSpec, Item, MotionPt, ProgEvent, Source};
+pub use source::{ArcSpec, Hole, HolePart, Item, MotionPt, ProgEvent, Source};
 
-use crate::cl::{CoolantCmd, FeedUnit, SpindleCmd};
+use crate::cl::{CoolantCmd, CycleKind, FeedUnit, SpindleCmd};
 use crate::diag::{Code, Diagnostic, Severity};
 use crate::kinematics::{self, IkOptions, Joints, Machine, Pose, Setup, Solutions, Units, Vec3, angle_between, fk, ik_into};
-use crate::nc::{Dialect, FeedMode, Formats, Formatter, Motion};
+use crate::nc::{Canned, CannedKind, Dialect, FeedMode, Formats, Formatter, Motion};
 use plan::{Cand, Committed, Out, Planner, wrap};
 use serde::Serialize;
 use std::collections::BTreeMap;
@@ -58,6 +58,9 @@ pub struct Options {
     pub clamps: [Option<(String, String)>; 3],
     /// Header comment lines (source file name, date …) the caller wants in the program.
     pub header: Vec<String>,
+    /// Drilling cycles (CL `CYCLE/`) as the control's canned cycles where the hole runs along
+    /// the machine's Z (joint mode); else, and by default, expanded into moves.
+    pub canned_cycles: bool,
 }
 
 impl Options {
@@ -79,6 +82,7 @@ impl Options {
             singular_tolerance: 0.0,
             clamps: Default::default(),
             header: Vec::new(),
+            canned_cycles: false,
         }
     }
 }
@@ -107,6 +111,10 @@ pub struct Settings {
     pub singular_tolerance: Option<f64>,
     /// Units of the CL when the file does not say: `mm` or `inch`.
     pub cl_units: Option<String>,
+    /// Drilling cycles: `expand` (default: moves) or `canned` (G81/G82/G83, CYCLE81–83, CYCL DEF
+    /// 200 where the hole runs along the machine's Z).
+    #[serde(default)]
+    pub cycles: Option<String>,
 }
 
 impl Settings {
@@ -162,6 +170,11 @@ impl Settings {
             Some("mm") => Some(Units::Mm),
             Some("inch") => Some(Units::Inch),
             Some(u) => return Err(format!("cl_units {u:?}: expected mm or inch")),
+        };
+        o.canned_cycles = match self.cycles.as_deref() {
+            None | Some("expand") => false,
+            Some("canned") => true,
+            Some(x) => return Err(format!("cycles {x:?}: expected expand or canned")),
         };
         Ok(o)
     }
@@ -339,6 +352,8 @@ pub struct Summary {
     pub smoothed_blocks: u64,
     pub smoothing_travel_saved_deg: f64,
     pub smoothing_max_deviation_deg: f64,
+    /// Holes written as canned cycles (with `cycles=canned`).
+    pub canned_holes: u64,
     pub errors: u64,
     pub warnings: u64,
 }
@@ -391,11 +406,18 @@ struct Emitter<'a, S: Sink + ?Sized> {
     exact_travel: f64,
     held_prev: Option<f64>,
     held_travel: f64,
+    /// The canned cycle the control has on (until cancelled), and whether the points of the
+    /// hole it just drilled are still arriving (they were written as the cycle).
+    cycle_on: Option<Canned>,
+    in_hole: bool,
+    /// Why holes were written as moves, each said once.
+    expanded_why: Vec<&'static str>,
 }
 
 /// Post-processes CL from `input` for machine `m` into `sink`.
 pub fn post<R: BufRead, S: Sink + ?Sized>(input: R, m: &Machine, o: &Options, sink: &mut S) -> Result<Summary, Error> {
     let mut src = Source::new(input, m.units, o.cl_units, o.strict)?;
+    src.canned_cycles = o.canned_cycles;
     let setup = Setup::new(o.tool_length.unwrap_or(m.default_tool_length), o.work_offset);
     let mut e = Emitter {
         m,
@@ -428,6 +450,9 @@ pub fn post<R: BufRead, S: Sink + ?Sized>(input: R, m: &Machine, o: &Options, si
         exact_travel: 0.0,
         held_prev: None,
         held_travel: 0.0,
+        cycle_on: None,
+        in_hole: false,
+        expanded_why: Vec::new(),
     };
     e.program_start()?;
     let mut planner = Planner::new(m, setup);
@@ -522,6 +547,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
     }
 
     fn program_end(&mut self) -> std::io::Result<()> {
+        self.cancel_cycle()?;
         self.lock_all()?;
         for l in self.f.footer() {
             self.out(&l)?;
@@ -541,6 +567,12 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
 
     fn event(&mut self, ev: ProgEvent) -> std::io::Result<()> {
         let d = self.o.dialect;
+        if !matches!(
+            ev,
+            ProgEvent::Comment(_) | ProgEvent::Operation(_) | ProgEvent::Diag(_) | ProgEvent::End
+        ) {
+            self.cancel_cycle()?;
+        }
         match ev {
             ProgEvent::Tool { number, .. } => {
                 if self.comp_on {
@@ -701,6 +733,24 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
     }
 
     fn point(&mut self, c: Committed) -> Result<(), Error> {
+        if self.o.canned_cycles {
+            match c.pt.hole {
+                Some(HolePart::Start(h)) => {
+                    self.in_hole = false;
+                    match self.canned_check(&c, &h) {
+                        Ok(cb) => return self.canned_hole(c, h, cb),
+                        Err(why) => self.expanded(&c.pt, why)?,
+                    }
+                }
+                // The rest of a hole written as a cycle.
+                Some(HolePart::Top) if self.in_hole => {
+                    self.sum.cl_points += 1;
+                    return Ok(());
+                }
+                Some(_) if self.in_hole => return Ok(()),
+                _ => self.in_hole = false,
+            }
+        }
         self.sum.cl_points += !c.pt.inserted as u64;
         let pt = c.pt;
         let Some(cand) = c.cand else {
@@ -1312,6 +1362,231 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
     }
 
     /// Writes one motion block and accounts for it.
+    /// Rapid traverse for the time estimate: the slowest linear's feed limit, else a typical one.
+    fn rapid_rate(&self) -> f64 {
+        let r = self
+            .m
+            .linears
+            .iter()
+            .flatten()
+            .filter_map(|l| l.max_feed)
+            .fold(f64::INFINITY, f64::min);
+        if r.is_finite() {
+            r
+        } else if self.m.units == Units::Mm {
+            10000.0
+        } else {
+            400.0
+        }
+    }
+
+    fn cancel_cycle(&mut self) -> std::io::Result<()> {
+        if self.cycle_on.take().is_some()
+            && let Some(l) = self.f.canned_off()
+        {
+            self.out(&l)?;
+        }
+        Ok(())
+    }
+
+    fn expanded(&mut self, pt: &MotionPt, why: &'static str) -> std::io::Result<()> {
+        if self.expanded_why.contains(&why) {
+            return Ok(());
+        }
+        self.expanded_why.push(why);
+        self.note(Diagnostic::new(
+            Code::CycleExpanded,
+            Severity::Info,
+            Some(pt.line),
+            format!("drilling cycle written as moves: {why} (said once)"),
+        ))
+    }
+
+    /// The hole starting at this point as a canned cycle, with the tool where the point puts it,
+    /// or why it cannot be one. Z levels are filled in from the start level once known.
+    fn canned_check(&mut self, c: &Committed, h: &Hole) -> Result<Canned, &'static str> {
+        let m = self.m;
+        if self.o.mode != Mode::Joint {
+            return Err("canned cycles are written in joint mode only (TCP controls refuse most)");
+        }
+        if h.depth <= 0.0 {
+            return Err("the cycle has no depth");
+        }
+        if m.linears[2].is_none() {
+            return Err("the machine has no Z axis");
+        }
+        let kind = match (h.kind, h.peck, h.dwell) {
+            (CycleKind::Deep, Some(q), _) if q > 0.0 => CannedKind::Peck,
+            (CycleKind::Drill | CycleKind::Deep, _, Some(t)) if t > 0.0 => CannedKind::Spot,
+            (CycleKind::Drill | CycleKind::Deep, _, _) => CannedKind::Drill,
+            _ => return Err("only drilling and peck drilling cycles are written canned"),
+        };
+        let feed = match h.feed {
+            Some((f, FeedUnit::PerMinute)) => f,
+            Some((f, FeedUnit::PerRev)) => f * self.rpm.ok_or("a feed per revolution with no spindle speed")?,
+            None => 0.0,
+        };
+        if !(feed > 0.0) {
+            return Err("the cycle has no feed");
+        }
+        let cand = c
+            .cand
+            .as_ref()
+            .filter(|k| k.feasible)
+            .ok_or("the hole's start is not reachable within travel")?;
+        let (joints, actual, _) = self.resolve(&c.pt.pose, cand).ok_or("no solution")?;
+        let start = joints.linear[2];
+        let (bottom, r) = (start - h.start - h.depth, start - h.start + h.clear);
+        if !self.along_z(&joints, &actual, &c.pt.pose.axis) {
+            return Err("the hole does not run along the machine's Z (a tilted head needs a tilted work plane)");
+        }
+        if m.linears[2]
+            .as_ref()
+            .is_some_and(|l| bottom < l.min - 1e-6 || bottom > l.max + 1e-6)
+        {
+            return Err("the hole's bottom is beyond Z travel");
+        }
+        Ok(Canned {
+            kind,
+            x: m.linears[0].is_some().then_some(joints.linear[0]),
+            y: m.linears[1].is_some().then_some(joints.linear[1]),
+            z_top: start - h.start,
+            z_r: r,
+            z_bottom: bottom,
+            z_start: start,
+            feed,
+            peck: h.peck.unwrap_or(0.0),
+            dwell: h.dwell.unwrap_or(0.0),
+        })
+    }
+
+    /// Whether one unit of machine Z moves the tip one unit back along the tool axis here: then
+    /// a canned cycle's Z words drill the hole.
+    fn along_z(&self, joints: &Joints, actual: &[f64; 3], axis: &Vec3) -> bool {
+        let mut up = joints.linear;
+        up[2] += 1.0;
+        let d = kinematics::fk_actual(self.m, &up, actual, &self.setup).tip
+            - kinematics::fk_actual(self.m, &joints.linear, actual, &self.setup).tip;
+        (d - axis.normalize()).norm() < 1e-9
+    }
+
+    /// One hole as a canned cycle: the approach as any rapid (cancelling the previous cycle
+    /// unless this hole continues it), then the cycle block.
+    fn canned_hole(&mut self, c: Committed, h: Hole, mut cb: Canned) -> Result<(), Error> {
+        let pt = c.pt.clone();
+        let modal = match (self.cycle_on, self.at) {
+            (Some(on), Some(at)) => {
+                let (joints, actual, branch) = self.resolve(&pt.pose, c.cand.as_ref().expect("checked")).expect("checked");
+                let same_rot = (0..self.m.rotaries.len()).all(|i| (joints.rotary[i] - at.joints.rotary[i]).abs() < 1e-9);
+                if same_rot && on.same_cycle(&cb, &self.f.fmt) {
+                    self.at = Some(At {
+                        joints,
+                        actual,
+                        pose: pt.pose,
+                        branch,
+                    });
+                    true
+                } else {
+                    false
+                }
+            }
+            _ => false,
+        };
+        if !modal {
+            self.cancel_cycle()?;
+            self.point(Committed {
+                pt: MotionPt {
+                    hole: None,
+                    ..pt.clone()
+                },
+                ..c
+            })?;
+            // The approach as written: the cycle starts from there.
+            match self.at {
+                Some(at) if (at.pose.tip - pt.pose.tip).norm() < 1e-9 && self.along_z(&at.joints, &at.actual, &at.pose.axis) => {
+                    let shift = at.joints.linear[2] - cb.z_start;
+                    for z in [&mut cb.z_top, &mut cb.z_r, &mut cb.z_bottom, &mut cb.z_start] {
+                        *z += shift;
+                    }
+                    cb.x = cb.x.map(|_| at.joints.linear[0]);
+                    cb.y = cb.y.map(|_| at.joints.linear[1]);
+                }
+                _ => return Ok(()), // the rest of the hole follows as moves
+            }
+        }
+        self.canned_block(&pt, &h, cb, modal)?;
+        Ok(())
+    }
+
+    fn canned_block(&mut self, pt: &MotionPt, h: &Hole, cb: Canned, modal: bool) -> Result<(), Error> {
+        let m = self.m;
+        let at = self.at.expect("positioned");
+        let lines = self.f.canned(&cb, modal);
+        let Some((call, def)) = lines.split_last() else {
+            return Ok(());
+        };
+        for l in def {
+            self.out(l)?;
+        }
+        // Self-verification: the bottom of the hole, replayed from the words as written.
+        let u = at.pose.axis.normalize();
+        let want = at.pose.tip - u * (h.start + h.depth);
+        let mut j = at.joints;
+        j.linear[2] = cb.z_bottom;
+        let mut axes: [Option<f64>; 6] = [None; 6];
+        for i in 0..3 {
+            if m.linears[i].is_some() {
+                axes[i] = Some(j.linear[i]);
+                j.linear[i] = self.f.written(j.linear[i], i);
+            }
+        }
+        for (i, r) in m.rotaries.iter().enumerate() {
+            let k = 3 + (r.name as u8 - b'A') as usize;
+            axes[k] = Some(at.joints.rotary[i].to_degrees());
+            j.rotary[i] = self.f.written(at.joints.rotary[i].to_degrees(), k).to_radians();
+        }
+        let replay = fk(m, &j, &self.setup);
+        let (tip_dev, ax_dev) = ((replay.tip - want).norm(), angle_between(&replay.axis, &u).to_degrees());
+        self.sum.max_tip_deviation = self.sum.max_tip_deviation.max(tip_dev);
+        self.sum.max_axis_deviation_deg = self.sum.max_axis_deviation_deg.max(ax_dev);
+        let mut diags = Vec::new();
+        if tip_dev > self.o.tolerance || ax_dev > 0.01 {
+            diags.push(Diagnostic::new(
+                Code::VerifyDeviation,
+                Severity::Error,
+                Some(pt.line),
+                format!("FK replay of the cycle's bottom misses the hole by {tip_dev:.6} / {ax_dev:.6}°"),
+            ));
+        }
+        for d in &diags {
+            self.count(d);
+        }
+        // Rapid down to R, feed to the bottom, rapid back to the start level.
+        let rate = self.rapid_rate();
+        let time = (cb.z_start - cb.z_r) / rate + (cb.z_r - cb.z_bottom) / cb.feed + (cb.z_start - cb.z_bottom) / rate;
+        self.sum.cycle_time_s += time * 60.0;
+        if let Some(st) = self.sum.axes.get_mut(&'Z') {
+            st.min = st.min.min(cb.z_bottom);
+        }
+        self.blocks += 1;
+        self.sum.blocks += 1;
+        self.sum.canned_holes += 1;
+        let info = BlockInfo {
+            n: self.blocks,
+            source_line: Some(pt.line),
+            joints: AxisWords(axes),
+            diagnostics: diags,
+            rapid: false,
+            tip: want.into(),
+            axis: u.into(),
+            time_s: time * 60.0,
+        };
+        self.sink.line(call, Some(&info))?;
+        self.cycle_on = Some(cb);
+        self.in_hole = true;
+        Ok(())
+    }
+
     fn block(
         &mut self,
         to: At,
@@ -1321,6 +1596,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         inserted: bool,
         comment: Option<&str>,
     ) -> Result<(), Error> {
+        self.cancel_cycle()?;
         let m = self.m;
         let tcp = self.o.mode == Mode::Tcp;
         let mut axes: [Option<f64>; 6] = [None; 6];
@@ -1421,20 +1697,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                 .map(|(a, b)| (a - b) * (a - b))
                 .sum::<f64>())
             .sqrt();
-            let rapid_rate = m
-                .linears
-                .iter()
-                .flatten()
-                .filter_map(|l| l.max_feed)
-                .fold(f64::INFINITY, f64::min);
-            let rate = if rapid_rate.is_finite() {
-                rapid_rate
-            } else if m.units == Units::Mm {
-                10000.0
-            } else {
-                400.0
-            };
-            time = len / rate;
+            time = len / self.rapid_rate();
         }
         // Diagnostics of the pose itself.
         for (i, r) in m.rotaries.iter().enumerate() {

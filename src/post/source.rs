@@ -4,7 +4,7 @@
 //! by CIRCLE, an active drilling cycle. Arcs and cycles become plain points here (linearized or
 //! expanded) so the planner sees one kind of motion.
 
-use crate::cl::{CoolantCmd, CycleParams, Event, FeedUnit, Reader, Record, SpindleCmd};
+use crate::cl::{CoolantCmd, CycleKind, CycleParams, Event, FeedUnit, Reader, Record, SpindleCmd};
 use crate::diag::{Code, Diagnostic, Severity};
 use crate::kinematics::{Pose, Units, Vec3};
 use std::collections::VecDeque;
@@ -26,6 +26,39 @@ pub struct MotionPt {
     /// This point ends an arc from the previous one (CL CIRCLE): the engine writes G2/G3 where
     /// the control and the machine's pose allow, else it linearizes within the tolerance.
     pub arc: Option<ArcSpec>,
+    /// This point is part of a drilling cycle's expansion (canned-cycle output only): the engine
+    /// may write the whole hole as one canned-cycle block instead.
+    pub hole: Option<HolePart>,
+}
+
+/// The points of one hole, in order: `Start` (rapid, above the hole at the higher of the
+/// clearance and retract heights, carrying the cycle), `Top` (the CL GOTO), `Bottom` (only
+/// when the cycle has a depth), `Retract`. A clearance point between `Start` and `Top` is
+/// marked `Clear`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum HolePart {
+    Start(Hole),
+    Clear,
+    Top,
+    Bottom,
+    Retract,
+}
+
+/// A drilling cycle at one hole, heights along the tool axis from the hole's top (the CL point),
+/// profile units.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Hole {
+    pub kind: CycleKind,
+    pub depth: f64,
+    /// The R plane: where the feed starts.
+    pub clear: f64,
+    /// Where the tool waits between holes (and returns to): the higher of clearance and retract.
+    pub start: f64,
+    pub peck: Option<f64>,
+    /// Seconds at the bottom.
+    pub dwell: Option<f64>,
+    /// Feed in profile units per minute or per rev (None: no feed, the expansion rapids).
+    pub feed: Option<(f64, FeedUnit)>,
 }
 
 /// An arc in the part frame, profile units: motion turns counter-clockwise about `normal`.
@@ -72,6 +105,8 @@ pub struct Source<R> {
     circle: Option<([f64; 3], [f64; 3], Option<f64>)>,
     circle_cw: bool,
     cycle: Option<CycleParams>,
+    /// Mark drilling holes for canned-cycle output (and approach them at the start level).
+    pub canned_cycles: bool,
     ended: bool,
     pub strict_error: Option<Diagnostic>,
     strict: bool,
@@ -131,6 +166,7 @@ impl<R: BufRead> Source<R> {
             circle: None,
             circle_cw: false,
             cycle: None,
+            canned_cycles: false,
             ended: false,
             strict_error: None,
             strict,
@@ -259,6 +295,10 @@ impl<R: BufRead> Source<R> {
             }
             Record::Cycle(c) => {
                 self.cycle = Some(c);
+                // Canned output says per hole what it could not write as a cycle.
+                if self.canned_cycles {
+                    return;
+                }
                 self.diag(
                     Code::CycleExpanded,
                     Severity::Info,
@@ -290,7 +330,14 @@ impl<R: BufRead> Source<R> {
             inserted,
             comment,
             arc: None,
+            hole: None,
         }));
+    }
+
+    fn mark(&mut self, part: HolePart) {
+        if let Some(Item::Motion(m)) = self.out.back_mut() {
+            m.hole = Some(part);
+        }
     }
 
     fn motion(&mut self, line: u32, p: Vec3) {
@@ -369,12 +416,37 @@ impl<R: BufRead> Source<R> {
         }
         // Rapid to the R plane, feed through the hole's point (the CL GOTO) to depth, rapid out.
         let rapid = self.feed.is_none();
-        self.push(line, clear, true, true, Some("CYCLE"));
+        let retract = c.retract_to.unwrap_or(c.rapid_to);
+        if self.canned_cycles {
+            // Canned output: the cycle waits above the hole at the higher of R and the retract
+            // height (G98's initial level), so the approach goes there first.
+            let start = retract.max(c.rapid_to);
+            let hole = Hole {
+                kind: c.kind,
+                depth: c.depth * self.scale,
+                clear: c.rapid_to * self.scale,
+                start: start * self.scale,
+                peck: c.peck.map(|x| x * self.scale),
+                dwell: c.dwell,
+                feed: self.feed,
+            };
+            self.push(line, p + u * start, true, true, Some("CYCLE"));
+            self.mark(HolePart::Start(hole));
+            if start > c.rapid_to {
+                self.push(line, clear, true, true, Some("CYCLE"));
+                self.mark(HolePart::Clear);
+            }
+        } else {
+            self.push(line, clear, true, true, Some("CYCLE"));
+        }
         self.push(line, p, rapid, false, Some("CYCLE"));
+        self.mark(HolePart::Top);
         if c.depth > 0.0 {
             self.push(line, p - u * c.depth, rapid, true, Some("CYCLE"));
+            self.mark(HolePart::Bottom);
         }
-        self.push(line, p + u * c.retract_to.unwrap_or(c.rapid_to), true, true, Some("CYCLE"));
+        self.push(line, p + u * retract, true, true, Some("CYCLE"));
+        self.mark(HolePart::Retract);
         self.feed = saved;
     }
 }

@@ -3,7 +3,7 @@
 //! reproduced, in order, by a block; blocks between two matched feed points must lie on the CL
 //! segment.
 
-use super::source::{Item, Source};
+use super::source::{HolePart, Item, Source};
 use super::{Mode, seg_dist};
 use crate::kinematics::{Joints, Machine, Setup, Units, Vec3, angle_between, fk};
 use crate::nc::read::{NcBlock, NcReader};
@@ -140,7 +140,15 @@ pub fn verify<C: BufRead, N: BufRead>(cl: C, nc: N, m: &Machine, o: &VerifyOptio
                 }
             }
             if let Some((tip, axis)) = ahead[i].1 {
-                let (dp, da) = ((tip - pt.pose.tip).norm(), angle_between(&axis, &pt.pose.axis).to_degrees());
+                let mut dp = (tip - pt.pose.tip).norm();
+                // A hole's top (its CL point) lies on a canned cycle's feed into the hole.
+                if pt.hole == Some(HolePart::Top)
+                    && !ahead[i].0.rapid
+                    && let Some(Some((from, _))) = i.checked_sub(1).map(|k| ahead[k].1)
+                {
+                    dp = dp.min(seg_dist(&pt.pose.tip, &from, &tip));
+                }
+                let da = angle_between(&axis, &pt.pose.axis).to_degrees();
                 if dp <= o.tolerance && da <= o.angle_tolerance_deg {
                     found = Some((i, dp, da));
                     break;

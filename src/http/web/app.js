@@ -48,7 +48,7 @@ async function submit(ev) {
   const f = $('file').files[0];
   if (!f) return;
   const q = new URLSearchParams({ machine: $('machine').value, mode: $('mode').value });
-  for (const k of ['dialect', 'tool_length', 'work_offset']) if ($(k).value.trim()) q.set(k, $(k).value.trim());
+  for (const k of ['dialect', 'cycles', 'tool_length', 'work_offset']) if ($(k).value.trim()) q.set(k, $(k).value.trim());
   $('go').disabled = true;
   $('error').hidden = true;
   $('result').hidden = true; // never show the previous file's result as this one's
@@ -180,6 +180,7 @@ function showSummary(s) {
     ['Estimated cycle time', `${(s.cycle_time_s / 60).toFixed(1)} min`],
     ['Errors / warnings', `${s.errors} / ${s.warnings}`],
   ];
+  if (s.canned_holes) rows.splice(2, 0, ['Holes as canned cycles', String(s.canned_holes)]);
   for (const [ax, st] of Object.entries(s.axes)) {
     if (st.travel !== undefined) rows.push([`${ax} rotary`, `travel ${st.travel.toFixed(1)}°, largest step ${(st.largest_step || 0).toFixed(2)}°, range ${st.min.toFixed(2)}…${st.max.toFixed(2)}°`]);
   }
