@@ -541,6 +541,21 @@ fn canned_cycles_reach_every_hole_on_every_profile() {
 fn every_dialect_drills_the_same_holes() {
     let (fanuc, ..) = canned("spinner-u5-620", Some("fanuc"), Mode::Joint);
     let want = iso_holes(&fanuc.nc, true);
+    // The independent parser reads the cycle blocks' words as ours do.
+    let text: String = fanuc
+        .nc
+        .lines()
+        .filter(|l| !l.starts_with(['%', 'O']))
+        .map(|l| format!("{l}\n"))
+        .collect();
+    let prog = gcode::parse(&text).unwrap_or_else(|e| panic!("the gcode crate rejects our cycles: {e:?}"));
+    let g8x: Vec<String> = prog
+        .blocks
+        .iter()
+        .map(|b| b.to_string())
+        .filter(|b| b.contains("G81") || b.contains("G82") || b.contains("G83"))
+        .collect();
+    assert_eq!(g8x.len(), 5, "{g8x:?}");
     assert_eq!(want.len(), 8);
     assert!(want.iter().any(|h| h.peck > 0.0) && want.iter().any(|h| h.dwell > 0.0));
     assert!(
@@ -609,4 +624,106 @@ fn canned_cycles_in_tcp_mode_stay_moves() {
     assert_eq!(sum.canned_holes, 0);
     assert_eq!(sum.errors, 0);
     assert!(diags.iter().any(|d| d.message.contains("joint mode only")), "{diags:?}");
+}
+
+/// Random holes on every profile: tops at random joint positions inside travel (through FK),
+/// random depth, R plane, retract and peck. The canned ISO program replays through FK to every
+/// hole; on table-table machines every hole is a cycle, wherever the table is turned.
+fn random_holes(id: &str, seed: &[f64]) -> Result<(), proptest::test_runner::TestCaseError> {
+    use kinepost::kinematics::{Joints, Setup, Units, Vec3};
+    use kinepost::post::verify::{VerifyOptions, verify};
+    use proptest::prelude::*;
+    let lib = Library::load_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap();
+    let p = lib.get(id).unwrap();
+    let m = &p.machine;
+    let setup = Setup::new(m.default_tool_length, Vec3::zeros());
+    let s = if m.units == Units::Mm { 1.0 } else { 1.0 / 25.4 };
+    let mut cl = format!(
+        "UNITS/{}\nLOADTL/1\nSPINDL/RPM,3000,CLW\nFEDRAT/{},{}\n",
+        if m.units == Units::Mm { "MM" } else { "INCHES" },
+        if m.units == Units::Mm { "MMPM" } else { "IPM" },
+        500.0 * s
+    );
+    let mut k = 0;
+    let mut next = || {
+        k += 1;
+        seed[(k - 1) % seed.len()]
+    };
+    let holes = 3;
+    for _ in 0..holes {
+        let mut j = Joints::default();
+        for i in 0..3 {
+            if let Some(l) = &m.linears[i] {
+                j.linear[i] = l.min + (0.3 + 0.4 * next()) * (l.max - l.min);
+            }
+        }
+        for (i, r) in m.rotaries.iter().enumerate() {
+            j.rotary[i] = match r.limits {
+                Some((lo, hi)) => lo + (0.15 + 0.7 * next()) * (hi - lo),
+                None => (next() * 2.0 - 1.0) * std::f64::consts::PI,
+            };
+        }
+        let pose = kinepost::kinematics::fk(m, &j, &setup);
+        let (t, u) = (pose.tip, pose.axis);
+        let (depth, rapto) = ((1.0 + 9.0 * next()) * s, (1.0 + 4.0 * next()) * s);
+        let retract = if next() < 0.5 {
+            format!(",RTRCTO,{}", rapto + 15.0 * s * next())
+        } else {
+            String::new()
+        };
+        let (kind, peck) = if next() < 0.5 {
+            ("DEEP", format!(",STEP,{}", (1.0 + 2.0 * next()) * s))
+        } else {
+            ("DRILL", String::new())
+        };
+        cl += &format!(
+            "CYCLE/{kind},FEDTO,{depth}{peck},{},{},RAPTO,{rapto}{retract}\nGOTO/{},{},{},{},{},{}\nCYCLE/OFF\n",
+            if m.units == Units::Mm { "MMPM" } else { "IPM" },
+            200.0 * s,
+            t.x,
+            t.y,
+            t.z,
+            u.x,
+            u.y,
+            u.z
+        );
+    }
+    cl += "END\nFINI\n";
+    let post_with = |canned: bool| {
+        let mut o = Options::new(m);
+        o.dialect = &kinepost::nc::FANUC;
+        o.canned_cycles = canned;
+        let mut sink = Collect::default();
+        let sum = post::post(cl.as_bytes(), m, &o, &mut sink).unwrap();
+        (sink, sum)
+    };
+    let (_, expanded) = post_with(false);
+    // Tops in the middle of travel, start levels a few mm above: all reachable.
+    prop_assert_eq!(expanded.errors, 0, "{}", cl);
+    let (sink, sum) = post_with(true);
+    prop_assert_eq!(sum.errors, 0, "{}\n{}", cl, sink.nc);
+    if m.kinematics_kind() == "table-table" {
+        prop_assert_eq!(sum.canned_holes, holes as u64, "{}", sink.nc);
+    }
+    let vo = VerifyOptions {
+        mode: Mode::Joint,
+        setup,
+        tolerance: if m.units == Units::Mm { 0.01 } else { 0.0004 },
+        angle_tolerance_deg: 0.01,
+        cl_units: None,
+    };
+    let r = verify(cl.as_bytes(), sink.nc.as_bytes(), m, &vo).unwrap();
+    prop_assert!(r.ok && r.matched == holes as u64, "{r:?}\n{cl}\n{}", sink.nc);
+    Ok(())
+}
+
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig::with_cases(24))]
+    #[test]
+    fn random_holes_drill_as_cycles_on_every_profile(seed in proptest::collection::vec(0.0f64..1.0, 24)) {
+        for id in ["spinner-u5-620", "haas-umc750", "mikron-ucp710", "dmu-nutating-45", "dmg-dmc75v", "fryer-5x-45",
+                   "htm50200-horizontal", "propeller-3r2l", "vmc-3axis", "vmc-4axis-a"] {
+            random_holes(id, &seed)?;
+        }
+    }
 }

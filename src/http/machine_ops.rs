@@ -154,7 +154,7 @@ fn setup(m: &Machine, tool_length: Option<f64>, wo: Option<[f64; 3]>) -> Result<
 fn joints(m: &Machine, words: &Words) -> Result<Joints, ApiError> {
     let mut j = Joints::default();
     for (k, v) in words {
-        if !(v.abs() <= kinematics::MAX_COORD) {
+        if v.is_nan() || v.abs() > kinematics::MAX_COORD {
             return Err(ApiError::BadParameter(format!(
                 "joints.{k} must be finite and within ±{:e}",
                 kinematics::MAX_COORD

@@ -1426,7 +1426,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             Some((f, FeedUnit::PerRev)) => f * self.rpm.ok_or("a feed per revolution with no spindle speed")?,
             None => 0.0,
         };
-        if !(feed > 0.0) {
+        if feed.is_nan() || feed <= 0.0 {
             return Err("the cycle has no feed");
         }
         let cand = c
