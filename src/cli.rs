@@ -330,6 +330,10 @@ pub struct ServeArgs {
     /// Seconds without a report after which another replica takes a running job over.
     #[arg(long, env = "KINEPOST_JOB_LEASE_SECS", default_value_t = 30.0)]
     pub job_lease_secs: f64,
+    /// Seconds requests in flight get after SIGTERM before the server stops anyway (jobs
+    /// running then resume on the next start).
+    #[arg(long, env = "KINEPOST_SHUTDOWN_GRACE", default_value_t = 60.0)]
+    pub shutdown_grace: f64,
 }
 
 /// `--mode`: joint or tcp.
@@ -539,9 +543,14 @@ fn serve(cli: &Cli, a: &ServeArgs) -> Result<(), String> {
         database_url: a.database_url.clone().filter(|u| !u.is_empty()),
         spool_dir: a.spool_dir.clone(),
         job_lease: std::time::Duration::from_secs_f64(a.job_lease_secs.clamp(1.0, 86400.0)),
+        shutdown_grace: std::time::Duration::from_secs_f64(a.shutdown_grace.clamp(0.0, 86400.0)),
     };
     let rt = tokio::runtime::Runtime::new().map_err(|e| e.to_string())?;
-    rt.block_on(crate::http::serve(cfg))
+    let r = rt.block_on(crate::http::serve(cfg));
+    // Dropping the runtime would wait for every blocking task (a job mid-run) to end; the queue
+    // is durable, so what still runs resumes on the next start.
+    rt.shutdown_timeout(std::time::Duration::from_secs(2));
+    r
 }
 
 fn run(cli: Cli) -> Result<(), String> {

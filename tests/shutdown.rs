@@ -51,3 +51,47 @@ async fn sigterm_finishes_the_stream_in_flight_then_exits() {
     assert!(status.success(), "exits cleanly after the stream: {status}");
     let _ = std::fs::remove_dir_all(&data);
 }
+
+/// A client that never finishes its upload cannot keep the server up: after SIGTERM it gets the
+/// grace (here 1 s), then the server stops and exits cleanly.
+#[tokio::test]
+async fn a_trickling_upload_does_not_outlive_the_shutdown_grace() {
+    let data = std::env::temp_dir().join(format!("kinepost-grace-{}", std::process::id()));
+    let (mut child, addr) = common::spawn_binary(&data, &["--shutdown-grace", "1"]);
+    let (tx, rx) = tokio::sync::mpsc::channel::<Result<String, std::io::Error>>(1);
+    tx.send(Ok("UNITS/MM\nGOTO/1,2,3\n".into())).await.unwrap();
+    let body = reqwest::Body::wrap_stream(futures_util::stream::unfold(rx, |mut rx| async move {
+        rx.recv().await.map(|x| (x, rx))
+    }));
+    let upload = tokio::spawn(
+        reqwest::Client::new()
+            .post(format!("{addr}/v1/post?machine=vmc-3axis"))
+            .header("content-type", "text/plain")
+            .body(body)
+            .send(),
+    );
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    Command::new("kill")
+        .args(["-TERM", &child.id().to_string()])
+        .status()
+        .unwrap();
+    // Generous: a server waiting for the upload would never exit; one that honours the grace
+    // exits about a second after the signal.
+    let exited = tokio::task::spawn_blocking(move || {
+        for _ in 0..300 {
+            if let Some(s) = child.try_wait().unwrap() {
+                return Some(s);
+            }
+            std::thread::sleep(Duration::from_millis(100));
+        }
+        let _ = child.kill();
+        None
+    })
+    .await
+    .unwrap();
+    let status = exited.expect("still running 30 s after SIGTERM with a 1 s grace");
+    assert!(status.success(), "{status}");
+    drop(tx); // the upload was never finished
+    let _ = upload.await;
+    let _ = std::fs::remove_dir_all(&data);
+}

@@ -61,6 +61,9 @@ pub struct Config {
     pub spool_dir: Option<PathBuf>,
     /// A running job whose node stops reporting for this long is taken over (replicas).
     pub job_lease: Duration,
+    /// After SIGTERM, how long requests in flight may take before the server stops anyway (a
+    /// client trickling an upload must not keep it up for ever; accepted jobs resume on restart).
+    pub shutdown_grace: Duration,
 }
 
 impl Config {
@@ -98,6 +101,7 @@ impl Default for Config {
             database_url: None,
             spool_dir: None,
             job_lease: Duration::from_secs(30),
+            shutdown_grace: Duration::from_secs(60),
         }
     }
 }
@@ -542,19 +546,34 @@ pub async fn serve(cfg: Config) -> Result<(), String> {
     let metrics = Arc::new(Metrics::default());
     let m = metrics.clone();
     queue.observe(Box::new(move |outcome, secs| m.record_job(outcome, secs)));
+    let grace = cfg.shutdown_grace;
     let state = Arc::new(AppState {
         machines,
         config: cfg,
         metrics,
         jobs: Some(queue),
     });
-    axum::serve(
+    let (stopping, mut stop) = tokio::sync::watch::channel(false);
+    let server = axum::serve(
         listener,
         app(state).into_make_service_with_connect_info::<std::net::SocketAddr>(),
     )
-    .with_graceful_shutdown(shutdown_signal())
-    .await
-    .map_err(|e| e.to_string())
+    .with_graceful_shutdown(async move {
+        shutdown_signal().await;
+        let _ = stopping.send(true);
+    });
+    let deadline = async move {
+        if stop.wait_for(|s| *s).await.is_ok() {
+            tokio::time::sleep(grace).await;
+            tracing::warn!(?grace, "shutdown grace over: stopping with requests still in flight");
+        } else {
+            std::future::pending::<()>().await;
+        }
+    };
+    tokio::select! {
+        r = server => r.map_err(|e| e.to_string()),
+        _ = deadline => Ok(()),
+    }
 }
 
 async fn shutdown_signal() {
