@@ -738,7 +738,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                 Some(HolePart::Start(h)) => {
                     self.in_hole = false;
                     match self.canned_check(&c, &h) {
-                        Ok(cb) => return self.canned_hole(c, h, cb),
+                        Ok((cb, start)) => return self.canned_hole(c, h, cb, start),
                         Err(why) => self.expanded(&c.pt, why)?,
                     }
                 }
@@ -1404,7 +1404,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
 
     /// The hole starting at this point as a canned cycle, with the tool where the point puts it,
     /// or why it cannot be one. Z levels are filled in from the start level once known.
-    fn canned_check(&mut self, c: &Committed, h: &Hole) -> Result<Canned, &'static str> {
+    fn canned_check(&mut self, c: &Committed, h: &Hole) -> Result<(Canned, At), &'static str> {
         let m = self.m;
         if self.o.mode != Mode::Joint {
             return Err("canned cycles are written in joint mode only (TCP controls refuse most)");
@@ -1434,7 +1434,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             .as_ref()
             .filter(|k| k.feasible)
             .ok_or("the hole's start is not reachable within travel")?;
-        let (joints, actual, _) = self.resolve(&c.pt.pose, cand).ok_or("no solution")?;
+        let (joints, actual, branch) = self.resolve(&c.pt.pose, cand).ok_or("no solution")?;
         let start = joints.linear[2];
         let (bottom, r) = (start - h.start - h.depth, start - h.start + h.clear);
         if !self.along_z(&joints, &actual, &c.pt.pose.axis) {
@@ -1446,7 +1446,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         {
             return Err("the hole's bottom is beyond Z travel");
         }
-        Ok(Canned {
+        let cb = Canned {
             kind,
             x: m.linears[0].is_some().then_some(joints.linear[0]),
             y: m.linears[1].is_some().then_some(joints.linear[1]),
@@ -1457,7 +1457,14 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             feed,
             peck: h.peck.unwrap_or(0.0),
             dwell: h.dwell.unwrap_or(0.0),
-        })
+        };
+        let at = At {
+            joints,
+            actual,
+            pose: c.pt.pose,
+            branch,
+        };
+        Ok((cb, at))
     }
 
     /// Whether one unit of machine Z moves the tip one unit back along the tool axis here: then
@@ -1472,27 +1479,18 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
 
     /// One hole as a canned cycle: the approach as any rapid (cancelling the previous cycle
     /// unless this hole continues it), then the cycle block.
-    fn canned_hole(&mut self, c: Committed, h: Hole, mut cb: Canned) -> Result<(), Error> {
+    fn canned_hole(&mut self, c: Committed, h: Hole, mut cb: Canned, start: At) -> Result<(), Error> {
         let pt = c.pt.clone();
         let modal = match (self.cycle_on, self.at) {
             (Some(on), Some(at)) => {
-                let (joints, actual, branch) = self.resolve(&pt.pose, c.cand.as_ref().expect("checked")).expect("checked");
-                let same_rot = (0..self.m.rotaries.len()).all(|i| (joints.rotary[i] - at.joints.rotary[i]).abs() < 1e-9);
-                if same_rot && on.same_cycle(&cb, &self.f.fmt) {
-                    self.at = Some(At {
-                        joints,
-                        actual,
-                        pose: pt.pose,
-                        branch,
-                    });
-                    true
-                } else {
-                    false
-                }
+                let same_rot = (0..self.m.rotaries.len()).all(|i| (start.joints.rotary[i] - at.joints.rotary[i]).abs() < 1e-9);
+                same_rot && on.same_cycle(&cb, &self.f.fmt)
             }
             _ => false,
         };
-        if !modal {
+        let at = if modal {
+            start
+        } else {
             self.cancel_cycle()?;
             self.point(Committed {
                 pt: MotionPt {
@@ -1510,17 +1508,17 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                     }
                     cb.x = cb.x.map(|_| at.joints.linear[0]);
                     cb.y = cb.y.map(|_| at.joints.linear[1]);
+                    at
                 }
                 _ => return Ok(()), // the rest of the hole follows as moves
             }
-        }
-        self.canned_block(&pt, &h, cb, modal)?;
-        Ok(())
+        };
+        self.at = Some(at);
+        self.canned_block(&pt, &h, cb, at, modal)
     }
 
-    fn canned_block(&mut self, pt: &MotionPt, h: &Hole, cb: Canned, modal: bool) -> Result<(), Error> {
+    fn canned_block(&mut self, pt: &MotionPt, h: &Hole, cb: Canned, at: At, modal: bool) -> Result<(), Error> {
         let m = self.m;
-        let at = self.at.expect("positioned");
         let lines = self.f.canned(&cb, modal);
         let Some((call, def)) = lines.split_last() else {
             return Ok(());
