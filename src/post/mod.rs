@@ -1380,6 +1380,21 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         }
     }
 
+    /// Books an FK replay's deviation (tip, degrees) in the summary; beyond the tolerance (or
+    /// 0.01°) it is an error on the block.
+    fn replayed(&mut self, line: u32, tip_dev: f64, ax_dev: f64, what: &str) -> Option<Diagnostic> {
+        self.sum.max_tip_deviation = self.sum.max_tip_deviation.max(tip_dev);
+        self.sum.max_axis_deviation_deg = self.sum.max_axis_deviation_deg.max(ax_dev);
+        (tip_dev > self.o.tolerance || ax_dev > 0.01).then(|| {
+            Diagnostic::new(
+                Code::VerifyDeviation,
+                Severity::Error,
+                Some(line),
+                format!("FK replay of {what} by {tip_dev:.6} / {ax_dev:.6}°"),
+            )
+        })
+    }
+
     fn cancel_cycle(&mut self) -> std::io::Result<()> {
         if self.cycle_on.take().is_some()
             && let Some(l) = self.f.canned_off()
@@ -1544,18 +1559,12 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             j.rotary[i] = self.f.written(at.joints.rotary[i].to_degrees(), k).to_radians();
         }
         let replay = fk(m, &j, &self.setup);
-        let (tip_dev, ax_dev) = ((replay.tip - want).norm(), angle_between(&replay.axis, &u).to_degrees());
-        self.sum.max_tip_deviation = self.sum.max_tip_deviation.max(tip_dev);
-        self.sum.max_axis_deviation_deg = self.sum.max_axis_deviation_deg.max(ax_dev);
-        let mut diags = Vec::new();
-        if tip_dev > self.o.tolerance || ax_dev > 0.01 {
-            diags.push(Diagnostic::new(
-                Code::VerifyDeviation,
-                Severity::Error,
-                Some(pt.line),
-                format!("FK replay of the cycle's bottom misses the hole by {tip_dev:.6} / {ax_dev:.6}°"),
-            ));
-        }
+        let tip_dev = (replay.tip - want).norm();
+        let ax_dev = angle_between(&replay.axis, &u).to_degrees();
+        let diags: Vec<Diagnostic> = self
+            .replayed(pt.line, tip_dev, ax_dev, "the cycle's bottom misses the hole")
+            .into_iter()
+            .collect();
         for d in &diags {
             self.count(d);
         }
@@ -1749,16 +1758,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             (replay.tip - to.pose.tip).norm()
         };
         let ax_dev = angle_between(&replay.axis, &to.pose.axis).to_degrees();
-        self.sum.max_tip_deviation = self.sum.max_tip_deviation.max(tip_dev);
-        self.sum.max_axis_deviation_deg = self.sum.max_axis_deviation_deg.max(ax_dev);
-        if tip_dev > self.o.tolerance || ax_dev > 0.01 {
-            diags.push(Diagnostic::new(
-                Code::VerifyDeviation,
-                Severity::Error,
-                Some(pt.line),
-                format!("FK replay of the written block misses the pose by {tip_dev:.6} / {ax_dev:.6}°"),
-            ));
-        }
+        diags.extend(self.replayed(pt.line, tip_dev, ax_dev, "the written block misses the pose"));
         // Statistics.
         for (k, v) in axes.iter().enumerate() {
             let Some(v) = v else { continue };
