@@ -444,7 +444,7 @@ pub fn parse_triple(s: &str) -> Result<Vec3, String> {
         .map(|p| p.trim().parse::<f64>().map_err(|_| format!("{p:?} is not a number")))
         .collect::<Result<_, _>>()?;
     match v.as_slice() {
-        [x, y, z] if v.iter().all(|c| c.abs() <= crate::kinematics::MAX_COORD) => Ok(Vec3::new(*x, *y, *z)),
+        [x, y, z] if v.iter().all(|c| crate::kinematics::coordinate_ok(*c)) => Ok(Vec3::new(*x, *y, *z)),
         _ => Err(format!(
             "expected three numbers x,y,z within ±{:e}, got {s:?}",
             crate::kinematics::MAX_COORD

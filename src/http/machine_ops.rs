@@ -141,7 +141,7 @@ async fn off_runtime<T: Send + 'static>(f: impl FnOnce() -> T + Send + 'static) 
 
 fn setup(m: &Machine, tool_length: Option<f64>, wo: Option<[f64; 3]>) -> Result<Setup, ApiError> {
     let l = tool_length.unwrap_or(m.default_tool_length);
-    let inside = |v: &f64| v.abs() <= kinematics::MAX_COORD; // false for NaN too
+    let inside = |v: &f64| kinematics::coordinate_ok(*v);
     if !inside(&l) || wo.is_some_and(|w| !w.iter().all(inside)) {
         return Err(ApiError::BadParameter(format!(
             "tool_length and work_offset must be finite and within ±{:e}",
@@ -154,7 +154,7 @@ fn setup(m: &Machine, tool_length: Option<f64>, wo: Option<[f64; 3]>) -> Result<
 fn joints(m: &Machine, words: &Words) -> Result<Joints, ApiError> {
     let mut j = Joints::default();
     for (k, v) in words {
-        if v.is_nan() || v.abs() > kinematics::MAX_COORD {
+        if !kinematics::coordinate_ok(*v) {
             return Err(ApiError::BadParameter(format!(
                 "joints.{k} must be finite and within ±{:e}",
                 kinematics::MAX_COORD
@@ -305,14 +305,15 @@ pub async fn angle_error_fit(
             ));
         }
     }
-    let (fits, samples) = off_runtime(move || (calib::fit_angle_error(&samples, 2..=5), samples)).await?;
-    let fits = fits.map_err(|e| ApiError::BadParameter(e.to_string()))?;
-    let chosen = calib::choose(&fits)
-        .ok_or_else(|| ApiError::BadParameter("no fit".into()))?
-        .clone();
     let range = samples
         .iter()
         .fold([f64::INFINITY, f64::NEG_INFINITY], |r, s| [r[0].min(s.0), r[1].max(s.0)]);
+    let fits = off_runtime(move || calib::fit_angle_error(&samples, 2..=5))
+        .await?
+        .map_err(|e| ApiError::BadParameter(e.to_string()))?;
+    let chosen = calib::choose(&fits)
+        .ok_or_else(|| ApiError::BadParameter("no fit".into()))?
+        .clone();
     let mut doc = p.doc.clone();
     doc.rotary[idx].angle_error = Some(crate::machines::AngleErrorDoc {
         coefficients: chosen.coefficients.clone(),

@@ -36,6 +36,11 @@ pub struct Pose {
 /// far beyond it arithmetic overflows into inf, which no solver can use.
 pub const MAX_COORD: f64 = 1e9;
 
+/// Whether a coordinate is one kinematics takes: finite and within ±[`MAX_COORD`].
+pub fn coordinate_ok(v: f64) -> bool {
+    v.abs() <= MAX_COORD // false for NaN
+}
+
 /// What a job adds to a profile: tool length (gauge line to tip) and work offset (origin of W in
 /// M at home), both in profile units.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -208,7 +208,7 @@ pub fn ik(m: &Machine, pose: &Pose, setup: &Setup, opt: &IkOptions) -> Result<So
 pub fn ik_into(m: &Machine, pose: &Pose, setup: &Setup, opt: &IkOptions, out: &mut Solutions) -> Result<(), Error> {
     out.clear();
     let n2 = pose.axis.norm_squared();
-    let inside = |v: &f64| v.abs() <= super::MAX_COORD; // false for NaN too
+    let inside = |v: &f64| super::coordinate_ok(*v);
     if !(n2.is_finite() && n2 > 1e-24 && pose.tip.iter().all(inside)) {
         return Err(Error::InvalidPose {
             problem: format!(

@@ -461,18 +461,10 @@ impl Formatter {
                 .push_str(if matches!(motion, Motion::Arc { .. }) { "C " } else { "L " });
         } else if let Some((mode, _)) = feed
             && motion != Motion::Rapid
-            && self.feed_mode != Some(mode)
+            && let Some(w) = self.switch_feed_mode(mode)
         {
-            let w = match mode {
-                FeedMode::PerMinute => self.d.feed_per_min,
-                FeedMode::InverseTime => self.d.inverse_time.unwrap_or(self.d.feed_per_min),
-            };
-            if !w.is_empty() {
-                self.buf.push_str(w);
-                self.buf.push(' ');
-            }
-            self.feed_mode = Some(mode);
-            self.feed = None;
+            self.buf.push_str(w);
+            self.buf.push(' ');
         }
         let mut moved = false;
         let motion_pos = self.buf.len();
@@ -542,6 +534,21 @@ impl Formatter {
         Some(&self.buf)
     }
 
+    /// The word that switches the feed mode to `mode`, when it is not on already (the modal F is
+    /// forgotten then: it means another thing now). `None` also where the control has no word.
+    fn switch_feed_mode(&mut self, mode: FeedMode) -> Option<&'static str> {
+        if self.feed_mode == Some(mode) {
+            return None;
+        }
+        self.feed_mode = Some(mode);
+        self.feed = None;
+        let w = match mode {
+            FeedMode::PerMinute => self.d.feed_per_min,
+            FeedMode::InverseTime => self.d.inverse_time.unwrap_or(self.d.feed_per_min),
+        };
+        (!w.is_empty()).then_some(w)
+    }
+
     fn number(&mut self, v: f64, dec: u32, signed: bool) {
         let r = round_to(v, dec);
         if signed && r >= 0 {
@@ -577,10 +584,9 @@ impl Formatter {
             Cycles::Iso { dwell_ms } => {
                 self.start();
                 if !modal {
-                    if self.feed_mode != Some(FeedMode::PerMinute) {
-                        self.buf.push_str(self.d.feed_per_min);
+                    if let Some(w) = self.switch_feed_mode(FeedMode::PerMinute) {
+                        self.buf.push_str(w);
                         self.buf.push(' ');
-                        self.feed_mode = Some(FeedMode::PerMinute);
                     }
                     // G98 returns to the level the cycle started from, G99 to the R plane.
                     let g98 = round_to(c.z_start, lin) > round_to(c.z_r, lin);
@@ -619,12 +625,11 @@ impl Formatter {
             Cycles::Siemens => {
                 if !modal {
                     let mut f = String::new();
-                    if self.feed_mode != Some(FeedMode::PerMinute) {
-                        f.push_str(self.d.feed_per_min);
+                    if let Some(w) = self.switch_feed_mode(FeedMode::PerMinute) {
+                        f.push_str(w);
                         f.push(' ');
-                        self.feed_mode = Some(FeedMode::PerMinute);
                     }
-                    if self.feed != Some(feed_r) || !f.is_empty() {
+                    if self.feed != Some(feed_r) {
                         f.push('F');
                         write_fixed(&mut f, feed_r, self.fmt.feed);
                         self.feed = Some(feed_r);

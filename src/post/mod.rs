@@ -139,7 +139,7 @@ impl Settings {
             Some(x) => return Err(format!("mode {x:?}: expected joint or tcp")),
         };
         if let Some(l) = self.tool_length {
-            if !((0.0..=crate::kinematics::MAX_COORD).contains(&l)) {
+            if !(l >= 0.0 && crate::kinematics::coordinate_ok(l)) {
                 return Err(format!(
                     "tool_length must be a length from 0 to {:e}",
                     crate::kinematics::MAX_COORD

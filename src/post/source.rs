@@ -26,22 +26,19 @@ pub struct MotionPt {
     /// This point ends an arc from the previous one (CL CIRCLE): the engine writes G2/G3 where
     /// the control and the machine's pose allow, else it linearizes within the tolerance.
     pub arc: Option<ArcSpec>,
-    /// This point is part of a drilling cycle's expansion (canned-cycle output only): the engine
-    /// may write the whole hole as one canned-cycle block instead.
+    /// This point is part of a drilling cycle's expansion: with canned-cycle output the engine
+    /// may write the whole hole as one cycle block; `verify` finds a hole's top on the feed in.
     pub hole: Option<HolePart>,
 }
 
-/// The points of one hole, in order: `Start` (rapid, above the hole at the higher of the
-/// clearance and retract heights, carrying the cycle), `Top` (the CL GOTO), `Bottom` (only
-/// when the cycle has a depth), `Retract`. A clearance point between `Start` and `Top` is
-/// marked `Clear`.
+/// The points of one hole, in order: `Start` (canned output only: rapid, above the hole at the
+/// higher of the clearance and retract heights, carrying the cycle), then the R plane, `Top`
+/// (the CL GOTO), the bottom and the retract, those three `Rest`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum HolePart {
     Start(Hole),
-    Clear,
     Top,
-    Bottom,
-    Retract,
+    Rest,
 }
 
 /// A drilling cycle at one hole, heights along the tool axis from the hole's top (the CL point),
@@ -434,19 +431,20 @@ impl<R: BufRead> Source<R> {
             self.mark(HolePart::Start(hole));
             if start > c.rapid_to {
                 self.push(line, clear, true, true, Some("CYCLE"));
-                self.mark(HolePart::Clear);
+                self.mark(HolePart::Rest);
             }
         } else {
             self.push(line, clear, true, true, Some("CYCLE"));
+            self.mark(HolePart::Rest);
         }
         self.push(line, p, rapid, false, Some("CYCLE"));
         self.mark(HolePart::Top);
         if c.depth > 0.0 {
             self.push(line, p - u * c.depth, rapid, true, Some("CYCLE"));
-            self.mark(HolePart::Bottom);
+            self.mark(HolePart::Rest);
         }
         self.push(line, p + u * retract, true, true, Some("CYCLE"));
-        self.mark(HolePart::Retract);
+        self.mark(HolePart::Rest);
         self.feed = saved;
     }
 }
