@@ -99,6 +99,27 @@ def main():
             if bad or c['matched'] != c['cl_points']:
                 fails.append(f'verify {f} {mid} {mode}: {rep.get("failed")}')
 
+    # 3+2 corpus files in tilted planes (holes as canned cycles in them). The shared verifier reads
+    # no plane commands: kinepost's own `verify` replays plane coordinates × the plane's frame.
+    planes = 0
+    for f in ('swcam_apt_boss_3plus2.apt', 'swcam_apt_wall_holes_3plus2.apt'):
+        cl = os.path.join(corpus, f)
+        for dialect, word in (('haas', 'G254'), ('fanuc', 'G68.2')):
+            planes += 1
+            nc = os.path.join(tmp, f'{f}-planes-{dialect}.nc')
+            p = run([a.kinepost, 'post', '--machine', 'haas-umc750', '--dialect', dialect, '--tilted-planes',
+                     '--canned-cycles', cl, '-o', nc])
+            if p.returncode:
+                fails.append(f'post planes {f} {dialect}: {p.stderr.strip()[-300:]}')
+                continue
+            tilts = sum(1 for l in open(nc) if l.startswith(word))
+            v = run([a.kinepost, 'verify', '--machine', 'haas-umc750', '--cl', cl, '--nc', nc])
+            rep = json.loads(v.stdout) if v.stdout.strip().startswith('{') else {'ok': False, 'error': v.stderr}
+            print(f'planes {f:40s} {dialect:6s} {word} x{tilts} verify ok={rep.get("ok")} '
+                  f'matched={rep.get("matched")}/{rep.get("cl_points")} max tip error {rep.get("max_tip_error")}')
+            if not rep.get('ok') or tilts == 0:
+                fails.append(f'planes {f} {dialect}: {tilts} planes, {rep}')
+
     # The NX golden: kinepost's rotary travel and largest step next to NX's.
     nc = os.path.join(tmp, 'va-haas-tcp.nc')
     run([a.kinepost, 'post', '--machine', 'haas-umc750', '--mode', 'tcp', os.path.join(corpus, 'nx_clsf_mech491_variable_axis_inch_5ax.cls'), '-o', nc])
@@ -114,7 +135,7 @@ def main():
 
     for f in fails:
         print('FAIL', f)
-    print(f'{ok + len(CORPUS) * 2 - len(fails)} passed, {len(fails)} failed')
+    print(f'{ok + len(CORPUS) * 2 + planes - len(fails)} passed, {len(fails)} failed')
     return 1 if fails else 0
 
 

@@ -404,6 +404,10 @@ pub struct PostArgs {
     /// where the hole runs along the machine's Z; default: expanded into moves.
     #[arg(long)]
     pub canned_cycles: bool,
+    /// Fixed-axis (3+2) runs in a tilted working plane (G68.2 + G53.1, G254, CYCLE800, PLANE
+    /// SPATIAL) with their motion in plane coordinates; default: 5-axis positioning.
+    #[arg(long)]
+    pub tilted_planes: bool,
     /// Write per-block diagnostics as NDJSON to this file.
     #[arg(long)]
     pub diagnostics: Option<PathBuf>,
@@ -692,6 +696,7 @@ fn post_cmd(p: &machines::Profile, a: &PostArgs) -> Result<(), String> {
         singular_tolerance: Some(a.singular_tolerance),
         cl_units: a.cl_units.map(|u| Units::from(u).as_str().to_string()),
         cycles: a.canned_cycles.then(|| "canned".into()),
+        planes: a.tilted_planes.then(|| "tilted".into()),
     };
     let mut o = settings.profile_options(p)?;
     o.header.push(format!("DATE {} UTC", utc_now()));

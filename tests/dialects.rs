@@ -347,6 +347,28 @@ struct DrilledHole {
     dwell: f64,
 }
 
+/// Random joints from `next` (values in [0, 1)): each linear at `from + span × next` of its
+/// travel, bounded rotaries in the middle 70 % of theirs, unbounded ones anywhere.
+fn random_joints(
+    m: &kinepost::kinematics::Machine,
+    (from, span): (f64, f64),
+    next: &mut dyn FnMut() -> f64,
+) -> kinepost::kinematics::Joints {
+    let mut j = kinepost::kinematics::Joints::default();
+    for i in 0..3 {
+        if let Some(l) = &m.linears[i] {
+            j.linear[i] = l.min + (from + span * next()) * (l.max - l.min);
+        }
+    }
+    for (i, r) in m.rotaries.iter().enumerate() {
+        j.rotary[i] = match r.limits {
+            Some((lo, hi)) => lo + (0.15 + 0.7 * next()) * (hi - lo),
+            None => (next() * 2.0 - 1.0) * std::f64::consts::PI,
+        };
+    }
+    j
+}
+
 /// The holes of an ISO program: G81/G82/G83 blocks and the X/Y blocks that repeat them.
 fn iso_holes(nc: &str, dwell_ms: bool) -> Vec<DrilledHole> {
     let (mut out, mut on, mut z, mut g98) = (Vec::new(), None::<DrilledHole>, f64::NAN, true);
@@ -630,7 +652,7 @@ fn canned_cycles_in_tcp_mode_stay_moves() {
 /// random depth, R plane, retract and peck. The canned ISO program replays through FK to every
 /// hole; on table-table machines every hole is a cycle, wherever the table is turned.
 fn random_holes(id: &str, seed: &[f64]) -> Result<(), proptest::test_runner::TestCaseError> {
-    use kinepost::kinematics::{Joints, Setup, Units, Vec3};
+    use kinepost::kinematics::{Setup, Units, Vec3};
     use kinepost::post::verify::{VerifyOptions, verify};
     use proptest::prelude::*;
     let lib = Library::load_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap();
@@ -651,18 +673,7 @@ fn random_holes(id: &str, seed: &[f64]) -> Result<(), proptest::test_runner::Tes
     };
     let holes = 3;
     for _ in 0..holes {
-        let mut j = Joints::default();
-        for i in 0..3 {
-            if let Some(l) = &m.linears[i] {
-                j.linear[i] = l.min + (0.3 + 0.4 * next()) * (l.max - l.min);
-            }
-        }
-        for (i, r) in m.rotaries.iter().enumerate() {
-            j.rotary[i] = match r.limits {
-                Some((lo, hi)) => lo + (0.15 + 0.7 * next()) * (hi - lo),
-                None => (next() * 2.0 - 1.0) * std::f64::consts::PI,
-            };
-        }
+        let j = random_joints(m, (0.3, 0.4), &mut next);
         let pose = kinepost::kinematics::fk(m, &j, &setup);
         let (t, u) = (pose.tip, pose.axis);
         let (depth, rapto) = ((1.0 + 9.0 * next()) * s, (1.0 + 4.0 * next()) * s);
@@ -724,6 +735,360 @@ proptest::proptest! {
         for id in ["spinner-u5-620", "haas-umc750", "mikron-ucp710", "dmu-nutating-45", "dmg-dmc75v", "fryer-5x-45",
                    "htm50200-horizontal", "propeller-3r2l", "vmc-3axis", "vmc-4axis-a"] {
             random_holes(id, &seed)?;
+        }
+    }
+}
+
+/// Profiles with three linears and two rotaries: the machines a tilted plane is written for.
+const PLANE_MACHINES: [&str; 7] = [
+    "spinner-u5-620",
+    "haas-umc750",
+    "mikron-ucp710",
+    "dmu-nutating-45",
+    "dmg-dmc75v",
+    "fryer-5x-45",
+    "htm50200-horizontal",
+];
+
+/// A 3+2 program: `ops` operations, each at a random fixed tool axis (FK of random joints in
+/// the middle of travel): approach, a square with a half circle in the plane normal to the axis,
+/// and (with `holes`) a drilled hole; rapids between. Returns the CL and the tips of its GOTOs
+/// (profile units, W), and how many planes it needs (one per change of tool axis).
+fn three_plus_two(
+    m: &kinepost::kinematics::Machine,
+    seed: &[f64],
+    ops: usize,
+    holes: bool,
+) -> (String, Vec<kinepost::kinematics::Vec3>, u64) {
+    use kinepost::kinematics::{Setup, Units, Vec3};
+    let s = if m.units == Units::Mm { 1.0 } else { 1.0 / 25.4 };
+    let setup = Setup::new(m.default_tool_length, Vec3::zeros());
+    let mut k = 0;
+    let mut next = || {
+        k += 1;
+        seed[(k - 1) % seed.len()]
+    };
+    let mut cl = format!(
+        "UNITS/{}\nLOADTL/1\nSPINDL/RPM,3000,CLW\n",
+        if m.units == Units::Mm { "MM" } else { "INCHES" }
+    );
+    let feed = if m.units == Units::Mm { "MMPM" } else { "IPM" };
+    let mut tips = Vec::new();
+    let (mut planes, mut last_axis) = (0, None);
+    for _ in 0..ops {
+        let j = random_joints(m, (0.35, 0.3), &mut next);
+        let pose = kinepost::kinematics::fk(m, &j, &setup);
+        let (t, u) = (pose.tip, pose.axis.normalize());
+        // An untilted axis needs no plane.
+        if (u - Vec3::z()).norm() > 1e-6 && last_axis.is_none_or(|l: Vec3| (l - u).norm() > 1e-9) {
+            planes += 1;
+        }
+        last_axis = Some(u);
+        let e1 = u.cross(&if u.x.abs() < 0.9 { Vec3::x() } else { Vec3::y() }).normalize();
+        let e2 = u.cross(&e1);
+        let g = |p: Vec3| format!("GOTO/{},{},{},{},{},{}\n", p.x, p.y, p.z, u.x, u.y, u.z);
+        let (a, w) = (8.0 * s, 20.0 * s);
+        let path = [t + u * w, t, t + e1 * a, t + e1 * a + e2 * a, t + e2 * a, t, t + u * w];
+        cl += &format!(
+            "RAPID\n{}FEDRAT/{feed},{}\n{}{}",
+            g(path[0]),
+            400.0 * s,
+            g(path[1]),
+            g(path[2])
+        );
+        // Half a circle about the square's far side, counter-clockwise about the tool axis.
+        let c = t + e1 * a + e2 * (a / 2.0);
+        cl += &format!("CIRCLE/{},{},{},{},{},{},{}\n", c.x, c.y, c.z, u.x, u.y, u.z, a / 2.0);
+        cl += &format!("{}{}{}RAPID\n{}", g(path[3]), g(path[4]), g(path[5]), g(path[6]));
+        tips.extend_from_slice(&path);
+        if holes {
+            let h = t + (e1 + e2) * (a / 2.0);
+            cl += &format!(
+                "CYCLE/DRILL,FEDTO,{},{feed},{},RAPTO,{}\n{}CYCLE/OFF\n",
+                3.0 * s,
+                150.0 * s,
+                2.0 * s,
+                g(h)
+            );
+            tips.push(h);
+        }
+    }
+    cl += "END\nFINI\n";
+    (cl, tips, planes)
+}
+
+fn post_planes(
+    m: &kinepost::kinematics::Machine,
+    cl: &str,
+    dialect: &str,
+    wo: kinepost::kinematics::Vec3,
+    holes: bool,
+) -> (Collect, post::Summary) {
+    let mut o = Options::new(m);
+    o.dialect = kinepost::nc::dialect(dialect).unwrap();
+    o.tilted_planes = true;
+    o.canned_cycles = holes;
+    o.work_offset = wo;
+    let mut sink = Collect::default();
+    let sum = post::post(cl.as_bytes(), m, &o, &mut sink).unwrap();
+    (sink, sum)
+}
+
+/// Inside a plane no rotary word may be written (the control owns the rotaries there), and every
+/// plane is left before the program ends.
+fn no_rotaries_in_planes(nc: &str, m: &kinepost::kinematics::Machine) -> Result<u32, String> {
+    let (mut on, mut planes) = (false, 0);
+    for l in nc.lines() {
+        let code = if l.starts_with("CYCLE800(") {
+            l
+        } else {
+            l.split(['(', ';']).next().unwrap_or("").trim()
+        };
+        if code.contains("G68.2") || code.contains("G254") || code.starts_with("CYCLE800(0") || code.contains("PLANE SPATIAL") {
+            (on, planes) = (true, planes + 1);
+            continue;
+        }
+        if code.contains("G69") || code.contains("G255") || code == "CYCLE800()" || code.contains("PLANE RESET") {
+            on = false;
+            continue;
+        }
+        if on
+            && words(code)
+                .iter()
+                .any(|(c, v)| v.is_some() && m.rotaries.iter().any(|r| r.name == *c))
+        {
+            return Err(format!("a rotary word inside a tilted plane: {l:?}"));
+        }
+    }
+    if on {
+        return Err("the program ends inside a tilted plane".into());
+    }
+    Ok(planes)
+}
+
+/// The tips a Heidenhain program's `L`/`C` blocks reach: FK of the words, or in a `PLANE
+/// SPATIAL` the plane's frame times X Y Z (less the work offset).
+fn heidenhain_tips(
+    nc: &str,
+    m: &kinepost::kinematics::Machine,
+    setup: &kinepost::kinematics::Setup,
+) -> Vec<kinepost::kinematics::Vec3> {
+    use kinepost::kinematics::{Joints, Vec3};
+    let mut plane: Option<nalgebra::Matrix3<f64>> = None;
+    let mut vals = [0.0f64; 6];
+    let mut out = Vec::new();
+    for l in nc.lines() {
+        let code = l.split(';').next().unwrap_or("");
+        let mut w = code.split_whitespace();
+        let _n = w.next();
+        let rest: Vec<&str> = w.collect();
+        match rest.first().copied() {
+            Some("PLANE") if rest.get(1) == Some(&"SPATIAL") => {
+                let a = ["SPA", "SPB", "SPC"].map(|p| {
+                    rest[2..]
+                        .iter()
+                        .find_map(|t| t.strip_prefix(p))
+                        .unwrap()
+                        .parse::<f64>()
+                        .unwrap()
+                        .to_radians()
+                });
+                plane = Some(kinepost::nc::plane::from_spatial(a));
+            }
+            Some("PLANE") => plane = None,
+            Some("L") | Some("C") => {
+                for t in &rest[1..] {
+                    let mut c = t.chars();
+                    let letter = c.next().unwrap();
+                    if let (Some(k), Ok(v)) = ("XYZABC".find(letter), c.as_str().parse::<f64>()) {
+                        vals[k] = v;
+                    }
+                }
+                let tip = match &plane {
+                    Some(f) => f * Vec3::new(vals[0], vals[1], vals[2]) - setup.work_offset,
+                    None => {
+                        let mut j = Joints {
+                            linear: [vals[0], vals[1], vals[2]],
+                            ..Default::default()
+                        };
+                        for (i, r) in m.rotaries.iter().enumerate() {
+                            j.rotary[i] = vals[3 + (r.name as u8 - b'A') as usize].to_radians();
+                        }
+                        kinepost::kinematics::fk(m, &j, setup).tip
+                    }
+                };
+                out.push(tip);
+            }
+            _ => {}
+        }
+    }
+    out
+}
+
+fn random_planes(id: &str, seed: &[f64]) -> Result<(), proptest::test_runner::TestCaseError> {
+    use kinepost::kinematics::{Setup, Units, Vec3};
+    use kinepost::post::verify::{VerifyOptions, verify};
+    use proptest::prelude::*;
+    let lib = Library::load_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap();
+    let m = &lib.get(id).unwrap().machine;
+    let s = if m.units == Units::Mm { 1.0 } else { 1.0 / 25.4 };
+    let tol = if m.units == Units::Mm { 0.01 } else { 0.0004 };
+    // A work offset moves the part on the table: plane coordinates must not care.
+    let wo = Vec3::new(seed[0] - 0.5, seed[1] - 0.5, seed[2] - 0.5) * 40.0 * s;
+    let ops = 3;
+    let table_table = m.kinematics_kind() == "table-table";
+    for d in ["fanuc", "haas", "siemens", "heidenhain"] {
+        if d == "haas" && !table_table {
+            continue;
+        }
+        // ISO canned cycles are read back by `verify`; Siemens' and Heidenhain's are not.
+        let holes = matches!(d, "fanuc" | "haas");
+        let (cl, tips, want) = three_plus_two(m, &seed[3..], ops, holes);
+        let (sink, sum) = post_planes(m, &cl, d, wo, holes);
+        prop_assert_eq!(sum.errors, 0, "{} {}\n{}\n{}", id, d, cl, sink.nc);
+        prop_assert_eq!(sum.tilted_planes, want, "{} {}\n{}", id, d, sink.nc);
+        let planes =
+            no_rotaries_in_planes(&sink.nc, m).map_err(|e| TestCaseError::fail(format!("{id} {d}: {e}\n{}", sink.nc)))?;
+        prop_assert_eq!(planes as u64, want, "{} {}\n{}", id, d, sink.nc);
+        let setup = Setup::new(m.default_tool_length, wo);
+        if d == "heidenhain" {
+            let got = heidenhain_tips(&sink.nc, m, &setup);
+            let mut i = 0;
+            for (n, t) in tips.iter().enumerate() {
+                while i < got.len() && (got[i] - t).norm() > tol {
+                    i += 1;
+                }
+                prop_assert!(i < got.len(), "{id}: CL point {n} {t:?} not reached\n{}", sink.nc);
+            }
+            continue;
+        }
+        let vo = VerifyOptions {
+            mode: Mode::Joint,
+            setup,
+            tolerance: tol,
+            angle_tolerance_deg: 0.01,
+            cl_units: None,
+        };
+        let r = verify(cl.as_bytes(), sink.nc.as_bytes(), m, &vo).unwrap();
+        prop_assert!(r.ok && r.matched == r.cl_points, "{id} {d}: {r:?}\n{cl}\n{}", sink.nc);
+        if holes {
+            prop_assert_eq!(sum.canned_holes, ops as u64, "{} {}\n{}", id, d, sink.nc);
+        }
+    }
+    Ok(())
+}
+
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig::with_cases(12))]
+    /// Random 3+2 programs on every 5-axis profile, in every dialect that tilts planes: each
+    /// fixed-axis operation becomes one plane, no rotary word is written inside one, the arcs
+    /// come out as arcs in the plane, holes as canned cycles in it, and `verify` (plane
+    /// coordinates × the plane's frame, as the control computes them) reaches every CL point.
+    #[test]
+    fn random_three_plus_two_in_tilted_planes(seed in proptest::collection::vec(0.0f64..1.0, 40)) {
+        for id in PLANE_MACHINES {
+            random_planes(id, &seed)?;
+        }
+    }
+}
+
+/// A fixed-axis run longer than the look-ahead that turns its axis inside a cut: the plane was
+/// entered (nothing ahead said otherwise), so the turn is a retract along the tool axis out of
+/// the plane, a reposition and a re-approach, with a warning, and the program still verifies.
+#[test]
+fn a_plane_left_inside_a_cut_is_repositioned_out_of_it() {
+    use kinepost::kinematics::{Joints, Setup, Vec3};
+    use kinepost::post::verify::{VerifyOptions, verify};
+    let lib = Library::load_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap();
+    let m = &lib.get("spinner-u5-620").unwrap().machine;
+    let setup = Setup::new(m.default_tool_length, Vec3::zeros());
+    let j = Joints {
+        linear: [0.0, 0.0, 100.0],
+        rotary: [0.5, 0.3, 0.0],
+    };
+    let p = kinepost::kinematics::fk(m, &j, &setup);
+    let (t, u) = (p.tip, p.axis);
+    let e1 = u.cross(&Vec3::x()).normalize();
+    let g = |q: Vec3, a: Vec3| format!("GOTO/{},{},{},{},{},{}\n", q.x, q.y, q.z, a.x, a.y, a.z);
+    let mut cl = String::from("UNITS/MM\nLOADTL/1\nSPINDL/RPM,3000,CLW\nRAPID\n");
+    cl += &g(t + u * 20.0, u);
+    cl += "FEDRAT/MMPM,500\n";
+    for i in 0..2000 {
+        cl += &g(t + e1 * (i as f64 * 0.01), u);
+    }
+    // The axis now tilts 5° further while cutting on.
+    let turned = (u + e1 * 0.0875).normalize();
+    cl += &g(t + e1 * 21.0, turned);
+    cl += &g(t + e1 * 22.0, turned);
+    cl += "END\nFINI\n";
+    let (sink, sum) = post_planes(m, &cl, "fanuc", Vec3::zeros(), false);
+    assert_eq!(sum.tilted_planes, 1, "{}", sink.nc);
+    assert_eq!(sum.errors, 0, "{}", sink.nc);
+    assert_eq!(sum.counts.get("branch_change"), Some(&1), "{:?}", sum.counts);
+    let after = sink.nc.split("G69").nth(1).expect("the plane is left");
+    let before = sink.nc.split("G69").next().unwrap();
+    assert!(
+        before.lines().rev().nth(1).unwrap().contains("RETRACT REPOSITION"),
+        "{}",
+        sink.nc
+    );
+    assert!(after.contains("(REPOSITION)"), "{after}");
+    no_rotaries_in_planes(&sink.nc, m).unwrap();
+    let vo = VerifyOptions {
+        mode: Mode::Joint,
+        setup,
+        tolerance: 0.01,
+        angle_tolerance_deg: 0.01,
+        cl_units: None,
+    };
+    let r = verify(cl.as_bytes(), sink.nc.as_bytes(), m, &vo).unwrap();
+    assert!(r.ok && r.matched == 2003, "{r:?}");
+}
+
+/// Golden 3+2 programs in each dialect that tilts planes (two operations at different axes,
+/// arcs, and on the ISO controls a hole as a canned cycle in the plane); the ISO ones parse
+/// with the `gcode` crate, which sees the plane words and each plane block's three axis words.
+#[test]
+fn golden_tilted_plane_programs() {
+    use kinepost::kinematics::Vec3;
+    let lib = Library::load_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap();
+    let seed = [0.21, 0.67, 0.43, 0.88, 0.12, 0.55, 0.31, 0.76, 0.49, 0.05, 0.93];
+    for (d, id) in [
+        ("fanuc", "spinner-u5-620"),
+        ("haas", "haas-umc750"),
+        ("siemens", "dmu-nutating-45"),
+        ("heidenhain", "dmg-dmc75v"),
+    ] {
+        let m = &lib.get(id).unwrap().machine;
+        let holes = matches!(d, "fanuc" | "haas");
+        let (cl, _, want) = three_plus_two(m, &seed, 2, holes);
+        let s = if m.units == kinepost::kinematics::Units::Mm {
+            1.0
+        } else {
+            1.0 / 25.4
+        };
+        let (sink, sum) = post_planes(m, &cl, d, Vec3::new(12.0, -8.0, 5.0) * s, holes);
+        assert_eq!(
+            (sum.errors, sum.tilted_planes),
+            (0, want),
+            "{d} {id} {:?}\n{}",
+            sum.counts,
+            sink.nc
+        );
+        assert_eq!(want, 2);
+        assert_golden(&format!("planes-{d}-{id}.nc"), &sink.nc);
+        if holes {
+            let text: String = sink
+                .nc
+                .lines()
+                .filter(|l| !l.starts_with(['%', 'O']))
+                .map(|l| format!("{l}\n"))
+                .collect();
+            let prog = gcode::parse(&text).unwrap_or_else(|e| panic!("the gcode crate rejects our planes: {e:?}"));
+            let shown: Vec<String> = prog.blocks.iter().map(|b| b.to_string()).collect();
+            let plane_word = if d == "fanuc" { "G68.2" } else { "G254" };
+            assert_eq!(shown.iter().filter(|b| b.contains(plane_word)).count(), 2, "{shown:?}");
+            assert!(shown.iter().any(|b| b.contains("G81")), "{shown:?}");
         }
     }
 }

@@ -183,6 +183,33 @@ async fn drilling_cycles_as_canned_cycles_on_request() {
     assert!(d[0]["canned_cycles"].as_str().unwrap().contains("G81"), "{d}");
 }
 
+/// 3+2 in a tilted working plane on request (`planes=tilted`), in the dialect asked for.
+#[tokio::test]
+async fn fixed_axis_work_in_a_tilted_plane_on_request() {
+    let base = server(cfg()).await;
+    let c = reqwest::Client::new();
+    let cl = "UNITS/MM\nLOADTL/1\nSPINDL/RPM,3000\nRAPID\nGOTO/10,-20,40,0,-0.5,0.8660254\nFEDRAT/MMPM,300\n\
+              GOTO/10,-5,14.019,0,-0.5,0.8660254\nGOTO/30,-5,14.019,0,-0.5,0.8660254\nRAPID\n\
+              GOTO/30,-20,40,0,-0.5,0.8660254\nFINI\n";
+    let post = |q: &'static str| {
+        c.post(format!("{base}/v1/post?machine=spinner-u5-620{q}"))
+            .header("content-type", "text/plain")
+            .body(cl)
+    };
+    let nc = post("&planes=tilted").text_ok().await;
+    assert!(
+        nc.contains("\nG68.2 X0 Y0 Z0 I") && nc.contains("\nG53.1\n") && nc.contains("\nG69\n"),
+        "{nc}"
+    );
+    let nc = post("&planes=tilted&dialect=heidenhain").text_ok().await;
+    assert!(nc.contains(" PLANE SPATIAL SPA") && nc.contains(" PLANE RESET STAY"), "{nc}");
+    let nc = post("").text_ok().await;
+    assert!(!nc.contains("G68.2"), "5-axis positioning by default: {nc}");
+    assert_eq!(post("&planes=sideways").status_ok().await, 400);
+    let d = c.get(format!("{base}/v1/dialects")).json_ok().await;
+    assert!(d[0]["tilted_planes"].as_str().unwrap().contains("G68.2"), "{d}");
+}
+
 #[tokio::test]
 async fn errors_before_the_first_byte_have_their_status() {
     let base = server(Config {

@@ -125,6 +125,10 @@ fn round_trip(id: &str, t: [f64; 6], s: [f64; 4]) -> Result<(), TestCaseError> {
     let setup = setup_from(&m, &s);
     let j = joints_from(&m, &t);
     let pose = fk(&m, &j, &setup);
+    // A tilted plane's frame: a rotation whose Z is the tool axis.
+    let f = kinepost::kinematics::machine_frame(&m, &j.rotary);
+    prop_assert!((f.transpose() * f - nalgebra::Matrix3::identity()).norm() < 1e-12 && (f.determinant() - 1.0).abs() < 1e-12);
+    prop_assert!((f.column(2) - pose.axis).norm() < 1e-12, "{id}: {f} vs {:?}", pose.axis);
     let mut sols = ik(&m, &pose, &setup, &IkOptions::default()).map_err(|e| TestCaseError::fail(format!("{id}: {e}")))?;
     // At a singular pose the free angle is the caller's: ask with the one we started from.
     if let Some(free) = sols.iter().find_map(|s| s.singular) {

@@ -459,6 +459,8 @@ pub struct DialectDto {
     pub default_for: Vec<String>,
     /// How drilling cycles are written with `cycles=canned`.
     pub canned_cycles: String,
+    /// How 3+2 work is written with `planes=tilted`.
+    pub tilted_planes: String,
     pub notes: String,
 }
 
@@ -487,6 +489,7 @@ async fn list_dialects(State(st): State<Arc<AppState>>) -> Json<Vec<DialectDto>>
                     .map(|c| c.profile.machine.id.clone())
                     .collect(),
                 canned_cycles: d.cycles.describe().into(),
+                tilted_planes: d.planes.describe().into(),
                 notes: d.notes.into(),
             })
             .collect(),

@@ -54,6 +54,9 @@ pub struct PostParams {
     /// Drilling cycles: `expand` (default: moves) or `canned` (the control's canned cycles where
     /// the hole runs along the machine's Z in joint mode; elsewhere still expanded).
     pub cycles: Option<String>,
+    /// 3+2 work: `positioning` (default) or `tilted` (a tilted working plane per fixed-axis run:
+    /// G68.2/G53.1, G254, CYCLE800, PLANE SPATIAL; joint mode).
+    pub planes: Option<String>,
 }
 
 impl PostParams {
@@ -71,6 +74,7 @@ impl PostParams {
             singular_tolerance: self.singular_tolerance,
             cl_units: self.cl_units.clone(),
             cycles: self.cycles.clone(),
+            planes: self.planes.clone(),
         }
     }
 
@@ -105,6 +109,7 @@ impl PostParams {
             "singular_tolerance" => self.singular_tolerance = if v.trim().is_empty() { None } else { Some(num(&v)?) },
             "cl_units" => self.cl_units = Some(v).filter(|s| !s.is_empty()),
             "cycles" => self.cycles = Some(v).filter(|s| !s.is_empty()),
+            "planes" => self.planes = Some(v).filter(|s| !s.is_empty()),
             other => return Err(ApiError::BadParameter(format!("unknown form field {other:?}"))),
         }
         Ok(())

@@ -58,6 +58,33 @@ pub fn tool_axis(m: &Machine, rotary_words: &[f64; 3]) -> Vec3 {
     a
 }
 
+/// What the machine's X, Y and Z directions are in W (columns) at these rotary words: the frame
+/// a tilted working plane takes, so that its Z is the tool axis and its X Y are the machine's as
+/// the rotaries carry them. Column 2 is [`tool_axis`].
+pub fn machine_frame(m: &Machine, rotary_words: &[f64; 3]) -> nalgebra::Matrix3<f64> {
+    let actual = m.actual_angles(rotary_words);
+    let mut f = nalgebra::Matrix3::identity();
+    for (r, &th) in m.rotaries.iter().zip(&actual).rev() {
+        if r.mount == Mount::Head {
+            let (s, c) = th.sin_cos();
+            for k in 0..3 {
+                let v = rotate(&r.axis, c, s, &f.column(k).into_owned());
+                f.set_column(k, &v);
+            }
+        }
+    }
+    for (r, &phi) in m.rotaries.iter().zip(&actual) {
+        if r.mount == Mount::Table {
+            let (s, c) = (-phi).sin_cos();
+            for k in 0..3 {
+                let v = rotate(&r.axis, c, s, &f.column(k).into_owned());
+                f.set_column(k, &v);
+            }
+        }
+    }
+    f
+}
+
 /// Tip relative to the controlled point, and the tool axis, both in M, for actual head angles:
 /// `G_h1(θ1) ∘ … ∘ G_hm(θm)(0)` with head pivots shifted by the tool length.
 #[inline]

@@ -3,9 +3,11 @@
 //! its dialect, suppressing modal words, and keeps no more state than a controller would.
 
 mod number;
+pub mod plane;
 pub mod read;
 
 pub use number::{round_to, write_fixed};
+pub use plane::Planes;
 
 use crate::kinematics::Units;
 
@@ -57,6 +59,8 @@ pub struct Dialect {
     pub block_numbers: bool,
     /// How the control writes canned drilling cycles.
     pub cycles: Cycles,
+    /// How the control tilts the working plane (3+2).
+    pub planes: Planes,
     pub notes: &'static str,
 }
 
@@ -156,6 +160,7 @@ pub const FANUC: Dialect = Dialect {
     coolant_off: "M9",
     block_numbers: true,
     cycles: Cycles::Iso { dwell_ms: true },
+    planes: Planes::Fanuc,
     notes: "TCP with G43.4 (type 1); inverse time G93",
 };
 
@@ -165,6 +170,7 @@ pub const HAAS: Dialect = Dialect {
     begin: &[("%", false), ("O{n5}", false)],
     tcp_on: "G234 H{t}",
     cycles: Cycles::Iso { dwell_ms: false },
+    planes: Planes::Haas,
     notes: "TCP with G234 (TCPC); inverse time G93",
     ..FANUC
 };
@@ -178,6 +184,7 @@ pub const LINUXCNC: Dialect = Dialect {
     tcp_off: "G49",
     coolant_through: "M8",
     cycles: Cycles::Iso { dwell_ms: false },
+    planes: Planes::None,
     notes: "no TCP G-code: the machine configuration switches kinematics; inverse time G93",
     ..FANUC
 };
@@ -197,6 +204,7 @@ pub const SIEMENS: Dialect = Dialect {
     tcp_on: "TRAORI",
     tcp_off: "TRAFOOF",
     cycles: Cycles::Siemens,
+    planes: Planes::Siemens,
     notes: "TCP with TRAORI; tool offset with D1; inverse time G93; rotaries programmed as linear (not modulo) axes",
     ..FANUC
 };
@@ -229,6 +237,7 @@ pub const HEIDENHAIN: Dialect = Dialect {
     coolant_off: "M9",
     block_numbers: true,
     cycles: Cycles::Heidenhain,
+    planes: Planes::Heidenhain,
     notes: "TCP with FUNCTION TCPM; no inverse time: rotary moves get the combined machine-axis feed",
 };
 
@@ -734,6 +743,77 @@ impl Formatter {
     }
 
     /// The value a word of this axis index carries once written (for replaying what was output).
+    /// The lines that tilt the working plane to `frame` (after the rotaries stand there), and
+    /// the frame as the control builds it from the words as written (rounded angles).
+    /// `positive`: the sign of the tilting rotary, for the controls that choose a solution.
+    pub fn plane_on(&mut self, frame: &nalgebra::Matrix3<f64>, positive: bool) -> (Vec<String>, nalgebra::Matrix3<f64>) {
+        let p = self.d.planes;
+        let a = plane::angles(p, frame);
+        let rd = self.fmt.rotary;
+        let mut deg = [0.0; 3];
+        for k in 0..3 {
+            deg[k] = round_to(a[k].to_degrees(), rd) as f64 / 10f64.powi(rd as i32);
+        }
+        let written = match p {
+            Planes::Haas | Planes::None => *frame,
+            _ => plane::frame(p, deg.map(f64::to_radians)),
+        };
+        let conv = self.conversational();
+        self.start();
+        let named = |head, names, tail| Some((head, names, tail));
+        let words: Option<(&str, [&str; 3], &str)> = match p {
+            Planes::Fanuc => named("G68.2 X0 Y0 Z0", ["I", "J", "K"], ""),
+            Planes::Heidenhain => named(
+                "PLANE SPATIAL",
+                ["SPA", "SPB", "SPC"],
+                if positive { " TURN FMAX SEQ+" } else { " TURN FMAX SEQ-" },
+            ),
+            _ => None,
+        };
+        match (p, words) {
+            (_, Some((head, names, tail))) => {
+                self.buf.push_str(head);
+                for (l, v) in names.into_iter().zip(deg) {
+                    self.buf.push(' ');
+                    self.buf.push_str(l);
+                    self.number(v, rd, conv);
+                }
+                self.buf.push_str(tail);
+            }
+            (Planes::Haas, _) => self.buf.push_str("G254"),
+            (Planes::Siemens, _) => {
+                self.buf.push_str("CYCLE800(0,\"TC1\",0,57,0,0,0");
+                for v in deg {
+                    self.buf.push(',');
+                    self.number(v, rd, false);
+                }
+                self.buf.push_str(if positive { ",0,0,0,1,0)" } else { ",0,0,0,-1,0)" });
+            }
+            _ => return (Vec::new(), written),
+        }
+        let mut out = vec![self.buf.clone()];
+        if p == Planes::Fanuc {
+            out.push(self.words("G53.1").to_string());
+        }
+        // Coordinates change meaning: every word is written again.
+        self.reset_modal();
+        (out, written)
+    }
+
+    /// The line that returns to the untilted program coordinates.
+    pub fn plane_off(&mut self) -> Option<String> {
+        let w = match self.d.planes {
+            Planes::Fanuc => "G69",
+            Planes::Haas => "G255",
+            Planes::Siemens => "CYCLE800()",
+            Planes::Heidenhain => "PLANE RESET STAY",
+            Planes::None => return None,
+        };
+        let l = self.words(w).to_string();
+        self.reset_modal();
+        Some(l)
+    }
+
     pub fn written(&self, value: f64, axis_index: usize) -> f64 {
         let dec = if axis_index < 3 { self.fmt.linear } else { self.fmt.rotary };
         round_to(value, dec) as f64 / 10f64.powi(dec as i32)

@@ -11,7 +11,18 @@ pub struct NcBlock {
     pub axes: [Option<f64>; 6],
     pub units: Units,
     pub tcp: bool,
+    /// The tilted working plane the block's X Y Z are in, if any.
+    pub plane: Option<Plane>,
     pub comment: String,
+}
+
+/// A tilted working plane as a program sets it: X Y Z of a block in it are `origin + F · xyz`
+/// in the untilted program coordinates.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Plane {
+    pub origin: [f64; 3],
+    /// `F`; `None`: a dynamic work offset (Haas G254), whose frame the rotaries make.
+    pub frame: Option<nalgebra::Matrix3<f64>>,
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -45,6 +56,7 @@ pub struct NcReader<R> {
     rapid: bool,
     units: Units,
     tcp: bool,
+    plane: Option<Plane>,
     incremental: bool,
     /// A `%` after program text ends the tape: what follows is not part of the program.
     percents: u32,
@@ -64,6 +76,7 @@ impl<R: std::io::BufRead> NcReader<R> {
             rapid: true,
             units: default_units,
             tcp: false,
+            plane: None,
             incremental: false,
             percents: 0,
             content: false,
@@ -95,7 +108,56 @@ impl<R: std::io::BufRead> NcReader<R> {
         }
     }
 
+    /// Siemens `CYCLE800(_FR,_TC,_ST,_MODE,_X0,_Y0,_Z0,_A,_B,_C,_X1,_Y1,_Z1,_DIR …)`, axis by
+    /// axis X Y' Z'' (mode 57) with reference point and zero point; `CYCLE800()` resets.
+    fn cycle800(&mut self, args: &str) -> Result<(), Error> {
+        if args.trim().is_empty() {
+            self.plane = None;
+            return Ok(());
+        }
+        let f: Vec<&str> = args.split(',').map(str::trim).collect();
+        let num = |k: usize| -> Result<f64, Error> {
+            match f.get(k).copied().unwrap_or("") {
+                "" => Ok(0.0),
+                s => s.parse::<f64>().map_err(|_| Error::Unsupported {
+                    line: self.line,
+                    problem: format!("CYCLE800 argument {} is not a number: {s:?}", k + 1),
+                }),
+            }
+        };
+        if num(3)? != 57.0 {
+            return Err(Error::Unsupported {
+                line: self.line,
+                problem: "CYCLE800 modes other than 57 (axis by axis X Y Z) are not read".into(),
+            });
+        }
+        let frame = super::plane::from_xyz([num(7)?, num(8)?, num(9)?].map(f64::to_radians));
+        let (x0, x1) = (
+            nalgebra::Vector3::new(num(4)?, num(5)?, num(6)?),
+            nalgebra::Vector3::new(num(10)?, num(11)?, num(12)?),
+        );
+        let o = x0 + frame * x1;
+        self.plane = Some(Plane {
+            origin: [o.x, o.y, o.z],
+            frame: Some(frame),
+        });
+        Ok(())
+    }
+
     fn parse_line(&mut self, raw: &str) -> Result<Option<NcBlock>, Error> {
+        // Siemens' swivel cycle, whose parentheses are arguments, not a comment.
+        let bare = raw.trim_start();
+        let bare = match bare.strip_prefix(['N', 'n']) {
+            Some(r) if r.starts_with(|c: char| c.is_ascii_digit()) => {
+                r.trim_start_matches(|c: char| c.is_ascii_digit()).trim_start()
+            }
+            _ => bare,
+        };
+        if bare.len() >= 9 && bare[..9].eq_ignore_ascii_case("CYCLE800(") {
+            let args = bare[9..].split(';').next().unwrap_or("").trim_end();
+            self.content = true;
+            return self.cycle800(args.strip_suffix(')').unwrap_or(args)).map(|_| None);
+        }
         let mut comment = String::new();
         let mut code = String::with_capacity(raw.len());
         let mut depth = 0;
@@ -122,10 +184,13 @@ impl<R: std::io::BufRead> NcReader<R> {
         if code.is_empty() || code.starts_with('O') {
             return Ok(None);
         }
+
         let mut vals: [Option<f64>; 6] = [None; 6];
         let mut machine_coords = false;
         let mut setting = false;
         let mut r_word = None;
+        let mut ijk: [Option<f64>; 3] = [None; 3];
+        let mut plane_def = false;
         let mut starts_cycle = false;
         let b = code.as_bytes();
         let mut i = 0;
@@ -179,6 +244,14 @@ impl<R: std::io::BufRead> NcReader<R> {
                     434 | 435 | 2340 => self.tcp = true,
                     490 => self.tcp = false,
                     280 | 300 | 530 => machine_coords = true,
+                    682 => plane_def = true,
+                    690 | 2550 => self.plane = None,
+                    2540 => {
+                        self.plane = Some(Plane {
+                            origin: [0.0; 3],
+                            frame: None,
+                        })
+                    }
                     40 | 100 | 520 | 920 => setting = true,
                     _ => {}
                 },
@@ -189,6 +262,9 @@ impl<R: std::io::BufRead> NcReader<R> {
                 'B' => vals[4] = Some(v),
                 'C' => vals[5] = Some(v),
                 'R' => r_word = Some(v),
+                'I' => ijk[0] = Some(v),
+                'J' => ijk[1] = Some(v),
+                'K' => ijk[2] = Some(v),
                 _ => {}
             }
         }
@@ -205,6 +281,15 @@ impl<R: std::io::BufRead> NcReader<R> {
         }
         // The line parsed: from here on the program has begun.
         self.content = true;
+        if plane_def {
+            // G68.2 X Y Z (origin) I J K (Euler Z X' Z'', degrees).
+            let a = ijk.map(|v| v.unwrap_or(0.0).to_radians());
+            self.plane = Some(Plane {
+                origin: [0, 1, 2].map(|k| vals[k].unwrap_or(0.0)),
+                frame: Some(super::plane::from_zxz(a)),
+            });
+            return Ok(None);
+        }
         if vals.iter().all(|v| v.is_none()) || setting {
             return Ok(None);
         }
@@ -248,6 +333,7 @@ impl<R: std::io::BufRead> NcReader<R> {
                     axes: self.axes,
                     units: self.units,
                     tcp: self.tcp,
+                    plane: self.plane,
                     comment: comment.trim().to_string(),
                 });
             }
@@ -264,6 +350,7 @@ impl<R: std::io::BufRead> NcReader<R> {
             axes: self.axes,
             units: self.units,
             tcp: self.tcp,
+            plane: self.plane,
             comment: comment.trim().to_string(),
         }))
     }

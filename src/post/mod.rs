@@ -19,7 +19,7 @@ use crate::kinematics::{self, IkOptions, Joints, Machine, Pose, Setup, Solutions
 use crate::nc::{Canned, CannedKind, Dialect, FeedMode, Formats, Formatter, Motion};
 use plan::{Cand, Committed, Out, Planner, wrap};
 use serde::Serialize;
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, VecDeque};
 use std::io::BufRead;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
@@ -61,6 +61,10 @@ pub struct Options {
     /// Drilling cycles (CL `CYCLE/`) as the control's canned cycles where the hole runs along
     /// the machine's Z (joint mode); else, and by default, expanded into moves.
     pub canned_cycles: bool,
+    /// Fixed-axis (3+2) runs in a tilted working plane (G68.2, G254, CYCLE800, PLANE SPATIAL)
+    /// with their motion in plane coordinates (joint mode); else, and by default, 5-axis
+    /// positioning.
+    pub tilted_planes: bool,
 }
 
 impl Options {
@@ -83,6 +87,7 @@ impl Options {
             clamps: Default::default(),
             header: Vec::new(),
             canned_cycles: false,
+            tilted_planes: false,
         }
     }
 }
@@ -115,6 +120,10 @@ pub struct Settings {
     /// 200 where the hole runs along the machine's Z).
     #[serde(default)]
     pub cycles: Option<String>,
+    /// 3+2 work: `positioning` (default: 5-axis positioning, machine coordinates) or `tilted`
+    /// (a tilted working plane per fixed-axis run, motion in plane coordinates; joint mode).
+    #[serde(default)]
+    pub planes: Option<String>,
 }
 
 impl Settings {
@@ -175,6 +184,11 @@ impl Settings {
             None | Some("expand") => false,
             Some("canned") => true,
             Some(x) => return Err(format!("cycles {x:?}: expected expand or canned")),
+        };
+        o.tilted_planes = match self.planes.as_deref() {
+            None | Some("positioning") => false,
+            Some("tilted") => true,
+            Some(x) => return Err(format!("planes {x:?}: expected positioning or tilted")),
         };
         Ok(o)
     }
@@ -354,6 +368,8 @@ pub struct Summary {
     pub smoothing_max_deviation_deg: f64,
     /// Holes written as canned cycles (with `cycles=canned`).
     pub canned_holes: u64,
+    /// Tilted working planes written (with `planes=tilted`).
+    pub tilted_planes: u64,
     pub errors: u64,
     pub warnings: u64,
 }
@@ -412,6 +428,47 @@ struct Emitter<'a, S: Sink + ?Sized> {
     in_hole: bool,
     /// Why holes were written as moves, each said once.
     expanded_why: Vec<&'static str>,
+    /// The tilted working plane in force, if any.
+    tilt: Option<Tilt>,
+    /// The point being written is a rapid whose fixed tool axis holds, in the look-ahead, until
+    /// the next rapid with another axis (or a tool change, or the end): a plane may start there.
+    plane_ahead: bool,
+    /// A feed point with another tool axis arrived while the plane is in force.
+    leave_in_cut: bool,
+    /// Why no plane was tilted, each said once.
+    plane_why: Vec<&'static str>,
+}
+
+/// A tilted working plane in force: the rotary words it stands on (radians), its frame as the
+/// control builds it from the words written, and the CL tool axis of its run.
+#[derive(Clone, Copy, Debug)]
+struct Tilt {
+    rotary: [f64; 3],
+    frame: nalgebra::Matrix3<f64>,
+    axis: Vec3,
+}
+
+/// Items held back for the tilted-plane look-ahead (about one planner commit).
+const LOOK_AHEAD: usize = 256;
+/// Tool axes closer than this (radians) are the same fixed axis.
+const PLANE_AXIS_EPS: f64 = 1e-9;
+
+/// Whether the run of points after a rapid keeps `axis` until a rapid with another axis, a tool
+/// change or the end, as far as `ahead` shows (beyond it, the run is taken as fixed: a later cut
+/// that turns the axis is repositioned out of the plane).
+fn fixed_run_ahead(axis: &Vec3, ahead: &VecDeque<Out>) -> bool {
+    for o in ahead {
+        match o {
+            Out::Event(ProgEvent::Tool { .. } | ProgEvent::End) => return true,
+            Out::Event(_) => {}
+            Out::Point(c) => {
+                if angle_between(axis, &c.pt.pose.axis) > PLANE_AXIS_EPS {
+                    return c.pt.rapid;
+                }
+            }
+        }
+    }
+    true
 }
 
 /// Post-processes CL from `input` for machine `m` into `sink`.
@@ -453,26 +510,30 @@ pub fn post<R: BufRead, S: Sink + ?Sized>(input: R, m: &Machine, o: &Options, si
         cycle_on: None,
         in_hole: false,
         expanded_why: Vec::new(),
+        tilt: None,
+        plane_ahead: false,
+        leave_in_cut: false,
+        plane_why: Vec::new(),
     };
     e.program_start()?;
     let mut planner = Planner::new(m, setup);
-    let mut pending: Vec<Out> = Vec::new();
+    let mut pending: VecDeque<Out> = VecDeque::new();
     loop {
         let item = src.next_item()?;
         let Some(item) = item else { break };
         match item {
-            Item::Motion(pt) => planner.push_point(pt, &mut |o| pending.push(o)),
+            Item::Motion(pt) => planner.push_point(pt, &mut |o| pending.push_back(o)),
             Item::Event(ProgEvent::ToolLength(l)) if o.tool_length.is_none() => {
                 // The tool length governs IK: it cannot wait in the window.
-                planner.finish(&mut |o| pending.push(o));
-                e.drain(&mut pending)?;
+                planner.finish(&mut |o| pending.push_back(o));
+                e.drain(&mut pending, true)?;
                 planner.setup.tool_length = l;
                 e.setup.tool_length = l;
                 e.sum.tool_length = l;
             }
-            Item::Event(ev) => planner.push_event(ev, &mut |o| pending.push(o)),
+            Item::Event(ev) => planner.push_event(ev, &mut |o| pending.push_back(o)),
         }
-        e.drain(&mut pending)?;
+        e.drain(&mut pending, false)?;
         if let Some(d) = e.strict_error.take().or_else(|| src.strict_error.take()) {
             return Err(Error::Strict(d));
         }
@@ -480,8 +541,8 @@ pub fn post<R: BufRead, S: Sink + ?Sized>(input: R, m: &Machine, o: &Options, si
     if let Some(d) = src.strict_error.take() {
         return Err(Error::Strict(d));
     }
-    planner.finish(&mut |o| pending.push(o));
-    e.drain(&mut pending)?;
+    planner.finish(&mut |o| pending.push_back(o));
+    e.drain(&mut pending, true)?;
     if let Some(d) = e.strict_error.take() {
         return Err(Error::Strict(d));
     }
@@ -548,6 +609,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
 
     fn program_end(&mut self) -> std::io::Result<()> {
         self.cancel_cycle()?;
+        self.leave_plane(false)?;
         self.lock_all()?;
         for l in self.f.footer() {
             self.out(&l)?;
@@ -555,11 +617,23 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         Ok(())
     }
 
-    fn drain(&mut self, pending: &mut Vec<Out>) -> Result<(), Error> {
-        for o in pending.drain(..) {
-            match o {
-                Out::Event(ev) => self.event(ev)?,
-                Out::Point(c) => self.point(c)?,
+    /// Writes what the planner committed, keeping [`LOOK_AHEAD`] items back (until `all`) when
+    /// tilted planes are on: whether a fixed-axis run ends at a rapid is decided from them.
+    fn drain(&mut self, pending: &mut VecDeque<Out>, all: bool) -> Result<(), Error> {
+        let keep = if all || !self.o.tilted_planes { 0 } else { LOOK_AHEAD };
+        while pending.len() > keep {
+            match pending.pop_front() {
+                Some(Out::Event(ev)) => self.event(ev)?,
+                Some(Out::Point(c)) => {
+                    self.plane_ahead = c.pt.rapid && self.o.tilted_planes && fixed_run_ahead(&c.pt.pose.axis, pending);
+                    self.leave_in_cut = !c.pt.rapid
+                        && c.cand.is_some()
+                        && self
+                            .tilt
+                            .is_some_and(|t| angle_between(&t.axis, &c.pt.pose.axis) > PLANE_AXIS_EPS);
+                    self.point(c)?
+                }
+                None => break,
             }
         }
         Ok(())
@@ -575,6 +649,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         }
         match ev {
             ProgEvent::Tool { number, .. } => {
+                self.leave_plane(false)?;
                 if self.comp_on {
                     if let Some(l) = self.f.line(d.tcp_off, number, 0) {
                         self.out(&l)?;
@@ -732,7 +807,18 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         Some((joints, actual, sol.branch))
     }
 
+    /// One committed CL point; a rapid that starts a fixed-axis run (seen ahead) tilts the
+    /// working plane once the machine stands there.
     fn point(&mut self, c: Committed) -> Result<(), Error> {
+        let (rapid, tip, ahead) = (c.pt.rapid, c.pt.pose.tip, self.plane_ahead);
+        self.point_at(c)?;
+        if rapid && ahead && self.tilt.is_none() {
+            self.enter_plane(&tip)?;
+        }
+        Ok(())
+    }
+
+    fn point_at(&mut self, c: Committed) -> Result<(), Error> {
         if self.o.canned_cycles {
             match c.pt.hole {
                 Some(HolePart::Start(h)) => {
@@ -843,7 +929,9 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                     self.arc_move(prev, target, &arc, &pt, diags)?;
                     return Ok(());
                 }
-                if unwind || branch_change {
+                if std::mem::take(&mut self.leave_in_cut) && self.tilt.is_some() {
+                    self.reposition(prev, target, false, &pt)?;
+                } else if unwind || branch_change {
                     self.reposition(prev, target, unwind, &pt)?;
                 } else {
                     self.segment(prev, target, &pt, diags, 0)?;
@@ -964,7 +1052,17 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         let tcp = self.o.mode == Mode::Tcp;
         let full_linears = m.linears.iter().all(|l| l.is_some());
         let conversational = self.o.dialect.style == crate::nc::Style::Conversational;
-        let (center, normal, start) = if tcp {
+        // In a tilted plane (the arc's end stands on the plane's rotaries): plane coordinates.
+        let tilt = self
+            .tilt
+            .filter(|t| (0..m.rotaries.len()).all(|i| (b.joints.rotary[i] - t.rotary[i]).abs() <= 1e-9));
+        let (center, normal, start) = if let Some(t) = &tilt {
+            (
+                self.plane_coords(t, &arc.center),
+                t.frame.transpose() * arc.normal,
+                self.plane_coords(t, &a.pose.tip),
+            )
+        } else if tcp {
             (arc.center, arc.normal, a.pose.tip)
         } else {
             let c = kinematics::controlled_point(m, &b.actual, &arc.center, &self.setup);
@@ -995,7 +1093,11 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         }
         // Heidenhain: `CC` (the centre, absolute) then `C` to the end point with `DR+`/`DR-`, for a
         // flat arc in the working plane (XY: the tool along Z); anything else as chords.
-        let end = if tcp { b.pose.tip } else { Vec3::from(b.joints.linear) };
+        let end = match &tilt {
+            Some(t) => self.plane_coords(t, &b.pose.tip),
+            None if tcp => b.pose.tip,
+            None => Vec3::from(b.joints.linear),
+        };
         if let (true, true, true, Some((2, _, _))) = (still, tcp || full_linears, conversational, plane)
             && (end[2] - start[2]).abs() < 1e-9
         {
@@ -1056,6 +1158,8 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
     /// mode: machine Z to the top of its travel, rotaries alone, then X Y, then down. TCP mode
     /// (or no Z axis): lift along the tool axis, turn at clearance, approach.
     fn safe_rapid(&mut self, prev: At, to: At, pt: &MotionPt, diags: Vec<Diagnostic>) -> Result<(), Error> {
+        // The rotaries turn: out of a tilted plane first, so the retract reads as one.
+        self.leave_plane(true)?;
         let zmax = self.m.linears[2].as_ref().map(|l| l.max);
         let (Mode::Joint, Some(zmax)) = (self.o.mode, zmax) else {
             let r1 = self.lifted(prev, self.o.clearance);
@@ -1108,11 +1212,19 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
     fn reposition(&mut self, prev: At, to: At, unwind: bool, pt: &MotionPt) -> Result<(), Error> {
         let word = if unwind { "UNWIND" } else { "REPOSITION" };
         let code = if unwind { Code::Unwind } else { Code::BranchChange };
+        let why = if self.tilt.is_some() {
+            " (the tilted plane's fixed tool axis turns inside a cut)"
+        } else {
+            ""
+        };
         let d = Diagnostic::new(
             code,
             Severity::Warning,
             Some(pt.line),
-            format!("{word}: retract {} along the tool axis, turn, re-approach", self.o.clearance),
+            format!(
+                "{word}: retract {} along the tool axis, turn, re-approach{why}",
+                self.o.clearance
+            ),
         );
         let r1 = self.lifted(prev, self.o.clearance);
         let r2 = self.lifted(to, self.o.clearance);
@@ -1395,6 +1507,103 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         })
     }
 
+    /// Why a fixed-axis run is not written in a tilted plane, if it cannot be.
+    fn plane_refused(&self) -> Option<&'static str> {
+        let m = self.m;
+        if self.o.mode != Mode::Joint {
+            return Some("tilted planes are written in joint mode only (TCP moves the tool in part coordinates already)");
+        }
+        if self.o.dialect.planes == crate::nc::Planes::None {
+            return Some("this dialect has no tilted-plane command");
+        }
+        if m.linears.iter().any(|l| l.is_none()) || m.rotaries.len() != 2 {
+            return Some("tilted planes need three linear and two rotary axes");
+        }
+        if self.o.dialect.planes == crate::nc::Planes::Haas && m.rotaries.iter().any(|r| r.mount != kinematics::Mount::Table) {
+            return Some("G254 (dynamic work offset) needs a table-table machine");
+        }
+        None
+    }
+
+    /// Tilts the working plane where the machine stands (the rapid to `tip` just written), if
+    /// the tool axis there is tilted and the machine and dialect allow it.
+    fn enter_plane(&mut self, tip: &Vec3) -> std::io::Result<()> {
+        let Some(at) = self.at else { return Ok(()) };
+        if (at.pose.tip - tip).norm() > 1e-9 || angle_between(&at.pose.axis, &Vec3::z()) < 1e-6 {
+            return Ok(());
+        }
+        if let Some(why) = self.plane_refused() {
+            if !self.plane_why.contains(&why) {
+                self.plane_why.push(why);
+                self.note(Diagnostic::new(
+                    Code::IgnoredRecord,
+                    Severity::Info,
+                    None,
+                    format!("3+2 written as 5-axis positioning: {why} (said once)"),
+                ))?;
+            }
+            return Ok(());
+        }
+        self.cancel_cycle()?;
+        let m = self.m;
+        let mut words = [0.0; 3];
+        for (i, r) in m.rotaries.iter().enumerate() {
+            let k = 3 + (r.name as u8 - b'A') as usize;
+            words[i] = self.f.written(at.joints.rotary[i].to_degrees(), k).to_radians();
+        }
+        let frame = kinematics::machine_frame(m, &words);
+        // The tilting rotary is the one that is not free about the singular direction.
+        let free = kinematics::outer_rotary(m);
+        let master = (0..m.rotaries.len()).find(|&i| Some(i) != free).unwrap_or(0);
+        let positive = at.joints.rotary[master] >= 0.0;
+        let c = self.f.comment("TILTED WORK PLANE").to_string();
+        self.out(&c)?;
+        self.comp_cancel()?;
+        let (lines, written) = self.f.plane_on(&frame, positive);
+        for l in &lines {
+            self.out(l)?;
+        }
+        self.tilt = Some(Tilt {
+            rotary: at.joints.rotary,
+            frame: written,
+            axis: at.pose.axis,
+        });
+        self.sum.tilted_planes += 1;
+        self.ensure_comp()
+    }
+
+    /// Back to untilted coordinates; `recomp`: length compensation on again for the blocks that
+    /// follow (not before a tool change, which sets its own).
+    fn leave_plane(&mut self, recomp: bool) -> std::io::Result<()> {
+        if self.tilt.take().is_none() {
+            return Ok(());
+        }
+        self.cancel_cycle()?;
+        self.comp_cancel()?;
+        if let Some(l) = self.f.plane_off() {
+            self.out(&l)?;
+        }
+        if recomp { self.ensure_comp() } else { Ok(()) }
+    }
+
+    /// Length compensation off (word-address controls with a G43-style word) around a plane
+    /// change, which redefines the direction it applies in.
+    fn comp_cancel(&mut self) -> std::io::Result<()> {
+        let d = self.o.dialect;
+        if self.comp_on && !d.length_comp.is_empty() && d.style == crate::nc::Style::WordAddress {
+            if let Some(l) = self.f.line(d.tcp_off, self.tool.unwrap_or(1), 0) {
+                self.out(&l)?;
+            }
+            self.comp_on = false;
+        }
+        Ok(())
+    }
+
+    /// The tip in the plane's coordinates (its origin is the joint-mode program zero).
+    fn plane_coords(&self, t: &Tilt, tip_w: &Vec3) -> Vec3 {
+        t.frame.transpose() * (tip_w + self.setup.work_offset)
+    }
+
     fn cancel_cycle(&mut self) -> std::io::Result<()> {
         if self.cycle_on.take().is_some()
             && let Some(l) = self.f.canned_off()
@@ -1452,7 +1661,8 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         let (joints, actual, branch) = self.resolve(&c.pt.pose, cand).ok_or("no solution")?;
         let start = joints.linear[2];
         let (bottom, r) = (start - h.start - h.depth, start - h.start + h.clear);
-        if !self.along_z(&joints, &actual, &c.pt.pose.axis) {
+        let in_plane = self.o.tilted_planes && self.plane_refused().is_none();
+        if !in_plane && !self.along_z(&joints, &actual, &c.pt.pose.axis) {
             return Err("the hole does not run along the machine's Z (a tilted head needs a tilted work plane)");
         }
         if m.linears[2]
@@ -1496,6 +1706,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
     /// unless this hole continues it), then the cycle block.
     fn canned_hole(&mut self, c: Committed, h: Hole, mut cb: Canned, start: At) -> Result<(), Error> {
         let pt = c.pt.clone();
+        self.cycle_in_plane(&mut cb, &start);
         let modal = match (self.cycle_on, self.at) {
             (Some(on), Some(at)) => {
                 let same_rot = (0..self.m.rotaries.len()).all(|i| (start.joints.rotary[i] - at.joints.rotary[i]).abs() < 1e-9);
@@ -1516,6 +1727,8 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             })?;
             // The approach as written: the cycle starts from there.
             match self.at {
+                // In a tilted plane its Z is the tool axis: the cycle in plane coordinates.
+                Some(at) if (at.pose.tip - pt.pose.tip).norm() < 1e-9 && self.cycle_in_plane(&mut cb, &at) => at,
                 Some(at) if (at.pose.tip - pt.pose.tip).norm() < 1e-9 && self.along_z(&at.joints, &at.actual, &at.pose.axis) => {
                     let shift = at.joints.linear[2] - cb.z_start;
                     for z in [&mut cb.z_top, &mut cb.z_r, &mut cb.z_bottom, &mut cb.z_start] {
@@ -1532,6 +1745,22 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         self.canned_block(&pt, &h, cb, at, modal)
     }
 
+    /// A cycle's words moved into the tilted plane in force, when the tool stands on its
+    /// rotaries at `at` (the cycle's start); false when no plane holds there.
+    fn cycle_in_plane(&self, cb: &mut Canned, at: &At) -> bool {
+        let Some(t) = self.tilt else { return false };
+        if (0..self.m.rotaries.len()).any(|i| (at.joints.rotary[i] - t.rotary[i]).abs() > 1e-9) {
+            return false;
+        }
+        let q = self.plane_coords(&t, &at.pose.tip);
+        let shift = q.z - cb.z_start;
+        for z in [&mut cb.z_top, &mut cb.z_r, &mut cb.z_bottom, &mut cb.z_start] {
+            *z += shift;
+        }
+        (cb.x, cb.y) = (Some(q.x), Some(q.y));
+        true
+    }
+
     fn canned_block(&mut self, pt: &MotionPt, h: &Hole, cb: Canned, at: At, modal: bool) -> Result<(), Error> {
         let m = self.m;
         let lines = self.f.canned(&cb, modal);
@@ -1546,6 +1775,12 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         let want = at.pose.tip - u * (h.start + h.depth);
         let mut j = at.joints;
         j.linear[2] = cb.z_bottom;
+        let tilt = self.tilt;
+        if tilt.is_some() {
+            // The machine's linears at the bottom (block info); the words are plane coordinates.
+            let cp = kinematics::controlled_point(m, &at.actual, &want, &self.setup);
+            j.linear = [cp.x, cp.y, cp.z];
+        }
         let mut axes: [Option<f64>; 6] = [None; 6];
         for i in 0..3 {
             if m.linears[i].is_some() {
@@ -1559,7 +1794,17 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             j.rotary[i] = self.f.written(at.joints.rotary[i].to_degrees(), k).to_radians();
         }
         let replay = fk(m, &j, &self.setup);
-        let tip_dev = (replay.tip - want).norm();
+        let tip_dev = match &tilt {
+            Some(t) => {
+                let q = Vec3::new(
+                    self.f.written(cb.x.unwrap_or(0.0), 0),
+                    self.f.written(cb.y.unwrap_or(0.0), 1),
+                    self.f.written(cb.z_bottom, 2),
+                );
+                (t.frame * q - self.setup.work_offset - want).norm()
+            }
+            None => (replay.tip - want).norm(),
+        };
         let ax_dev = angle_between(&replay.axis, &u).to_degrees();
         let diags: Vec<Diagnostic> = self
             .replayed(pt.line, tip_dev, ax_dev, "the cycle's bottom misses the hole")
@@ -1573,7 +1818,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         let time = (cb.z_start - cb.z_r) / rate + (cb.z_r - cb.z_bottom) / cb.feed + (cb.z_start - cb.z_bottom) / rate;
         self.sum.cycle_time_s += time * 60.0;
         if let Some(st) = self.sum.axes.get_mut(&'Z') {
-            st.min = st.min.min(cb.z_bottom);
+            st.min = st.min.min(axes[2].unwrap_or(cb.z_bottom));
         }
         self.blocks += 1;
         self.sum.blocks += 1;
@@ -1605,7 +1850,15 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
     ) -> Result<(), Error> {
         self.cancel_cycle()?;
         let m = self.m;
+        if self
+            .tilt
+            .is_some_and(|t| (0..m.rotaries.len()).any(|i| (to.joints.rotary[i] - t.rotary[i]).abs() > 1e-9))
+        {
+            self.leave_plane(true)?;
+        }
         let tcp = self.o.mode == Mode::Tcp;
+        // The machine's axis values (summary, block info), and the words written (in a tilted
+        // plane: plane coordinates, no rotaries).
         let mut axes: [Option<f64>; 6] = [None; 6];
         for i in 0..3 {
             if m.linears[i].is_some() || tcp {
@@ -1615,6 +1868,12 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         for (i, r) in m.rotaries.iter().enumerate() {
             let k = 3 + (r.name as u8 - b'A') as usize;
             axes[k] = Some(to.joints.rotary[i].to_degrees());
+        }
+        let tilt = self.tilt;
+        let mut words = axes;
+        if let Some(t) = &tilt {
+            let q = self.plane_coords(t, &to.pose.tip);
+            words = [Some(q.x), Some(q.y), Some(q.z), None, None, None];
         }
         // Feed.
         let prev = self.at;
@@ -1747,7 +2006,15 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             written.rotary[i] = self.f.written(axes[k].unwrap_or(0.0), k).to_radians();
         }
         let replay = fk(m, &written, &self.setup);
-        let tip_dev = if tcp {
+        let tip_dev = if let Some(t) = &tilt {
+            // The plane's frame (as the control builds it) times the words as written.
+            let q = Vec3::new(
+                self.f.written(words[0].unwrap_or(0.0), 0),
+                self.f.written(words[1].unwrap_or(0.0), 1),
+                self.f.written(words[2].unwrap_or(0.0), 2),
+            );
+            (t.frame * q - self.setup.work_offset - to.pose.tip).norm()
+        } else if tcp {
             let w = Vec3::new(
                 self.f.written(to.pose.tip.x, 0),
                 self.f.written(to.pose.tip.y, 1),
@@ -1796,7 +2063,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         };
         let extra = arc.as_ref().map_or("", |(_, w)| w.as_str());
         self.at = Some(to);
-        match self.f.motion(motion, &axes, feed, extra, comment) {
+        match self.f.motion(motion, &words, feed, extra, comment) {
             Some(text) => {
                 self.blocks += 1;
                 self.sum.blocks += 1;

@@ -62,6 +62,9 @@ pub struct VerifyOptions {
 
 /// The pose a block reaches, in profile units: FK of its words (TCP: its X Y Z are the tip).
 fn block_joints(m: &Machine, b: &NcBlock, o: &VerifyOptions) -> Option<Joints> {
+    if b.plane.is_some() {
+        return None; // plane coordinates, not joints: the control moves straight in the plane
+    }
     let s = b.units.factor_to(m.units);
     let mut j = Joints::default();
     for i in 0..3 {
@@ -92,6 +95,14 @@ fn block_pose(m: &Machine, b: &NcBlock, o: &VerifyOptions) -> Option<(Vec3, Vec3
         j.rotary[i] = b.axes[3 + (r.name as u8 - b'A') as usize].unwrap_or(0.0).to_radians();
     }
     let p = fk(m, &j, &o.setup);
+    if let Some(pl) = &b.plane {
+        // A tilted plane: X Y Z in it, from its origin in the untilted program coordinates (the
+        // joint-mode zero); a dynamic work offset's frame is the rotaries'.
+        let f = pl.frame.unwrap_or_else(|| crate::kinematics::machine_frame(m, &j.rotary));
+        let q = Vec3::from(j.linear);
+        let tip = Vec3::from(pl.origin) * s + f * q - o.setup.work_offset;
+        return Some((tip, p.axis));
+    }
     let tip = if o.mode == Mode::Tcp {
         Vec3::new(j.linear[0], j.linear[1], j.linear[2])
     } else {
