@@ -237,5 +237,5 @@ fn find_comment(text: &str) -> Option<usize> {
 
 #[inline]
 fn memchr(b: u8, s: &[u8]) -> Option<usize> {
-    s.iter().position(|&c| c == b)
+    memchr::memchr(b, s)
 }

@@ -486,7 +486,7 @@ fn fast_goto(stmt: &str) -> Option<Record> {
     let rest = stmt[4..].trim_start().strip_prefix('/')?;
     let mut v = [0.0; 6];
     let mut n = 0;
-    for part in rest.split(',') {
+    for part in rest.as_bytes().split(|&c| c == b',') {
         if n == 6 {
             return None;
         }
@@ -650,14 +650,11 @@ fn split_args(rest: &str, start_col: u32) -> Vec<Arg<'_>> {
 
 /// A number as CL files write them: `6.`, `.9625`, `-0.5`, `1e-3`, spaces around.
 #[inline]
-pub(crate) fn num(s: &str) -> Option<f64> {
-    let t = s.trim();
-    if t.is_empty() {
-        return None;
+pub(crate) fn num(s: impl AsRef<[u8]>) -> Option<f64> {
+    // ASCII whitespace only: anything else is not part of a CL number anyway.
+    let b = s.as_ref().trim_ascii();
+    match b.first() {
+        Some(c) if c.is_ascii_digit() || matches!(c, b'-' | b'+' | b'.') => fast_float2::parse(b).ok(),
+        _ => None,
     }
-    let b = t.as_bytes();
-    if !(b[0].is_ascii_digit() || matches!(b[0], b'-' | b'+' | b'.')) {
-        return None;
-    }
-    fast_float2::parse(t).ok()
 }

@@ -128,6 +128,14 @@ pub fn reachable_within_limits(m: &Machine, sol: &Solution) -> bool {
 }
 
 /// Angle in radians between two vectors (robust near 0 and π).
+#[inline]
 pub fn angle_between(a: &Vec3, b: &Vec3) -> f64 {
-    a.cross(b).norm().atan2(a.dot(b))
+    let (s, c) = (a.cross(b).norm(), a.dot(b));
+    // The common case on a toolpath (a few µrad, every block's replay): atan's series, exact to
+    // the last bit for t < 1e-3 (the next term is t⁵/5 < 2e-16·t), without a libm call.
+    if c > 0.0 && s < 1e-3 * c {
+        let t = s / c;
+        return t - t * t * t / 3.0;
+    }
+    s.atan2(c)
 }

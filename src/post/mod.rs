@@ -437,6 +437,8 @@ struct Emitter<'a, S: Sink + ?Sized> {
     leave_in_cut: bool,
     /// Why no plane was tilted, each said once.
     plane_why: Vec<&'static str>,
+    /// Per axis letter (X Y Z A B C): extents and travel, moved into the summary at the end.
+    stats: [Option<AxisStats>; 6],
 }
 
 /// A tilted working plane in force: the rotary words it stands on (radians), its frame as the
@@ -514,6 +516,7 @@ pub fn post<R: BufRead, S: Sink + ?Sized>(input: R, m: &Machine, o: &Options, si
         plane_ahead: false,
         leave_in_cut: false,
         plane_why: Vec::new(),
+        stats: Default::default(),
     };
     e.program_start()?;
     let mut planner = Planner::new(m, setup);
@@ -547,6 +550,11 @@ pub fn post<R: BufRead, S: Sink + ?Sized>(input: R, m: &Machine, o: &Options, si
         return Err(Error::Strict(d));
     }
     e.program_end()?;
+    for (k, st) in e.stats.iter().enumerate() {
+        if let Some(st) = st {
+            e.sum.axes.insert(crate::nc::AXIS_LETTERS[k], st.clone());
+        }
+    }
     let sum = e.sum.clone();
     e.sink.summary(&sum)?;
     Ok(sum)
@@ -1817,7 +1825,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         let rate = self.rapid_rate();
         let time = (cb.z_start - cb.z_r) / rate + (cb.z_r - cb.z_bottom) / cb.feed + (cb.z_start - cb.z_bottom) / rate;
         self.sum.cycle_time_s += time * 60.0;
-        if let Some(st) = self.sum.axes.get_mut(&'Z') {
+        if let Some(st) = self.stats[2].as_mut() {
             st.min = st.min.min(axes[2].unwrap_or(cb.z_bottom));
         }
         self.blocks += 1;
@@ -1985,7 +1993,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             }
         }
         if let Some(dir) = kinematics::singular_direction(m)
-            && angle_between(&to.pose.axis, &dir).min(angle_between(&to.pose.axis, &-dir)) < self.o.singular_cone
+            && to.pose.axis.dot(&dir).abs() > self.o.singular_cone.cos() * to.pose.axis.norm() * dir.norm()
         {
             diags.push(Diagnostic::new(
                 Code::Singular,
@@ -2026,11 +2034,10 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         };
         let ax_dev = angle_between(&replay.axis, &to.pose.axis).to_degrees();
         diags.extend(self.replayed(pt.line, tip_dev, ax_dev, "the written block misses the pose"));
-        // Statistics.
+        // Statistics (per block: an array by axis letter, the summary's map at the end).
         for (k, v) in axes.iter().enumerate() {
             let Some(v) = v else { continue };
-            let name = crate::nc::AXIS_LETTERS[k];
-            let st = self.sum.axes.entry(name).or_insert(AxisStats {
+            let st = self.stats[k].get_or_insert(AxisStats {
                 min: *v,
                 max: *v,
                 ..Default::default()
@@ -2041,7 +2048,9 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         if let Some(p) = prev {
             for (i, r) in m.rotaries.iter().enumerate() {
                 let d = (to.joints.rotary[i] - p.joints.rotary[i]).to_degrees().abs();
-                let st = self.sum.axes.get_mut(&r.name).expect("rotary stats");
+                let Some(st) = self.stats[3 + (r.name as u8 - b'A') as usize].as_mut() else {
+                    continue;
+                };
                 *st.travel.get_or_insert(0.0) += d;
                 if !rapid && comment.is_none() && d > st.largest_step.unwrap_or(0.0) {
                     st.largest_step = Some(d);

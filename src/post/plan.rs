@@ -8,7 +8,7 @@
 //! what was committed. Memory is O(WINDOW · candidates), whatever the file's length.
 
 use super::source::{MotionPt, ProgEvent};
-use crate::kinematics::{IkOptions, Joints, Machine, Setup, Solution, Solutions, Vec3, angle_between, ik_into, tool_axis};
+use crate::kinematics::{IkOptions, Joints, Machine, Setup, Solution, Solutions, Vec3, ik_into, tool_axis};
 use arrayvec::ArrayVec;
 
 pub const WINDOW: usize = 512;
@@ -44,7 +44,8 @@ pub fn crosses_fold(m: &Machine, ja: &[f64; 3], jb: &[f64; 3], ua: &Vec3, ub: &V
     let axis = tool_axis(m, &mid);
     let s = ua + ub;
     let want = if s.norm() < 1e-9 { *ua } else { s.normalize() };
-    angle_between(&axis, &want) <= FOLD_TOLERANCE
+    // angle ≤ tolerance, as a dot product (both unit): no libm call on the planner's hot path.
+    axis.dot(&want) >= FOLD_TOLERANCE.cos() * axis.norm() * want.norm()
 }
 
 pub struct Column {
@@ -129,6 +130,18 @@ fn transition_cost(m: &Machine, a: &Cand, b: &Cand, rapid: bool, ua: &Vec3, ub: 
     }
 }
 
+/// Whether `new` is `old` less one constant over the first `n` costs (to 1e-12 of their size).
+fn offset_only(old: &[f64; MAX_CANDS], new: &[f64; MAX_CANDS], n: usize) -> bool {
+    if n == 0 {
+        return false;
+    }
+    let d0 = old[0] - new[0];
+    (0..n).all(|b| {
+        let d = old[b] - new[b];
+        d.is_finite() && (d - d0).abs() <= 1e-12 * old[b].abs().max(1.0)
+    })
+}
+
 #[inline]
 pub fn wrap(a: f64) -> f64 {
     use std::f64::consts::{PI, TAU};
@@ -155,7 +168,7 @@ fn relax(m: &Machine, root: &Option<(Cand, Vec3)>, prev: Option<&Column>, col: &
                         (best, arg) = (c, a as u8);
                     }
                 }
-                for (a, mut c) in deferred {
+                for &(a, mut c) in &deferred {
                     if c >= best {
                         continue; // the branch penalty only adds: no need to look at the fold
                     }
@@ -356,7 +369,10 @@ impl<'m> Planner<'m> {
                 }
             }
         }
-        // Re-root the rest on what was committed.
+        // Re-root the rest on what was committed. Once a column's costs come out as its old ones
+        // less one constant (every best path there ran through the committed choice), every later
+        // column would too, with the same back pointers: a constant offset changes no choice, so
+        // the rest is left as it is.
         let slots = self.window.as_mut_slice();
         let mut prev: Option<usize> = None;
         for i in 0..slots.len() {
@@ -369,7 +385,11 @@ impl<'m> Planner<'m> {
                 Slot::Event(_) => None,
             });
             if let Slot::Point(col) = &mut after[0] {
+                let old = col.cost;
                 relax(self.m, &self.root, p, col);
+                if offset_only(&old, &col.cost, col.cands.len()) {
+                    break;
+                }
             }
             prev = Some(i);
         }
