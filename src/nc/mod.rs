@@ -816,6 +816,6 @@ impl Formatter {
 
     pub fn written(&self, value: f64, axis_index: usize) -> f64 {
         let dec = if axis_index < 3 { self.fmt.linear } else { self.fmt.rotary };
-        round_to(value, dec) as f64 / 10f64.powi(dec as i32)
+        round_to(value, dec) as f64 / number::POW10[dec.min(6) as usize]
     }
 }

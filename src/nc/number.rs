@@ -8,10 +8,24 @@
 /// `v` rounded to `dec` decimals, as an integer count of 10^-dec.
 #[inline]
 pub fn round_to(v: f64, dec: u32) -> i64 {
-    const P: [f64; 7] = [1.0, 10.0, 100.0, 1000.0, 10000.0, 100000.0, 1000000.0];
-    let r = (v * P[dec.min(6) as usize]).round();
-    if r.is_finite() && r.abs() < 9.0e18 { r as i64 } else { 0 }
+    let x = v * POW10[dec.min(6) as usize];
+    let t = x.abs();
+    if t.is_nan() {
+        return 0;
+    }
+    if t >= 4.5e15 {
+        // Beyond 2^52 every double is an integer already.
+        return if t < 9.0e18 { x as i64 } else { 0 };
+    }
+    // `f64::round` by hand: a libm call on baseline x86-64, and this runs for every word.
+    // `t - i` is exact below 2^52, so the half is judged on the value itself.
+    let i = t as i64;
+    let r = if t - i as f64 >= 0.5 { i + 1 } else { i };
+    if x < 0.0 { -r } else { r }
 }
+
+/// 10^d for the decimals a word can have.
+pub const POW10: [f64; 7] = [1.0, 10.0, 100.0, 1000.0, 10000.0, 100000.0, 1000000.0];
 
 /// Writes the integer `r` (in units of 10^-dec) as a decimal with exactly `dec` places.
 #[inline]
@@ -60,5 +74,26 @@ mod tests {
         assert_eq!(f(123456.7, 4), "123456.7000");
         assert_eq!(f(-0.05, 4), "-0.0500");
         assert_eq!(f(f64::NAN, 3), "0.000");
+        // The same rule as `f64::round` everywhere, halves and near-halves included.
+        for v in [
+            0.49999999999999994,
+            0.5,
+            1.5,
+            2.5,
+            -2.5,
+            1234.5,
+            4.4999999999999996e15,
+            1e17,
+            -7.5e15,
+        ] {
+            assert_eq!(round_to(v, 0), v.round() as i64, "{v}");
+        }
+        let mut x = 0.123456789f64;
+        for _ in 0..10_000 {
+            x = (x * 7919.0 + 0.2718).fract() * 2e6 - 1e6;
+            for d in 0..7 {
+                assert_eq!(round_to(x, d), (x * POW10[d as usize]).round() as i64, "{x} {d}");
+            }
+        }
     }
 }

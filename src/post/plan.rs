@@ -142,9 +142,13 @@ fn offset_only(old: &[f64; MAX_CANDS], new: &[f64; MAX_CANDS], n: usize) -> bool
     })
 }
 
+/// `a` in (−π, π].
 #[inline]
 pub fn wrap(a: f64) -> f64 {
     use std::f64::consts::{PI, TAU};
+    if a > -PI && a <= PI {
+        return a; // the common case, exactly, without fmod
+    }
     let r = (a + PI).rem_euclid(TAU) - PI;
     if r == -PI { PI } else { r }
 }
