@@ -439,6 +439,8 @@ struct Emitter<'a, S: Sink + ?Sized> {
     plane_why: Vec<&'static str>,
     /// Per axis letter (X Y Z A B C): extents and travel, moved into the summary at the end.
     stats: [Option<AxisStats>; 6],
+    /// cos of the singular cone and the singular direction, once (they are checked per block).
+    singular: Option<(Vec3, f64)>,
 }
 
 /// A tilted working plane in force: the rotary words it stands on (radians), its frame as the
@@ -517,6 +519,7 @@ pub fn post<R: BufRead, S: Sink + ?Sized>(input: R, m: &Machine, o: &Options, si
         leave_in_cut: false,
         plane_why: Vec::new(),
         stats: Default::default(),
+        singular: kinematics::singular_direction(m).map(|d| (d.normalize(), o.singular_cone.cos())),
     };
     e.program_start()?;
     let mut planner = Planner::new(m, setup);
@@ -1992,8 +1995,8 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                 ));
             }
         }
-        if let Some(dir) = kinematics::singular_direction(m)
-            && to.pose.axis.dot(&dir).abs() > self.o.singular_cone.cos() * to.pose.axis.norm() * dir.norm()
+        if let Some((dir, cone_cos)) = self.singular
+            && to.pose.axis.dot(&dir).abs() > cone_cos * to.pose.axis.norm()
         {
             diags.push(Diagnostic::new(
                 Code::Singular,
