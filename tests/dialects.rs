@@ -119,6 +119,14 @@ fn golden_programs_per_dialect() {
     }
 }
 
+/// An ISO program without its tape frame (`%`, `O` number), which the `gcode` crate does not read.
+fn tape_body(nc: &str) -> String {
+    nc.lines()
+        .filter(|l| !l.starts_with(['%', 'O']))
+        .map(|l| format!("{l}\n"))
+        .collect()
+}
+
 #[test]
 fn iso_dialects_read_back_with_an_independent_gcode_parser() {
     for (d, m) in [
@@ -130,11 +138,7 @@ fn iso_dialects_read_back_with_an_independent_gcode_parser() {
             let p = program(d, m, mode, 120);
             let mut motions = 0;
             let mut modal = [None::<f32>; 6];
-            let text: String =
-                p.nc.lines()
-                    .filter(|l| !l.starts_with('%') && !l.starts_with('O'))
-                    .map(|l| format!("{l}\n"))
-                    .collect();
+            let text = tape_body(&p.nc);
             let prog = gcode::parse(&text).unwrap_or_else(|e| panic!("{d} {m}: the gcode crate rejects our program: {e:?}"));
             for block in &prog.blocks {
                 let mut axis_words = false;
@@ -564,12 +568,7 @@ fn every_dialect_drills_the_same_holes() {
     let (fanuc, ..) = canned("spinner-u5-620", Some("fanuc"), Mode::Joint);
     let want = iso_holes(&fanuc.nc, true);
     // The independent parser reads the cycle blocks' words as ours do.
-    let text: String = fanuc
-        .nc
-        .lines()
-        .filter(|l| !l.starts_with(['%', 'O']))
-        .map(|l| format!("{l}\n"))
-        .collect();
+    let text = tape_body(&fanuc.nc);
     let prog = gcode::parse(&text).unwrap_or_else(|e| panic!("the gcode crate rejects our cycles: {e:?}"));
     let g8x: Vec<String> = prog
         .blocks
@@ -1078,12 +1077,7 @@ fn golden_tilted_plane_programs() {
         assert_eq!(want, 2);
         assert_golden(&format!("planes-{d}-{id}.nc"), &sink.nc);
         if holes {
-            let text: String = sink
-                .nc
-                .lines()
-                .filter(|l| !l.starts_with(['%', 'O']))
-                .map(|l| format!("{l}\n"))
-                .collect();
+            let text = tape_body(&sink.nc);
             let prog = gcode::parse(&text).unwrap_or_else(|e| panic!("the gcode crate rejects our planes: {e:?}"));
             let shown: Vec<String> = prog.blocks.iter().map(|b| b.to_string()).collect();
             let plane_word = if d == "fanuc" { "G68.2" } else { "G254" };

@@ -72,6 +72,12 @@ pub struct Rotary {
 }
 
 impl Rotary {
+    /// Where its word sits among X Y Z A B C (3, 4 or 5).
+    #[inline]
+    pub fn slot(&self) -> usize {
+        3 + (self.name as u8 - b'A') as usize
+    }
+
     /// The angle the axis really stands at when the NC word commands `word` (radians).
     #[inline]
     pub fn actual(&self, word: f64) -> f64 {

@@ -119,6 +119,15 @@ pub struct Canned {
 
 impl Canned {
     /// Same cycle as written (levels, feed, peck, dwell): a next hole needs only its position.
+    /// The same cycle started from (`x`, `y`) at level `z_start`: every Z level moves with it.
+    pub fn start_at(&mut self, x: Option<f64>, y: Option<f64>, z_start: f64) {
+        let shift = z_start - self.z_start;
+        for z in [&mut self.z_top, &mut self.z_r, &mut self.z_bottom, &mut self.z_start] {
+            *z += shift;
+        }
+        (self.x, self.y) = (x, y);
+    }
+
     pub fn same_cycle(&self, o: &Canned, f: &Formats) -> bool {
         let l = |a: f64, b: f64| round_to(a, f.linear) == round_to(b, f.linear);
         self.kind == o.kind
@@ -750,10 +759,7 @@ impl Formatter {
         let p = self.d.planes;
         let a = plane::angles(p, frame);
         let rd = self.fmt.rotary;
-        let mut deg = [0.0; 3];
-        for k in 0..3 {
-            deg[k] = round_to(a[k].to_degrees(), rd) as f64 / 10f64.powi(rd as i32);
-        }
+        let deg = a.map(|r| number::rounded(r.to_degrees(), rd));
         let written = match p {
             Planes::Haas | Planes::None => *frame,
             _ => plane::frame(p, deg.map(f64::to_radians)),
@@ -815,7 +821,6 @@ impl Formatter {
     }
 
     pub fn written(&self, value: f64, axis_index: usize) -> f64 {
-        let dec = if axis_index < 3 { self.fmt.linear } else { self.fmt.rotary };
-        round_to(value, dec) as f64 / number::POW10[dec.min(6) as usize]
+        number::rounded(value, if axis_index < 3 { self.fmt.linear } else { self.fmt.rotary })
     }
 }

@@ -24,6 +24,12 @@ pub fn round_to(v: f64, dec: u32) -> i64 {
     if x < 0.0 { -r } else { r }
 }
 
+/// `v` as written with `dec` decimals, read back.
+#[inline]
+pub fn rounded(v: f64, dec: u32) -> f64 {
+    round_to(v, dec) as f64 / POW10[dec.min(6) as usize]
+}
+
 /// 10^d for the decimals a word can have.
 pub const POW10: [f64; 7] = [1.0, 10.0, 100.0, 1000.0, 10000.0, 100000.0, 1000000.0];
 

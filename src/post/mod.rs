@@ -426,17 +426,13 @@ struct Emitter<'a, S: Sink + ?Sized> {
     /// hole it just drilled are still arriving (they were written as the cycle).
     cycle_on: Option<Canned>,
     in_hole: bool,
-    /// Why holes were written as moves, each said once.
-    expanded_why: Vec<&'static str>,
+    /// Why holes were written as moves, or 3+2 as positioning: each said once.
+    said_once: Vec<&'static str>,
     /// The tilted working plane in force, if any.
     tilt: Option<Tilt>,
     /// The point being written is a rapid whose fixed tool axis holds, in the look-ahead, until
     /// the next rapid with another axis (or a tool change, or the end): a plane may start there.
     plane_ahead: bool,
-    /// A feed point with another tool axis arrived while the plane is in force.
-    leave_in_cut: bool,
-    /// Why no plane was tilted, each said once.
-    plane_why: Vec<&'static str>,
     /// Per axis letter (X Y Z A B C): extents and travel, moved into the summary at the end.
     stats: [Option<AxisStats>; 6],
     /// cos of the singular cone and the singular direction, once (they are checked per block).
@@ -513,11 +509,9 @@ pub fn post<R: BufRead, S: Sink + ?Sized>(input: R, m: &Machine, o: &Options, si
         held_travel: 0.0,
         cycle_on: None,
         in_hole: false,
-        expanded_why: Vec::new(),
+        said_once: Vec::new(),
         tilt: None,
         plane_ahead: false,
-        leave_in_cut: false,
-        plane_why: Vec::new(),
         stats: Default::default(),
         singular: kinematics::singular_direction(m).map(|d| (d.normalize(), o.singular_cone.cos())),
     };
@@ -637,11 +631,6 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                 Some(Out::Event(ev)) => self.event(ev)?,
                 Some(Out::Point(c)) => {
                     self.plane_ahead = c.pt.rapid && self.o.tilted_planes && fixed_run_ahead(&c.pt.pose.axis, pending);
-                    self.leave_in_cut = !c.pt.rapid
-                        && c.cand.is_some()
-                        && self
-                            .tilt
-                            .is_some_and(|t| angle_between(&t.axis, &c.pt.pose.axis) > PLANE_AXIS_EPS);
                     self.point(c)?
                 }
                 None => break,
@@ -940,7 +929,11 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                     self.arc_move(prev, target, &arc, &pt, diags)?;
                     return Ok(());
                 }
-                if std::mem::take(&mut self.leave_in_cut) && self.tilt.is_some() {
+                // A feed that turns the axis of the plane in force: a cut longer than the look-ahead.
+                if self
+                    .tilt
+                    .is_some_and(|t| angle_between(&t.axis, &pt.pose.axis) > PLANE_AXIS_EPS)
+                {
                     self.reposition(prev, target, false, &pt)?;
                 } else if unwind || branch_change {
                     self.reposition(prev, target, unwind, &pt)?;
@@ -1064,9 +1057,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         let full_linears = m.linears.iter().all(|l| l.is_some());
         let conversational = self.o.dialect.style == crate::nc::Style::Conversational;
         // In a tilted plane (the arc's end stands on the plane's rotaries): plane coordinates.
-        let tilt = self
-            .tilt
-            .filter(|t| (0..m.rotaries.len()).all(|i| (b.joints.rotary[i] - t.rotary[i]).abs() <= 1e-9));
+        let tilt = self.plane_at(&b.joints.rotary);
         let (center, normal, start) = if let Some(t) = &tilt {
             (
                 self.plane_coords(t, &arc.center),
@@ -1544,25 +1535,11 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             return Ok(());
         }
         if let Some(why) = self.plane_refused() {
-            if !self.plane_why.contains(&why) {
-                self.plane_why.push(why);
-                self.note(Diagnostic::new(
-                    Code::IgnoredRecord,
-                    Severity::Info,
-                    None,
-                    format!("3+2 written as 5-axis positioning: {why} (said once)"),
-                ))?;
-            }
-            return Ok(());
+            return self.say_once(why, Code::IgnoredRecord, None, "3+2 written as 5-axis positioning");
         }
         self.cancel_cycle()?;
         let m = self.m;
-        let mut words = [0.0; 3];
-        for (i, r) in m.rotaries.iter().enumerate() {
-            let k = 3 + (r.name as u8 - b'A') as usize;
-            words[i] = self.f.written(at.joints.rotary[i].to_degrees(), k).to_radians();
-        }
-        let frame = kinematics::machine_frame(m, &words);
+        let frame = kinematics::machine_frame(m, &self.written_rotaries(&at.joints.rotary));
         // The tilting rotary is the one that is not free about the singular direction.
         let free = kinematics::outer_rotary(m);
         let master = (0..m.rotaries.len()).find(|&i| Some(i) != free).unwrap_or(0);
@@ -1615,6 +1592,31 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         t.frame.transpose() * (tip_w + self.setup.work_offset)
     }
 
+    /// The inverse, from the words as written (rounded): where the control puts the tip.
+    fn plane_tip(&self, t: &Tilt, words: [f64; 3]) -> Vec3 {
+        let q = Vec3::new(
+            self.f.written(words[0], 0),
+            self.f.written(words[1], 1),
+            self.f.written(words[2], 2),
+        );
+        t.frame * q - self.setup.work_offset
+    }
+
+    /// The plane in force, if the rotary words `rotary` stand on it.
+    fn plane_at(&self, rotary: &[f64; 3]) -> Option<Tilt> {
+        self.tilt
+            .filter(|t| (0..self.m.rotaries.len()).all(|i| (rotary[i] - t.rotary[i]).abs() <= 1e-9))
+    }
+
+    /// Rotary words (radians) as the control reads them back from the written degrees.
+    fn written_rotaries(&self, rotary: &[f64; 3]) -> [f64; 3] {
+        let mut w = [0.0; 3];
+        for (i, r) in self.m.rotaries.iter().enumerate() {
+            w[i] = self.f.written(rotary[i].to_degrees(), r.slot()).to_radians();
+        }
+        w
+    }
+
     fn cancel_cycle(&mut self) -> std::io::Result<()> {
         if self.cycle_on.take().is_some()
             && let Some(l) = self.f.canned_off()
@@ -1625,15 +1627,20 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
     }
 
     fn expanded(&mut self, pt: &MotionPt, why: &'static str) -> std::io::Result<()> {
-        if self.expanded_why.contains(&why) {
+        self.say_once(why, Code::CycleExpanded, Some(pt.line), "drilling cycle written as moves")
+    }
+
+    /// An info `{what}: {why}` the first time `why` comes up in a program.
+    fn say_once(&mut self, why: &'static str, code: Code, line: Option<u32>, what: &str) -> std::io::Result<()> {
+        if self.said_once.contains(&why) {
             return Ok(());
         }
-        self.expanded_why.push(why);
+        self.said_once.push(why);
         self.note(Diagnostic::new(
-            Code::CycleExpanded,
+            code,
             Severity::Info,
-            Some(pt.line),
-            format!("drilling cycle written as moves: {why} (said once)"),
+            line,
+            format!("{what}: {why} (said once)"),
         ))
     }
 
@@ -1741,12 +1748,8 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                 // In a tilted plane its Z is the tool axis: the cycle in plane coordinates.
                 Some(at) if (at.pose.tip - pt.pose.tip).norm() < 1e-9 && self.cycle_in_plane(&mut cb, &at) => at,
                 Some(at) if (at.pose.tip - pt.pose.tip).norm() < 1e-9 && self.along_z(&at.joints, &at.actual, &at.pose.axis) => {
-                    let shift = at.joints.linear[2] - cb.z_start;
-                    for z in [&mut cb.z_top, &mut cb.z_r, &mut cb.z_bottom, &mut cb.z_start] {
-                        *z += shift;
-                    }
-                    cb.x = cb.x.map(|_| at.joints.linear[0]);
-                    cb.y = cb.y.map(|_| at.joints.linear[1]);
+                    let [x, y, z] = at.joints.linear;
+                    cb.start_at(cb.x.map(|_| x), cb.y.map(|_| y), z);
                     at
                 }
                 _ => return Ok(()), // the rest of the hole follows as moves
@@ -1759,16 +1762,11 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
     /// A cycle's words moved into the tilted plane in force, when the tool stands on its
     /// rotaries at `at` (the cycle's start); false when no plane holds there.
     fn cycle_in_plane(&self, cb: &mut Canned, at: &At) -> bool {
-        let Some(t) = self.tilt else { return false };
-        if (0..self.m.rotaries.len()).any(|i| (at.joints.rotary[i] - t.rotary[i]).abs() > 1e-9) {
+        let Some(t) = self.plane_at(&at.joints.rotary) else {
             return false;
-        }
+        };
         let q = self.plane_coords(&t, &at.pose.tip);
-        let shift = q.z - cb.z_start;
-        for z in [&mut cb.z_top, &mut cb.z_r, &mut cb.z_bottom, &mut cb.z_start] {
-            *z += shift;
-        }
-        (cb.x, cb.y) = (Some(q.x), Some(q.y));
+        cb.start_at(Some(q.x), Some(q.y), q.z);
         true
     }
 
@@ -1800,20 +1798,12 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             }
         }
         for (i, r) in m.rotaries.iter().enumerate() {
-            let k = 3 + (r.name as u8 - b'A') as usize;
-            axes[k] = Some(at.joints.rotary[i].to_degrees());
-            j.rotary[i] = self.f.written(at.joints.rotary[i].to_degrees(), k).to_radians();
+            axes[r.slot()] = Some(at.joints.rotary[i].to_degrees());
         }
+        j.rotary = self.written_rotaries(&at.joints.rotary);
         let replay = fk(m, &j, &self.setup);
         let tip_dev = match &tilt {
-            Some(t) => {
-                let q = Vec3::new(
-                    self.f.written(cb.x.unwrap_or(0.0), 0),
-                    self.f.written(cb.y.unwrap_or(0.0), 1),
-                    self.f.written(cb.z_bottom, 2),
-                );
-                (t.frame * q - self.setup.work_offset - want).norm()
-            }
+            Some(t) => (self.plane_tip(t, [cb.x.unwrap_or(0.0), cb.y.unwrap_or(0.0), cb.z_bottom]) - want).norm(),
             None => (replay.tip - want).norm(),
         };
         let ax_dev = angle_between(&replay.axis, &u).to_degrees();
@@ -1861,10 +1851,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
     ) -> Result<(), Error> {
         self.cancel_cycle()?;
         let m = self.m;
-        if self
-            .tilt
-            .is_some_and(|t| (0..m.rotaries.len()).any(|i| (to.joints.rotary[i] - t.rotary[i]).abs() > 1e-9))
-        {
+        if self.tilt.is_some() && self.plane_at(&to.joints.rotary).is_none() {
             self.leave_plane(true)?;
         }
         let tcp = self.o.mode == Mode::Tcp;
@@ -1877,7 +1864,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             }
         }
         for (i, r) in m.rotaries.iter().enumerate() {
-            let k = 3 + (r.name as u8 - b'A') as usize;
+            let k = r.slot();
             axes[k] = Some(to.joints.rotary[i].to_degrees());
         }
         let tilt = self.tilt;
@@ -2012,19 +1999,10 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                 written.linear[i] = self.f.written(v, i);
             }
         }
-        for (i, r) in m.rotaries.iter().enumerate() {
-            let k = 3 + (r.name as u8 - b'A') as usize;
-            written.rotary[i] = self.f.written(axes[k].unwrap_or(0.0), k).to_radians();
-        }
+        written.rotary = self.written_rotaries(&to.joints.rotary);
         let replay = fk(m, &written, &self.setup);
         let tip_dev = if let Some(t) = &tilt {
-            // The plane's frame (as the control builds it) times the words as written.
-            let q = Vec3::new(
-                self.f.written(words[0].unwrap_or(0.0), 0),
-                self.f.written(words[1].unwrap_or(0.0), 1),
-                self.f.written(words[2].unwrap_or(0.0), 2),
-            );
-            (t.frame * q - self.setup.work_offset - to.pose.tip).norm()
+            (self.plane_tip(t, [words[0], words[1], words[2]].map(|w| w.unwrap_or(0.0))) - to.pose.tip).norm()
         } else if tcp {
             let w = Vec3::new(
                 self.f.written(to.pose.tip.x, 0),
@@ -2051,7 +2029,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         if let Some(p) = prev {
             for (i, r) in m.rotaries.iter().enumerate() {
                 let d = (to.joints.rotary[i] - p.joints.rotary[i]).to_degrees().abs();
-                let Some(st) = self.stats[3 + (r.name as u8 - b'A') as usize].as_mut() else {
+                let Some(st) = self.stats[r.slot()].as_mut() else {
                     continue;
                 };
                 *st.travel.get_or_insert(0.0) += d;

@@ -163,7 +163,7 @@ impl PreviewBuilder {
         }
         for r in &m.rotaries {
             axes.push((
-                3 + (r.name as u8 - b'A') as usize,
+                r.slot(),
                 PreviewAxis {
                     name: r.name,
                     kind: "rotary",

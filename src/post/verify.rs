@@ -75,7 +75,7 @@ fn block_joints(m: &Machine, b: &NcBlock, o: &VerifyOptions) -> Option<Joints> {
         };
     }
     for (i, r) in m.rotaries.iter().enumerate() {
-        j.rotary[i] = b.axes[3 + (r.name as u8 - b'A') as usize].unwrap_or(0.0).to_radians();
+        j.rotary[i] = b.axes[r.slot()].unwrap_or(0.0).to_radians();
     }
     let _ = o;
     Some(j)
@@ -92,7 +92,7 @@ fn block_pose(m: &Machine, b: &NcBlock, o: &VerifyOptions) -> Option<(Vec3, Vec3
         };
     }
     for (i, r) in m.rotaries.iter().enumerate() {
-        j.rotary[i] = b.axes[3 + (r.name as u8 - b'A') as usize].unwrap_or(0.0).to_radians();
+        j.rotary[i] = b.axes[r.slot()].unwrap_or(0.0).to_radians();
     }
     let p = fk(m, &j, &o.setup);
     if let Some(pl) = &b.plane {
