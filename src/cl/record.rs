@@ -483,19 +483,58 @@ fn fast_goto(stmt: &str) -> Option<Record> {
     if b.len() < 6 || !b[..4].eq_ignore_ascii_case(b"GOTO") {
         return None;
     }
-    let rest = stmt[4..].trim_start().strip_prefix('/')?;
+    let rest = stmt[4..].trim_start().strip_prefix('/')?.as_bytes();
+    // One pass over the arguments, each a short decimal (see `short_decimal`) with spaces around:
+    // anything else goes to the general parser, which also names what is wrong and where.
     let mut v = [0.0; 6];
     let mut n = 0;
-    for part in rest.as_bytes().split(|&c| c == b',') {
-        if n == 6 {
+    let mut i = 0;
+    loop {
+        while i < rest.len() && rest[i].is_ascii_whitespace() {
+            i += 1;
+        }
+        let neg = match rest.get(i) {
+            Some(b'-') => {
+                i += 1;
+                true
+            }
+            Some(b'+') => {
+                i += 1;
+                false
+            }
+            _ => false,
+        };
+        let (mut m, mut digits, mut decimals, mut point) = (0u64, 0u32, 0usize, false);
+        while let Some(&c) = rest.get(i) {
+            let d = c.wrapping_sub(b'0');
+            if d < 10 {
+                if digits == 15 {
+                    return None; // beyond an exact double: the general parser rounds it
+                }
+                m = m * 10 + d as u64;
+                digits += 1;
+                decimals += point as usize;
+            } else if c == b'.' && !point {
+                point = true;
+            } else {
+                break;
+            }
+            i += 1;
+        }
+        if digits == 0 || n == 6 {
             return None;
         }
-        let x = num(part)?;
-        if !x.is_finite() {
-            return None;
-        }
-        v[n] = x;
+        let x = m as f64 / POW10_EXACT[decimals];
+        v[n] = if neg { -x } else { x };
         n += 1;
+        while i < rest.len() && rest[i].is_ascii_whitespace() {
+            i += 1;
+        }
+        match rest.get(i) {
+            None => break,
+            Some(b',') => i += 1,
+            Some(_) => return None,
+        }
     }
     match n {
         3 => Some(Record::Goto {
@@ -510,6 +549,11 @@ fn fast_goto(stmt: &str) -> Option<Record> {
         _ => None,
     }
 }
+
+/// 10^k for k ≤ 15: each an exact double.
+const POW10_EXACT: [f64; 16] = [
+    1e0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9, 1e10, 1e11, 1e12, 1e13, 1e14, 1e15,
+];
 
 fn parse_cycle(args: &[Arg], line: u32, rest_col: u32, diags: &mut Vec<Diagnostic>) -> Option<Record> {
     let w = |a: &Arg| a.text.trim().to_ascii_uppercase();
@@ -656,5 +700,68 @@ pub(crate) fn num(s: impl AsRef<[u8]>) -> Option<f64> {
     match b.first() {
         Some(c) if c.is_ascii_digit() || matches!(c, b'-' | b'+' | b'.') => fast_float2::parse(b).ok(),
         _ => None,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    fn goto(args: &str) -> Option<[f64; 6]> {
+        match fast_goto(&format!("GOTO/{args}")) {
+            Some(Record::Goto { p, axis: Some(a) }) => Some([p[0], p[1], p[2], a[0], a[1], a[2]]),
+            Some(Record::Goto { p, axis: None }) => Some([p[0], p[1], p[2], 0.0, 0.0, 0.0]),
+            _ => None,
+        }
+    }
+
+    #[test]
+    fn the_goto_fast_path_reads_short_decimals_and_leaves_the_rest() {
+        let bits = |v: [f64; 6]| v.map(f64::to_bits);
+        assert_eq!(
+            goto(" 6. , .9625,-0.5 ,+.5,-0,1").map(bits),
+            Some(bits([6.0, 0.9625, -0.5, 0.5, -0.0, 1.0]))
+        );
+        assert_eq!(goto("1,2,3").map(bits), Some(bits([1.0, 2.0, 3.0, 0.0, 0.0, 0.0])));
+        // To the general parser: exponents, long mantissas, empty and junk arguments, a trailing
+        // comma, a zero axis, too many values.
+        let long = format!("{},0,0", "9".repeat(400));
+        assert_eq!(goto(&long), None);
+        for a in [
+            "1.5e3,0,0",
+            "1234567890123456,0,0",
+            "1,,2",
+            "1,2,3,",
+            "1,2,x",
+            "1,2,3,0,0,0",
+            "1,2,3,4,5,6,7",
+            ".,1,2",
+            "-,1,2",
+        ] {
+            assert_eq!(goto(a), None, "{a}");
+        }
+    }
+
+    proptest! {
+        #[test]
+        fn short_decimals_are_the_general_parsers_doubles(
+            int in 0u64..10_000_000_000_000,
+            dec in 0usize..16,
+            neg: bool,
+        ) {
+            let digits = int.to_string();
+            let s = if dec == 0 {
+                digits.clone()
+            } else if dec >= digits.len() {
+                format!(".{}{digits}", "0".repeat(dec - digits.len()))
+            } else {
+                format!("{}.{}", &digits[..digits.len() - dec], &digits[digits.len() - dec..])
+            };
+            let s = if neg { format!("-{s}") } else { s };
+            let want: f64 = s.parse().unwrap();
+            let got = goto(&format!("{s},0,0,0,0,1"));
+            prop_assert_eq!(got.map(|v| v[0].to_bits()), Some(want.to_bits()), "{}", s);
+        }
     }
 }

@@ -820,7 +820,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
 
     fn point_at(&mut self, c: Committed) -> Result<(), Error> {
         if self.o.canned_cycles {
-            match c.pt.hole {
+            match c.pt.hole.as_deref().copied() {
                 Some(HolePart::Start(h)) => {
                     self.in_hole = false;
                     match self.canned_check(&c, &h) {
@@ -925,7 +925,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                     });
                 let branch_change = prev.branch * branch < 0
                     && !plan::crosses_fold(self.m, &prev.joints.rotary, &joints.rotary, &prev.pose.axis, &pt.pose.axis);
-                if let (Some(arc), false, false) = (pt.arc, unwind, branch_change) {
+                if let (Some(arc), false, false) = (pt.arc.as_deref().copied(), unwind, branch_change) {
                     self.arc_move(prev, target, &arc, &pt, diags)?;
                     return Ok(());
                 }

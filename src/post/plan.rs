@@ -4,14 +4,19 @@
 //! must.
 //!
 //! A Viterbi pass over the candidates of each point, with a bounded window: when the window holds
-//! `WINDOW` points, the first half is committed along the best path and the rest is re-rooted on
-//! what was committed. Memory is O(WINDOW · candidates), whatever the file's length.
+//! `WINDOW` points, all but the last `KEEP` are committed along the best path and those are
+//! re-rooted on what was committed. Memory is O(WINDOW · candidates), whatever the file's length.
 
 use super::source::{MotionPt, ProgEvent};
 use crate::kinematics::{IkOptions, Joints, Machine, Setup, Solution, Solutions, Vec3, ik_into, tool_axis};
 use arrayvec::ArrayVec;
+use std::collections::VecDeque;
 
-pub const WINDOW: usize = 512;
+pub const WINDOW: usize = 1024;
+/// Points left in the window after a commit: the least look-ahead any committed choice had. A
+/// commit re-roots what is left (one relax per point kept), so committing most of the window at
+/// once keeps that cost at a third of a relax per point.
+const KEEP: usize = 256;
 pub const MAX_CANDS: usize = 8;
 /// Cost (in degrees of rotary travel) of leaving a branch in the middle of a cut: it takes a
 /// retract, a reposition and a re-approach.
@@ -53,22 +58,20 @@ pub struct Column {
     pub cands: ArrayVec<Cand, MAX_CANDS>,
     cost: [f64; MAX_CANDS],
     back: [u8; MAX_CANDS],
-    /// IK failed: the point is reported and skipped, and the chain restarts after it.
-    pub error: Option<crate::kinematics::Error>,
-}
-
-// Points are the common case: boxing them would allocate once per CL point.
-#[allow(clippy::large_enum_variant)]
-pub enum Slot {
-    Event(ProgEvent),
-    Point(Column),
+    /// Fold checks against the predecessor's candidates done (bit `a·MAX_CANDS + b`), and
+    /// which of them found the move continuous.
+    fold_known: u64,
+    fold_crosses: u64,
+    /// IK failed: the point is reported and skipped, and the chain restarts after it. (Boxed:
+    /// rare, and every column and committed point is moved at least once.)
+    pub error: Option<Box<crate::kinematics::Error>>,
 }
 
 /// A committed point: its column and the candidate chosen.
 pub struct Committed {
     pub pt: MotionPt,
     pub cand: Option<Cand>,
-    pub error: Option<crate::kinematics::Error>,
+    pub error: Option<Box<crate::kinematics::Error>>,
 }
 
 #[allow(clippy::large_enum_variant)]
@@ -80,12 +83,17 @@ pub enum Out {
 pub struct Planner<'m> {
     m: &'m Machine,
     pub setup: Setup,
-    /// Contiguous (a Vec, not a ring): each push reads the previous column in place; the
-    /// committed front is drained half a window at a time (amortised O(1) per point).
-    window: Vec<Slot>,
+    /// A ring of `WINDOW` columns, reused in place (point `g` in `cols[g % WINDOW]`): a column
+    /// is over a kilobyte, and moving one per point cost more than planning it.
+    cols: Vec<Column>,
+    /// Points pushed so far, and how many of the last are not committed yet.
+    pushed: usize,
     points: usize,
+    /// Events behind uncommitted points, each with the number of points pushed before it.
+    events: VecDeque<(usize, ProgEvent)>,
     /// The last committed candidate: the root the window's costs start from.
     root: Option<(Cand, Vec3)>,
+    choice: Vec<Option<usize>>,
     buf: Solutions,
     opt: IkOptions,
 }
@@ -155,8 +163,17 @@ pub fn wrap(a: f64) -> f64 {
 
 /// Costs of `col` from its predecessor column, or from the committed root.
 fn relax(m: &Machine, root: &Option<(Cand, Vec3)>, prev: Option<&Column>, col: &mut Column) {
-    let rapid = col.pt.rapid;
-    for (b, cb) in col.cands.iter().enumerate() {
+    let Column {
+        pt,
+        cands,
+        cost,
+        back,
+        fold_known,
+        fold_crosses,
+        ..
+    } = col;
+    let rapid = pt.rapid;
+    for (b, cb) in cands.iter().enumerate() {
         let (mut best, mut arg) = (f64::INFINITY, 0u8);
         match prev {
             Some(p) => {
@@ -176,13 +193,21 @@ fn relax(m: &Machine, root: &Option<(Cand, Vec3)>, prev: Option<&Column>, col: &
                     if c >= best {
                         continue; // the branch penalty only adds: no need to look at the fold
                     }
-                    if !crosses_fold(
-                        m,
-                        &p.cands[a].sol.joints.rotary,
-                        &cb.sol.joints.rotary,
-                        &p.pt.pose.axis,
-                        &col.pt.pose.axis,
-                    ) {
+                    // The predecessor of a column never changes: a re-root asks again.
+                    let bit = 1u64 << (a * MAX_CANDS + b);
+                    if *fold_known & bit == 0 {
+                        *fold_known |= bit;
+                        if crosses_fold(
+                            m,
+                            &p.cands[a].sol.joints.rotary,
+                            &cb.sol.joints.rotary,
+                            &p.pt.pose.axis,
+                            &pt.pose.axis,
+                        ) {
+                            *fold_crosses |= bit;
+                        }
+                    }
+                    if *fold_crosses & bit == 0 {
                         c += BRANCH_PENALTY;
                     }
                     if c < best {
@@ -192,7 +217,7 @@ fn relax(m: &Machine, root: &Option<(Cand, Vec3)>, prev: Option<&Column>, col: &
             }
             None => {
                 best = match root {
-                    Some((r, ua)) => transition_cost(m, r, cb, rapid, ua, &col.pt.pose.axis),
+                    Some((r, ua)) => transition_cost(m, r, cb, rapid, ua, &pt.pose.axis),
                     // First point of the program: prefer small angles, within travel.
                     None => {
                         cb.sol.joints.rotary.iter().map(|a| a.abs().to_degrees()).sum::<f64>() * 1e-3
@@ -201,8 +226,8 @@ fn relax(m: &Machine, root: &Option<(Cand, Vec3)>, prev: Option<&Column>, col: &
                 };
             }
         }
-        col.cost[b] = best;
-        col.back[b] = arg;
+        cost[b] = best;
+        back[b] = arg;
     }
 }
 
@@ -266,134 +291,146 @@ fn candidates(
     Ok(())
 }
 
+/// Column `k` (if any) to read and column `i` (another) to write.
+fn two(v: &mut [Column], k: Option<usize>, i: usize) -> (Option<&Column>, &mut Column) {
+    match k {
+        None => (None, &mut v[i]),
+        Some(k) if k < i => {
+            let (x, y) = v.split_at_mut(i);
+            (Some(&x[k]), &mut y[0])
+        }
+        Some(k) => {
+            let (x, y) = v.split_at_mut(k);
+            (Some(&y[0]), &mut x[i])
+        }
+    }
+}
+
 impl<'m> Planner<'m> {
     pub fn new(m: &'m Machine, setup: Setup) -> Planner<'m> {
         Planner {
             m,
             setup,
-            window: Vec::with_capacity(WINDOW + 64),
+            cols: Vec::with_capacity(WINDOW),
+            pushed: 0,
             points: 0,
+            events: VecDeque::new(),
             root: None,
+            choice: Vec::with_capacity(WINDOW),
             buf: Solutions::new(),
             opt: IkOptions::default(),
         }
     }
 
     pub fn push_event(&mut self, e: ProgEvent, out: &mut impl FnMut(Out)) {
-        if self.window.is_empty() {
+        if self.points == 0 {
             out(Out::Event(e));
         } else {
-            self.window.push(Slot::Event(e));
+            self.events.push_back((self.pushed, e));
         }
+    }
+
+    /// The last uncommitted point without an IK error, as a global index.
+    fn last_ok(&self) -> Option<usize> {
+        (self.pushed - self.points..self.pushed)
+            .rev()
+            .find(|&g| self.cols[g % WINDOW].error.is_none())
     }
 
     pub fn push_point(&mut self, pt: MotionPt, out: &mut impl FnMut(Out)) {
-        self.window.push(Slot::Point(Column {
-            pt,
-            cands: ArrayVec::new(),
-            cost: [f64::INFINITY; MAX_CANDS],
-            back: [0; MAX_CANDS],
-            error: None,
-        }));
-        let slots = self.window.as_mut_slice();
-        let last = slots.len() - 1;
-        let prev_idx = slots[..last]
-            .iter()
-            .rposition(|s| matches!(s, Slot::Point(c) if c.error.is_none()));
-        let (before, after) = slots.split_at_mut(last);
-        let Slot::Point(col) = &mut after[0] else {
-            unreachable!("just pushed a point")
-        };
+        let prev = self.last_ok().map(|g| g % WINDOW);
+        let i = self.pushed % WINDOW;
+        if i == self.cols.len() {
+            self.cols.push(Column {
+                pt,
+                cands: ArrayVec::new(),
+                cost: [f64::INFINITY; MAX_CANDS],
+                back: [0; MAX_CANDS],
+                fold_known: 0,
+                fold_crosses: 0,
+                error: None,
+            });
+        } else {
+            let c = &mut self.cols[i];
+            c.pt = pt;
+            c.cands.clear();
+            (c.fold_known, c.fold_crosses, c.error) = (0, 0, None);
+        }
+        self.pushed += 1;
+        self.points += 1;
+        let (prev, col) = two(&mut self.cols, prev, i);
         match candidates(self.m, &self.setup, &self.opt, &mut self.buf, &col.pt, &mut col.cands) {
             Ok(()) if col.cands.is_empty() => {
-                col.error = Some(crate::kinematics::Error::NoSolution {
+                col.error = Some(Box::new(crate::kinematics::Error::NoSolution {
                     reason: "no solution".into(),
-                })
+                }))
             }
             Ok(()) => {}
-            Err(e) => col.error = Some(e),
+            Err(e) => col.error = Some(Box::new(e)),
         }
         if col.error.is_none() {
-            let prev = prev_idx.and_then(|k| match &before[k] {
-                Slot::Point(c) => Some(c),
-                Slot::Event(_) => None,
-            });
             relax(self.m, &self.root, prev, col);
         }
-        self.points += 1;
         if self.points >= WINDOW {
-            self.commit(WINDOW / 2, out);
+            self.commit(WINDOW - KEEP, out);
         }
     }
 
-    /// Commits the first `n` points (and the events among them) along the best path.
+    /// Commits the first `n` points (and the events before them) along the best path.
     fn commit(&mut self, n: usize, out: &mut impl FnMut(Out)) {
+        let first = self.pushed - self.points;
         // Trace the best path back through the window.
-        let mut choice: Vec<Option<usize>> = vec![None; self.window.len()];
+        self.choice.clear();
+        self.choice.resize(self.points, None);
         let mut next: Option<usize> = None;
-        for (i, slot) in self.window.iter().enumerate().rev() {
-            if let Slot::Point(c) = slot {
-                if c.error.is_some() || c.cands.is_empty() {
-                    continue;
-                }
-                let pick = match next {
-                    Some(b) => b,
-                    None => (0..c.cands.len())
-                        .min_by(|&x, &y| c.cost[x].total_cmp(&c.cost[y]))
-                        .unwrap_or(0),
-                };
-                choice[i] = Some(pick);
-                next = Some(c.back[pick] as usize);
+        for g in (first..self.pushed).rev() {
+            let c = &self.cols[g % WINDOW];
+            if c.error.is_some() || c.cands.is_empty() {
+                continue;
             }
+            let pick = match next {
+                Some(b) => b,
+                None => (0..c.cands.len())
+                    .min_by(|&x, &y| c.cost[x].total_cmp(&c.cost[y]))
+                    .unwrap_or(0),
+            };
+            self.choice[g - first] = Some(pick);
+            next = Some(c.back[pick] as usize);
         }
-        // The slots holding the first `n` points (and the events among them).
-        let mut cut = 0;
-        let mut counted = 0;
-        for slot in &self.window {
-            if counted == n {
-                break;
-            }
-            cut += 1;
-            counted += matches!(slot, Slot::Point(_)) as usize;
-        }
-        for (idx, slot) in self.window.drain(..cut).enumerate() {
-            match slot {
-                Slot::Event(e) => out(Out::Event(e)),
-                Slot::Point(c) => {
-                    let cand = choice[idx].map(|k| c.cands[k]);
-                    if let Some(cd) = cand {
-                        self.root = Some((cd, c.pt.pose.axis));
-                    }
-                    out(Out::Point(Committed {
-                        pt: c.pt,
-                        cand,
-                        error: c.error,
-                    }));
-                    self.points -= 1;
+        for g in first..first + n {
+            while self.events.front().is_some_and(|(k, _)| *k <= g) {
+                if let Some((_, e)) = self.events.pop_front() {
+                    out(Out::Event(e));
                 }
             }
+            // Read in place: the column's slot is reused by a later point.
+            let c = &mut self.cols[g % WINDOW];
+            let cand = self.choice[g - first].map(|k| c.cands[k]);
+            if let Some(cd) = cand {
+                self.root = Some((cd, c.pt.pose.axis));
+            }
+            out(Out::Point(Committed {
+                pt: c.pt.clone(),
+                cand,
+                error: c.error.take(),
+            }));
         }
+        self.points -= n;
         // Re-root the rest on what was committed. Once a column's costs come out as its old ones
         // less one constant (every best path there ran through the committed choice), every later
         // column would too, with the same back pointers: a constant offset changes no choice, so
         // the rest is left as it is.
-        let slots = self.window.as_mut_slice();
         let mut prev: Option<usize> = None;
-        for i in 0..slots.len() {
-            if !matches!(&slots[i], Slot::Point(c) if c.error.is_none()) {
+        for g in self.pushed - self.points..self.pushed {
+            let i = g % WINDOW;
+            if self.cols[i].error.is_some() {
                 continue;
             }
-            let (before, after) = slots.split_at_mut(i);
-            let p = prev.and_then(|k| match &before[k] {
-                Slot::Point(c) => Some(c),
-                Slot::Event(_) => None,
-            });
-            if let Slot::Point(col) = &mut after[0] {
-                let old = col.cost;
-                relax(self.m, &self.root, p, col);
-                if offset_only(&old, &col.cost, col.cands.len()) {
-                    break;
-                }
+            let (p, col) = two(&mut self.cols, prev, i);
+            let old = col.cost;
+            relax(self.m, &self.root, p, col);
+            if offset_only(&old, &col.cost, col.cands.len()) {
+                break;
             }
             prev = Some(i);
         }
@@ -401,12 +438,9 @@ impl<'m> Planner<'m> {
 
     /// Commits everything (end of program).
     pub fn finish(&mut self, out: &mut impl FnMut(Out)) {
-        let n = self.points;
-        self.commit(n, out);
-        for slot in self.window.drain(..) {
-            if let Slot::Event(e) = slot {
-                out(Out::Event(e));
-            }
+        self.commit(self.points, out);
+        while let Some((_, e)) = self.events.pop_front() {
+            out(Out::Event(e));
         }
     }
 }

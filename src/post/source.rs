@@ -25,10 +25,10 @@ pub struct MotionPt {
     pub comment: Option<&'static str>,
     /// This point ends an arc from the previous one (CL CIRCLE): the engine writes G2/G3 where
     /// the control and the machine's pose allow, else it linearizes within the tolerance.
-    pub arc: Option<ArcSpec>,
+    pub arc: Option<Box<ArcSpec>>,
     /// This point is part of a drilling cycle's expansion: with canned-cycle output the engine
     /// may write the whole hole as one cycle block; `verify` finds a hole's top on the feed in.
-    pub hole: Option<HolePart>,
+    pub hole: Option<Box<HolePart>>,
 }
 
 /// The points of one hole, in order: `Start` (canned output only: rapid, above the hole at the
@@ -333,7 +333,7 @@ impl<R: BufRead> Source<R> {
 
     fn mark(&mut self, part: HolePart) {
         if let Some(Item::Motion(m)) = self.out.back_mut() {
-            m.hole = Some(part);
+            m.hole = Some(Box::new(part));
         }
     }
 
@@ -352,7 +352,7 @@ impl<R: BufRead> Source<R> {
         };
         self.push(line, p, rapid, false, None);
         if let (Some(a), Some(Item::Motion(m))) = (arc, self.out.back_mut()) {
-            m.arc = Some(a);
+            m.arc = Some(Box::new(a));
         }
         self.tip = Some(p);
     }

@@ -153,7 +153,7 @@ pub fn verify<C: BufRead, N: BufRead>(cl: C, nc: N, m: &Machine, o: &VerifyOptio
             if let Some((tip, axis)) = ahead[i].1 {
                 let mut dp = (tip - pt.pose.tip).norm();
                 // A hole's top (its CL point) lies on a canned cycle's feed into the hole.
-                if pt.hole == Some(HolePart::Top)
+                if pt.hole.as_deref() == Some(&HolePart::Top)
                     && !ahead[i].0.rapid
                     && let Some(Some((from, _))) = i.checked_sub(1).map(|k| ahead[k].1)
                 {
