@@ -107,6 +107,12 @@ impl<R: BufRead> Reader<R> {
             if self.done {
                 return Ok(None);
             }
+            if !self.in_comment
+                && self.pending.is_empty()
+                && let Some(s) = self.whole_goto()
+            {
+                return Ok(Some(Event::Statement(s)));
+            }
             let (got, overflow) = self.read_line()?;
             if !got {
                 self.done = true;
@@ -146,6 +152,26 @@ impl<R: BufRead> Reader<R> {
             }
             self.raw = raw;
         }
+    }
+
+    /// Most lines of a 5-axis file are one whole `GOTO/x,y,z,i,j,k`: read in place in the input
+    /// buffer, without the copy, UTF-8 check, comment scan and statement assembly every other line
+    /// goes through. Only a line the general path would read the same way is taken (ASCII, no
+    /// `$`, complete within the buffer, six or three short decimals); anything else is left for it.
+    fn whole_goto(&mut self) -> Option<Statement> {
+        let buf = self.input.fill_buf().ok()?;
+        let end = memchr(b'\n', buf)?;
+        let text = &buf[..end];
+        if memchr(b'$', text).is_some() {
+            return None;
+        }
+        let record = record::fast_goto(text.trim_ascii())?;
+        self.input.consume(end + 1);
+        self.line_no += 1;
+        Some(Statement {
+            line: self.line_no,
+            record,
+        })
     }
 
     /// Adds one physical line to the statement being assembled.

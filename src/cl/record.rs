@@ -178,7 +178,7 @@ struct Arg<'a> {
 /// Parses one statement (continuations joined). `None` when the statement yields no record; then
 /// `diags` says why.
 pub fn parse_statement(stmt: &str, line: u32, diags: &mut Vec<Diagnostic>) -> Option<Record> {
-    if let Some(r) = fast_goto(stmt) {
+    if let Some(r) = fast_goto(stmt.as_bytes()) {
         return Some(r);
     }
     let s = stmt.trim_start();
@@ -478,15 +478,22 @@ pub fn parse_statement(stmt: &str, line: u32, diags: &mut Vec<Diagnostic>) -> Op
 /// `GOTO/x,y,z[,i,j,k]` with plain numbers, parsed without allocating: nearly every statement
 /// of a large file. Anything else (or anything odd) goes to the general parser.
 #[inline]
-fn fast_goto(stmt: &str) -> Option<Record> {
-    let b = stmt.as_bytes();
-    if b.len() < 6 || !b[..4].eq_ignore_ascii_case(b"GOTO") {
+pub(crate) fn fast_goto(stmt: &[u8]) -> Option<Record> {
+    let len = stmt.len();
+    if len < 6 || !stmt[..4].eq_ignore_ascii_case(b"GOTO") {
         return None;
     }
-    let rest = stmt[4..].trim_start().strip_prefix('/')?.as_bytes();
-    // One pass over the arguments, each a short decimal (see `short_decimal`) with spaces around:
-    // anything else goes to the general parser, which also names what is wrong and where.
-    let mut v = [0.0; 6];
+    let slash = 4 + stmt[4..].iter().position(|c| !c.is_ascii_whitespace())?;
+    if stmt[slash] != b'/' {
+        return None;
+    }
+    let rest = &stmt[slash + 1..];
+    // One pass over the arguments, each a sign, at most 15 digits and a point, spaces around.
+    // Then the digits as an integer and 10^decimals are both exact doubles, and one IEEE division
+    // rounds their quotient correctly (Clinger's fast path): the same double as the general
+    // parser. Anything else (exponents, long mantissas, junk) goes to the general parser, which
+    // also names what is wrong and where.
+    let mut parts = [(0u64, 0usize, false); 6];
     let mut n = 0;
     let mut i = 0;
     loop {
@@ -504,28 +511,43 @@ fn fast_goto(stmt: &str) -> Option<Record> {
             }
             _ => false,
         };
-        let (mut m, mut digits, mut decimals, mut point) = (0u64, 0u32, 0usize, false);
-        while let Some(&c) = rest.get(i) {
-            let d = c.wrapping_sub(b'0');
-            if d < 10 {
-                if digits == 15 {
-                    return None; // beyond an exact double: the general parser rounds it
-                }
-                m = m * 10 + d as u64;
-                digits += 1;
-                decimals += point as usize;
-            } else if c == b'.' && !point {
-                point = true;
-            } else {
-                break;
-            }
+        let (mut m, mut digits, mut decimals) = (0u64, 0usize, 0usize);
+        while let Some(&c) = rest.get(i)
+            && c.is_ascii_digit()
+        {
+            m = m * 10 + (c - b'0') as u64;
+            digits += 1;
             i += 1;
+            if digits > 15 {
+                return None; // beyond an exact double: the general parser rounds it
+            }
+        }
+        if rest.get(i) == Some(&b'.') {
+            i += 1;
+            // Eight fraction digits at a time, off the one-digit dependency chain.
+            while let Some(c) = rest.get(i..i + 8)
+                && let Some(v) = eight_digits(u64::from_le_bytes([c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7]]))
+            {
+                if digits + 8 > 15 {
+                    return None;
+                }
+                m = m * 100_000_000 + v;
+                (digits, decimals, i) = (digits + 8, decimals + 8, i + 8);
+            }
+            while let Some(&c) = rest.get(i)
+                && c.is_ascii_digit()
+            {
+                m = m * 10 + (c - b'0') as u64;
+                (digits, decimals, i) = (digits + 1, decimals + 1, i + 1);
+                if digits > 15 {
+                    return None;
+                }
+            }
         }
         if digits == 0 || n == 6 {
             return None;
         }
-        let x = m as f64 / POW10_EXACT[decimals];
-        v[n] = if neg { -x } else { x };
+        parts[n] = (m, decimals, neg);
         n += 1;
         while i < rest.len() && rest[i].is_ascii_whitespace() {
             i += 1;
@@ -536,6 +558,11 @@ fn fast_goto(stmt: &str) -> Option<Record> {
             Some(_) => return None,
         }
     }
+    // The divisions last: independent of each other, they overlap.
+    let v = parts.map(|(m, decimals, neg)| {
+        let x = m as f64 / POW10_EXACT[decimals];
+        if neg { -x } else { x }
+    });
     match n {
         3 => Some(Record::Goto {
             p: [v[0], v[1], v[2]],
@@ -548,6 +575,23 @@ fn fast_goto(stmt: &str) -> Option<Record> {
         }),
         _ => None,
     }
+}
+
+/// Eight ASCII digits (the first in the lowest byte) as their value; `None` if any byte is not
+/// a digit. The SWAR reduction of fast_float's `parse_eight_digits`.
+#[inline]
+fn eight_digits(w: u64) -> Option<u64> {
+    const ZEROS: u64 = 0x3030_3030_3030_3030;
+    // Every byte 0x30..=0x39: high nibble 3, and adding 6 keeps it 3.
+    if (w & 0xF0F0_F0F0_F0F0_F0F0) != ZEROS || (w.wrapping_add(0x0606_0606_0606_0606) & 0xF0F0_F0F0_F0F0_F0F0) != ZEROS {
+        return None;
+    }
+    let mut v = w - ZEROS;
+    v = v.wrapping_mul(10).wrapping_add(v >> 8);
+    const MASK: u64 = 0x0000_00FF_0000_00FF;
+    let v1 = (v & MASK).wrapping_mul(100 + (1_000_000 << 32));
+    let v2 = ((v >> 16) & MASK).wrapping_mul(1 + (10_000 << 32));
+    Some((v1.wrapping_add(v2) >> 32) as u32 as u64)
 }
 
 /// 10^k for k ≤ 15: each an exact double.
@@ -709,10 +753,20 @@ mod tests {
     use proptest::prelude::*;
 
     fn goto(args: &str) -> Option<[f64; 6]> {
-        match fast_goto(&format!("GOTO/{args}")) {
+        match fast_goto(format!("GOTO/{args}").as_bytes()) {
             Some(Record::Goto { p, axis: Some(a) }) => Some([p[0], p[1], p[2], a[0], a[1], a[2]]),
             Some(Record::Goto { p, axis: None }) => Some([p[0], p[1], p[2], 0.0, 0.0, 0.0]),
             _ => None,
+        }
+    }
+
+    #[test]
+    fn eight_digits_at_once() {
+        assert_eq!(eight_digits(u64::from_le_bytes(*b"12345678")), Some(12_345_678));
+        assert_eq!(eight_digits(u64::from_le_bytes(*b"00000009")), Some(9));
+        assert_eq!(eight_digits(u64::from_le_bytes(*b"99999999")), Some(99_999_999));
+        for bad in [*b"1234567,", *b"/2345678", *b"1234:678", *b"12 45678", *b"\x001234567"] {
+            assert_eq!(eight_digits(u64::from_le_bytes(bad)), None);
         }
     }
 

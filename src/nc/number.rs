@@ -69,6 +69,21 @@ mod tests {
         s
     }
 
+    proptest::proptest! {
+        #[test]
+        fn fixed_words_are_the_integer_with_a_point(r in proptest::num::i64::ANY, dec in 0u32..=6) {
+            let p = 10u64.pow(dec);
+            let a = r.unsigned_abs();
+            let want = match dec {
+                0 => format!("{}{a}", if r < 0 { "-" } else { "" }),
+                d => format!("{}{}.{:0w$}", if r < 0 { "-" } else { "" }, a / p, a % p, w = d as usize),
+            };
+            let mut got = String::from("X");
+            write_fixed(&mut got, r, dec);
+            proptest::prop_assert_eq!(&got[1..], want.as_str());
+        }
+    }
+
     #[test]
     fn fixed_decimals_round_half_away_from_zero() {
         assert_eq!(f(1.2345, 3), "1.235");

@@ -454,10 +454,11 @@ const LOOK_AHEAD: usize = 256;
 const PLANE_AXIS_EPS: f64 = 1e-9;
 
 /// Whether the run of points after a rapid keeps `axis` until a rapid with another axis, a tool
-/// change or the end, as far as `ahead` shows (beyond it, the run is taken as fixed: a later cut
-/// that turns the axis is repositioned out of the plane).
+/// change or the end, as far as the next [`LOOK_AHEAD`] items show (beyond them, the run is taken
+/// as fixed: a later cut that turns the axis is repositioned out of the plane). Exactly that far,
+/// however much the planner happened to commit at once, so that the output does not depend on it.
 fn fixed_run_ahead(axis: &Vec3, ahead: &VecDeque<Out>) -> bool {
-    for o in ahead {
+    for o in ahead.iter().take(LOOK_AHEAD) {
         match o {
             Out::Event(ProgEvent::Tool { .. } | ProgEvent::End) => return true,
             Out::Event(_) => {}
