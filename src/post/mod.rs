@@ -1869,11 +1869,16 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             axes[k] = Some(to.joints.rotary[i].to_degrees());
         }
         let tilt = self.tilt;
-        let mut words = axes;
-        if let Some(t) = &tilt {
-            let q = self.plane_coords(t, &to.pose.tip);
-            words = [Some(q.x), Some(q.y), Some(q.z), None, None, None];
-        }
+        // Borrowed, not copied, in the common case (the copy stalled on the stores just made).
+        let plane_words;
+        let words = match &tilt {
+            Some(t) => {
+                let q = self.plane_coords(t, &to.pose.tip);
+                plane_words = [Some(q.x), Some(q.y), Some(q.z), None, None, None];
+                &plane_words
+            }
+            None => &axes,
+        };
         // Feed.
         let prev = self.at;
         let mut feed = None;
@@ -2054,7 +2059,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         };
         let extra = arc.as_ref().map_or("", |(_, w)| w.as_str());
         self.at = Some(to);
-        match self.f.motion(motion, &words, feed, extra, comment) {
+        match self.f.motion(motion, words, feed, extra, comment) {
             Some(text) => {
                 self.blocks += 1;
                 self.sum.blocks += 1;
