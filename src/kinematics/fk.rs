@@ -4,10 +4,19 @@
 use super::model::{Machine, Mount};
 use super::{Joints, Pose, Setup, Vec3};
 
-/// Rodrigues: rotate `v` by the angle whose cosine and sine are `c`, `s` about unit `k`.
+/// Rodrigues: rotate `v` by the angle whose cosine and sine are `c`, `s` about unit `k`:
+/// `v c + (k × v) s + k (k·v)(1 − c)`, written out per component (nalgebra's generic operators
+/// cost several times the instructions on this path, which replays every block).
 #[inline]
 pub(crate) fn rotate(k: &Vec3, c: f64, s: f64, v: &Vec3) -> Vec3 {
-    v * c + k.cross(v) * s + k * (k.dot(v) * (1.0 - c))
+    let (kx, ky, kz) = (k.x, k.y, k.z);
+    let (vx, vy, vz) = (v.x, v.y, v.z);
+    let d = (kx * vx + ky * vy + kz * vz) * (1.0 - c);
+    Vec3::new(
+        vx * c + (ky * vz - kz * vy) * s + kx * d,
+        vy * c + (kz * vx - kx * vz) * s + ky * d,
+        vz * c + (kx * vy - ky * vx) * s + kz * d,
+    )
 }
 
 /// The tool pose in the workpiece frame for commanded joints (NC words, radians).

@@ -472,6 +472,28 @@ fn fixed_run_ahead(axis: &Vec3, ahead: &VecDeque<Out>) -> bool {
     true
 }
 
+/// Hands what the planner committed to the emitter: at once, or with tilted planes through the
+/// look-ahead queue (see [`Emitter::drain`]). The first error stops the rest.
+fn deliver<S: Sink + ?Sized>(e: &mut Emitter<'_, S>, pending: &mut VecDeque<Out>, failed: &mut Option<Error>, x: Out) {
+    if failed.is_some() {
+        return;
+    }
+    if e.o.tilted_planes {
+        pending.push_back(x);
+        return;
+    }
+    let r = match x {
+        Out::Event(ev) => e.event(ev).map_err(Error::from),
+        Out::Point(c) => {
+            e.plane_ahead = false;
+            e.point(c)
+        }
+    };
+    if let Err(err) = r {
+        *failed = Some(err);
+    }
+}
+
 /// Post-processes CL from `input` for machine `m` into `sink`.
 pub fn post<R: BufRead, S: Sink + ?Sized>(input: R, m: &Machine, o: &Options, sink: &mut S) -> Result<Summary, Error> {
     let mut src = Source::new(input, m.units, o.cl_units, o.strict)?;
@@ -519,20 +541,24 @@ pub fn post<R: BufRead, S: Sink + ?Sized>(input: R, m: &Machine, o: &Options, si
     e.program_start()?;
     let mut planner = Planner::new(m, setup);
     let mut pending: VecDeque<Out> = VecDeque::new();
+    let mut failed: Option<Error> = None;
     loop {
         let item = src.next_item()?;
         let Some(item) = item else { break };
         match item {
-            Item::Motion(pt) => planner.push_point(pt, &mut |o| pending.push_back(o)),
+            Item::Motion(pt) => planner.push_point(pt, &mut |x| deliver(&mut e, &mut pending, &mut failed, x)),
             Item::Event(ProgEvent::ToolLength(l)) if o.tool_length.is_none() => {
                 // The tool length governs IK: it cannot wait in the window.
-                planner.finish(&mut |o| pending.push_back(o));
+                planner.finish(&mut |x| deliver(&mut e, &mut pending, &mut failed, x));
                 e.drain(&mut pending, true)?;
                 planner.setup.tool_length = l;
                 e.setup.tool_length = l;
                 e.sum.tool_length = l;
             }
-            Item::Event(ev) => planner.push_event(ev, &mut |o| pending.push_back(o)),
+            Item::Event(ev) => planner.push_event(ev, &mut |x| deliver(&mut e, &mut pending, &mut failed, x)),
+        }
+        if let Some(err) = failed.take() {
+            return Err(err);
         }
         e.drain(&mut pending, false)?;
         if let Some(d) = e.strict_error.take().or_else(|| src.strict_error.take()) {
@@ -542,7 +568,10 @@ pub fn post<R: BufRead, S: Sink + ?Sized>(input: R, m: &Machine, o: &Options, si
     if let Some(d) = src.strict_error.take() {
         return Err(Error::Strict(d));
     }
-    planner.finish(&mut |o| pending.push_back(o));
+    planner.finish(&mut |x| deliver(&mut e, &mut pending, &mut failed, x));
+    if let Some(err) = failed.take() {
+        return Err(err);
+    }
     e.drain(&mut pending, true)?;
     if let Some(d) = e.strict_error.take() {
         return Err(Error::Strict(d));
