@@ -265,3 +265,47 @@ fn find_comment(text: &str) -> Option<usize> {
 fn memchr(b: u8, s: &[u8]) -> Option<usize> {
     memchr::memchr(b, s)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    fn events(text: &[u8], capacity: usize) -> Vec<Event> {
+        let input = std::io::BufReader::with_capacity(capacity, text);
+        Reader::new(input).map(|e| e.expect("in-memory input")).collect()
+    }
+
+    proptest! {
+        /// The in-place GOTO path (a whole line in the buffer) and the general path (a line cut
+        /// by the buffer's end) read any mix of lines to the same events.
+        #[test]
+        fn events_do_not_depend_on_where_the_buffer_ends(
+            lines in prop::collection::vec(prop::sample::select(vec![
+                "GOTO/1.5,-2.25,3.0,0,0,1",
+                "  goto / 1.5 , -2.25 , 3.0  ",
+                "GOTO/1,2,3",
+                "GOTO/1.5,-2.25,3.0,0,0,1\r",
+                "GOTO/1.5,-2.25,$",
+                "3.0,0,0,1",
+                "GOTO/1,2,3 $$ a comment",
+                "$$ a comment that goes on $",
+                "GOTO/1e2,2,3",
+                "GOTO/1,2,",
+                "GOTO/12345678901234567,2,3",
+                "GOTO/0,0,0,0,0,0",
+                "GOTO/x,2,3",
+                "FEDRAT/500,MMPM",
+                "",
+            ]), 0..40),
+            small in 1usize..40,
+            last_newline: bool,
+        ) {
+            let mut text = lines.join("\n");
+            if last_newline {
+                text.push('\n');
+            }
+            prop_assert_eq!(events(text.as_bytes(), small), events(text.as_bytes(), 1 << 16));
+        }
+    }
+}

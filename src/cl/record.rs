@@ -181,6 +181,11 @@ pub fn parse_statement(stmt: &str, line: u32, diags: &mut Vec<Diagnostic>) -> Op
     if let Some(r) = fast_goto(stmt.as_bytes()) {
         return Some(r);
     }
+    parse_general(stmt, line, diags)
+}
+
+/// Every statement the long way (the fast path's reference in tests).
+fn parse_general(stmt: &str, line: u32, diags: &mut Vec<Diagnostic>) -> Option<Record> {
     let s = stmt.trim_start();
     let lead = (stmt.len() - s.len()) as u32;
     let (major, rest, rest_col) = match s.find('/') {
@@ -795,6 +800,65 @@ mod tests {
         ] {
             assert_eq!(goto(a), None, "{a}");
         }
+    }
+
+    /// A number as CAM systems and people write it: sign, leading zeros, a point anywhere or
+    /// none, an exponent now and then.
+    fn cl_number() -> impl Strategy<Value = String> {
+        (
+            prop::sample::select(vec!["", "-", "+"]),
+            "[0-9]{0,9}",
+            prop::option::weighted(0.8, "[0-9]{0,9}"),
+            prop::option::weighted(0.02, -3i32..3),
+        )
+            .prop_map(|(sign, int, frac, exp)| {
+                let mut s = format!("{sign}{int}");
+                if let Some(f) = frac {
+                    s += &format!(".{f}");
+                }
+                if let Some(e) = exp {
+                    s += &format!("e{e}");
+                }
+                s
+            })
+    }
+
+    /// Whatever the fast path takes, the general parser reads to the same record, bit for bit;
+    /// and it takes most well-formed GOTOs.
+    #[test]
+    fn the_fast_path_is_the_general_parser() {
+        use proptest::test_runner::{Config, TestRunner};
+        let lines = (
+            prop::sample::select(vec![3usize, 6, 6, 6, 4, 7]).prop_flat_map(|n| prop::collection::vec(cl_number(), n)),
+            prop::collection::vec(prop::sample::select(vec!["", " ", "  ", "\t"]), 16),
+            any::<bool>(),
+        );
+        let taken = std::cell::Cell::new(0);
+        let mut runner = TestRunner::new(Config {
+            cases: 2000,
+            ..Config::default()
+        });
+        runner
+            .run(&lines, |(nums, pad, lower)| {
+                let mut s = format!("{}{}{}/", pad[0], if lower { "goto" } else { "GOTO" }, pad[1]);
+                for (k, n) in nums.iter().enumerate() {
+                    if k > 0 {
+                        s.push(',');
+                    }
+                    s += &format!("{}{n}{}", pad[2 + k % 7], pad[9 + k % 7]);
+                }
+                if let Some(fast) = fast_goto(s.trim_ascii().as_bytes()) {
+                    taken.set(taken.get() + 1);
+                    let mut diags = Vec::new();
+                    let general = parse_general(&s, 1, &mut diags);
+                    let text = |r: &Record| format!("{r:?}");
+                    prop_assert_eq!(Some(text(&fast)), general.as_ref().map(text), "{}", s);
+                    prop_assert!(diags.is_empty(), "{}: {:?}", s, diags);
+                }
+                Ok(())
+            })
+            .unwrap();
+        assert!(taken.get() > 400, "the fast path took only {} of 2000 lines", taken.get());
     }
 
     proptest! {
