@@ -4,7 +4,7 @@
 //! by CIRCLE, an active drilling cycle. Arcs and cycles become plain points here (linearized or
 //! expanded) so the planner sees one kind of motion.
 
-use crate::cl::{CoolantCmd, CycleKind, CycleParams, Event, FeedUnit, Reader, Record, SpindleCmd};
+use crate::cl::{CoolantCmd, CycleKind, CycleParams, Event, FeedUnit, Reader, Record, SpindleCmd, Statement};
 use crate::diag::{Code, Diagnostic, Severity};
 use crate::kinematics::{Pose, Units, Vec3};
 use std::collections::VecDeque;
@@ -195,6 +195,22 @@ impl<R: BufRead> Source<R> {
                     }
                     self.out.push_back(Item::Event(ProgEvent::Diag(d)));
                 }
+                // The common case, a plain GOTO with nothing queued, handed over directly.
+                Event::Statement(Statement {
+                    line,
+                    record: Record::Goto { p, axis },
+                }) if self.cycle.is_none() && self.circle.is_none() => {
+                    if let Some(a) = axis
+                        && !self.set_axis(a, line)
+                    {
+                        continue;
+                    }
+                    let pt = self.point(line, Vec3::from(p));
+                    if self.out.is_empty() {
+                        return Ok(Some(Item::Motion(pt)));
+                    }
+                    self.out.push_back(Item::Motion(pt)); // after the axis warning
+                }
                 Event::Statement(s) => self.statement(s.line, s.record),
             }
         }
@@ -316,7 +332,12 @@ impl<R: BufRead> Source<R> {
     }
 
     fn push(&mut self, line: u32, p_cl: Vec3, rapid: bool, inserted: bool, comment: Option<&'static str>) {
-        self.out.push_back(Item::Motion(MotionPt {
+        let pt = self.motion_pt(line, p_cl, rapid, inserted, comment);
+        self.out.push_back(Item::Motion(pt));
+    }
+
+    fn motion_pt(&self, line: u32, p_cl: Vec3, rapid: bool, inserted: bool, comment: Option<&'static str>) -> MotionPt {
+        MotionPt {
             line,
             pose: Pose {
                 tip: p_cl * self.scale,
@@ -328,7 +349,14 @@ impl<R: BufRead> Source<R> {
             comment,
             arc: None,
             hole: None,
-        }));
+        }
+    }
+
+    /// A plain move (no cycle, no arc pending): what [`Source::motion`] makes of it.
+    fn point(&mut self, line: u32, p: Vec3) -> MotionPt {
+        let rapid = std::mem::take(&mut self.rapid_next) || self.feed.is_none();
+        self.tip = Some(p);
+        self.motion_pt(line, p, rapid, false, None)
     }
 
     fn mark(&mut self, part: HolePart) {
