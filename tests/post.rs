@@ -267,6 +267,43 @@ fn strict_mode_fails_cleanly_at_the_first_error() {
     assert!(!sink.nc.contains("M30"), "a failed program never ends as if complete");
 }
 
+/// A tilting axis whose travel leaves out 0 (B from 5° to 120°): the branch within travel is
+/// taken, though the other one turns C less. (Candidates were once judged with their rotary words
+/// set to 0, which made every candidate on such a machine "outside travel".)
+#[test]
+fn a_travel_that_leaves_out_zero_still_tells_the_branches_apart() {
+    let text = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/machines/haas-umc750.toml"))
+        .unwrap()
+        .replace("min = -35.0", "min = 5.0");
+    let m = kinepost::machines::parse_profile(&text, "b-from-5.toml", None)
+        .unwrap()
+        .machine;
+    let setup = Setup::new(m.default_tool_length, Vec3::zeros());
+    let b = m.rotary_index('B').unwrap();
+    let c = m.rotary_index('C').unwrap();
+    let mut cl = String::from("UNITS/INCHES\nFEDRAT/20,IPM\n");
+    for k in 0..5 {
+        // The pose of B = +30°, C = 170°: the other branch is B = −30°, C = −10°.
+        let mut j = Joints {
+            linear: [1.0 + k as f64 * 0.1, 2.0, 3.0],
+            rotary: [0.0; 3],
+        };
+        j.rotary[b] = 30f64.to_radians();
+        j.rotary[c] = 170f64.to_radians();
+        let p = fk(&m, &j, &setup);
+        cl += &format!(
+            "GOTO/{},{},{},{},{},{}\n",
+            p.tip.x, p.tip.y, p.tip.z, p.axis.x, p.axis.y, p.axis.z
+        );
+    }
+    let (sink, s) = run(&m, cl.as_bytes(), &Options::new(&m));
+    assert_eq!(s.errors, 0, "{:?}\n{}", sink.diags, sink.nc);
+    for blk in &sink.blocks {
+        let bw = blk.joints.0[4].unwrap();
+        assert!((bw - 30.0).abs() < 1e-3, "B{bw} in {}", sink.nc);
+    }
+}
+
 #[test]
 fn unreachable_poses_name_the_line_and_limits_name_the_axis() {
     let m = machine("vmc-3axis");

@@ -8,7 +8,7 @@
 //! re-rooted on what was committed. Memory is O(WINDOW · candidates), whatever the file's length.
 
 use super::source::{MotionPt, ProgEvent};
-use crate::kinematics::{IkOptions, Joints, Machine, Setup, Solution, Solutions, Vec3, ik_into, tool_axis};
+use crate::kinematics::{IkOptions, Machine, Setup, Solution, Solutions, Vec3, ik_into, tool_axis};
 use arrayvec::ArrayVec;
 use std::collections::VecDeque;
 
@@ -243,15 +243,13 @@ fn candidates(
 ) -> Result<(), crate::kinematics::Error> {
     ik_into(m, &pt.pose, setup, opt, buf)?;
     for s in buf.iter() {
-        let lin_ok = crate::kinematics::limit_violation(
-            m,
-            &Joints {
-                rotary: [0.0; 3],
-                ..s.joints
-            },
-            1e-6,
-        )
-        .is_none();
+        // The linears only (the rotaries' windings are judged below): a rotary word of 0 is not
+        // within every machine's travel.
+        let lin_ok = m
+            .linears
+            .iter()
+            .zip(&s.joints.linear)
+            .all(|(l, &v)| l.as_ref().is_none_or(|l| v >= l.min - 1e-6 && v <= l.max + 1e-6));
         // Bounded rotaries: the words within travel for this solution's angle (most have one).
         let mut ws: [ArrayVec<f64, 8>; 3] = Default::default();
         let mut combos = 1usize;
