@@ -118,7 +118,6 @@ pub struct Canned {
 }
 
 impl Canned {
-    /// Same cycle as written (levels, feed, peck, dwell): a next hole needs only its position.
     /// The same cycle started from (`x`, `y`) at level `z_start`: every Z level moves with it.
     pub fn start_at(&mut self, x: Option<f64>, y: Option<f64>, z_start: f64) {
         let shift = z_start - self.z_start;
@@ -128,6 +127,7 @@ impl Canned {
         (self.x, self.y) = (x, y);
     }
 
+    /// Same cycle as written (levels, feed, peck, dwell): a next hole needs only its position.
     pub fn same_cycle(&self, o: &Canned, f: &Formats) -> bool {
         let l = |a: f64, b: f64| round_to(a, f.linear) == round_to(b, f.linear);
         self.kind == o.kind

@@ -482,14 +482,7 @@ fn deliver<S: Sink + ?Sized>(e: &mut Emitter<'_, S>, pending: &mut VecDeque<Out>
         pending.push_back(x);
         return;
     }
-    let r = match x {
-        Out::Event(ev) => e.event(ev).map_err(Error::from),
-        Out::Point(c) => {
-            e.plane_ahead = false;
-            e.point(c)
-        }
-    };
-    if let Err(err) = r {
+    if let Err(err) = e.take(x, pending) {
         *failed = Some(err);
     }
 }
@@ -657,16 +650,21 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
     fn drain(&mut self, pending: &mut VecDeque<Out>, all: bool) -> Result<(), Error> {
         let keep = if all || !self.o.tilted_planes { 0 } else { LOOK_AHEAD };
         while pending.len() > keep {
-            match pending.pop_front() {
-                Some(Out::Event(ev)) => self.event(ev)?,
-                Some(Out::Point(c)) => {
-                    self.plane_ahead = c.pt.rapid && self.o.tilted_planes && fixed_run_ahead(&c.pt.pose.axis, pending);
-                    self.point(c)?
-                }
-                None => break,
-            }
+            let Some(o) = pending.pop_front() else { break };
+            self.take(o, pending)?;
         }
         Ok(())
+    }
+
+    /// One committed item, with what is known to follow it (the tilted-plane look-ahead).
+    fn take(&mut self, o: Out, ahead: &VecDeque<Out>) -> Result<(), Error> {
+        match o {
+            Out::Event(ev) => Ok(self.event(ev)?),
+            Out::Point(c) => {
+                self.plane_ahead = c.pt.rapid && self.o.tilted_planes && fixed_run_ahead(&c.pt.pose.axis, ahead);
+                self.point(c)
+            }
+        }
     }
 
     fn event(&mut self, ev: ProgEvent) -> std::io::Result<()> {

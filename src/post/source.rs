@@ -4,7 +4,7 @@
 //! by CIRCLE, an active drilling cycle. Arcs and cycles become plain points here (linearized or
 //! expanded) so the planner sees one kind of motion.
 
-use crate::cl::{CoolantCmd, CycleKind, CycleParams, Event, FeedUnit, Reader, Record, SpindleCmd, Statement};
+use crate::cl::{CoolantCmd, CycleKind, CycleParams, Event, FeedUnit, Reader, Record, SpindleCmd};
 use crate::diag::{Code, Diagnostic, Severity};
 use crate::kinematics::{Pose, Units, Vec3};
 use std::collections::VecDeque;
@@ -195,23 +195,15 @@ impl<R: BufRead> Source<R> {
                     }
                     self.out.push_back(Item::Event(ProgEvent::Diag(d)));
                 }
-                // The common case, a plain GOTO with nothing queued, handed over directly.
-                Event::Statement(Statement {
-                    line,
-                    record: Record::Goto { p, axis },
-                }) if self.cycle.is_none() && self.circle.is_none() => {
-                    if let Some(a) = axis
-                        && !self.set_axis(a, line)
-                    {
-                        continue;
+                Event::Statement(s) => {
+                    if let Some(pt) = self.statement(s.line, s.record) {
+                        // The common case, nothing queued before it: handed over directly.
+                        if self.out.is_empty() {
+                            return Ok(Some(Item::Motion(pt)));
+                        }
+                        self.out.push_back(Item::Motion(pt));
                     }
-                    let pt = self.point(line, Vec3::from(p));
-                    if self.out.is_empty() {
-                        return Ok(Some(Item::Motion(pt)));
-                    }
-                    self.out.push_back(Item::Motion(pt)); // after the axis warning
                 }
-                Event::Statement(s) => self.statement(s.line, s.record),
             }
         }
     }
@@ -248,24 +240,26 @@ impl<R: BufRead> Source<R> {
         true
     }
 
-    fn statement(&mut self, line: u32, rec: Record) {
+    /// One record: a plain move comes back (to go after whatever the record queued), everything
+    /// else is queued here.
+    fn statement(&mut self, line: u32, rec: Record) -> Option<MotionPt> {
         match rec {
             Record::Goto { p, axis } | Record::From { p, axis } => {
                 if let Some(a) = axis
                     && !self.set_axis(a, line)
                 {
-                    return;
+                    return None;
                 }
-                self.motion(line, Vec3::from(p));
+                return self.motion(line, Vec3::from(p));
             }
             Record::GoDelta { d, axis } => {
                 if let Some(a) = axis
                     && !self.set_axis(a, line)
                 {
-                    return;
+                    return None;
                 }
                 let base = self.tip.unwrap_or_else(Vec3::zeros);
-                self.motion(line, base + Vec3::from(d));
+                return self.motion(line, base + Vec3::from(d));
             }
             Record::Rapid => self.rapid_next = true,
             Record::Feedrate { value, unit, units } => {
@@ -310,7 +304,7 @@ impl<R: BufRead> Source<R> {
                 self.cycle = Some(c);
                 // Canned output says per hole what it could not write as a cycle.
                 if self.canned_cycles {
-                    return;
+                    return None;
                 }
                 self.diag(
                     Code::CycleExpanded,
@@ -329,6 +323,7 @@ impl<R: BufRead> Source<R> {
             }
             Record::Ignored(_) => {}
         }
+        None
     }
 
     fn push(&mut self, line: u32, p_cl: Vec3, rapid: bool, inserted: bool, comment: Option<&'static str>) {
@@ -352,25 +347,20 @@ impl<R: BufRead> Source<R> {
         }
     }
 
-    /// A plain move (no cycle, no arc pending): what [`Source::motion`] makes of it.
-    fn point(&mut self, line: u32, p: Vec3) -> MotionPt {
-        let rapid = std::mem::take(&mut self.rapid_next) || self.feed.is_none();
-        self.tip = Some(p);
-        self.motion_pt(line, p, rapid, false, None)
-    }
-
     fn mark(&mut self, part: HolePart) {
         if let Some(Item::Motion(m)) = self.out.back_mut() {
             m.hole = Some(Box::new(part));
         }
     }
 
-    fn motion(&mut self, line: u32, p: Vec3) {
+    /// A move to `p` (CL units): a drilling cycle's moves are queued here; a plain move (with the
+    /// arc it ends, if any) comes back.
+    fn motion(&mut self, line: u32, p: Vec3) -> Option<MotionPt> {
         let rapid = std::mem::take(&mut self.rapid_next) || self.feed.is_none();
         if let Some(c) = self.cycle {
             self.hole(line, p, c);
             self.tip = Some(p);
-            return;
+            return None;
         }
         let arc = match (self.circle.take(), self.tip) {
             (Some((center, axis, radius)), Some(start)) if !rapid => {
@@ -378,11 +368,10 @@ impl<R: BufRead> Source<R> {
             }
             _ => None,
         };
-        self.push(line, p, rapid, false, None);
-        if let (Some(a), Some(Item::Motion(m))) = (arc, self.out.back_mut()) {
-            m.arc = Some(Box::new(a));
-        }
+        let mut pt = self.motion_pt(line, p, rapid, false, None);
+        pt.arc = arc.map(Box::new);
         self.tip = Some(p);
+        Some(pt)
     }
 
     /// The arc from `start` to `end` about `axis` through `center` (CL units in, profile units
