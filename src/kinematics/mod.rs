@@ -127,6 +127,28 @@ pub fn reachable_within_limits(m: &Machine, sol: &Solution) -> bool {
             .all(|(i, r)| !r.windings(sol.actual[i], sol.actual[i]).is_empty())
 }
 
+/// `a` in (−π, π].
+#[inline]
+pub fn wrap(a: f64) -> f64 {
+    use std::f64::consts::{PI, TAU};
+    if a > -PI && a <= PI {
+        return a; // the common case, exactly, without fmod
+    }
+    let x = a + PI;
+    // `x.rem_euclid(TAU)` without fmod within a turn either side (a move between the branches of
+    // a table's C axis differs by up to two turns' worth of half turns): there fmod is `x − TAU`
+    // (exact, by Sterbenz) or `x`, and rem_euclid adds TAU to a negative remainder; the same
+    // operations, so the same bits.
+    let r = if (TAU..2.0 * TAU).contains(&x) {
+        x - TAU
+    } else if x < 0.0 && x > -TAU {
+        x + TAU
+    } else {
+        x.rem_euclid(TAU)
+    } - PI;
+    if r == -PI { PI } else { r }
+}
+
 /// Angle in radians between two vectors (robust near 0 and π).
 #[inline]
 pub fn angle_between(a: &Vec3, b: &Vec3) -> f64 {
@@ -138,4 +160,48 @@ pub fn angle_between(a: &Vec3, b: &Vec3) -> f64 {
         return t - t * t * t / 3.0;
     }
     s.atan2(c)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::wrap;
+    use std::f64::consts::{PI, TAU};
+
+    fn reference(a: f64) -> f64 {
+        if a > -PI && a <= PI {
+            return a;
+        }
+        let r = (a + PI).rem_euclid(TAU) - PI;
+        if r == -PI { PI } else { r }
+    }
+
+    proptest::proptest! {
+        #[test]
+        fn wrap_is_rem_euclid_bit_for_bit(a in -40.0f64..40.0, k in -8i32..8, ulps in -4i64..4) {
+            // Around every multiple of π too, where the branches of the fast path meet.
+            for x in [a, k as f64 * PI, f64::from_bits((k as f64 * PI).to_bits().wrapping_add_signed(ulps))] {
+                proptest::prop_assert_eq!(wrap(x).to_bits(), reference(x).to_bits(), "{}", x);
+            }
+        }
+    }
+
+    #[test]
+    fn wrap_keeps_odd_values() {
+        for x in [
+            f64::NAN,
+            f64::INFINITY,
+            -0.0,
+            0.0,
+            1e300,
+            -1e300,
+            -PI,
+            PI,
+            TAU,
+            -TAU,
+            3.0 * PI,
+            -3.0 * PI,
+        ] {
+            assert_eq!(wrap(x).to_bits(), reference(x).to_bits(), "{x}");
+        }
+    }
 }

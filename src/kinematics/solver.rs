@@ -8,7 +8,7 @@
 use super::fk::rotate;
 use super::model::{Linear, Machine, Mount, Rotary};
 use super::subproblem::{Cs, Pair, sp1};
-use super::{Error, Joints, Pose, Setup, Vec3};
+use super::{Error, Joints, Pose, Setup, Vec3, wrap};
 use arrayvec::ArrayVec;
 
 #[derive(Clone, Debug)]
@@ -710,13 +710,6 @@ fn polish(m: &Machine, pose: &Pose, setup: &Setup, sol: &mut Solution) {
         sol.actual[k] = x[lin.len() + k];
         sol.joints.rotary[k] = m.rotaries[k].word(sol.actual[k]);
     }
-}
-
-#[inline]
-fn wrap(a: f64) -> f64 {
-    use std::f64::consts::{PI, TAU};
-    let r = (a + PI).rem_euclid(TAU) - PI;
-    if r == -PI { PI } else { r }
 }
 
 /// The angle between `valid` (reach ≥ 0) and `invalid` (reach < 0) where reach crosses 0.

@@ -8,6 +8,7 @@
 //! re-rooted on what was committed. Memory is O(WINDOW · candidates), whatever the file's length.
 
 use super::source::{MotionPt, ProgEvent};
+pub use crate::kinematics::wrap;
 use crate::kinematics::{IkOptions, Machine, Setup, Solution, Solutions, Vec3, ik_into, tool_axis};
 use arrayvec::ArrayVec;
 use std::collections::VecDeque;
@@ -41,16 +42,104 @@ pub const FOLD_TOLERANCE: f64 = 0.0175;
 /// from one to the other with small rotary steps. A true branch jump swings the tool far off the
 /// CL orientation halfway.
 pub fn crosses_fold(m: &Machine, ja: &[f64; 3], jb: &[f64; 3], ua: &Vec3, ub: &Vec3) -> bool {
+    let mid = fold_mid(m, ja, jb);
+    fold_deviation_ok(&tool_axis(m, &mid), &fold_want(ua, ub))
+}
+
+/// The joint-space midpoint of a move (unbounded axes the short way round).
+#[inline]
+fn fold_mid(m: &Machine, ja: &[f64; 3], jb: &[f64; 3]) -> [f64; 3] {
     let mut mid = [0.0; 3];
     for (i, r) in m.rotaries.iter().enumerate() {
         let d = jb[i] - ja[i];
         mid[i] = ja[i] + 0.5 * if r.limits.is_none() { wrap(d) } else { d };
     }
-    let axis = tool_axis(m, &mid);
+    mid
+}
+
+/// The CL great circle's midpoint between two tool axes.
+#[inline]
+fn fold_want(ua: &Vec3, ub: &Vec3) -> Vec3 {
     let s = ua + ub;
-    let want = if s.norm() < 1e-9 { *ua } else { s.normalize() };
-    // angle ≤ tolerance, as a dot product (both unit): no libm call on the planner's hot path.
-    axis.dot(&want) >= FOLD_TOLERANCE.cos() * axis.norm() * want.norm()
+    if s.norm() < 1e-9 { *ua } else { s.normalize() }
+}
+
+/// Angle between `axis` and `want` ≤ [`FOLD_TOLERANCE`], as a dot product (no libm call).
+#[inline]
+fn fold_deviation_ok(axis: &Vec3, want: &Vec3) -> bool {
+    axis.dot(want) >= FOLD_TOLERANCE.cos() * axis.norm() * want.norm()
+}
+
+/// Fold checks remembered as lower bounds, so that most are answered without FK. A jump between
+/// branches is checked at every point of a cut (the other branch's chain carries the root's
+/// branch penalty, so the jump always looks cheaper than staying on it), and its deviation changes
+/// little from one point to the next: with `θ` the deviation measured at midpoint `q` and want
+/// `w`, the deviation at `q'`, `w'` is at least `θ − Σ|q'ᵢ − qᵢ| − ∠(w, w')`, since turning one
+/// rotary by δ turns the tool axis by at most δ (unit axes, and no angle error, whose slope would
+/// scale that). When that bound is beyond the tolerance, the check's answer (no) is known.
+pub(crate) struct FoldMemo {
+    enabled: bool,
+    /// Per candidate pair (`a·MAX_CANDS + b`): the last measured midpoint, want and deviation.
+    refs: Vec<FoldRef>,
+}
+
+#[derive(Clone, Copy)]
+struct FoldRef {
+    mid: [f64; 3],
+    want: Vec3,
+    theta: f64,
+}
+
+/// Slack (radians) for rounding in the bound and in `acos` near 0: the bound must never answer
+/// a check whose exact answer it could get wrong.
+const FOLD_BOUND_SLACK: f64 = 1e-7;
+
+impl FoldMemo {
+    pub(crate) fn new(m: &Machine) -> FoldMemo {
+        FoldMemo {
+            enabled: m.rotaries.iter().all(|r| r.angle_error.is_none()),
+            refs: vec![
+                FoldRef {
+                    mid: [0.0; 3],
+                    want: Vec3::zeros(),
+                    theta: f64::NEG_INFINITY,
+                };
+                MAX_CANDS * MAX_CANDS
+            ],
+        }
+    }
+
+    /// [`crosses_fold`], answered from the pair's last measurement where the bound allows.
+    fn crosses(&mut self, m: &Machine, pair: usize, ja: &[f64; 3], jb: &[f64; 3], ua: &Vec3, ub: &Vec3) -> bool {
+        let mid = fold_mid(m, ja, jb);
+        let want = fold_want(ua, ub);
+        let r = &mut self.refs[pair];
+        if r.theta > FOLD_TOLERANCE {
+            let mut moved = 0.0;
+            for i in 0..m.rotaries.len() {
+                moved += wrap(mid[i] - r.mid[i]).abs();
+            }
+            // The angle between unit vectors is at most π/2 times their chord.
+            let turned = std::f64::consts::FRAC_PI_2 * (want - r.want).norm();
+            if r.theta - moved - turned > FOLD_TOLERANCE + FOLD_BOUND_SLACK {
+                return false;
+            }
+        }
+        let axis = tool_axis(m, &mid);
+        let ok = fold_deviation_ok(&axis, &want);
+        // Remembered only where the bound holds: unit axes, and a unit want (not the
+        // degenerate reversal, where want is a CL axis as given).
+        let wn = want.norm();
+        if self.enabled && (wn - 1.0).abs() < 1e-12 {
+            let c = axis.dot(&want) / (axis.norm() * wn);
+            *r = FoldRef {
+                mid,
+                want,
+                theta: c.clamp(-1.0, 1.0).acos(),
+            };
+        }
+        ok
+    }
 }
 
 pub struct Column {
@@ -96,6 +185,8 @@ pub struct Planner<'m> {
     choice: Vec<Option<usize>>,
     buf: Solutions,
     opt: IkOptions,
+    fold: FoldMemo,
+    axes: PlanAxes,
 }
 
 /// Rotary travel (degrees) between two candidates, and whether the move changes branch or
@@ -104,19 +195,27 @@ pub struct Planner<'m> {
 /// Returns the cost without the branch penalty, and whether that penalty may apply (it needs
 /// the fold check, which callers skip when the move cannot win anyway).
 #[inline]
-fn transition(m: &Machine, a: &Cand, b: &Cand, rapid: bool) -> (f64, bool) {
-    let mut travel = 0.0;
-    let mut unwind = false;
-    for (i, r) in m.rotaries.iter().enumerate() {
-        if a.sol.singular == Some(i) || b.sol.singular == Some(i) {
-            continue;
+fn transition(ax: &PlanAxes, a: &Cand, b: &Cand, rapid: bool) -> (f64, bool) {
+    let (ja, jb) = (&a.sol.joints.rotary, &b.sol.joints.rotary);
+    let (sa, sb) = (a.sol.singular, b.sol.singular);
+    let (mut travel, mut unwind) = (0.0, false);
+    let mut axis = |i: usize| {
+        if sa != Some(i) && sb != Some(i) {
+            let d = jb[i] - ja[i];
+            let d = if ax.unbounded[i] { wrap(d) } else { d }.abs();
+            unwind |= d > std::f64::consts::PI;
+            travel += d;
         }
-        let d = b.sol.joints.rotary[i] - a.sol.joints.rotary[i];
-        let d = if r.limits.is_none() { wrap(d) } else { d };
-        if d.abs() > std::f64::consts::PI {
-            unwind = true;
-        }
-        travel += d.abs();
+    };
+    // Unrolled: a loop to a count known only at run time costs more than the work here.
+    if ax.n > 0 {
+        axis(0);
+    }
+    if ax.n > 1 {
+        axis(1);
+    }
+    if ax.n > 2 {
+        axis(2);
     }
     let mut cost = travel.to_degrees();
     if !rapid && unwind {
@@ -128,9 +227,29 @@ fn transition(m: &Machine, a: &Cand, b: &Cand, rapid: bool) -> (f64, bool) {
     (cost, !rapid && a.sol.branch * b.sol.branch < 0)
 }
 
+/// What [`transition`] needs of the machine, as plain arrays (it runs for every pair of
+/// candidates of every point).
+struct PlanAxes {
+    n: usize,
+    unbounded: [bool; 3],
+}
+
+impl PlanAxes {
+    fn new(m: &Machine) -> PlanAxes {
+        let mut unbounded = [false; 3];
+        for (u, r) in unbounded.iter_mut().zip(&m.rotaries) {
+            *u = r.limits.is_none();
+        }
+        PlanAxes {
+            n: m.rotaries.len().min(3),
+            unbounded,
+        }
+    }
+}
+
 /// The full transition cost, fold check included.
 fn transition_cost(m: &Machine, a: &Cand, b: &Cand, rapid: bool, ua: &Vec3, ub: &Vec3) -> f64 {
-    let (c, check) = transition(m, a, b, rapid);
+    let (c, check) = transition(&PlanAxes::new(m), a, b, rapid);
     if check && !crosses_fold(m, &a.sol.joints.rotary, &b.sol.joints.rotary, ua, ub) {
         c + BRANCH_PENALTY
     } else {
@@ -150,19 +269,15 @@ fn offset_only(old: &[f64; MAX_CANDS], new: &[f64; MAX_CANDS], n: usize) -> bool
     })
 }
 
-/// `a` in (−π, π].
-#[inline]
-pub fn wrap(a: f64) -> f64 {
-    use std::f64::consts::{PI, TAU};
-    if a > -PI && a <= PI {
-        return a; // the common case, exactly, without fmod
-    }
-    let r = (a + PI).rem_euclid(TAU) - PI;
-    if r == -PI { PI } else { r }
-}
-
 /// Costs of `col` from its predecessor column, or from the committed root.
-fn relax(m: &Machine, root: &Option<(Cand, Vec3)>, prev: Option<&Column>, col: &mut Column) {
+fn relax(
+    m: &Machine,
+    axes: &PlanAxes,
+    root: &Option<(Cand, Vec3)>,
+    fold: &mut FoldMemo,
+    prev: Option<&Column>,
+    col: &mut Column,
+) {
     let Column {
         pt,
         cands,
@@ -179,17 +294,22 @@ fn relax(m: &Machine, root: &Option<(Cand, Vec3)>, prev: Option<&Column>, col: &
             Some(p) => {
                 // Moves that need no fold check first, so that `best` is tight before any
                 // (costlier) check runs: the check can only add the branch penalty.
-                let mut deferred: ArrayVec<(usize, f64), MAX_CANDS> = ArrayVec::new();
+                let mut deferred = [0.0; MAX_CANDS];
+                let mut check_mask = 0u32;
                 for (a, ca) in p.cands.iter().enumerate() {
-                    let (t, check) = transition(m, ca, cb, rapid);
+                    let (t, check) = transition(axes, ca, cb, rapid);
                     let c = p.cost[a] + t;
                     if check {
-                        deferred.push((a, c));
+                        deferred[a] = c;
+                        check_mask |= 1 << a;
                     } else if c < best {
                         (best, arg) = (c, a as u8);
                     }
                 }
-                for &(a, mut c) in &deferred {
+                while check_mask != 0 {
+                    let a = check_mask.trailing_zeros() as usize;
+                    check_mask &= check_mask - 1;
+                    let mut c = deferred[a];
                     if c >= best {
                         continue; // the branch penalty only adds: no need to look at the fold
                     }
@@ -197,8 +317,9 @@ fn relax(m: &Machine, root: &Option<(Cand, Vec3)>, prev: Option<&Column>, col: &
                     let bit = 1u64 << (a * MAX_CANDS + b);
                     if *fold_known & bit == 0 {
                         *fold_known |= bit;
-                        if crosses_fold(
+                        if fold.crosses(
                             m,
+                            a * MAX_CANDS + b,
                             &p.cands[a].sol.joints.rotary,
                             &cb.sol.joints.rotary,
                             &p.pt.pose.axis,
@@ -317,6 +438,8 @@ impl<'m> Planner<'m> {
             choice: Vec::with_capacity(WINDOW),
             buf: Solutions::new(),
             opt: IkOptions::default(),
+            fold: FoldMemo::new(m),
+            axes: PlanAxes::new(m),
         }
     }
 
@@ -367,7 +490,7 @@ impl<'m> Planner<'m> {
             Err(e) => col.error = Some(Box::new(e)),
         }
         if col.error.is_none() {
-            relax(self.m, &self.root, prev, col);
+            relax(self.m, &self.axes, &self.root, &mut self.fold, prev, col);
         }
         if self.points >= WINDOW {
             self.commit(WINDOW - KEEP, out);
@@ -426,7 +549,7 @@ impl<'m> Planner<'m> {
             }
             let (p, col) = two(&mut self.cols, prev, i);
             let old = col.cost;
-            relax(self.m, &self.root, p, col);
+            relax(self.m, &self.axes, &self.root, &mut self.fold, p, col);
             if offset_only(&old, &col.cost, col.cands.len()) {
                 break;
             }
@@ -440,5 +563,90 @@ impl<'m> Planner<'m> {
         while let Some((_, e)) = self.events.pop_front() {
             out(Out::Event(e));
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn library() -> crate::machines::Library {
+        crate::machines::Library::load_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/machines").as_ref()).unwrap()
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(48))]
+        /// The memo answers exactly what the check answers, on slow walks of both candidates'
+        /// joints (the planner's case: consecutive points of a cut) that pass over the fold and
+        /// away from it again, on every shipped machine.
+        #[test]
+        fn the_fold_memo_answers_as_the_check_does(
+            seed in proptest::num::u64::ANY,
+            step in 1e-5f64..2e-2,
+            spread in 0.0f64..3.5,
+        ) {
+            let lib = library();
+            let mut rng = seed | 1;
+            let mut next = move || {
+                // xorshift: enough to wander.
+                rng ^= rng << 13;
+                rng ^= rng >> 7;
+                rng ^= rng << 17;
+                (rng >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+            };
+            for p in lib.iter() {
+                let m = &p.machine;
+                if m.rotaries.len() < 2 {
+                    continue;
+                }
+                let mut memo = FoldMemo::new(m);
+                let n = m.rotaries.len();
+                let mut ja = [0.0; 3];
+                let mut off = [0.0; 3];
+                for i in 0..n {
+                    ja[i] = next() * 2.0;
+                    off[i] = next() * spread;
+                }
+                let mut ua = tool_axis(m, &ja);
+                for _ in 0..400 {
+                    let mut ja2 = ja;
+                    let mut jb = [0.0; 3];
+                    for i in 0..n {
+                        ja2[i] += next() * step;
+                        // The other candidate drifts through the first one and away.
+                        off[i] += next() * step * 3.0;
+                        jb[i] = ja2[i] + off[i];
+                    }
+                    let ub = tool_axis(m, &jb);
+                    let exact = crosses_fold(m, &ja, &jb, &ua, &ub);
+                    let got = memo.crosses(m, 3, &ja, &jb, &ua, &ub);
+                    proptest::prop_assert_eq!(got, exact, "{} at {:?} {:?}", p.machine.id, ja, jb);
+                    ja = ja2;
+                    ua = tool_axis(m, &ja);
+                }
+            }
+        }
+    }
+
+    /// On a plain cut far from the fold, the memo answers nearly every check without FK.
+    #[test]
+    fn the_fold_memo_skips_most_checks_of_a_cut() {
+        let lib = library();
+        let m = &lib.get("spinner-u5-620").unwrap().machine;
+        let mut memo = FoldMemo::new(m);
+        let (mut exact_runs, mut crossed) = (0, 0);
+        for k in 0..1000 {
+            let t = k as f64 * 1e-3;
+            // B about 40°, C turning; the other candidate far away on the other side of the fold
+            // (not C + 180° exactly, whose midpoint rounds to either side from point to point).
+            let ja = [0.7 + 0.1 * t.sin(), t, 0.0];
+            let jb = [-0.6 * ja[0], wrap(ja[1] + 3.0), 0.0];
+            let (ua, ub) = (tool_axis(m, &ja), tool_axis(m, &ja));
+            let before = memo.refs[1].theta;
+            crossed += memo.crosses(m, 1, &ja, &jb, &ua, &ub) as usize;
+            exact_runs += (memo.refs[1].theta != before) as usize;
+        }
+        assert_eq!(crossed, 0, "a jump to a candidate 70° away is no fold crossing");
+        assert!(exact_runs < 20, "{exact_runs} of 1000 checks ran FK");
     }
 }
