@@ -161,11 +161,8 @@ impl<R: BufRead> Reader<R> {
     fn whole_goto(&mut self) -> Option<Statement> {
         let buf = self.input.fill_buf().ok()?;
         let end = memchr(b'\n', buf)?;
-        let text = &buf[..end];
-        if memchr(b'$', text).is_some() {
-            return None;
-        }
-        let record = record::fast_goto(text.trim_ascii())?;
+        // A `$` anywhere (continuation, comment) is outside fast_goto's grammar: it declines.
+        let record = record::fast_goto(buf[..end].trim_ascii())?;
         self.input.consume(end + 1);
         self.line_no += 1;
         Some(Statement {

@@ -529,15 +529,22 @@ pub(crate) fn fast_goto(stmt: &[u8]) -> Option<Record> {
         }
         if rest.get(i) == Some(&b'.') {
             i += 1;
-            // Eight fraction digits at a time, off the one-digit dependency chain.
-            while let Some(c) = rest.get(i..i + 8)
-                && let Some(v) = eight_digits(u64::from_le_bytes([c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7]]))
-            {
-                if digits + 8 > 15 {
+            // Up to eight fraction digits at a time, off the one-digit dependency chain, while
+            // eight bytes are left to load (the last few of a line go one by one below).
+            while let Some(c) = rest.get(i..i + 8) {
+                let w = u64::from_le_bytes([c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7]]);
+                let k = leading_digits(w);
+                if k == 0 {
+                    break;
+                }
+                if digits + k > 15 {
                     return None;
                 }
-                m = m * 100_000_000 + v;
-                (digits, decimals, i) = (digits + 8, decimals + 8, i + 8);
+                m = m * POW10_U64[k] + digits_value(w, k);
+                (digits, decimals, i) = (digits + k, decimals + k, i + k);
+                if k < 8 {
+                    break;
+                }
             }
             while let Some(&c) = rest.get(i)
                 && c.is_ascii_digit()
@@ -582,22 +589,38 @@ pub(crate) fn fast_goto(stmt: &[u8]) -> Option<Record> {
     }
 }
 
-/// Eight ASCII digits (the first in the lowest byte) as their value; `None` if any byte is not
-/// a digit. The SWAR reduction of fast_float's `parse_eight_digits`.
+const ZEROS: u64 = 0x3030_3030_3030_3030;
+
+/// How many of the eight bytes of `w` (the first in the lowest byte) are ASCII digits before the
+/// first that is not. A digit is 0x30..=0x39: high nibble 3, and adding 6 keeps it 3 (a carry out
+/// of a byte ≥ 0xFA only reaches bytes after that non-digit).
 #[inline]
-fn eight_digits(w: u64) -> Option<u64> {
-    const ZEROS: u64 = 0x3030_3030_3030_3030;
-    // Every byte 0x30..=0x39: high nibble 3, and adding 6 keeps it 3.
-    if (w & 0xF0F0_F0F0_F0F0_F0F0) != ZEROS || (w.wrapping_add(0x0606_0606_0606_0606) & 0xF0F0_F0F0_F0F0_F0F0) != ZEROS {
-        return None;
-    }
+fn leading_digits(w: u64) -> usize {
+    const HIGH: u64 = 0xF0F0_F0F0_F0F0_F0F0;
+    let bad = ((w & HIGH) ^ ZEROS) | ((w.wrapping_add(0x0606_0606_0606_0606) & HIGH) ^ ZEROS);
+    (bad.trailing_zeros() / 8) as usize
+}
+
+/// The value of the first `k` (1..=8) bytes of `w`, ASCII digits: shifted to the top with '0's
+/// below, which as leading zeros change nothing. The SWAR reduction of fast_float's
+/// `parse_eight_digits`.
+#[inline]
+fn digits_value(w: u64, k: usize) -> u64 {
+    let w = if k >= 8 {
+        w
+    } else {
+        (w << (8 * (8 - k))) | (ZEROS >> (8 * k))
+    };
     let mut v = w - ZEROS;
     v = v.wrapping_mul(10).wrapping_add(v >> 8);
     const MASK: u64 = 0x0000_00FF_0000_00FF;
     let v1 = (v & MASK).wrapping_mul(100 + (1_000_000 << 32));
     let v2 = ((v >> 16) & MASK).wrapping_mul(1 + (10_000 << 32));
-    Some((v1.wrapping_add(v2) >> 32) as u32 as u64)
+    (v1.wrapping_add(v2) >> 32) as u32 as u64
 }
+
+/// 10^k for k ≤ 8.
+const POW10_U64: [u64; 9] = [1, 10, 100, 1000, 10_000, 100_000, 1_000_000, 10_000_000, 100_000_000];
 
 /// 10^k for k ≤ 15: each an exact double.
 const POW10_EXACT: [f64; 16] = [
@@ -765,13 +788,47 @@ mod tests {
         }
     }
 
+    fn digits_naive(b: &[u8; 8]) -> (usize, u64) {
+        let k = b.iter().take_while(|c| c.is_ascii_digit()).count();
+        (k, b[..k].iter().fold(0, |v, c| v * 10 + (c - b'0') as u64))
+    }
+
     #[test]
-    fn eight_digits_at_once() {
-        assert_eq!(eight_digits(u64::from_le_bytes(*b"12345678")), Some(12_345_678));
-        assert_eq!(eight_digits(u64::from_le_bytes(*b"00000009")), Some(9));
-        assert_eq!(eight_digits(u64::from_le_bytes(*b"99999999")), Some(99_999_999));
-        for bad in [*b"1234567,", *b"/2345678", *b"1234:678", *b"12 45678", *b"\x001234567"] {
-            assert_eq!(eight_digits(u64::from_le_bytes(bad)), None);
+    fn digit_runs_at_once() {
+        for (b, k, v) in [
+            (*b"12345678", 8, 12_345_678),
+            (*b"00000009", 8, 9),
+            (*b"99999999", 8, 99_999_999),
+            (*b"224382,-", 6, 224_382),
+            (*b"1234:678", 4, 1234),
+            (*b"12 45678", 2, 12),
+            (*b"7\xfa\xff\xff\xff\xff\xff\xff", 1, 7),
+            (*b"/2345678", 0, 0),
+            (*b"\x001234567", 0, 0),
+        ] {
+            let w = u64::from_le_bytes(b);
+            assert_eq!(leading_digits(w), k, "{b:?}");
+            if k > 0 {
+                assert_eq!(digits_value(w, k), v, "{b:?}");
+            }
+        }
+    }
+
+    proptest::proptest! {
+        #[test]
+        fn digit_runs_agree_with_a_byte_loop(
+            b in proptest::array::uniform8(proptest::prop_oneof![
+                8 => b'0'..=b'9',
+                1 => proptest::num::u8::ANY,
+                1 => proptest::sample::select(vec![b',', b'.', b' ', b'/', b':', b'\xfa', b'\xff']),
+            ])
+        ) {
+            let (k, v) = digits_naive(&b);
+            let w = u64::from_le_bytes(b);
+            proptest::prop_assert_eq!(leading_digits(w), k);
+            if k > 0 {
+                proptest::prop_assert_eq!(digits_value(w, k), v);
+            }
         }
     }
 
@@ -784,7 +841,7 @@ mod tests {
         );
         assert_eq!(goto("1,2,3").map(bits), Some(bits([1.0, 2.0, 3.0, 0.0, 0.0, 0.0])));
         // To the general parser: exponents, long mantissas, empty and junk arguments, a trailing
-        // comma, a zero axis, too many values.
+        // comma, a zero axis, too many values, any `$`.
         let long = format!("{},0,0", "9".repeat(400));
         assert_eq!(goto(&long), None);
         for a in [
@@ -797,6 +854,11 @@ mod tests {
             "1,2,3,4,5,6,7",
             ".,1,2",
             "-,1,2",
+            // Continuations and comments: the reader relies on the fast path declining them.
+            "1,2,3 $$ a comment",
+            "1,2,$",
+            "1,2,3$",
+            "1,2$,3",
         ] {
             assert_eq!(goto(a), None, "{a}");
         }
