@@ -194,7 +194,7 @@ pub struct Planner<'m> {
 /// winding); the free axis of a singular candidate costs nothing (it keeps the previous angle).
 /// Returns the cost without the branch penalty, and whether that penalty may apply (it needs
 /// the fold check, which callers skip when the move cannot win anyway).
-#[inline]
+#[inline(always)]
 fn transition(ax: &PlanAxes, a: &Cand, b: &Cand, rapid: bool) -> (f64, bool) {
     let (ja, jb) = (&a.sol.joints.rotary, &b.sol.joints.rotary);
     let (sa, sb) = (a.sol.singular, b.sol.singular);
