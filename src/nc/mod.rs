@@ -460,12 +460,13 @@ impl Formatter {
         self.feed_mode = None;
     }
 
-    /// One motion block. `axes`: values for X Y Z A B C (None = not on this machine). Returns the
-    /// line, or None when nothing changed (no block needed).
+    /// One motion block. `words`: X Y Z A B C as written, rounded by [`Formatter::round_words`]
+    /// (None = not on this machine): the emitter rounds each once, for the line and for its FK
+    /// replay. Returns the line, or None when nothing changed (no block needed).
     pub fn motion(
         &mut self,
         motion: Motion,
-        axes: &[Option<f64>; 6],
+        words: &[Option<i64>; 6],
         feed: Option<(FeedMode, f64)>,
         extra: &str,
         comment: Option<&str>,
@@ -487,10 +488,9 @@ impl Formatter {
         let mut moved = false;
         let motion_pos = self.buf.len();
         let force = matches!(motion, Motion::Arc { .. });
-        for (i, v) in axes.iter().enumerate() {
-            let Some(v) = v else { continue };
-            let dec = if i < 3 { self.fmt.linear } else { self.fmt.rotary };
-            let r = round_to(*v, dec);
+        for (i, r) in words.iter().enumerate() {
+            let Some(r) = *r else { continue };
+            let dec = self.decimals(i);
             // An ISO arc names its end point whole; a Heidenhain `C` only the plane's (a Z
             // there would ask for a helix).
             if (force && i < if conv { 2 } else { 3 }) || self.axes[i] != Some(r) {
@@ -821,6 +821,28 @@ impl Formatter {
     }
 
     pub fn written(&self, value: f64, axis_index: usize) -> f64 {
-        number::rounded(value, if axis_index < 3 { self.fmt.linear } else { self.fmt.rotary })
+        number::rounded(value, self.decimals(axis_index))
+    }
+
+    /// Decimals of the word for axis slot `axis_index` (X Y Z A B C).
+    #[inline]
+    pub fn decimals(&self, axis_index: usize) -> u32 {
+        if axis_index < 3 { self.fmt.linear } else { self.fmt.rotary }
+    }
+
+    /// The words of `axes` as written: integers of 10^-decimals (see [`Formatter::motion`]).
+    #[inline]
+    pub fn round_words(&self, axes: &[Option<f64>; 6]) -> [Option<i64>; 6] {
+        let mut r = [None; 6];
+        for (k, v) in axes.iter().enumerate() {
+            r[k] = v.map(|v| round_to(v, self.decimals(k)));
+        }
+        r
+    }
+
+    /// The value a rounded word stands for: [`Formatter::written`] of what it was rounded from.
+    #[inline]
+    pub fn word_value(&self, rounded: i64, axis_index: usize) -> f64 {
+        rounded as f64 / number::POW10[self.decimals(axis_index).min(6) as usize]
     }
 }

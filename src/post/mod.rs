@@ -2025,14 +2025,29 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                 "tool axis within the singular cone: the free rotary is held",
             ));
         }
-        // Self-verification: FK of the words as written.
+        // Self-verification: FK of the words as written (rounded once, for the line too).
+        let rounded = self.f.round_words(words);
         let mut written = to.joints;
-        for i in 0..3 {
-            if let Some(v) = axes[i] {
-                written.linear[i] = self.f.written(v, i);
+        if tilt.is_none() {
+            // The words are the axes.
+            for i in 0..3 {
+                if let Some(r) = rounded[i] {
+                    written.linear[i] = self.f.word_value(r, i);
+                }
             }
+            for (i, r) in m.rotaries.iter().enumerate() {
+                if let Some(w) = rounded[r.slot()] {
+                    written.rotary[i] = self.f.word_value(w, r.slot()).to_radians();
+                }
+            }
+        } else {
+            for i in 0..3 {
+                if let Some(v) = axes[i] {
+                    written.linear[i] = self.f.written(v, i);
+                }
+            }
+            written.rotary = self.written_rotaries(&to.joints.rotary);
         }
-        written.rotary = self.written_rotaries(&to.joints.rotary);
         let replay = fk(m, &written, &self.setup);
         let tip_dev = if let Some(t) = &tilt {
             (self.plane_tip(t, [words[0], words[1], words[2]].map(|w| w.unwrap_or(0.0))) - to.pose.tip).norm()
@@ -2086,7 +2101,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         };
         let extra = arc.as_ref().map_or("", |(_, w)| w.as_str());
         self.at = Some(to);
-        match self.f.motion(motion, words, feed, extra, comment) {
+        match self.f.motion(motion, &rounded, feed, extra, comment) {
             Some(text) => {
                 self.blocks += 1;
                 self.sum.blocks += 1;
