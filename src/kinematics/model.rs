@@ -130,6 +130,22 @@ impl Rotary {
                 let k = ((near - actual) / TAU).round();
                 out.push(self.word(actual + k * TAU));
             }
+            Some((lo, hi)) if self.angle_error.is_none() => {
+                // The word is the angle: from a turn below the first in range upward until past
+                // the last (increasing with k), without floor/ceil (libm calls on baseline
+                // x86-64); a bounded count, so a NaN ends too. The same words as the loop below.
+                let start = (((lo - actual) / TAU) as i64).saturating_sub(2);
+                let turns = (((hi - lo) / TAU) as i64).saturating_add(5);
+                for k in start..=start.saturating_add(turns) {
+                    let w = actual + k as f64 * TAU;
+                    if w > hi + 1e-9 {
+                        break;
+                    }
+                    if self.within(w, 1e-9) && !out.is_full() {
+                        out.push(w.clamp(lo, hi));
+                    }
+                }
+            }
             Some((lo, hi)) => {
                 // Windings of the actual angle, then mapped to words; angle error is bounded, so a
                 // margin of one extra turn each side is enough to catch every word in range.
@@ -330,7 +346,8 @@ mod tests {
     use std::f64::consts::TAU;
 
     proptest! {
-        /// The short cut for travel under a turn gives what trying every winding gives.
+        /// The short cuts (travel under a turn, and longer travel without angle error) give what
+        /// trying every winding gives.
         #[test]
         fn windings_are_every_word_in_travel(lo in -7.0f64..7.0, span in 0.0f64..12.0, actual in -14.0f64..14.0) {
             let r = Rotary {
@@ -348,6 +365,23 @@ mod tests {
                 .map(|w| w.clamp(lo, lo + span))
                 .collect();
             prop_assert_eq!(r.windings(actual, 0.0).to_vec(), want);
+        }
+    }
+
+    #[test]
+    fn windings_of_no_angle_are_none() {
+        for limits in [(-1.0, 1.0), (-2.0 * TAU, 2.0 * TAU)] {
+            let r = Rotary {
+                name: 'C',
+                mount: Mount::Table,
+                axis: Vec3::z(),
+                pivot: Vec3::zeros(),
+                limits: Some(limits),
+                max_feed: None,
+                angle_error: None,
+            };
+            assert!(r.windings(f64::NAN, 0.0).is_empty());
+            assert!(r.windings(f64::INFINITY, 0.0).is_empty());
         }
     }
 }
