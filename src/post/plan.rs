@@ -113,8 +113,12 @@ impl FoldMemo {
     fn crosses(&mut self, m: &Machine, pair: usize, ja: &[f64; 3], jb: &[f64; 3], ua: &Vec3, ub: &Vec3) -> bool {
         let mid = fold_mid(m, ja, jb);
         let want = fold_want(ua, ub);
+        // The bound holds between unit wants (not the degenerate reversal, where want is a CL
+        // axis as given).
+        let wn = want.norm();
+        let unit = (wn - 1.0).abs() < 1e-12;
         let r = &mut self.refs[pair];
-        if r.theta > FOLD_TOLERANCE {
+        if unit && r.theta > FOLD_TOLERANCE {
             let mut moved = 0.0;
             for i in 0..m.rotaries.len() {
                 moved += wrap(mid[i] - r.mid[i]).abs();
@@ -127,10 +131,8 @@ impl FoldMemo {
         }
         let axis = tool_axis(m, &mid);
         let ok = fold_deviation_ok(&axis, &want);
-        // Remembered only where the bound holds: unit axes, and a unit want (not the
-        // degenerate reversal, where want is a CL axis as given).
-        let wn = want.norm();
-        if self.enabled && (wn - 1.0).abs() < 1e-12 {
+        // Remembered only where the bound holds: unit axes (no angle error), a unit want.
+        if self.enabled && unit {
             let c = axis.dot(&want) / (axis.norm() * wn);
             *r = FoldRef {
                 mid,
