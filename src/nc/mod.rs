@@ -843,6 +843,6 @@ impl Formatter {
     /// The value a rounded word stands for: [`Formatter::written`] of what it was rounded from.
     #[inline]
     pub fn word_value(&self, rounded: i64, axis_index: usize) -> f64 {
-        rounded as f64 / number::POW10[self.decimals(axis_index).min(6) as usize]
+        number::value(rounded, self.decimals(axis_index))
     }
 }

@@ -27,7 +27,13 @@ pub fn round_to(v: f64, dec: u32) -> i64 {
 /// `v` as written with `dec` decimals, read back.
 #[inline]
 pub fn rounded(v: f64, dec: u32) -> f64 {
-    round_to(v, dec) as f64 / POW10[dec.min(6) as usize]
+    value(round_to(v, dec), dec)
+}
+
+/// What a word of `r` units of 10^-dec stands for.
+#[inline]
+pub fn value(r: i64, dec: u32) -> f64 {
+    r as f64 / POW10[dec.min(6) as usize]
 }
 
 /// 10^d for the decimals a word can have.

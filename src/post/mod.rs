@@ -2025,28 +2025,27 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                 "tool axis within the singular cone: the free rotary is held",
             ));
         }
-        // Self-verification: FK of the words as written (rounded once, for the line too).
+        // Self-verification: FK of the machine's axes as written. Each word is rounded once, for
+        // the line too; outside a tilted plane the words are the axes.
         let rounded = self.f.round_words(words);
+        let tilted_axes;
+        let axes_written = match tilt {
+            None => &rounded,
+            Some(_) => {
+                tilted_axes = self.f.round_words(&axes);
+                &tilted_axes
+            }
+        };
         let mut written = to.joints;
-        if tilt.is_none() {
-            // The words are the axes.
-            for i in 0..3 {
-                if let Some(r) = rounded[i] {
-                    written.linear[i] = self.f.word_value(r, i);
-                }
+        for i in 0..3 {
+            if let Some(r) = axes_written[i] {
+                written.linear[i] = self.f.word_value(r, i);
             }
-            for (i, r) in m.rotaries.iter().enumerate() {
-                if let Some(w) = rounded[r.slot()] {
-                    written.rotary[i] = self.f.word_value(w, r.slot()).to_radians();
-                }
+        }
+        for (i, r) in m.rotaries.iter().enumerate() {
+            if let Some(w) = axes_written[r.slot()] {
+                written.rotary[i] = self.f.word_value(w, r.slot()).to_radians();
             }
-        } else {
-            for i in 0..3 {
-                if let Some(v) = axes[i] {
-                    written.linear[i] = self.f.written(v, i);
-                }
-            }
-            written.rotary = self.written_rotaries(&to.joints.rotary);
         }
         let replay = fk(m, &written, &self.setup);
         let tip_dev = if let Some(t) = &tilt {

@@ -249,9 +249,10 @@ impl PlanAxes {
     }
 }
 
-/// The full transition cost, fold check included.
-fn transition_cost(m: &Machine, a: &Cand, b: &Cand, rapid: bool, ua: &Vec3, ub: &Vec3) -> f64 {
-    let (c, check) = transition(&PlanAxes::new(m), a, b, rapid);
+/// The full transition cost, fold check included (from the committed root: once per commit).
+#[cold]
+fn transition_cost(m: &Machine, axes: &PlanAxes, a: &Cand, b: &Cand, rapid: bool, ua: &Vec3, ub: &Vec3) -> f64 {
+    let (c, check) = transition(axes, a, b, rapid);
     if check && !crosses_fold(m, &a.sol.joints.rotary, &b.sol.joints.rotary, ua, ub) {
         c + BRANCH_PENALTY
     } else {
@@ -340,7 +341,7 @@ fn relax(
             }
             None => {
                 best = match root {
-                    Some((r, ua)) => transition_cost(m, r, cb, rapid, ua, &pt.pose.axis),
+                    Some((r, ua)) => transition_cost(m, axes, r, cb, rapid, ua, &pt.pose.axis),
                     // First point of the program: prefer small angles, within travel.
                     None => {
                         cb.sol.joints.rotary.iter().map(|a| a.abs().to_degrees()).sum::<f64>() * 1e-3
