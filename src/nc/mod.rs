@@ -495,12 +495,7 @@ impl Formatter {
             // there would ask for a helix).
             if (force && i < if conv { 2 } else { 3 }) || self.axes[i] != Some(r) {
                 self.axes[i] = Some(r);
-                self.buf.push(AXIS_LETTERS[i]);
-                if conv && r >= 0 {
-                    self.buf.push('+');
-                }
-                write_fixed(&mut self.buf, r, dec);
-                self.buf.push(' ');
+                number::write_word(&mut self.buf, b"XYZABC"[i], conv, r, dec);
                 moved = true;
             }
         }
