@@ -1,12 +1,13 @@
 //! End to end on a generated 5-axis file: read, IK, plan, linearize, format, write (to a null
-//! sink), one core. `cargo bench --bench post [-- POINTS MACHINE MODE]`. Prints points per second
-//! and peak RSS (VmHWM), which must not grow with the input.
+//! sink), one core. `cargo bench --bench post [-- POINTS MACHINE]` runs TCP, then joint mode, and
+//! prints points per second and peak RSS (VmHWM), which must not grow with the input.
 //!
 //! Then the same file through the floor: a loop that only splits lines, parses the six numbers of
 //! each GOTO and writes five words (what the issue calls the floor to approach). This VM's speed
-//! varies by a third from day to day; kinepost's time over the floor's, measured in the same
-//! minute, does not, so that ratio is the figure to compare across days (2 M/s against the
-//! issue's 6.5 M/s floor is 3.25×).
+//! varies by a third from day to day and by half within an hour; kinepost's time over the
+//! floor's, measured in the same minute, varies less (4.5–5.8× over five runs in one hour while
+//! kinepost's own time ranged 1.06–1.63 s), so that ratio is the figure to compare across days
+//! (2 M/s against the issue's 6.5 M/s floor is 3.25×).
 
 use kinepost::machines::Library;
 use kinepost::post::{self, Mode, Options, TextSink};
