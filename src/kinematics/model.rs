@@ -103,26 +103,32 @@ impl Rotary {
         }
     }
 
+    /// [`Rotary::windings`] where it has at most one word, known without a search: less than a
+    /// turn of travel without angle error (most tilting axes), and an angle within a turn of it.
+    /// `Some(None)`: no word in travel; `None`: not that case (ask `windings`). The planner's hot
+    /// path, without floor/ceil (libm calls on baseline x86-64) or a list.
+    #[inline]
+    pub fn one_winding(&self, actual: f64) -> Option<Option<f64>> {
+        use std::f64::consts::TAU;
+        let (lo, hi) = self.limits?;
+        if self.angle_error.is_some() || hi - lo >= TAU - 1e-6 || !(actual >= lo - TAU && actual <= hi + TAU) {
+            return None;
+        }
+        Some(
+            [actual, actual - TAU, actual + TAU]
+                .into_iter()
+                .find(|&w| self.within(w, 1e-9))
+                .map(|w| w.clamp(lo, hi)),
+        )
+    }
+
     /// Every commanded word within travel that makes the axis stand at `actual` modulo a full
     /// turn, in increasing order. Unbounded axes get the one nearest `near`.
     pub fn windings(&self, actual: f64, near: f64) -> ArrayVec<f64, 8> {
         use std::f64::consts::TAU;
         let mut out = ArrayVec::new();
-        // Less than a turn of travel without angle error (most tilting axes), and an angle within
-        // a turn of it: at most one word is in range, found without floor/ceil (libm calls on
-        // baseline x86-64) on the planner's hot path. The same answer as the general loop.
-        if let Some((lo, hi)) = self.limits
-            && self.angle_error.is_none()
-            && hi - lo < TAU - 1e-6
-            && actual >= lo - TAU
-            && actual <= hi + TAU
-        {
-            for w in [actual, actual - TAU, actual + TAU] {
-                if self.within(w, 1e-9) {
-                    out.push(w.clamp(lo, hi));
-                    break;
-                }
-            }
+        if let Some(one) = self.one_winding(actual) {
+            out.extend(one);
             return out;
         }
         match self.limits {
@@ -364,7 +370,11 @@ mod tests {
                 .filter(|w| r.within(*w, 1e-9))
                 .map(|w| w.clamp(lo, lo + span))
                 .collect();
-            prop_assert_eq!(r.windings(actual, 0.0).to_vec(), want);
+            prop_assert_eq!(&r.windings(actual, 0.0).to_vec(), &want);
+            // The planner asks for the single word first, and takes it as the whole answer.
+            if let Some(one) = r.one_winding(actual) {
+                prop_assert_eq!(one.into_iter().collect::<Vec<_>>(), want);
+            }
         }
     }
 

@@ -374,38 +374,56 @@ fn candidates(
             .iter()
             .zip(&s.joints.linear)
             .all(|(l, &v)| l.as_ref().is_none_or(|l| v >= l.min - 1e-6 && v <= l.max + 1e-6));
-        // Bounded rotaries: the words within travel for this solution's angle (most have one).
+        // Bounded rotaries: the words within travel for this solution's angle. Most have at most
+        // one, known without a list (tilting axes); the others (a table over a turn of travel)
+        // multiply the candidates.
+        let mut v = *s;
+        let mut rot_ok = true;
         let mut ws: [ArrayVec<f64, 8>; 3] = Default::default();
+        let mut listed = [false; 3];
         let mut combos = 1usize;
         for (i, r) in m.rotaries.iter().enumerate() {
-            if r.limits.is_some() && s.singular != Some(i) {
-                ws[i] = r.windings(s.actual[i], s.actual[i]);
-                combos *= ws[i].len().max(1);
+            if r.limits.is_none() || s.singular == Some(i) {
+                continue;
+            }
+            match r.one_winding(s.actual[i]) {
+                Some(Some(w)) => v.joints.rotary[i] = w,
+                Some(None) => rot_ok = false, // out of travel: kept, marked infeasible
+                None => {
+                    ws[i] = r.windings(s.actual[i], s.actual[i]);
+                    combos *= ws[i].len().max(1);
+                    listed[i] = true;
+                }
             }
         }
+        // Full (at most MAX_CANDS): the rest are dropped.
+        let mut add = |sol, ok: bool| {
+            out.try_push(Cand {
+                sol,
+                feasible: lin_ok && ok,
+            })
+            .is_ok()
+        };
+        if listed == [false; 3] {
+            if !add(v, rot_ok) {
+                return Ok(());
+            }
+            continue;
+        }
         for k in 0..combos {
-            let mut v = *s;
+            let mut c = v;
+            let mut ok = rot_ok;
             let mut rest = k;
-            let mut rot_ok = true;
-            for (i, r) in m.rotaries.iter().enumerate() {
-                if r.limits.is_none() || s.singular == Some(i) {
-                    continue;
-                }
+            for i in (0..3).filter(|&i| listed[i]) {
                 match ws[i].len() {
-                    0 => rot_ok = false, // out of travel: kept, marked infeasible
+                    0 => ok = false,
                     n => {
-                        v.joints.rotary[i] = ws[i][rest % n];
+                        c.joints.rotary[i] = ws[i][rest % n];
                         rest /= n;
                     }
                 }
             }
-            if out
-                .try_push(Cand {
-                    sol: v,
-                    feasible: lin_ok && rot_ok,
-                })
-                .is_err()
-            {
+            if !add(c, ok) {
                 return Ok(());
             }
         }
