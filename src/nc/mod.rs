@@ -495,7 +495,7 @@ impl Formatter {
             // there would ask for a helix).
             if (force && i < if conv { 2 } else { 3 }) || self.axes[i] != Some(r) {
                 self.axes[i] = Some(r);
-                number::write_word(&mut self.buf, b"XYZABC"[i], conv, r, dec);
+                number::write_word(&mut self.buf, AXIS_LETTERS[i] as u8, conv, r, dec);
                 moved = true;
             }
         }
@@ -579,9 +579,7 @@ impl Formatter {
             let r = round_to(v, self.fmt.linear);
             if force || self.axes[i] != Some(r) {
                 self.axes[i] = Some(r);
-                self.buf.push(AXIS_LETTERS[i]);
-                self.number(v, self.fmt.linear, conv);
-                self.buf.push(' ');
+                number::write_word(&mut self.buf, AXIS_LETTERS[i] as u8, conv, r, self.fmt.linear);
             }
         }
     }

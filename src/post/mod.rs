@@ -2051,12 +2051,8 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         let tip_dev = if let Some(t) = &tilt {
             (self.plane_tip(t, [words[0], words[1], words[2]].map(|w| w.unwrap_or(0.0))) - to.pose.tip).norm()
         } else if tcp {
-            let w = Vec3::new(
-                self.f.written(to.pose.tip.x, 0),
-                self.f.written(to.pose.tip.y, 1),
-                self.f.written(to.pose.tip.z, 2),
-            );
-            (w - to.pose.tip).norm()
+            // X Y Z are the tip: its deviation is their rounding, already read back above.
+            (Vec3::from(written.linear) - to.pose.tip).norm()
         } else {
             (replay.tip - to.pose.tip).norm()
         };
