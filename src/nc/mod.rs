@@ -318,7 +318,19 @@ pub struct Formatter {
     units: &'static str,
 }
 
-pub const AXIS_LETTERS: [char; 6] = ['X', 'Y', 'Z', 'A', 'B', 'C'];
+/// The axis words' addresses as bytes, for the formatter's hot loop.
+pub const AXIS_ADDRESSES: [u8; 6] = *b"XYZABC";
+
+/// The same letters as `char`s, for summaries and previews.
+pub const AXIS_LETTERS: [char; 6] = {
+    let mut letters = ['\0'; 6];
+    let mut i = 0;
+    while i < 6 {
+        letters[i] = AXIS_ADDRESSES[i] as char;
+        i += 1;
+    }
+    letters
+};
 
 impl Formatter {
     pub fn new(d: &'static Dialect, fmt: Formats, sequence_numbers: bool) -> Formatter {
@@ -495,7 +507,7 @@ impl Formatter {
             // there would ask for a helix).
             if (force && i < if conv { 2 } else { 3 }) || self.axes[i] != Some(r) {
                 self.axes[i] = Some(r);
-                number::write_word(&mut self.buf, AXIS_LETTERS[i] as u8, conv, r, dec);
+                number::write_word(&mut self.buf, AXIS_ADDRESSES[i], conv, r, dec);
                 moved = true;
             }
         }
@@ -579,7 +591,7 @@ impl Formatter {
             let r = round_to(v, self.fmt.linear);
             if force || self.axes[i] != Some(r) {
                 self.axes[i] = Some(r);
-                number::write_word(&mut self.buf, AXIS_LETTERS[i] as u8, conv, r, self.fmt.linear);
+                number::write_word(&mut self.buf, AXIS_ADDRESSES[i], conv, r, self.fmt.linear);
             }
         }
     }

@@ -49,8 +49,10 @@ pub fn write_fixed(out: &mut String, r: i64, dec: u32) {
 }
 
 /// One axis word: `letter`, a `+` before a value ≥ 0 when `plus` (conversational), the value as
-/// [`write_fixed`] writes it, and a space: one append for the whole word.
-#[inline]
+/// [`write_fixed`] writes it, and a space: one append for the whole word. Always inlined: the
+/// motion block's loop is the formatter's hot path, and with a second caller (a hole's X/Y) the
+/// compiler stopped inlining it there, at ≈ 100 instructions a CL point.
+#[inline(always)]
 pub fn write_word(out: &mut String, letter: u8, plus: bool, r: i64, dec: u32) {
     assert!(letter.is_ascii(), "an NC word's address is ASCII");
     let mut t = Ascii::new();
