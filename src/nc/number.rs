@@ -106,6 +106,14 @@ impl Ascii {
         self.buf[self.start] = b;
     }
 
+    /// The two digits of `n` (< 100).
+    #[inline(always)]
+    fn pair(&mut self, n: u64) {
+        let p = n as usize * 2;
+        self.start -= 2;
+        self.buf[self.start..self.start + 2].copy_from_slice(&PAIRS[p..p + 2]);
+    }
+
     #[inline(always)]
     fn append(&mut self, b: u8) {
         self.buf[self.end] = b;
@@ -116,10 +124,8 @@ impl Ascii {
     #[inline(always)]
     fn digits(&mut self, mut n: u64, mut digits: u32) {
         while digits >= 2 {
-            let p = (n % 100) as usize * 2;
+            self.pair(n % 100);
             n /= 100;
-            self.start -= 2;
-            self.buf[self.start..self.start + 2].copy_from_slice(&PAIRS[p..p + 2]);
             digits -= 2;
         }
         if digits == 1 {
@@ -131,15 +137,11 @@ impl Ascii {
     #[inline(always)]
     fn whole(&mut self, mut n: u64) {
         while n >= 100 {
-            let p = (n % 100) as usize * 2;
+            self.pair(n % 100);
             n /= 100;
-            self.start -= 2;
-            self.buf[self.start..self.start + 2].copy_from_slice(&PAIRS[p..p + 2]);
         }
         if n >= 10 {
-            let p = n as usize * 2;
-            self.start -= 2;
-            self.buf[self.start..self.start + 2].copy_from_slice(&PAIRS[p..p + 2]);
+            self.pair(n);
         } else {
             self.prepend(b'0' + n as u8);
         }
