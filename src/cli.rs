@@ -73,7 +73,7 @@ pub enum Command {
         #[command(flatten)]
         setup: SetupArgs,
         /// Position tolerance in profile units (default 0.01 mm / 0.0004 in).
-        #[arg(long)]
+        #[arg(long, allow_hyphen_values = true)]
         tolerance: Option<f64>,
         #[arg(long)]
         #[arg(value_enum)]
@@ -311,7 +311,12 @@ pub struct ServeArgs {
     #[arg(long, env = "KINEPOST_MAX_JOBS_PER_CLIENT", default_value_t = 100)]
     pub max_jobs_per_client: u64,
     /// Hours a finished job and its files are kept.
-    #[arg(long, env = "KINEPOST_JOB_RETENTION_HOURS", default_value_t = 168.0)]
+    #[arg(
+        long,
+        env = "KINEPOST_JOB_RETENTION_HOURS",
+        default_value_t = 168.0,
+        allow_hyphen_values = true
+    )]
     pub job_retention_hours: f64,
     /// Log format: text or json.
     #[arg(long, env = "KINEPOST_LOG_FORMAT", default_value = "text")]
@@ -328,11 +333,11 @@ pub struct ServeArgs {
     #[arg(long, env = "KINEPOST_SPOOL_DIR")]
     pub spool_dir: Option<std::path::PathBuf>,
     /// Seconds without a report after which another replica takes a running job over.
-    #[arg(long, env = "KINEPOST_JOB_LEASE_SECS", default_value_t = 30.0)]
+    #[arg(long, env = "KINEPOST_JOB_LEASE_SECS", default_value_t = 30.0, allow_hyphen_values = true)]
     pub job_lease_secs: f64,
     /// Seconds requests in flight get after SIGTERM before the server stops anyway (jobs
     /// running then resume on the next start).
-    #[arg(long, env = "KINEPOST_SHUTDOWN_GRACE", default_value_t = 60.0)]
+    #[arg(long, env = "KINEPOST_SHUTDOWN_GRACE", default_value_t = 60.0, allow_hyphen_values = true)]
     pub shutdown_grace: f64,
 }
 
@@ -380,8 +385,9 @@ pub struct PostArgs {
     pub mode: ModeArg,
     #[command(flatten)]
     pub setup: SetupArgs,
-    /// Chord tolerance in profile units (default 0.01 mm / 0.0004 in).
-    #[arg(long)]
+    /// Chord tolerance in profile units (default 0.01 mm / 0.0004 in, at most 1 mm / 0.04 in):
+    /// also the bound of the FK replay's tip check.
+    #[arg(long, allow_hyphen_values = true)]
     pub tolerance: Option<f64>,
     /// Units of the CL file when it does not say (mm or inch).
     #[arg(long)]
@@ -390,7 +396,7 @@ pub struct PostArgs {
     /// N numbers on blocks.
     #[arg(long)]
     pub sequence_numbers: bool,
-    #[arg(long, default_value_t = 1000)]
+    #[arg(long, default_value_t = 1000, allow_hyphen_values = true)]
     pub program_number: u32,
     /// Stop at the first error (bad record, unreachable pose, limit) with a non-zero exit.
     #[arg(long)]
@@ -398,7 +404,7 @@ pub struct PostArgs {
     /// Orientation tolerance in degrees near a singular direction: the free rotary is held
     /// while the tool axis stays within it of the CL orientation (e.g. 0.5 for ball-end tools).
     /// Default 0: exact.
-    #[arg(long, default_value_t = 0.0)]
+    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
     pub singular_tolerance: f64,
     /// Drilling cycles as the control's canned cycles (G81/G82/G83, CYCLE81–83, CYCL DEF 200)
     /// where the hole runs along the machine's Z; default: expanded into moves.
@@ -518,6 +524,16 @@ fn lint(input: &str, verbose: bool) -> Result<(), String> {
     }
 }
 
+/// A duration option given in `unit` seconds, within [min, max] units: a clear error for
+/// anything else (NaN and negatives would panic in `Duration`, and clamping hides a typo).
+fn seconds(flag: &str, v: f64, min: f64, max: f64, unit: f64) -> Result<std::time::Duration, String> {
+    if v.is_finite() && (min..=max).contains(&v) {
+        Ok(std::time::Duration::from_secs_f64(v * unit))
+    } else {
+        Err(format!("--{flag}: expected a number from {min} to {max}, got {v}"))
+    }
+}
+
 fn serve(cli: &Cli, a: &ServeArgs) -> Result<(), String> {
     let filter =
         tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
@@ -542,12 +558,12 @@ fn serve(cli: &Cli, a: &ServeArgs) -> Result<(), String> {
             .max(1),
         max_queued: a.max_queued,
         max_jobs_per_client: a.max_jobs_per_client,
-        job_retention: std::time::Duration::from_secs_f64((a.job_retention_hours * 3600.0).clamp(0.0, 1e10)),
+        job_retention: seconds("job-retention-hours", a.job_retention_hours, 0.0, 1e6, 3600.0)?,
         admin_token: a.admin_token.clone().filter(|t| !t.is_empty()),
         database_url: a.database_url.clone().filter(|u| !u.is_empty()),
         spool_dir: a.spool_dir.clone(),
-        job_lease: std::time::Duration::from_secs_f64(a.job_lease_secs.clamp(1.0, 86400.0)),
-        shutdown_grace: std::time::Duration::from_secs_f64(a.shutdown_grace.clamp(0.0, 86400.0)),
+        job_lease: seconds("job-lease-secs", a.job_lease_secs, 1.0, 86400.0, 1.0)?,
+        shutdown_grace: seconds("shutdown-grace", a.shutdown_grace, 0.0, 86400.0, 1.0)?,
     };
     let rt = tokio::runtime::Runtime::new().map_err(|e| e.to_string())?;
     let r = rt.block_on(crate::http::serve(cfg));
@@ -744,11 +760,16 @@ fn post_cmd(p: &machines::Profile, a: &PostArgs) -> Result<(), String> {
         );
     }
     eprintln!(
-        "kinepost: {} CL points -> {} blocks ({} inserted); {}; FK replay max {:.2e} {} / {:.2e}°; {} errors, {} warnings; est. {:.1} min",
+        "kinepost: {} CL points -> {} blocks ({} inserted); {}FK replay max {:.2e} {} / {:.2e}°; {} errors, {} warnings; est. {:.1} min",
         s.cl_points,
         s.blocks,
         s.inserted_blocks,
-        rot.join(", "),
+        // No rotary moved (or none on the machine): nothing to list.
+        if rot.is_empty() {
+            String::new()
+        } else {
+            format!("{}; ", rot.join(", "))
+        },
         s.max_tip_deviation,
         m.units.as_str(),
         s.max_axis_deviation_deg,

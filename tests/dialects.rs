@@ -1086,3 +1086,35 @@ fn golden_tilted_plane_programs() {
         }
     }
 }
+
+/// A program number the control's frame cannot carry (`O` and four digits on fanuc, five on
+/// haas; `O0` nowhere) is refused with the range, before anything is written; the dialects that
+/// name programs take any.
+#[test]
+fn program_numbers_are_checked_against_the_dialects_program_frame() {
+    let lib = Library::load_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap();
+    let m = &lib.get("dmg-dmc75v").unwrap().machine;
+    let settings = |dialect: &str, n: u32| post::Settings {
+        dialect: Some(dialect.into()),
+        program_number: Some(n),
+        ..Default::default()
+    };
+    for (dialect, max) in [
+        ("fanuc", Some(9999)),
+        ("haas", Some(99999)),
+        ("siemens", None),
+        ("heidenhain", None),
+        ("linuxcnc", None),
+    ] {
+        match max {
+            Some(max) => {
+                assert!(settings(dialect, max).options(m).is_ok());
+                for bad in [0, max + 1, u32::MAX] {
+                    let e = settings(dialect, bad).options(m).unwrap_err();
+                    assert_eq!(e, format!("program_number {bad}: {dialect} takes 1 to {max}"));
+                }
+            }
+            None => assert!(settings(dialect, u32::MAX).options(m).is_ok()),
+        }
+    }
+}

@@ -49,6 +49,11 @@ const CASES: &[(&str, &str, Option<u32>)] = &[
     ("CIRCLE/1,2,3,0,0,1,5.x", "bad_record", Some(20)),
     ("GOTO/1,$\n2,x", "bad_record", Some(10)),
     ("GOTO/1,2,3,0,0,0", "bad_record", Some(12)),
+    ("FEDRAT/0,MMPM", "bad_record", Some(8)),
+    ("LOADTL/2.5", "bad_record", Some(8)),
+    ("LOADTL/-1", "bad_record", Some(8)),
+    ("LOADTL/999999999999", "bad_record", Some(8)),
+    ("LOAD/TOOL", "bad_record", Some(6)),
     ("LONG", "line_too_long", None),
 ];
 
@@ -62,8 +67,8 @@ fn body(case: &str) -> String {
 }
 
 #[test]
-fn the_table_has_forty_cases() {
-    assert!(CASES.len() >= 40);
+fn the_table_has_forty_five_cases() {
+    assert!(CASES.len() >= 45);
 }
 
 #[test]

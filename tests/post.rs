@@ -250,6 +250,80 @@ fn bad_records_are_diagnostics_with_line_and_column_and_the_rest_goes_on() {
     assert!(sink.nc.trim_end().ends_with("M30\n%") || sink.nc.trim_end().ends_with('%'));
 }
 
+/// Moves the CAM system did not give a feed are written at rapid, and the post says so once;
+/// FROM positions at rapid even with a feed in force; a bad tool number changes no tool; a
+/// negative drilling depth positions the hole only, with a warning.
+#[test]
+fn feedless_moves_from_bad_tools_and_negative_depths_are_told() {
+    let m = machine("spinner-u5-620");
+    let cl = "UNITS/MM\nLOADTL/3\nGOTO/0,0,50\nGOTO/0,0,40\nGOTO/0,0,30\nFEDRAT/500,MMPM\n\
+              GOTO/0,0,20\nFROM/0,0,60\nGOTO/0,0,55\nLOADTL/4.5\nCYCLE/DRILL,-5,MMPM,100\nGOTO/5,5,0\nCYCLE/OFF\n";
+    let (sink, _) = run(&m, cl.as_bytes(), &Options::new(&m));
+    let no_feed: Vec<_> = sink.diags.iter().filter(|d| d.code == Code::NoFeed).collect();
+    assert_eq!(no_feed.len(), 1, "{:?}", sink.diags);
+    assert_eq!((no_feed[0].line, no_feed[0].severity), (Some(4), Severity::Warning));
+    let lines: Vec<&str> = sink.nc.lines().collect();
+    let at = |z: &str| {
+        lines
+            .iter()
+            .position(|l| l.contains(z))
+            .unwrap_or_else(|| panic!("{z} in\n{}", sink.nc))
+    };
+    let has = |l: &str, w: &str| l.split_whitespace().any(|x| x == w);
+    // Z40 and Z30 before any FEDRAT: rapid (G0 stays modal from the first move, no G1 before).
+    assert!(!lines[..at("Z30.")].iter().any(|l| has(l, "G1")), "{}", sink.nc);
+    assert!(has(lines[at("Z20.")], "G1"), "{}", sink.nc);
+    assert!(has(lines[at("Z60.")], "G0"), "FROM positions at rapid:\n{}", sink.nc);
+    assert!(has(lines[at("Z55.")], "G1"), "{}", sink.nc);
+    let tool = sink
+        .diags
+        .iter()
+        .find(|d| d.line == Some(10))
+        .expect("bad tool number reported");
+    assert_eq!(
+        (tool.code, tool.severity, tool.column),
+        (Code::BadRecord, Severity::Error, Some(8))
+    );
+    let tools: Vec<_> = lines.iter().filter(|l| has(l, "M6")).collect();
+    assert_eq!(tools, [&"T3 M6"], "{}", sink.nc);
+    let depth = sink
+        .diags
+        .iter()
+        .find(|d| d.line == Some(11))
+        .expect("negative depth reported");
+    assert_eq!(depth.severity, Severity::Warning);
+    assert!(depth.message.contains("negative"), "{depth}");
+    assert!(!sink.nc.contains("Z-5."), "no hole drilled upward or downward:\n{}", sink.nc);
+}
+
+/// A feed per revolution on a stopped spindle is no feed per minute of 0 (an alarm on the
+/// control) but the per-minute reading, with a warning.
+#[test]
+fn a_feed_per_revolution_at_s0_is_not_f0() {
+    let m = machine("spinner-u5-620");
+    let cl = "UNITS/MM\nSPINDL/0,RPM\nFEDRAT/0.2,MMPR\nGOTO/1,2,3\nGOTO/5,0,0\n";
+    let (sink, _) = run(&m, cl.as_bytes(), &Options::new(&m));
+    assert!(sink.nc.contains("G1 X5.000 Y0.000 Z0.000 F0.2"), "{}", sink.nc);
+    assert!(
+        sink.diags
+            .iter()
+            .any(|d| d.code == Code::FeedClamped && d.message.contains("no spindle speed"))
+    );
+}
+
+/// A file that moves nothing (a wrong upload) still makes a program, but never a silent one.
+#[test]
+fn a_file_without_motion_is_told() {
+    let m = machine("spinner-u5-620");
+    for cl in ["", "PARTNO/EMPTY\nUNITS/MM\nFINI\n", "\u{1}\u{2}PNG\n"] {
+        let (sink, s) = run(&m, cl.as_bytes(), &Options::new(&m));
+        let d = sink.diags.iter().find(|d| d.code == Code::NoMotion).expect("no_motion");
+        assert_eq!((d.severity, s.cl_points), (Severity::Warning, 0));
+    }
+    let (sink, _) = run(&m, b"UNITS/MM\nGOTO/1,2,3\n", &Options::new(&m));
+    assert!(!sink.diags.iter().any(|d| d.code == Code::NoMotion));
+}
+
 #[test]
 fn strict_mode_fails_cleanly_at_the_first_error() {
     let m = machine("spinner-u5-620");

@@ -44,6 +44,8 @@ pub struct Reader<R> {
     in_comment: bool,
     queue: std::collections::VecDeque<Event>,
     done: bool,
+    /// The byte order mark was looked for (once, before the first line).
+    started: bool,
 }
 
 impl<R: BufRead> Reader<R> {
@@ -58,6 +60,7 @@ impl<R: BufRead> Reader<R> {
             in_comment: false,
             queue: Default::default(),
             done: false,
+            started: false,
         }
     }
 
@@ -107,6 +110,11 @@ impl<R: BufRead> Reader<R> {
             if self.done {
                 return Ok(None);
             }
+            if !self.started {
+                self.started = true;
+                self.byte_order_mark()?;
+                continue;
+            }
             if !self.in_comment
                 && self.pending.is_empty()
                 && let Some(s) = self.whole_goto()
@@ -152,6 +160,60 @@ impl<R: BufRead> Reader<R> {
             }
             self.raw = raw;
         }
+    }
+
+    /// A UTF-8 byte order mark (Windows editors write one) is dropped: left in, it would hide
+    /// the first record, and a lost `UNITS/INCHES` scales the whole part by 25.4. A UTF-16 file
+    /// is no CL text at all: one error says how to save it, and nothing is read.
+    fn byte_order_mark(&mut self) -> Result<(), Error> {
+        const BOM: [u8; 3] = [0xEF, 0xBB, 0xBF];
+        let mut matched = 0;
+        // Matched and consumed piecewise, wherever the input's buffers split it.
+        loop {
+            let buf = match self.input.fill_buf() {
+                Ok(b) => b,
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
+                Err(e) => return Err(e.into()),
+            };
+            if buf.is_empty() {
+                break;
+            }
+            if matched == 0 && buf.len() >= 2 && (buf[..2] == [0xFF, 0xFE] || buf[..2] == [0xFE, 0xFF]) {
+                self.queue.push_back(Event::Diagnostic(
+                    Diagnostic::new(
+                        Code::InvalidUtf8,
+                        Severity::Error,
+                        Some(1),
+                        "the file is UTF-16 text: CL files are ASCII; save it as ASCII or UTF-8",
+                    )
+                    .at(1),
+                ));
+                self.done = true;
+                return Ok(());
+            }
+            let k = buf.len().min(3 - matched);
+            if buf[..k] != BOM[matched..matched + k] {
+                break;
+            }
+            self.input.consume(k);
+            matched += k;
+            if matched == 3 {
+                return Ok(());
+            }
+        }
+        if matched > 0 {
+            // Part of a mark, then something else: bytes that were no UTF-8 anyway, now gone.
+            self.queue.push_back(Event::Diagnostic(
+                Diagnostic::new(
+                    Code::InvalidUtf8,
+                    Severity::Warning,
+                    Some(1),
+                    "bytes that are not UTF-8 dropped",
+                )
+                .at(1),
+            ));
+        }
+        Ok(())
     }
 
     /// Most lines of a 5-axis file are one whole `GOTO/x,y,z,i,j,k`: read in place in the input
@@ -304,5 +366,33 @@ mod tests {
             }
             prop_assert_eq!(events(text.as_bytes(), small), events(text.as_bytes(), 1 << 16));
         }
+    }
+
+    /// A UTF-8 byte order mark is dropped however the buffer splits it, so the first record
+    /// (here the units) is read; UTF-16 is one error and nothing else; a broken mark is told.
+    #[test]
+    fn byte_order_marks() {
+        let plain = events(b"UNITS/INCHES\nGOTO/1,2,3\n", 1 << 16);
+        for capacity in [1, 2, 3, 4, 1 << 16] {
+            assert_eq!(
+                events(b"\xEF\xBB\xBFUNITS/INCHES\nGOTO/1,2,3\n", capacity),
+                plain,
+                "{capacity}"
+            );
+        }
+        let utf16: Vec<u8> = [0xFF, 0xFE]
+            .into_iter()
+            .chain("GOTO/1,2,3\n".bytes().flat_map(|b| [b, 0]))
+            .collect();
+        match &events(&utf16, 1 << 16)[..] {
+            [Event::Diagnostic(d)] => {
+                assert_eq!((d.code, d.severity, d.line), (Code::InvalidUtf8, Severity::Error, Some(1)));
+                assert!(d.message.contains("UTF-16"), "{d}");
+            }
+            other => panic!("{other:?}"),
+        }
+        let broken = events(b"\xEF\xBBGOTO/1,2,3\n", 1);
+        assert!(matches!(&broken[0], Event::Diagnostic(d) if d.code == Code::InvalidUtf8 && d.severity == Severity::Warning));
+        assert_eq!(broken[1..], events(b"GOTO/1,2,3\n", 1)[..]);
     }
 }

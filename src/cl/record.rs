@@ -85,7 +85,7 @@ pub enum Record {
     Spindle(SpindleCmd),
     Coolant(CoolantCmd),
     LoadTool {
-        number: Option<u32>,
+        number: u32,
         length: Option<f64>,
     },
     ToolData {
@@ -260,7 +260,16 @@ fn parse_general(stmt: &str, line: u32, diags: &mut Vec<Diagnostic>) -> Option<R
                     "IPR" => (unit, units) = (FeedUnit::PerRev, Some(Units::Inch)),
                     "" => {}
                     _ => match num(a.text) {
-                        Some(x) if x.is_finite() && x >= 0.0 && value.is_none() => value = Some(x),
+                        Some(x) if x.is_finite() && x > 0.0 && value.is_none() => value = Some(x),
+                        // A zero feed is an alarm on every control, not a move.
+                        Some(x) if x == 0.0 && value.is_none() => {
+                            bad(
+                                diags,
+                                a.col,
+                                "FEDRAT: a feed of 0 cannot move the machine: record skipped".into(),
+                            );
+                            return None;
+                        }
                         _ => {
                             bad(
                                 diags,
@@ -349,8 +358,21 @@ fn parse_general(stmt: &str, line: u32, diags: &mut Vec<Diagnostic>) -> Option<R
                     length = args.get(i + 1).and_then(|a| num(a.text));
                     i += 1;
                 } else if let Some(x) = num(args[i].text) {
-                    if number.is_none() && x >= 0.0 && x.fract() == 0.0 && x < 1e9 {
-                        number = Some(x as u32);
+                    if number.is_none() {
+                        if x >= 0.0 && x.fract() == 0.0 && x < 1e9 {
+                            number = Some(x as u32);
+                        } else {
+                            // Another tool than the one the CAM system meant is a crash: say so.
+                            bad(
+                                diags,
+                                args[i].col,
+                                format!(
+                                    "{major_uc}: tool number {:?} is not a whole number from 0 to 999999999: no tool change written",
+                                    args[i].text.trim()
+                                ),
+                            );
+                            return None;
+                        }
                     }
                 } else if !w.is_empty() && !matches!(w.as_str(), "ADJUST" | "OSETNO" | "MILL" | "LATHE") {
                     diags.push(
@@ -365,7 +387,13 @@ fn parse_general(stmt: &str, line: u32, diags: &mut Vec<Diagnostic>) -> Option<R
                 }
                 i += 1;
             }
-            Some(Record::LoadTool { number, length })
+            match number {
+                Some(number) => Some(Record::LoadTool { number, length }),
+                None => {
+                    bad(diags, rest_col, format!("{major_uc}: no tool number: no tool change written"));
+                    None
+                }
+            }
         }
         "TLDATA" => {
             // TLDATA/MILL,diameter,corner radius,length,…
@@ -735,6 +763,19 @@ fn parse_cycle(args: &[Arg], line: u32, rest_col: u32, diags: &mut Vec<Diagnosti
                 Severity::Warning,
                 Some(line),
                 format!("CYCLE/{first}: no depth given; holes are positioned only"),
+            )
+            .at(rest_col),
+        );
+        p.depth = 0.0;
+    } else if p.depth < 0.0 {
+        // A depth is measured down the tool axis from the hole's point: a negative one would
+        // drill upward out of the hole, which no cycle means.
+        diags.push(
+            Diagnostic::new(
+                Code::BadRecord,
+                Severity::Warning,
+                Some(line),
+                format!("CYCLE/{first}: depth {} is negative; holes are positioned only", p.depth),
             )
             .at(rest_col),
         );

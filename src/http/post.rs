@@ -41,9 +41,12 @@ pub struct PostParams {
     pub tool_length: Option<f64>,
     /// Work offset `x,y,z` in profile units.
     pub work_offset: Option<String>,
-    /// Chord tolerance in profile units (default 0.01 mm / 0.0004 in).
+    /// Chord tolerance in profile units (default 0.01 mm / 0.0004 in, at most 1 mm / 0.04 in):
+    /// also the bound of the FK replay's tip check.
     pub tolerance: Option<f64>,
     pub sequence_numbers: Option<bool>,
+    /// Program number (default 1000): 1 to 9999 on fanuc (`O` and four digits), 1 to 99999 on
+    /// haas; any on the others, which name the program.
     pub program_number: Option<u32>,
     /// Stop at the first error instead of reporting it and going on.
     pub strict: Option<bool>,

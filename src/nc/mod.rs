@@ -250,6 +250,19 @@ pub const HEIDENHAIN: Dialect = Dialect {
     notes: "TCP with FUNCTION TCPM; no inverse time: rotary moves get the combined machine-axis feed",
 };
 
+impl Dialect {
+    /// The program numbers the program frame can carry: an `O` word of four (five) digits
+    /// takes 1 to 9999 (99999); `O0` and wider numbers are alarms on the control. Unbounded
+    /// where the number is a name or a comment.
+    pub fn program_numbers(&self) -> std::ops::RangeInclusive<u32> {
+        let digits = |t: &str| t.contains("{n4}").then_some(9999).or(t.contains("{n5}").then_some(99999));
+        match self.begin.iter().chain(self.end).find_map(|(t, _)| digits(t)) {
+            Some(max) => 1..=max,
+            None => 0..=u32::MAX,
+        }
+    }
+}
+
 pub const ALL: [&Dialect; 5] = [&FANUC, &HAAS, &SIEMENS, &HEIDENHAIN, &LINUXCNC];
 
 pub fn dialect(name: &str) -> Option<&'static Dialect> {

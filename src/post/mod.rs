@@ -106,9 +106,12 @@ pub struct Settings {
     pub tool_length: Option<f64>,
     /// Work offset `x,y,z` in profile units.
     pub work_offset: Option<String>,
-    /// Chord tolerance in profile units (default 0.01 mm / 0.0004 in).
+    /// Chord tolerance in profile units (default 0.01 mm / 0.0004 in, at most 1 mm / 0.04 in):
+    /// also the bound of the FK replay's tip check.
     pub tolerance: Option<f64>,
     pub sequence_numbers: Option<bool>,
+    /// Program number (default 1000): 1 to 9999 on fanuc (`O` and four digits), 1 to 99999 on
+    /// haas; any on the others, which name the program.
     pub program_number: Option<u32>,
     /// Stop at the first error instead of reporting it and going on.
     pub strict: Option<bool>,
@@ -160,13 +163,25 @@ impl Settings {
             o.work_offset = crate::cli::parse_triple(w).map_err(|e| format!("work_offset: {e}"))?;
         }
         if let Some(t) = self.tolerance {
-            if !(t.is_finite() && t > 0.0) {
-                return Err("tolerance must be a positive number".into());
+            // It is also the FK replay's bound: a huge one would switch the self-verification off.
+            let (max, unit) = if m.units == Units::Mm { (1.0, "mm") } else { (0.04, "in") };
+            if !(t.is_finite() && t > 0.0 && t <= max) {
+                return Err(format!("tolerance must be a positive number up to {max} {unit}"));
             }
             o.tolerance = t;
         }
         o.sequence_numbers = self.sequence_numbers.unwrap_or(false);
         o.program_number = self.program_number.unwrap_or(1000);
+        let numbers = o.dialect.program_numbers();
+        if !numbers.contains(&o.program_number) {
+            return Err(format!(
+                "program_number {}: {} takes {} to {}",
+                o.program_number,
+                o.dialect.name,
+                numbers.start(),
+                numbers.end()
+            ));
+        }
         o.strict = self.strict.unwrap_or(false);
         if let Some(t) = self.singular_tolerance {
             if !(t.is_finite() && (0.0..=10.0).contains(&t)) {
@@ -568,6 +583,16 @@ pub fn post<R: BufRead, S: Sink + ?Sized>(input: R, m: &Machine, o: &Options, si
     e.drain(&mut pending, true)?;
     if let Some(d) = e.strict_error.take() {
         return Err(Error::Strict(d));
+    }
+    if e.sum.cl_points == 0 {
+        // An empty program that ends well is easily taken for a posted part (a wrong file
+        // uploaded, a CL dialect not read): say it.
+        e.note(Diagnostic::new(
+            Code::NoMotion,
+            Severity::Warning,
+            None,
+            "no motion in the CL input (no GOTO, GODLTA or FROM was read): the program moves nothing",
+        ))?;
     }
     e.program_end()?;
     for (k, st) in e.stats.iter().enumerate() {
@@ -1913,7 +1938,8 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         if !rapid && let Some((fv, unit)) = pt.feed {
             let mut f = fv;
             if unit == FeedUnit::PerRev {
-                match self.rpm {
+                // A stopped spindle (S0) gives no feed per minute either: F0 is an alarm.
+                match self.rpm.filter(|&r| r > 0.0) {
                     Some(r) => f *= r,
                     None if !self.warned_per_rev => {
                         self.warned_per_rev = true;

@@ -98,6 +98,8 @@ pub struct Source<R> {
     tip: Option<Vec3>,
     axis: Vec3,
     rapid_next: bool,
+    /// A move with no feed was reported (once a program: the rest follow the same rule).
+    warned_no_feed: bool,
     feed: Option<(f64, FeedUnit)>,
     circle: Option<([f64; 3], [f64; 3], Option<f64>)>,
     circle_cw: bool,
@@ -159,6 +161,7 @@ impl<R: BufRead> Source<R> {
             tip: None,
             axis: Vec3::z(),
             rapid_next: false,
+            warned_no_feed: false,
             feed: None,
             circle: None,
             circle_cw: false,
@@ -243,6 +246,7 @@ impl<R: BufRead> Source<R> {
     /// One record: a plain move comes back (to go after whatever the record queued), everything
     /// else is queued here.
     fn statement(&mut self, line: u32, rec: Record) -> Option<MotionPt> {
+        let from = matches!(rec, Record::From { .. });
         match rec {
             Record::Goto { p, axis } | Record::From { p, axis } => {
                 if let Some(a) = axis
@@ -250,6 +254,9 @@ impl<R: BufRead> Source<R> {
                 {
                     return None;
                 }
+                // FROM says where the tool stands, it programs no cut: the machine gets there at
+                // rapid, whatever feed is in force.
+                self.rapid_next |= from;
                 return self.motion(line, Vec3::from(p));
             }
             Record::GoDelta { d, axis } => {
@@ -276,10 +283,7 @@ impl<R: BufRead> Source<R> {
                 if let Some(l) = length {
                     self.out.push_back(Item::Event(ProgEvent::ToolLength(l * self.scale)));
                 }
-                self.out.push_back(Item::Event(ProgEvent::Tool {
-                    number: number.unwrap_or(1),
-                    line,
-                }));
+                self.out.push_back(Item::Event(ProgEvent::Tool { number, line }));
             }
             Record::ToolData { length: Some(l), .. } => self.out.push_back(Item::Event(ProgEvent::ToolLength(l * self.scale))),
             Record::ToolData { .. } => {}
@@ -356,7 +360,19 @@ impl<R: BufRead> Source<R> {
     /// A move to `p` (CL units): a drilling cycle's moves are queued here; a plain move (with the
     /// arc it ends, if any) comes back.
     fn motion(&mut self, line: u32, p: Vec3) -> Option<MotionPt> {
-        let rapid = std::mem::take(&mut self.rapid_next) || self.feed.is_none();
+        let asked = std::mem::take(&mut self.rapid_next);
+        // The first move positions at rapid anyway; a later one with no feed yet is most
+        // likely an approach, but if the CAM system meant a cut, G0 through stock is a crash.
+        if !asked && self.feed.is_none() && self.cycle.is_none() && self.tip.is_some() && !self.warned_no_feed {
+            self.warned_no_feed = true;
+            self.diag(
+                Code::NoFeed,
+                Severity::Warning,
+                line,
+                "move with no FEDRAT programmed yet: written at rapid, as is every move until one comes".into(),
+            );
+        }
+        let rapid = asked || self.feed.is_none();
         if let Some(c) = self.cycle {
             self.hole(line, p, c);
             self.tip = Some(p);
