@@ -324,6 +324,48 @@ fn a_file_without_motion_is_told() {
     assert!(!sink.diags.iter().any(|d| d.code == Code::NoMotion));
 }
 
+/// The tool tilting about a tip that stands still: the tip's path gives no time, so each block
+/// takes the machine axes' path (units and degrees) at F: inverse time 1/t on a control that has
+/// it (not F1000000), F itself on one that has not.
+#[test]
+fn a_turn_about_a_standing_tip_takes_the_machine_axes_time() {
+    let cl = "UNITS/MM\nFEDRAT/1000,MMPM\nGOTO/0,0,50,0,0,1\nGOTO/0,0,50,0.5,0,0.8660254\nGOTO/10,0,50,0.5,0,0.8660254\n";
+    for id in ["spinner-u5-620", "dmg-dmc75v"] {
+        let m = machine(id);
+        let (sink, _) = run(&m, cl.as_bytes(), &Options::new(&m));
+        let turning: Vec<_> = sink
+            .blocks
+            .windows(2)
+            .filter(|w| !w[1].rapid && w[0].tip == w[1].tip)
+            .collect();
+        assert!(turning.len() >= 10, "{id}: {}", sink.nc);
+        for w in turning {
+            let (a, b) = (&w[0].joints.0, &w[1].joints.0);
+            let len = (0..6)
+                .map(|k| match (a[k], b[k]) {
+                    (Some(x), Some(y)) => (y - x) * (y - x),
+                    _ => 0.0,
+                })
+                .sum::<f64>()
+                .sqrt();
+            let want = len / 1000.0 * 60.0;
+            assert!(
+                (w[1].time_s - want).abs() <= 1e-9 + 1e-6 * want,
+                "{id}: {} s, want {want} s",
+                w[1].time_s
+            );
+        }
+        let feeds: Vec<f64> = sink
+            .nc
+            .lines()
+            .flat_map(|l| l.split_whitespace())
+            .filter_map(|w| w.strip_prefix('F').and_then(|v| v.parse().ok()))
+            .collect();
+        // Inverse time: a few per minute (it was 1 000 000); heidenhain, F along the axes: F1000.
+        assert!(feeds.iter().all(|&f| f <= 1000.0 + 1e-9), "{id}: {feeds:?}");
+    }
+}
+
 #[test]
 fn strict_mode_fails_cleanly_at_the_first_error() {
     let m = machine("spinner-u5-620");

@@ -1956,7 +1956,31 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             let len = prev.map_or(0.0, |p| (to.pose.tip - p.pose.tip).norm());
             let rot_moves =
                 prev.is_some_and(|p| (0..m.rotaries.len()).any(|i| (to.joints.rotary[i] - p.joints.rotary[i]).abs() > 1e-12));
+            // The path of the machine's axes, units and degrees combined: what a control without
+            // inverse time reads F along.
+            let machine_len = |p: &At| {
+                let mut sq = 0.0;
+                for i in 0..3 {
+                    sq += (to.joints.linear[i] - p.joints.linear[i]).powi(2);
+                }
+                for i in 0..m.rotaries.len() {
+                    sq += (to.joints.rotary[i] - p.joints.rotary[i]).to_degrees().powi(2);
+                }
+                sq.sqrt()
+            };
             let mut t = if f > 0.0 { len / f } else { 0.0 };
+            // The tool turning about a tip that stands (it moves less than the X Y Z words can
+            // say): the tip's path gives the move no time (it was G93 F1000000, the control's
+            // fastest cutting feed for a swing of the table); the machine axes' path at F does.
+            // Only there: a tip that moves, however little, is what F is about.
+            if rot_moves
+                && !tcp
+                && len < 0.5 * 10f64.powi(-(self.f.fmt.linear as i32))
+                && f > 0.0
+                && let Some(p) = &prev
+            {
+                t = t.max(machine_len(p) / f);
+            }
             // Axis feed limits.
             let mut limited = false;
             if let Some(p) = prev {
@@ -1987,16 +2011,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                     (Some(_), _) | (None, None) => (FeedMode::InverseTime, 1.0 / t),
                     // No inverse time on this control: the feed along the combined machine axes
                     // (units and degrees) that takes the same time.
-                    (None, Some(p)) => {
-                        let mut sq = 0.0;
-                        for i in 0..3 {
-                            sq += (to.joints.linear[i] - p.joints.linear[i]).powi(2);
-                        }
-                        for i in 0..m.rotaries.len() {
-                            sq += (to.joints.rotary[i] - p.joints.rotary[i]).to_degrees().powi(2);
-                        }
-                        (FeedMode::PerMinute, sq.sqrt() / t)
-                    }
+                    (None, Some(p)) => (FeedMode::PerMinute, machine_len(&p) / t),
                 });
             } else {
                 let fz = if limited && t > 0.0 { len / t } else { f };
