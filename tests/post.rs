@@ -366,6 +366,44 @@ fn a_turn_about_a_standing_tip_takes_the_machine_axes_time() {
     }
 }
 
+/// After a tool change the machine is not where the last tool left off: the next move (here a
+/// feed, the CL file gives no RAPID) positions at rapid as a rotary-turning rapid does (retract,
+/// turn, over the point, down), never a feed interpolated from the old tool's last block.
+#[test]
+fn the_first_move_after_a_tool_change_positions_at_rapid() {
+    let m = machine("spinner-u5-620");
+    let cl = "UNITS/MM\nLOADTL/1\nFEDRAT/500,MMPM\nGOTO/0,0,50,0.5,0,0.8660254\nGOTO/10,0,40,0.5,0,0.8660254\n\
+              LOADTL/2\nGOTO/0,0,50,0,0,1\nGOTO/10,0,40,0,0,1\n";
+    for mode in [Mode::Joint, Mode::Tcp] {
+        let mut o = Options::new(&m);
+        o.mode = mode;
+        let (sink, _) = run(&m, cl.as_bytes(), &o);
+        let lines: Vec<&str> = sink.nc.lines().collect();
+        let has = |l: &str, w: &str| l.split_whitespace().any(|x| x == w);
+        let t2 = lines.iter().position(|l| has(l, "M6") && l.starts_with("T2")).expect("T2 M6");
+        let moves: Vec<&str> = lines[t2..]
+            .iter()
+            .copied()
+            .filter(|l| l.split_whitespace().any(|w| w.len() > 1 && "XYZBC".contains(&w[..1])))
+            .collect();
+        let cut = moves.iter().position(|l| has(l, "G1")).expect("the cut");
+        assert!(cut >= 2, "{mode:?}: positioning before the cut:\n{}", sink.nc);
+        assert!(has(moves[0], "G0") && moves[0].contains("RETRACT"), "{mode:?}:\n{}", sink.nc);
+        assert!(
+            !moves[..cut].iter().any(|l| has(l, "G93") || has(l, "G1")),
+            "{mode:?}:\n{}",
+            sink.nc
+        );
+        // The cut starts at the CL point the positioning reached.
+        assert!(moves[cut - 1].contains("Z50.000"), "{mode:?}:\n{}", sink.nc);
+        assert!(
+            moves[cut].contains("X10.000") && moves[cut].contains("Z40.000"),
+            "{mode:?}:\n{}",
+            sink.nc
+        );
+    }
+}
+
 #[test]
 fn strict_mode_fails_cleanly_at_the_first_error() {
     let m = machine("spinner-u5-620");

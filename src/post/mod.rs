@@ -416,6 +416,8 @@ struct Emitter<'a, S: Sink + ?Sized> {
     f: Formatter,
     setup: Setup,
     at: Option<At>,
+    /// A tool change since the last block: the machine is not at `at` any more.
+    tool_changed: bool,
     tool: Option<u32>,
     comp_on: bool,
     rpm: Option<f64>,
@@ -514,6 +516,7 @@ pub fn post<R: BufRead, S: Sink + ?Sized>(input: R, m: &Machine, o: &Options, si
         f: Formatter::new(o.dialect, Formats::for_units(m.units), o.sequence_numbers),
         setup,
         at: None,
+        tool_changed: false,
         tool: None,
         comp_on: false,
         rpm: None,
@@ -718,6 +721,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                 }
                 self.f.reset_modal();
                 self.tool = Some(number);
+                self.tool_changed = true;
             }
             ProgEvent::ToolLength(l) => {
                 // Only when the job fixed the length (else handled before planning).
@@ -963,9 +967,12 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             pose,
             branch,
         };
+        // After a tool change the machine stands where the change left it, not at the last
+        // block: the next move, feed or not, positions as a rapid that turns rotaries does.
         if let Some(prev) = self.at
-            && pt.rapid
-            && (0..self.m.rotaries.len()).any(|i| (joints.rotary[i] - prev.joints.rotary[i]).abs() > 1f64.to_radians())
+            && (self.tool_changed
+                || pt.rapid
+                    && (0..self.m.rotaries.len()).any(|i| (joints.rotary[i] - prev.joints.rotary[i]).abs() > 1f64.to_radians()))
         {
             self.safe_rapid(prev, target, &pt, diags)?;
             return Ok(());
@@ -2137,6 +2144,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         };
         let extra = arc.as_ref().map_or("", |(_, w)| w.as_str());
         self.at = Some(to);
+        self.tool_changed = false;
         match self.f.motion(motion, &rounded, feed, extra, comment) {
             Some(text) => {
                 self.blocks += 1;
