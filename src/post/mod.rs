@@ -1004,8 +1004,35 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             }
             _ => {}
         }
+        if self.at.is_none() && !self.m.rotaries.is_empty() {
+            return self.approach(target, &pt, diags);
+        }
         self.block(target, &pt, pt.rapid || self.at.is_none(), diags, pt.inserted, None)?;
         Ok(())
+    }
+
+    /// The program's first move, from home (the tool up, rotaries at 0): over the point at the
+    /// top of Z travel with the rotaries turned, then straight down (TCP, or no Z axis: from
+    /// the clearance along the tool axis), so that the table or head never turns while the tool
+    /// comes down to the part. The real NX post also turns the rotaries first.
+    fn approach(&mut self, to: At, pt: &MotionPt, diags: Vec<Diagnostic>) -> Result<(), Error> {
+        let zmax = self.m.linears[2].as_ref().map(|l| l.max);
+        let over = match (self.o.mode, zmax) {
+            (Mode::Joint, Some(zmax)) => {
+                let mut joints = to.joints;
+                joints.linear[2] = zmax;
+                At {
+                    joints,
+                    actual: to.actual,
+                    pose: fk(self.m, &joints, &self.setup),
+                    branch: to.branch,
+                }
+            }
+            _ => self.lifted(to, self.o.clearance),
+        };
+        self.block(over, pt, true, diags, true, Some("APPROACH"))?;
+        self.lock_all()?;
+        self.block(to, pt, true, Vec::new(), pt.inserted, None)
     }
 
     /// An axis within 1 % of its travel (1° for rotaries) of an end: worth knowing before the
