@@ -418,6 +418,8 @@ struct Emitter<'a, S: Sink + ?Sized> {
     at: Option<At>,
     /// A tool change since the last block: the machine is not at `at` any more.
     tool_changed: bool,
+    /// Tip moves shorter than this (half the X Y Z words' last digit) are a standing tip.
+    standing: f64,
     tool: Option<u32>,
     comp_on: bool,
     rpm: Option<f64>,
@@ -517,6 +519,7 @@ pub fn post<R: BufRead, S: Sink + ?Sized>(input: R, m: &Machine, o: &Options, si
         setup,
         at: None,
         tool_changed: false,
+        standing: 0.5 * 10f64.powi(-(Formats::for_units(m.units).linear as i32)),
         tool: None,
         comp_on: false,
         rpm: None,
@@ -969,12 +972,12 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         };
         // After a tool change the machine stands where the change left it, not at the last
         // block: the next move, feed or not, positions as a rapid that turns rotaries does.
-        if let Some(prev) = self.at
+        if (self.tool_changed || pt.rapid)
+            && let Some(prev) = &self.at
             && (self.tool_changed
-                || pt.rapid
-                    && (0..self.m.rotaries.len()).any(|i| (joints.rotary[i] - prev.joints.rotary[i]).abs() > 1f64.to_radians()))
+                || (0..self.m.rotaries.len()).any(|i| (joints.rotary[i] - prev.joints.rotary[i]).abs() > 1f64.to_radians()))
         {
-            self.safe_rapid(prev, target, &pt, diags)?;
+            self.safe_rapid(*prev, target, &pt, diags)?;
             return Ok(());
         }
         match self.at {
@@ -1015,6 +1018,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
     /// top of Z travel with the rotaries turned, then straight down (TCP, or no Z axis: from
     /// the clearance along the tool axis), so that the table or head never turns while the tool
     /// comes down to the part. The real NX post also turns the rotaries first.
+    #[cold]
     fn approach(&mut self, to: At, pt: &MotionPt, diags: Vec<Diagnostic>) -> Result<(), Error> {
         let zmax = self.m.linears[2].as_ref().map(|l| l.max);
         let over = match (self.o.mode, zmax) {
@@ -2009,7 +2013,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             // Only there: a tip that moves, however little, is what F is about.
             if rot_moves
                 && !tcp
-                && len < 0.5 * 10f64.powi(-(self.f.fmt.linear as i32))
+                && len < self.standing
                 && f > 0.0
                 && let Some(p) = &prev
             {
