@@ -366,9 +366,11 @@ fn a_turn_about_a_standing_tip_takes_the_machine_axes_time() {
     }
 }
 
-/// After a tool change the machine is not where the last tool left off: the next move (here a
-/// feed, the CL file gives no RAPID) positions at rapid as a rotary-turning rapid does (retract,
-/// turn, over the point, down), never a feed interpolated from the old tool's last block.
+/// The tool leaves the part before a tool change and before the end (joint: to the top of Z;
+/// TCP: the clearance along the tool axis). After the change the machine is not where the last
+/// tool left off: the next move (here a feed, the CL file gives no RAPID) positions as a
+/// rotary-turning rapid does (retract, turn, over the point, down), never a feed interpolated
+/// from the old tool's last block.
 #[test]
 fn the_first_move_after_a_tool_change_positions_at_rapid() {
     let m = machine("spinner-u5-620");
@@ -381,6 +383,20 @@ fn the_first_move_after_a_tool_change_positions_at_rapid() {
         let lines: Vec<&str> = sink.nc.lines().collect();
         let has = |l: &str, w: &str| l.split_whitespace().any(|x| x == w);
         let t2 = lines.iter().position(|l| has(l, "M6") && l.starts_with("T2")).expect("T2 M6");
+        // Up and away before the change and before the end, in the orientation the tool has.
+        let end = lines.iter().position(|l| has(l, "M30")).expect("M30");
+        for at in [t2, end] {
+            let last = lines[..at]
+                .iter()
+                .rev()
+                .find(|l| l.contains(" Z") || l.starts_with('Z'))
+                .unwrap();
+            assert!(last.contains("RETRACT") && has(last, "G0"), "{mode:?}: {last}\n{}", sink.nc);
+            if mode == Mode::Joint {
+                let zmax = m.linears[2].as_ref().unwrap().max;
+                assert!(last.contains(&format!("Z{zmax:.3}")), "{last}");
+            }
+        }
         let moves: Vec<&str> = lines[t2..]
             .iter()
             .copied()

@@ -420,6 +420,8 @@ struct Emitter<'a, S: Sink + ?Sized> {
     tool_changed: bool,
     /// Tip moves shorter than this (half the X Y Z words' last digit) are a standing tip.
     standing: f64,
+    /// The CL line of the last block written (a retract at a tool change or the end has none).
+    last_line: u32,
     tool: Option<u32>,
     comp_on: bool,
     rpm: Option<f64>,
@@ -519,6 +521,7 @@ pub fn post<R: BufRead, S: Sink + ?Sized>(input: R, m: &Machine, o: &Options, si
         setup,
         at: None,
         tool_changed: false,
+        last_line: 0,
         standing: 0.5 * 10f64.powi(-(Formats::for_units(m.units).linear as i32)),
         tool: None,
         comp_on: false,
@@ -666,9 +669,10 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         Ok(())
     }
 
-    fn program_end(&mut self) -> std::io::Result<()> {
+    fn program_end(&mut self) -> Result<(), Error> {
         self.cancel_cycle()?;
         self.leave_plane(false)?;
+        self.retract_up()?;
         self.lock_all()?;
         for l in self.f.footer() {
             self.out(&l)?;
@@ -690,7 +694,14 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
     /// One committed item, with what is known to follow it (the tilted-plane look-ahead).
     fn take(&mut self, o: Out, ahead: &VecDeque<Out>) -> Result<(), Error> {
         match o {
-            Out::Event(ev) => Ok(self.event(ev)?),
+            Out::Event(ev) => {
+                if matches!(ev, ProgEvent::Tool { .. }) {
+                    self.cancel_cycle()?;
+                    self.leave_plane(false)?;
+                    self.retract_up()?;
+                }
+                Ok(self.event(ev)?)
+            }
             Out::Point(c) => {
                 self.plane_ahead = c.pt.rapid && self.o.tilted_planes && fixed_run_ahead(&c.pt.pose.axis, ahead);
                 self.point(c)
@@ -1014,26 +1025,54 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         Ok(())
     }
 
+    /// `a` out of the way: joint mode at the top of Z travel (same X Y and rotaries), TCP or a
+    /// machine without Z the clearance along the tool axis.
+    fn above(&mut self, a: At) -> At {
+        match (self.o.mode, self.m.linears[2].as_ref().map(|l| l.max)) {
+            (Mode::Joint, Some(zmax)) => {
+                let mut joints = a.joints;
+                joints.linear[2] = zmax;
+                At {
+                    joints,
+                    pose: fk(self.m, &joints, &self.setup),
+                    ..a
+                }
+            }
+            _ => self.lifted(a, self.o.clearance),
+        }
+    }
+
+    /// Up and away from the part before a tool change and at the program's end, whatever the
+    /// change macro or the operator does next: joint mode to the top of Z travel where the tool
+    /// stands, TCP (or no Z axis) the clearance along the tool axis. Nothing before the first
+    /// block.
+    #[cold]
+    fn retract_up(&mut self) -> Result<(), Error> {
+        let Some(prev) = self.at else { return Ok(()) };
+        let up = self.above(prev);
+        if up.joints.linear == prev.joints.linear {
+            return Ok(()); // at the top already
+        }
+        let pt = MotionPt {
+            line: self.last_line,
+            pose: up.pose,
+            rapid: true,
+            feed: None,
+            inserted: true,
+            comment: None,
+            arc: None,
+            hole: None,
+        };
+        self.block(up, &pt, true, Vec::new(), true, Some("RETRACT"))
+    }
+
     /// The program's first move, from home (the tool up, rotaries at 0): over the point at the
     /// top of Z travel with the rotaries turned, then straight down (TCP, or no Z axis: from
     /// the clearance along the tool axis), so that the table or head never turns while the tool
     /// comes down to the part. The real NX post also turns the rotaries first.
     #[cold]
     fn approach(&mut self, to: At, pt: &MotionPt, diags: Vec<Diagnostic>) -> Result<(), Error> {
-        let zmax = self.m.linears[2].as_ref().map(|l| l.max);
-        let over = match (self.o.mode, zmax) {
-            (Mode::Joint, Some(zmax)) => {
-                let mut joints = to.joints;
-                joints.linear[2] = zmax;
-                At {
-                    joints,
-                    actual: to.actual,
-                    pose: fk(self.m, &joints, &self.setup),
-                    branch: to.branch,
-                }
-            }
-            _ => self.lifted(to, self.o.clearance),
-        };
+        let over = self.above(to);
         self.block(over, pt, true, diags, true, Some("APPROACH"))?;
         self.lock_all()?;
         self.block(to, pt, true, Vec::new(), pt.inserted, None)
@@ -2176,6 +2215,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         let extra = arc.as_ref().map_or("", |(_, w)| w.as_str());
         self.at = Some(to);
         self.tool_changed = false;
+        self.last_line = pt.line;
         match self.f.motion(motion, &rounded, feed, extra, comment) {
             Some(text) => {
                 self.blocks += 1;
