@@ -75,11 +75,7 @@ impl<R: BufRead> Reader<R> {
         self.raw.clear();
         let mut overflow = false;
         loop {
-            let buf = match self.input.fill_buf() {
-                Ok(b) => b,
-                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
-                Err(e) => return Err(e.into()),
-            };
+            let buf = fill(&mut self.input)?;
             if buf.is_empty() {
                 return Ok((!self.raw.is_empty() || overflow, overflow));
             }
@@ -170,11 +166,7 @@ impl<R: BufRead> Reader<R> {
         let mut matched = 0;
         // Matched and consumed piecewise, wherever the input's buffers split it.
         loop {
-            let buf = match self.input.fill_buf() {
-                Ok(b) => b,
-                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
-                Err(e) => return Err(e.into()),
-            };
+            let buf = fill(&mut self.input)?;
             if buf.is_empty() {
                 break;
             }
@@ -321,6 +313,20 @@ fn find_comment(text: &str) -> Option<usize> {
 }
 
 #[inline]
+/// The input's buffer, read again after an interrupted read (a signal is no end of input).
+fn fill<R: BufRead>(input: &mut R) -> Result<&[u8], Error> {
+    loop {
+        match input.fill_buf() {
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
+            Err(e) => return Err(e.into()),
+            Ok(_) => break,
+        }
+    }
+    // Asked again to hand the borrow out (returning it from inside the loop is beyond today's
+    // borrow checker): the buffer is filled, so this only returns it.
+    Ok(input.fill_buf()?)
+}
+
 fn memchr(b: u8, s: &[u8]) -> Option<usize> {
     memchr::memchr(b, s)
 }

@@ -513,16 +513,17 @@ pub fn post<R: BufRead, S: Sink + ?Sized>(input: R, m: &Machine, o: &Options, si
     let mut src = Source::new(input, m.units, o.cl_units, o.strict)?;
     src.canned_cycles = o.canned_cycles;
     let setup = Setup::new(o.tool_length.unwrap_or(m.default_tool_length), o.work_offset);
+    let formats = Formats::for_units(m.units);
     let mut e = Emitter {
         m,
         o,
         sink,
-        f: Formatter::new(o.dialect, Formats::for_units(m.units), o.sequence_numbers),
+        f: Formatter::new(o.dialect, formats, o.sequence_numbers),
         setup,
         at: None,
         tool_changed: false,
         last_line: 0,
-        standing: 0.5 * 10f64.powi(-(Formats::for_units(m.units).linear as i32)),
+        standing: 0.5 * 10f64.powi(-(formats.linear as i32)),
         tool: None,
         comp_on: false,
         rpm: None,
@@ -694,14 +695,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
     /// One committed item, with what is known to follow it (the tilted-plane look-ahead).
     fn take(&mut self, o: Out, ahead: &VecDeque<Out>) -> Result<(), Error> {
         match o {
-            Out::Event(ev) => {
-                if matches!(ev, ProgEvent::Tool { .. }) {
-                    self.cancel_cycle()?;
-                    self.leave_plane(false)?;
-                    self.retract_up()?;
-                }
-                Ok(self.event(ev)?)
-            }
+            Out::Event(ev) => self.event(ev),
             Out::Point(c) => {
                 self.plane_ahead = c.pt.rapid && self.o.tilted_planes && fixed_run_ahead(&c.pt.pose.axis, ahead);
                 self.point(c)
@@ -709,7 +703,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         }
     }
 
-    fn event(&mut self, ev: ProgEvent) -> std::io::Result<()> {
+    fn event(&mut self, ev: ProgEvent) -> Result<(), Error> {
         let d = self.o.dialect;
         if !matches!(
             ev,
@@ -720,6 +714,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         match ev {
             ProgEvent::Tool { number, .. } => {
                 self.leave_plane(false)?;
+                self.retract_up()?;
                 if self.comp_on {
                     if let Some(l) = self.f.line(d.tcp_off, number, 0) {
                         self.out(&l)?;
@@ -983,10 +978,10 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         };
         // After a tool change the machine stands where the change left it, not at the last
         // block: the next move, feed or not, positions as a rapid that turns rotaries does.
-        if (self.tool_changed || pt.rapid)
-            && let Some(prev) = &self.at
+        if let Some(prev) = &self.at
             && (self.tool_changed
-                || (0..self.m.rotaries.len()).any(|i| (joints.rotary[i] - prev.joints.rotary[i]).abs() > 1f64.to_radians()))
+                || pt.rapid
+                    && (0..self.m.rotaries.len()).any(|i| (joints.rotary[i] - prev.joints.rotary[i]).abs() > 1f64.to_radians()))
         {
             self.safe_rapid(*prev, target, &pt, diags)?;
             return Ok(());
@@ -1028,8 +1023,8 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
     /// `a` out of the way: joint mode at the top of Z travel (same X Y and rotaries), TCP or a
     /// machine without Z the clearance along the tool axis.
     fn above(&mut self, a: At) -> At {
-        match (self.o.mode, self.m.linears[2].as_ref().map(|l| l.max)) {
-            (Mode::Joint, Some(zmax)) => {
+        match self.z_top() {
+            Some(zmax) => {
                 let mut joints = a.joints;
                 joints.linear[2] = zmax;
                 At {
@@ -1038,8 +1033,15 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                     ..a
                 }
             }
-            _ => self.lifted(a, self.o.clearance),
+            None => self.lifted(a, self.o.clearance),
         }
+    }
+
+    /// The top of Z travel, where joint-mode positioning turns the rotaries (none in TCP mode,
+    /// where X Y Z are the tip, or on a machine without Z).
+    fn z_top(&self) -> Option<f64> {
+        let zmax = self.m.linears[2].as_ref().map(|l| l.max);
+        zmax.filter(|_| self.o.mode == Mode::Joint)
     }
 
     /// Up and away from the part before a tool change and at the program's end, whatever the
@@ -1292,49 +1294,24 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
     fn safe_rapid(&mut self, prev: At, to: At, pt: &MotionPt, diags: Vec<Diagnostic>) -> Result<(), Error> {
         // The rotaries turn: out of a tilted plane first, so the retract reads as one.
         self.leave_plane(true)?;
-        let zmax = self.m.linears[2].as_ref().map(|l| l.max);
-        let (Mode::Joint, Some(zmax)) = (self.o.mode, zmax) else {
-            let r1 = self.lifted(prev, self.o.clearance);
-            let r2 = self.lifted(to, self.o.clearance);
-            self.block(r1, pt, true, diags, true, Some("RETRACT"))?;
-            self.block(r2, pt, true, Vec::new(), true, Some("ROTARY REPOSITION"))?;
+        let up = self.above(prev);
+        let over = self.above(to);
+        if self.z_top().is_none() {
+            self.block(up, pt, true, diags, true, Some("RETRACT"))?;
+            self.block(over, pt, true, Vec::new(), true, Some("ROTARY REPOSITION"))?;
             return self.block(to, pt, true, Vec::new(), pt.inserted, None);
+        }
+        // Turned at the top, still over the old X Y; then over the new one, then down.
+        let mut joints = up.joints;
+        joints.rotary = to.joints.rotary;
+        let turned = At {
+            joints,
+            pose: fk(self.m, &joints, &self.setup),
+            ..to
         };
-        let at = |m: &Machine, s: &Setup, mut j: Joints, actual: [f64; 3], branch: i8| {
-            j.linear[2] = j.linear[2].max(f64::MIN);
-            let pose = fk(m, &j, s);
-            At {
-                joints: j,
-                actual,
-                pose,
-                branch,
-            }
-        };
-        let mut up = prev.joints;
-        up.linear[2] = zmax;
-        let mut turned = up;
-        turned.rotary = to.joints.rotary;
-        let mut over = turned;
-        over.linear[0] = to.joints.linear[0];
-        over.linear[1] = to.joints.linear[1];
-        let (m, s) = (self.m, self.setup);
-        self.block(
-            at(m, &s, up, prev.actual, prev.branch),
-            pt,
-            true,
-            diags,
-            true,
-            Some("RETRACT Z"),
-        )?;
-        self.block(
-            at(m, &s, turned, to.actual, to.branch),
-            pt,
-            true,
-            Vec::new(),
-            true,
-            Some("ROTARY REPOSITION"),
-        )?;
-        self.block(at(m, &s, over, to.actual, to.branch), pt, true, Vec::new(), true, None)?;
+        self.block(up, pt, true, diags, true, Some("RETRACT Z"))?;
+        self.block(turned, pt, true, Vec::new(), true, Some("ROTARY REPOSITION"))?;
+        self.block(over, pt, true, Vec::new(), true, None)?;
         self.lock_all()?;
         self.block(to, pt, true, Vec::new(), pt.inserted, None)
     }
