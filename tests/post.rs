@@ -832,3 +832,150 @@ fn clamped_rotaries_unlock_before_they_turn_and_lock_after_positioning() {
     );
     assert!(!sink.nc.contains("UNLOCK"));
 }
+
+/// A segment whose axis sweeps through the singular direction symmetrically (a lead angle from
+/// −20° to +20°, common in CAM output) has its subdivision midpoint exactly on it, where the free
+/// rotary takes the interpolated angle: the linears must follow that angle. They were computed
+/// for the first rotary's angle, a block 35 mm off its pose on spinner-u5-620 (caught only by the
+/// self-verification).
+#[test]
+fn a_segment_through_the_singular_direction_keeps_every_block_on_its_pose() {
+    let lib = Library::load_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap();
+    let mut checked = 0;
+    for p in lib.iter() {
+        let m = &p.machine;
+        let Some(s1) = kinepost::kinematics::singular_direction(m) else {
+            continue;
+        };
+        // A reachable tip: the controlled point at mid travel, rotaries at zero.
+        let mut j = Joints::default();
+        for (i, l) in m.linears.iter().enumerate() {
+            if let Some(l) = l {
+                j.linear[i] = 0.5 * (l.min + l.max);
+            }
+        }
+        let setup = Setup::new(m.default_tool_length, Vec3::zeros());
+        let tip = fk(m, &j, &setup).tip;
+        let tilt = |d: Vec3, e: Vec3, deg: f64| {
+            nalgebra::Rotation3::from_axis_angle(&nalgebra::Unit::new_normalize(e), deg.to_radians()) * d
+        };
+        let reachable = |a: Vec3| {
+            let pose = kinepost::kinematics::Pose { tip, axis: a };
+            kinepost::kinematics::ik(m, &pose, &setup, &Default::default()).is_ok()
+        };
+        // Either sense of the rotary's line, a plane through it in which both tilts are
+        // orientations the machine reaches.
+        let Some((d, e)) = [s1, -s1]
+            .into_iter()
+            .flat_map(|d| [Vec3::x(), Vec3::y(), Vec3::z()].map(|w| (d, d.cross(&w))))
+            .filter_map(|(d, e)| Some((d, e.try_normalize(1e-9)?)))
+            .find(|&(d, e)| reachable(tilt(d, e, -20.0)) && reachable(tilt(d, e, 20.0)))
+        else {
+            panic!("{}: no reachable tilt about {s1:?}", m.id)
+        };
+        let (a1, a2) = (tilt(d, e, -20.0), tilt(d, e, 20.0));
+        let cl = format!(
+            "UNITS/{}\nFEDRAT/500\nGOTO/{},{},{},{},{},{}\nGOTO/{},{},{},{},{},{}\n",
+            if m.units == Units::Inch { "INCHES" } else { "MM" },
+            tip.x,
+            tip.y,
+            tip.z,
+            a1.x,
+            a1.y,
+            a1.z,
+            tip.x + 1.0,
+            tip.y,
+            tip.z,
+            a2.x,
+            a2.y,
+            a2.z,
+        );
+        let o = Options::new(m);
+        let (sink, s) = run(m, cl.as_bytes(), &o);
+        let bad: Vec<_> = sink
+            .diags
+            .iter()
+            .filter(|d| d.code == Code::VerifyDeviation || d.code == Code::Unreachable)
+            .collect();
+        assert!(bad.is_empty(), "{}: {bad:?}\n{}", m.id, sink.nc);
+        assert!(
+            s.max_tip_deviation <= o.tolerance,
+            "{}: {}\n{}",
+            m.id,
+            s.max_tip_deviation,
+            sink.nc
+        );
+        assert!(
+            s.inserted_blocks > 0,
+            "{}: the segment is subdivided through the midpoint",
+            m.id
+        );
+        checked += 1;
+    }
+    assert!(checked >= 4, "{checked} two-rotary profiles");
+}
+
+/// Inverse time is 1/min: a long move's value is small, and one decimal (F0.1 for 0.149) was a
+/// third off its time. Every G93 F now carries the block's time to the word's last digit; a feed
+/// that rounds to F0 (an alarm) is the smallest F, with a warning.
+#[test]
+fn inverse_time_keeps_its_precision_and_no_feed_word_is_zero() {
+    /// Each written line with its block.
+    #[derive(Default)]
+    struct Lines(Vec<(String, Option<BlockInfo>)>, Vec<Diagnostic>);
+    impl Sink for Lines {
+        fn line(&mut self, text: &str, b: Option<&BlockInfo>) -> std::io::Result<()> {
+            self.1.extend(b.iter().flat_map(|b| b.diagnostics.iter().cloned()));
+            self.0.push((text.to_string(), b.cloned()));
+            Ok(())
+        }
+        fn diagnostic(&mut self, _: &Diagnostic) -> std::io::Result<()> {
+            Ok(())
+        }
+    }
+    let m = machine("spinner-u5-620");
+    let cl = "UNITS/MM\nFEDRAT/1,MMPM\nGOTO/0,0,50,0,0,1\nGOTO/200,0,50,0.5,0,0.8660254\n\
+              FEDRAT/0.01,MMPM\nGOTO/210,0,50,0.5,0,0.8660254\n";
+    let mut sink = Lines::default();
+    post::post(cl.as_bytes(), &m, &Options::new(&m), &mut sink).unwrap();
+    let (mut inverse, mut per_min) = (0, 0);
+    let mut g93 = false;
+    for (text, b) in &sink.0 {
+        g93 = (g93 || text.contains("G93")) && !text.contains("G94");
+        let Some(f) = text
+            .split_whitespace()
+            .find_map(|w| w.strip_prefix('F').and_then(|v| v.parse::<f64>().ok()))
+        else {
+            continue;
+        };
+        assert!(f > 0.0, "{text}");
+        let b = b.as_ref().unwrap();
+        if g93 {
+            // 1/min to the word's three decimals; most of these moves take minutes (F < 1).
+            let want = 60.0 / b.time_s;
+            assert!((f - want).abs() <= 0.0005 + 1e-12, "{text}: 1/min is {want}");
+            inverse += (want < 1.0) as usize;
+        } else {
+            per_min += 1;
+        }
+    }
+    assert!(inverse >= 2 && per_min >= 1, "{:?}", sink.0);
+    // FEDRAT/0.01 mm/min: F0.0 before, now F0.1 with the warning that says so.
+    let clamped: Vec<_> = sink.1.iter().filter(|d| d.code == Code::FeedClamped).collect();
+    assert!(clamped.len() == 1 && clamped[0].line == Some(6), "{clamped:?}");
+    assert!(sink.0.iter().any(|(t, _)| t.ends_with("F0.1")), "{:?}", sink.0);
+}
+
+/// A CL point 10⁵× outside travel (a typo) is a limit error; the segments to and from it are
+/// written straight, not followed to the tolerance (2¹⁴ leaves that cannot converge, each a
+/// reposition: 98 000 blocks for this file).
+#[test]
+fn a_point_far_outside_travel_is_one_error_not_a_flood_of_blocks() {
+    let m = machine("spinner-u5-620");
+    let cl = "UNITS/MM\nFEDRAT/1000,MMPM\nGOTO/0,0,50,0,0.5,0.8660254\nGOTO/10,0,50,0,0.5,0.8660254\n\
+              GOTO/1e8,0,50,0.5,0,0.8660254\nGOTO/20,0,50,0,-0.5,0.8660254\n";
+    let (sink, s) = run(&m, cl.as_bytes(), &Options::new(&m));
+    assert!(s.blocks < 100, "{} blocks", s.blocks);
+    let limits: Vec<_> = sink.diags.iter().filter(|d| d.code == Code::LimitViolation).collect();
+    assert!(limits.len() == 1 && limits[0].line == Some(5), "{limits:?}");
+}

@@ -150,6 +150,15 @@ pub fn hold_outer(m: &Machine, pose: &Pose, setup: &Setup, outer: f64, branch: i
     Some((s, super::angle_between(&reached, &u)))
 }
 
+/// The rotary (chain index) that [`IkOptions::free_angle`] sets at a singular pose, on any chain.
+pub fn free_rotary(m: &Machine) -> Option<usize> {
+    match &m.solver.shape {
+        Shape::Fixed => None,
+        Shape::One { .. } | Shape::Two(_) => Some(m.solver.seq[0]),
+        Shape::Three { .. } => Some(m.solver.seq[1]),
+    }
+}
+
 /// The rotary (chain index) that turns freely at the singular direction of a two-rotary chain.
 pub fn outer_rotary(m: &Machine) -> Option<usize> {
     matches!(m.solver.shape, Shape::Two(_)).then(|| m.solver.seq[0])

@@ -271,26 +271,43 @@ pub fn dialect(name: &str) -> Option<&'static Dialect> {
 
 pub const DIALECTS: &[&str] = &["fanuc", "haas", "siemens", "heidenhain", "linuxcnc"];
 
-/// Number formats: linear words 3 decimals in mm, 4 in inch; rotary words 4 decimals; feed 1.
+/// Number formats: linear words 3 decimals in mm, 4 in inch; rotary words 4 decimals; feed 1
+/// (mm) or 2 (inch); inverse time 3, as NX's Haas post writes it: a 1/min value is small where
+/// a move is long, and one decimal of F2.4 is a 2 % error in the move's time.
 #[derive(Clone, Copy, Debug)]
 pub struct Formats {
     pub linear: u32,
     pub rotary: u32,
     pub feed: u32,
+    pub inverse_feed: u32,
 }
 
 impl Formats {
+    pub fn feed_decimals(&self, mode: FeedMode) -> u32 {
+        match mode {
+            FeedMode::InverseTime => self.inverse_feed,
+            FeedMode::PerMinute => self.feed,
+        }
+    }
+
+    /// The smallest F the word can carry: below half of it the word says F0, an alarm.
+    pub fn feed_step(&self, mode: FeedMode) -> f64 {
+        10f64.powi(-(self.feed_decimals(mode) as i32))
+    }
+
     pub fn for_units(u: Units) -> Formats {
         match u {
             Units::Mm => Formats {
                 linear: 3,
                 rotary: 4,
                 feed: 1,
+                inverse_feed: 3,
             },
             Units::Inch => Formats {
                 linear: 4,
                 rotary: 4,
                 feed: 2,
+                inverse_feed: 3,
             },
         }
     }
@@ -547,11 +564,18 @@ impl Formatter {
         if let Some((mode, f)) = feed
             && motion != Motion::Rapid
         {
-            let r = round_to(f, self.fmt.feed);
+            let dec = self.fmt.feed_decimals(mode);
+            let r = round_to(f, dec);
             // Inverse time needs F on every block; per-minute feed is modal.
             if mode == FeedMode::InverseTime || self.feed != Some(r) {
                 self.buf.push('F');
-                write_fixed(&mut self.buf, r, self.fmt.feed);
+                write_fixed(&mut self.buf, r, dec);
+                if mode == FeedMode::InverseTime {
+                    // Its decimals are for small values: F3200.0, not F3200.000.
+                    while self.buf.ends_with('0') && !self.buf[..self.buf.len() - 1].ends_with('.') {
+                        self.buf.pop();
+                    }
+                }
                 self.buf.push(' ');
                 self.feed = Some(r);
             }

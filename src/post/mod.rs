@@ -1356,8 +1356,9 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             j.linear = [cp.x, cp.y, cp.z];
             return At { joints: j, pose, ..a };
         }
+        // A singular pose keeps its free rotary where it stands: the retract is along the axis.
         let opt = IkOptions {
-            free_angle: a.actual[0],
+            free_angle: kinematics::free_rotary(self.m).map_or(0.0, |f| a.actual[f]),
             ..Default::default()
         };
         if ik_into(self.m, &pose, &self.setup, &opt, &mut self.buf).is_ok()
@@ -1414,6 +1415,20 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                 (sum * sum * lever + 2.0 * sum * dlin) / 8.0
             };
             split = bound > 0.5 * self.o.tolerance && self.nonlinear_error(&a, &b) > 0.8 * self.o.tolerance;
+        }
+        // An end farther outside travel than the travel is long is a typo in the CL file (it is
+        // a limit error already): following it to the tolerance cannot converge. `GOTO/1e8,…`
+        // made 2¹⁴ leaves, each written as a reposition: 98 000 blocks for one bad point.
+        if split && depth == 0 {
+            let far = |j: &Joints| {
+                self.m.linears.iter().zip(j.linear).any(|(l, v)| {
+                    l.as_ref()
+                        .is_some_and(|l| !(v >= l.min - (l.max - l.min) && v <= l.max + (l.max - l.min)))
+                })
+            };
+            if far(&a.joints) || far(&b.joints) {
+                split = false;
+            }
         }
         if split && depth >= 14 && self.o.mode == Mode::Joint && self.nonlinear_error(&a, &b) > self.o.tolerance {
             // Subdivision did not converge: the solution followed runs into a fold.
@@ -1474,9 +1489,10 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         for i in 0..3 {
             want[i] = 0.5 * (a.actual[i] + b.actual[i]);
         }
-        let free = self.m.rotaries.len().min(1).saturating_sub(1);
+        // At a singular midpoint the free rotary takes the interpolated angle, and the linears
+        // follow from it (they were computed for the first rotary's angle: 35 mm off the pose).
         let opt = IkOptions {
-            free_angle: want[free],
+            free_angle: kinematics::free_rotary(self.m).map_or(0.0, |f| want[f]),
             ..Default::default()
         };
         ik_into(self.m, &pose, &self.setup, &opt, &mut self.buf).ok()?;
@@ -2078,6 +2094,23 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                     Some(pt.line),
                     "feed reduced to respect an axis feed limit",
                 ));
+            }
+            // A feed the F word rounds to zero is an alarm on every control (a move of days in
+            // inverse time, or a feed per minute below the word's last digit): the smallest F.
+            if let Some((mode, v)) = &mut feed {
+                let step = self.f.fmt.feed_step(*mode);
+                if *v < 0.5 * step {
+                    diags.push(Diagnostic::new(
+                        Code::FeedClamped,
+                        Severity::Warning,
+                        Some(pt.line),
+                        format!("F{v:.2e} rounds to zero: the smallest F the word carries written (a faster move)"),
+                    ));
+                    if *v > 0.0 {
+                        t *= *v / step;
+                    }
+                    *v = step;
+                }
             }
             time = t;
         } else if let Some(p) = prev {
