@@ -36,6 +36,7 @@ pub enum Code {
     VerifyDeviation,
     ArcLinearized,
     CycleExpanded,
+    SurfaceSpeed,
 }
 
 impl Code {
@@ -62,6 +63,7 @@ impl Code {
             Code::VerifyDeviation => "verify_deviation",
             Code::ArcLinearized => "arc_linearized",
             Code::CycleExpanded => "cycle_expanded",
+            Code::SurfaceSpeed => "surface_speed",
         }
     }
 }

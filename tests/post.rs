@@ -979,3 +979,57 @@ fn a_point_far_outside_travel_is_one_error_not_a_flood_of_blocks() {
     let limits: Vec<_> = sink.diags.iter().filter(|d| d.code == Code::LimitViolation).collect();
     assert!(limits.len() == 1 && limits[0].line == Some(5), "{limits:?}");
 }
+
+/// A surface speed is turned into RPM at the cutter's diameter (a mill's S word is RPM): it was
+/// written as S300 for 300 ft/min, an eighth of the speed a ½-inch cutter needs. A lathe tool
+/// (TURRET, TOOLNO/…,TURN) or no diameter: written as S with a warning, as before.
+#[test]
+fn surface_speed_becomes_rpm_at_the_cutters_diameter() {
+    let s_words = |nc: &str| -> Vec<String> {
+        nc.lines()
+            .filter(|l| !l.starts_with('('))
+            .flat_map(|l| l.split_whitespace())
+            .filter(|w| w.starts_with('S') && w[1..].parse::<f64>().is_ok())
+            .map(str::to_string)
+            .collect()
+    };
+    let motion = "GOTO/0,0,1,0,0,1\nGOTO/1,0,1,0,0,1\n";
+    let m = machine("haas-umc750");
+    let cases = [
+        // 300 ft/min at Ø0.5 in: 300·12/(π·0.5) = 2291.8.
+        (
+            "UNITS/INCHES\nCUTTER/0.5\nSPINDL/300,SFM,CLW\nFEDRAT/20,IPM\n",
+            "S2292",
+            Severity::Info,
+        ),
+        // 200 m/min at Ø10 mm: 200 000/(π·10) = 6366.2; the CL in mm, the machine in inch.
+        (
+            "UNITS/MM\nTLDATA/MILL,10,0,50\nSPINDL/200,SMM\nFEDRAT/500,MMPM\n",
+            "S6366",
+            Severity::Info,
+        ),
+        // A lathe tool: its diameter is not what the surface speed is about.
+        (
+            "UNITS/MM\nCUTTER/0.8\nTURRET/1\nSPINDL/120,SFM\nFEDRAT/500,MMPM\n",
+            "S120",
+            Severity::Warning,
+        ),
+        (
+            "UNITS/MM\nCUTTER/0.8\nTOOLNO/1,TURN,1\nSPINDL/120,SFM\nFEDRAT/500,MMPM\n",
+            "S120",
+            Severity::Warning,
+        ),
+        ("UNITS/MM\nSPINDL/120,SFM\nFEDRAT/500,MMPM\n", "S120", Severity::Warning),
+    ];
+    for (head, want, sev) in cases {
+        let cl = format!("{head}{motion}");
+        let (sink, _) = run(&m, cl.as_bytes(), &Options::new(&m));
+        assert_eq!(s_words(&sink.nc), vec![want.to_string()], "{cl}\n{}", sink.nc);
+        let d: Vec<_> = sink.diags.iter().filter(|d| d.code == Code::SurfaceSpeed).collect();
+        assert!(d.len() == 1 && d[0].severity == sev, "{cl}: {d:?}");
+    }
+    // A feed per revolution goes with the converted speed: 0.01 in/rev at 2292 RPM.
+    let cl = format!("UNITS/INCHES\nCUTTER/0.5\nSPINDL/300,SFM\nFEDRAT/0.01,IPR\n{motion}");
+    let (sink, _) = run(&m, cl.as_bytes(), &Options::new(&m));
+    assert!(sink.nc.contains("F22.92"), "{}", sink.nc);
+}

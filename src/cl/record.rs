@@ -19,10 +19,12 @@ pub enum SpindleCmd {
         speed: f64,
         clockwise: bool,
     },
-    /// Surface speed (SFM/SMM); the RPM depends on the tool diameter.
+    /// Surface speed; the RPM depends on the tool diameter.
     Surface {
         speed: f64,
         clockwise: bool,
+        /// SMM (metres a minute), else SFM (feet a minute).
+        metric: bool,
     },
     Off,
 }
@@ -91,6 +93,9 @@ pub enum Record {
     ToolData {
         diameter: Option<f64>,
         length: Option<f64>,
+        /// `TURN` (a lathe tool: its diameter is no cutting diameter) or `MILL`/`DRILL` in
+        /// `TLDATA`/`TOOLNO`; `None` where the record does not say (CUTTER).
+        turning: Option<bool>,
     },
     Units(Units),
     Multax(bool),
@@ -128,11 +133,9 @@ const IGNORED: &[&str] = &[
     "OPFEATSTART",
     "OPFEATEND",
     "SELECT",
-    "TOOLNO",
     "TPRINT",
     "SYN",
     "PPFUN",
-    "TURRET",
     "REWIND",
     "CUTCOM",
     "CLRSRF",
@@ -173,6 +176,22 @@ const IGNORED: &[&str] = &[
 struct Arg<'a> {
     text: &'a str,
     col: u32,
+}
+
+/// A lathe tool (`TURN`, `GROOVE`, `THREAD`) or a milling one (`MILL`, `DRILL`), where the record
+/// names its kind.
+fn tool_kind(args: &[Arg]) -> Option<bool> {
+    args.iter().find_map(|a| {
+        let w = a.text.trim();
+        let is = |k: &str| w.eq_ignore_ascii_case(k);
+        if is("TURN") || is("GROOVE") || is("THREAD") {
+            Some(true)
+        } else if is("MILL") || is("DRILL") {
+            Some(false)
+        } else {
+            None
+        }
+    })
 }
 
 /// Parses one statement (continuations joined). `None` when the statement yields no record; then
@@ -294,11 +313,12 @@ fn parse_general(stmt: &str, line: u32, diags: &mut Vec<Diagnostic>) -> Option<R
         }
         "SPINDL" => {
             let mut speed = None;
-            let (mut cw, mut surface, mut off) = (true, false, false);
+            let (mut cw, mut surface, mut metric, mut off) = (true, false, false, false);
             for a in &args {
                 match word(a).as_str() {
                     "RPM" => {}
-                    "SFM" | "SMM" => surface = true,
+                    "SFM" => surface = true,
+                    "SMM" => (surface, metric) = (true, true),
                     "CLW" => cw = true,
                     "CCLW" => cw = false,
                     "OFF" => off = true,
@@ -322,7 +342,11 @@ fn parse_general(stmt: &str, line: u32, diags: &mut Vec<Diagnostic>) -> Option<R
             Some(Record::Spindle(match (off, speed, surface) {
                 (true, _, _) => SpindleCmd::Off,
                 (false, Some(speed), false) => SpindleCmd::Rpm { speed, clockwise: cw },
-                (false, Some(speed), true) => SpindleCmd::Surface { speed, clockwise: cw },
+                (false, Some(speed), true) => SpindleCmd::Surface {
+                    speed,
+                    clockwise: cw,
+                    metric,
+                },
                 (false, None, _) => {
                     bad(diags, rest_col, "SPINDL: expected a speed or OFF".into());
                     return None;
@@ -398,14 +422,30 @@ fn parse_general(stmt: &str, line: u32, diags: &mut Vec<Diagnostic>) -> Option<R
         "TLDATA" => {
             // TLDATA/MILL,diameter,corner radius,length,…
             let nums: Vec<f64> = args.iter().filter_map(|a| num(a.text)).collect();
+            let turning = tool_kind(&args);
             Some(Record::ToolData {
-                diameter: nums.first().copied(),
-                length: nums.get(2).copied().filter(|l| *l > 0.0),
+                diameter: nums.first().copied().filter(|_| turning != Some(true)),
+                length: nums.get(2).copied().filter(|l| *l > 0.0 && turning != Some(true)),
+                turning,
             })
         }
+        // TURRET/… selects a lathe's turret station (a mill's tool change is LOADTL): what
+        // CATIA's lathe output says of its tools.
+        "TURRET" => Some(Record::ToolData {
+            diameter: None,
+            length: None,
+            turning: Some(true),
+        }),
+        // TOOLNO/number,TURN,… (CATIA): only what kind of tool it is.
+        "TOOLNO" => Some(Record::ToolData {
+            diameter: None,
+            length: None,
+            turning: tool_kind(&args),
+        }),
         "CUTTER" => Some(Record::ToolData {
             diameter: args.first().and_then(|a| num(a.text)),
             length: None,
+            turning: None,
         }),
         "UNITS" | "UNIT" => {
             let w = args.first().map(word).unwrap_or_default();

@@ -739,12 +739,12 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             ProgEvent::Spindle(c) => {
                 let (speed, cw) = match c {
                     SpindleCmd::Rpm { speed, clockwise } => (Some(speed), clockwise),
-                    SpindleCmd::Surface { speed, clockwise } => {
+                    SpindleCmd::Surface { speed, clockwise, .. } => {
                         self.note(Diagnostic::new(
-                            Code::IgnoredRecord,
+                            Code::SurfaceSpeed,
                             Severity::Warning,
                             None,
-                            "surface speed not converted: written as S",
+                            "surface speed not converted (no milling cutter's diameter before it): written as S",
                         ))?;
                         (Some(speed), clockwise)
                     }

@@ -101,6 +101,10 @@ pub struct Source<R> {
     /// A move with no feed was reported (once a program: the rest follow the same rule).
     warned_no_feed: bool,
     feed: Option<(f64, FeedUnit)>,
+    /// The last CUTTER/TLDATA diameter, in mm: turns a surface speed into RPM (not for a lathe
+    /// tool, whose surface speed is about the part's diameter).
+    diameter_mm: Option<f64>,
+    turning: bool,
     circle: Option<([f64; 3], [f64; 3], Option<f64>)>,
     circle_cw: bool,
     cycle: Option<CycleParams>,
@@ -163,6 +167,8 @@ impl<R: BufRead> Source<R> {
             rapid_next: false,
             warned_no_feed: false,
             feed: None,
+            diameter_mm: None,
+            turning: false,
             circle: None,
             circle_cw: false,
             cycle: None,
@@ -217,6 +223,37 @@ impl<R: BufRead> Source<R> {
             self.strict_error = Some(d.clone());
         }
         self.out.push_back(Item::Event(ProgEvent::Diag(d)));
+    }
+
+    /// A surface speed at the cutter's diameter, as RPM (a mill's spindle word is RPM; NX's
+    /// posts convert the same way). Without a diameter it stays a surface speed, which the
+    /// engine writes as S with a warning.
+    fn spindle_rpm(&mut self, c: SpindleCmd, line: u32) -> SpindleCmd {
+        let SpindleCmd::Surface {
+            speed,
+            clockwise,
+            metric,
+        } = c
+        else {
+            return c;
+        };
+        let Some(d) = self.diameter_mm.filter(|_| !self.turning) else {
+            return c;
+        };
+        // Metres or feet a minute, in mm, over the circumference.
+        let per_min_mm = speed * if metric { 1000.0 } else { 304.8 };
+        let rpm = per_min_mm / (std::f64::consts::PI * d);
+        self.diag(
+            Code::SurfaceSpeed,
+            Severity::Info,
+            line,
+            format!(
+                "surface speed {speed} {} at the cutter's diameter {}: {rpm:.0} RPM",
+                if metric { "m/min" } else { "ft/min" },
+                fmt_len(d, self.cl_units)
+            ),
+        );
+        SpindleCmd::Rpm { speed: rpm, clockwise }
     }
 
     fn set_axis(&mut self, a: [f64; 3], line: u32) -> bool {
@@ -277,7 +314,10 @@ impl<R: BufRead> Source<R> {
                 self.cl_units = u;
                 self.scale = u.factor_to(self.profile_units);
             }
-            Record::Spindle(c) => self.out.push_back(Item::Event(ProgEvent::Spindle(c))),
+            Record::Spindle(c) => {
+                let c = self.spindle_rpm(c, line);
+                self.out.push_back(Item::Event(ProgEvent::Spindle(c)))
+            }
             Record::Coolant(c) => self.out.push_back(Item::Event(ProgEvent::Coolant(c))),
             Record::LoadTool { number, length } => {
                 if let Some(l) = length {
@@ -285,8 +325,21 @@ impl<R: BufRead> Source<R> {
                 }
                 self.out.push_back(Item::Event(ProgEvent::Tool { number, line }));
             }
-            Record::ToolData { length: Some(l), .. } => self.out.push_back(Item::Event(ProgEvent::ToolLength(l * self.scale))),
-            Record::ToolData { .. } => {}
+            Record::ToolData {
+                diameter,
+                length,
+                turning,
+            } => {
+                if let Some(t) = turning {
+                    self.turning = t;
+                }
+                if let Some(d) = diameter.filter(|d| d.is_finite() && *d > 0.0) {
+                    self.diameter_mm = Some(d * self.cl_units.factor_to(Units::Mm));
+                }
+                if let Some(l) = length {
+                    self.out.push_back(Item::Event(ProgEvent::ToolLength(l * self.scale)));
+                }
+            }
             Record::Multax(on) => {
                 if !on {
                     self.axis = Vec3::z();
@@ -479,5 +532,13 @@ impl<R: BufRead> Source<R> {
         self.push(line, p + u * retract, true, true, Some("CYCLE"));
         self.mark(HolePart::Rest);
         self.feed = saved;
+    }
+}
+
+/// A length in mm as the CL file states it (its own units).
+fn fmt_len(mm: f64, u: Units) -> String {
+    match u {
+        Units::Mm => format!("{mm} mm"),
+        Units::Inch => format!("{} in", mm / 25.4),
     }
 }
