@@ -1033,3 +1033,41 @@ fn surface_speed_becomes_rpm_at_the_cutters_diameter() {
     let (sink, _) = run(&m, cl.as_bytes(), &Options::new(&m));
     assert!(sink.nc.contains("F22.92"), "{}", sink.nc);
 }
+
+/// A path passing microradians from the singular direction: the exact free rotary chases the
+/// azimuth of an all but vertical axis to and fro, and linearization stopped 14 halvings deep at
+/// 0.98 of the tolerance, over once the words were rounded (`kinepost verify` failed kinepost's
+/// own output). However fine the tolerance, one segment makes at most 2¹⁴ blocks, with a warning.
+#[test]
+fn linearization_follows_a_near_singular_swing_and_is_bounded() {
+    let m = machine("spinner-u5-620");
+    let cl = std::fs::read_to_string(data("near_singular_jitter.cls")).unwrap();
+    let o = Options::new(&m);
+    let (sink, s) = run(&m, cl.as_bytes(), &o);
+    assert_eq!(s.errors, 0, "{:?}", sink.diags);
+    let vo = kinepost::post::verify::VerifyOptions {
+        mode: Mode::Joint,
+        setup: Setup::new(m.default_tool_length, Vec3::zeros()),
+        tolerance: o.tolerance,
+        angle_tolerance_deg: 0.01,
+        cl_units: None,
+    };
+    let r = kinepost::post::verify::verify(cl.as_bytes(), sink.nc.as_bytes(), &m, &vo).unwrap();
+    assert!(r.ok, "{r:?}");
+    // Where the interpolated rotaries miss the orientation by less than a word says, they are
+    // the midpoint: C no longer chases the azimuth to and fro (15 branch changes before).
+    let chases: Vec<_> = sink.diags.iter().filter(|d| d.code == Code::BranchChange).collect();
+    assert!(chases.is_empty(), "{chases:?}");
+    // A quarter turn of B at a tolerance of 1e-7 mm wants 40 000 blocks: 2^14, told.
+    let mut o = Options::new(&m);
+    o.tolerance = 1e-7;
+    let cl = "UNITS/MM\nFEDRAT/500,MMPM\nGOTO/100,0,50,0,0,1\nGOTO/100,0,50,1,0,0\n";
+    let (sink, s) = run(&m, cl.as_bytes(), &o);
+    assert!(s.blocks <= (1 << 14) + 100, "{} blocks", s.blocks);
+    let told: Vec<_> = sink
+        .diags
+        .iter()
+        .filter(|d| d.code == Code::Linearized && d.severity == Severity::Warning)
+        .collect();
+    assert_eq!(told.len(), 1, "{told:?}");
+}

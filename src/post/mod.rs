@@ -418,6 +418,9 @@ struct Emitter<'a, S: Sink + ?Sized> {
     at: Option<At>,
     /// A tool change since the last block: the machine is not at `at` any more.
     tool_changed: bool,
+    /// Halvings left to the CL segment being linearized (see [`MAX_SEGMENT_SPLITS`]).
+    split_budget: u32,
+    split_told: bool,
     /// Tip moves shorter than this (half the X Y Z words' last digit) are a standing tip.
     standing: f64,
     /// The CL line of the last block written (a retract at a tool change or the end has none).
@@ -522,6 +525,8 @@ pub fn post<R: BufRead, S: Sink + ?Sized>(input: R, m: &Machine, o: &Options, si
         setup,
         at: None,
         tool_changed: false,
+        split_budget: 0,
+        split_told: false,
         last_line: 0,
         standing: 0.5 * 10f64.powi(-(formats.linear as i32)),
         tool: None,
@@ -1419,6 +1424,9 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         // An end farther outside travel than the travel is long is a typo in the CL file (it is
         // a limit error already): following it to the tolerance cannot converge. `GOTO/1e8,…`
         // made 2¹⁴ leaves, each written as a reposition: 98 000 blocks for one bad point.
+        if depth == 0 {
+            (self.split_budget, self.split_told) = (MAX_SEGMENT_SPLITS, false);
+        }
         if split && depth == 0 {
             let far = |j: &Joints| {
                 self.m.linears.iter().zip(j.linear).any(|(l, v)| {
@@ -1430,12 +1438,30 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                 split = false;
             }
         }
-        if split && depth >= 14 && self.o.mode == Mode::Joint && self.nonlinear_error(&a, &b) > self.o.tolerance {
+        if split && depth >= MAX_SPLIT_DEPTH && self.o.mode == Mode::Joint && self.nonlinear_error(&a, &b) > self.o.tolerance {
             // Subdivision did not converge: the solution followed runs into a fold.
             self.reposition(a, b, false, pt)?;
             return Ok(3);
         }
-        if split && depth < 14 {
+        if split && depth < MAX_SPLIT_DEPTH && self.split_budget == 0 {
+            // Never seen in a real or generated path; bounds the output whatever comes. Told
+            // once a segment (the budget is reset with the next one).
+            if !self.split_told {
+                self.split_told = true;
+                let d = Diagnostic::new(
+                    Code::Linearized,
+                    Severity::Warning,
+                    Some(pt.line),
+                    format!(
+                        "segment not linearized past {MAX_SEGMENT_SPLITS} blocks: the motion between them may leave the tolerance"
+                    ),
+                );
+                self.note(d)?;
+            }
+            split = false;
+        }
+        if split && depth < MAX_SPLIT_DEPTH {
+            self.split_budget = self.split_budget.saturating_sub(1);
             match self.midpoint(&a, &b) {
                 Some(mid) => {
                     let n1 = self.segment(a, mid, pt, Vec::new(), depth + 1)?;
@@ -1530,31 +1556,59 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             NEAR_SINGULAR_SWING
         };
         match best {
-            Some((d, at)) if d <= limit => return Some(at),
-            _ if missing_linear => return None,
-            _ => {}
+            // Near the interpolation (the second-order difference of any short segment away
+            // from a singular direction): the exact solution, nothing to weigh.
+            Some((d, at)) if d <= 1e-4 => return Some(at),
+            Some((d, at)) if missing_linear => return (d <= limit).then_some(at),
+            None if missing_linear => return None,
+            Some((d, at)) => {
+                // Microradians from a singular direction the exact free rotary chases the
+                // azimuth of an all but vertical axis (and the rounding of i, j, k) to and fro:
+                // where the interpolated rotaries miss the orientation by less than a rotary
+                // word can say, they are the better midpoint (it never converged 14 halvings
+                // deep, C wandering by a degree at a standing tip).
+                let (held, dev) = self.held_midpoint(a, &want, &tip, &axis);
+                if dev <= 0.5 * 10f64.powi(-(self.f.fmt.rotary as i32)) {
+                    self.sum.max_singular_deviation_deg = self.sum.max_singular_deviation_deg.max(dev);
+                    return Some(held);
+                }
+                if d <= limit {
+                    return Some(at);
+                }
+            }
+            None => {}
         }
         // Near a singular direction the exact midpoint's free rotary follows the azimuth of a
         // nearly aligned axis and swings wildly. Keep the interpolated rotaries (the motion the
         // control makes between the two blocks anyway), put the tip exactly on the chord, and
         // account for the orientation this leaves (bounded by how near the path passes).
+        let (held, dev) = self.held_midpoint(a, &want, &tip, &axis);
+        self.sum.max_singular_deviation_deg = self.sum.max_singular_deviation_deg.max(dev);
+        Some(held)
+    }
+
+    /// The midpoint with the rotaries at `want` (actual angles), the tip exactly at `tip`, and
+    /// the angle (degrees) by which its tool axis misses `axis`.
+    fn held_midpoint(&self, a: &At, want: &[f64; 3], tip: &Vec3, axis: &Vec3) -> (At, f64) {
         let mut joints = a.joints;
         for (i, r) in self.m.rotaries.iter().enumerate() {
             joints.rotary[i] = r.word(want[i]);
         }
         let axis_fk = fk(self.m, &joints, &self.setup).axis;
-        let cp = kinematics::controlled_point(self.m, &want, &tip, &self.setup);
+        let cp = kinematics::controlled_point(self.m, want, tip, &self.setup);
         for i in 0..3 {
             joints.linear[i] = if self.m.linears[i].is_some() { cp[i] } else { 0.0 };
         }
-        let dev = angle_between(&axis_fk, &axis).to_degrees();
-        self.sum.max_singular_deviation_deg = self.sum.max_singular_deviation_deg.max(dev);
-        Some(At {
+        let at = At {
             joints,
-            actual: want,
-            pose: Pose { tip, axis: axis_fk },
+            actual: *want,
+            pose: Pose {
+                tip: *tip,
+                axis: axis_fk,
+            },
             branch: a.branch,
-        })
+        };
+        (at, angle_between(&axis_fk, axis).to_degrees())
     }
 
     /// Lock every clamped rotary that is unlocked (after positioning, at the end).
@@ -2275,3 +2329,11 @@ fn slerp_half(a: &Vec3, b: &Vec3) -> Vec3 {
     let n = s.norm();
     if n < 1e-9 { *a } else { s / n }
 }
+
+/// Halvings of one CL segment before linearization gives up: a path passing within microradians
+/// of a singular direction swings the free rotary over a millionth of its segment (14 left
+/// leaves at 0.98 of the tolerance, over it once rounded).
+const MAX_SPLIT_DEPTH: u32 = 20;
+
+/// Blocks one CL segment may be linearized into: a bound on the output whatever the input.
+const MAX_SEGMENT_SPLITS: u32 = 1 << 14;
