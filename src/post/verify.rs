@@ -160,13 +160,22 @@ pub fn verify<C: BufRead, N: BufRead>(cl: C, nc: N, m: &Machine, o: &VerifyOptio
                     dp = dp.min(seg_dist(&pt.pose.tip, &from, &tip));
                 }
                 let da = angle_between(&axis, &pt.pose.axis).to_degrees();
-                if dp <= o.tolerance && da <= o.angle_tolerance_deg {
+                let score = |p: f64, a: f64| p / o.tolerance + a / o.angle_tolerance_deg;
+                let ok = dp <= o.tolerance && da <= o.angle_tolerance_deg;
+                if let Some((_, fp, fa)) = found {
+                    // A run of blocks that all reproduce the point (near a singular direction
+                    // the machine turns about a standing tip on its way there): the closest is
+                    // the point, the others lead to it. Matching the first made the last ones
+                    // part of the next segment, and off it.
+                    if !ok {
+                        break;
+                    }
+                    if score(dp, da) < score(fp, fa) {
+                        found = Some((i, dp, da));
+                    }
+                } else if ok {
                     found = Some((i, dp, da));
-                    break;
-                }
-                if nearest.is_none_or(|(_, p, a)| {
-                    dp / o.tolerance + da / o.angle_tolerance_deg < p / o.tolerance + a / o.angle_tolerance_deg
-                }) {
+                } else if nearest.is_none_or(|(_, p, a)| score(dp, da) < score(p, a)) {
                     nearest = Some((ahead[i].0.line, dp, da));
                 }
             }
