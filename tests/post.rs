@@ -1041,7 +1041,7 @@ fn surface_speed_becomes_rpm_at_the_cutters_diameter() {
 #[test]
 fn linearization_follows_a_near_singular_swing_and_is_bounded() {
     let m = machine("spinner-u5-620");
-    let cl = std::fs::read_to_string(data("near_singular_jitter.cls")).unwrap();
+    let cl = std::fs::read_to_string(data("generated/near_singular_jitter.cls")).unwrap();
     let o = Options::new(&m);
     let (sink, s) = run(&m, cl.as_bytes(), &o);
     assert_eq!(s.errors, 0, "{:?}", sink.diags);
@@ -1176,5 +1176,36 @@ proptest::proptest! {
             exercised += near_singular_path(&p.machine.id, &seed)? as u32;
         }
         proptest::prop_assert!(exercised >= 5, "{exercised} profiles");
+    }
+}
+
+/// The propeller machine (three rotaries, two linears) facing a plane through X = 0: the chain
+/// flips there, and no feed block may turn a rotary further than the step limit (10°). Joint
+/// mode repositioned; TCP mode wrote the flip as one G1 turning C 180° while cutting.
+#[test]
+fn no_feed_block_turns_a_rotary_past_the_step_limit() {
+    let m = machine("propeller-3r2l");
+    let cl = std::fs::read(data("nx_clsf_mech491_simple_mill_plane_mm.cls")).unwrap();
+    for mode in [Mode::Joint, Mode::Tcp] {
+        let mut o = Options::new(&m);
+        o.mode = mode;
+        let (sink, _) = run(&m, &cl, &o);
+        let mut repositions = 0;
+        for w in sink.blocks.windows(2) {
+            if w[1].rapid || w[0].rapid {
+                repositions += w[1].rapid as u32;
+                continue;
+            }
+            for k in 3..6 {
+                if let (Some(a), Some(b)) = (w[0].joints.0[k], w[1].joints.0[k]) {
+                    assert!(
+                        (b - a).abs() <= 10.0 + 1e-6,
+                        "{mode:?}: {a} -> {b} at line {:?}",
+                        w[1].source_line
+                    );
+                }
+            }
+        }
+        assert!(repositions > 0, "{mode:?}");
     }
 }

@@ -1438,8 +1438,12 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                 split = false;
             }
         }
-        if split && depth >= MAX_SPLIT_DEPTH && self.o.mode == Mode::Joint && self.nonlinear_error(&a, &b) > self.o.tolerance {
-            // Subdivision did not converge: the solution followed runs into a fold.
+        if split
+            && depth >= MAX_SPLIT_DEPTH
+            && (step > self.o.max_rotary_step || self.o.mode == Mode::Joint && self.nonlinear_error(&a, &b) > self.o.tolerance)
+        {
+            // Subdivision did not converge: the solution followed runs into a fold (or, any
+            // mode, a rotary still steps too far: it was a feed block turning C 180°).
             self.reposition(a, b, false, pt)?;
             return Ok(3);
         }
