@@ -283,6 +283,7 @@ async fn a_preview_draws_the_decimated_path_its_joints_and_every_warning() {
     let blocks = done["summary"]["blocks"].as_u64().unwrap();
     let pts = p["points"].as_array().unwrap();
     assert_eq!(p["blocks"], blocks);
+    assert_eq!(done["progress"]["blocks"], blocks, "progress counts what the summary counts");
     assert!(
         blocks >= 30_000 && pts.len() <= 10_000 && pts.len() >= 2_500,
         "{} of {blocks}",

@@ -47,6 +47,7 @@ pub struct JobView {
 pub struct JobProgress {
     pub input_bytes: u64,
     pub bytes_read: u64,
+    /// NC motion blocks written so far (the summary's `blocks` once finished).
     pub blocks: u64,
     /// Of the input read (100 when finished successfully).
     pub percent: f64,

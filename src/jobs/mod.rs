@@ -309,7 +309,8 @@ struct JobSink<'a> {
 
 impl Sink for JobSink<'_> {
     fn line(&mut self, text: &str, b: Option<&BlockInfo>) -> std::io::Result<()> {
-        let n = self.progress.blocks.fetch_add(1, Ordering::Relaxed);
+        // Motion blocks, as the summary counts them (it counted every line, header and M codes).
+        let n = self.progress.blocks.fetch_add(b.is_some() as u64, Ordering::Relaxed);
         if n % 1024 == 0 && self.cancel.load(Ordering::Relaxed) {
             return Err(std::io::Error::other("cancelled"));
         }
