@@ -1209,3 +1209,39 @@ fn no_feed_block_turns_a_rotary_past_the_step_limit() {
         assert!(repositions > 0, "{mode:?}");
     }
 }
+
+/// Blocks inserted between two points within travel can leave it (a long segment with large
+/// turns: Z above 0 on htm50200-horizontal): each such block is a limit error naming the axis,
+/// as the shared verifier finds them (108 here); none was reported before. Checked against the
+/// profile's travel block by block, independently of the engine's own check.
+#[test]
+fn inserted_blocks_outside_travel_are_limit_errors() {
+    let m = machine("htm50200-horizontal");
+    let cl = std::fs::read(data("generated/htm_shuffled.cls")).unwrap();
+    let mut o = Options::new(&m);
+    o.dialect = &kinepost::nc::FANUC;
+    let (sink, _) = run(&m, &cl, &o);
+    let outside = |b: &BlockInfo| {
+        let w = &b.joints.0;
+        m.linears.iter().enumerate().any(|(i, l)| {
+            l.as_ref()
+                .is_some_and(|l| w[i].is_some_and(|v| v < l.min - 1e-3 || v > l.max + 1e-3))
+        }) || m.rotaries.iter().any(|r| {
+            let k = 3 + (r.name as u8 - b'A') as usize;
+            r.limits
+                .is_some_and(|(lo, hi)| w[k].is_some_and(|v| v < lo.to_degrees() - 1e-3 || v > hi.to_degrees() + 1e-3))
+        })
+    };
+    let mut n = 0;
+    for b in &sink.blocks {
+        let told = b.diagnostics.iter().any(|d| d.code == Code::LimitViolation);
+        assert_eq!(told, outside(b), "{:?}", b);
+        n += told as u32;
+    }
+    let errs = sink.diags.iter().filter(|d| d.code == Code::LimitViolation).count();
+    assert!(
+        n >= 50,
+        "{n} blocks outside travel, {errs} errors, {} blocks",
+        sink.blocks.len()
+    );
+}

@@ -420,6 +420,8 @@ struct Emitter<'a, S: Sink + ?Sized> {
     tool_changed: bool,
     /// Halvings left to the CL segment being linearized (see [`MAX_SEGMENT_SPLITS`]).
     split_budget: u32,
+    /// The CL line of the last point outside travel: blocks inserted for it say nothing more.
+    outside_line: Option<u32>,
     split_told: bool,
     /// Tip moves shorter than this (half the X Y Z words' last digit) are a standing tip.
     standing: f64,
@@ -526,6 +528,7 @@ pub fn post<R: BufRead, S: Sink + ?Sized>(input: R, m: &Machine, o: &Options, si
         at: None,
         tool_changed: false,
         split_budget: 0,
+        outside_line: None,
         split_told: false,
         last_line: 0,
         standing: 0.5 * 10f64.powi(-(formats.linear as i32)),
@@ -968,6 +971,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         if !cand.feasible
             && let Some(v) = kinematics::limit_violation(self.m, &joints, 1e-6)
         {
+            self.outside_line = Some(pt.line);
             diags.push(Diagnostic::new(
                 Code::LimitViolation,
                 Severity::Error,
@@ -2182,7 +2186,23 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             .sqrt();
             time = len / self.rapid_rate();
         }
-        // Diagnostics of the pose itself.
+        // Diagnostics of the pose itself. A CL point's travel was checked where it was planned;
+        // a block inserted between two points within travel (linearization, a retract along the
+        // tool axis) can still leave it: the machine would stop on overtravel mid-cut.
+        if inserted
+            && self.outside_line != Some(pt.line)
+            && let Some(v) = kinematics::limit_violation(m, &to.joints, 1e-6)
+        {
+            diags.push(Diagnostic::new(
+                Code::LimitViolation,
+                Severity::Error,
+                Some(pt.line),
+                format!(
+                    "{} = {:.4} outside its travel [{}, {}] (a block kinepost inserted: linearization, retract or approach)",
+                    v.axis, v.value, v.min, v.max
+                ),
+            ));
+        }
         for (i, r) in m.rotaries.iter().enumerate() {
             if let Some(e) = &r.angle_error
                 && !e.in_range(to.joints.rotary[i])
