@@ -329,7 +329,10 @@ fn a_file_without_motion_is_told() {
 /// it (not F1000000), F itself on one that has not.
 #[test]
 fn a_turn_about_a_standing_tip_takes_the_machine_axes_time() {
-    let cl = "UNITS/MM\nFEDRAT/1000,MMPM\nGOTO/0,0,50,0,0,1\nGOTO/0,0,50,0.5,0,0.8660254\nGOTO/10,0,50,0.5,0,0.8660254\n";
+    // Tilted one way, then the other about the same tip (from vertical, the free rotary is
+    // turned while positioning, and the turn would be B alone).
+    let cl =
+        "UNITS/MM\nFEDRAT/1000,MMPM\nGOTO/0,0,50,0.5,0,0.8660254\nGOTO/0,0,50,0,0.5,0.8660254\nGOTO/10,0,50,0,0.5,0.8660254\n";
     for id in ["spinner-u5-620", "dmg-dmc75v"] {
         let m = machine(id);
         let (sink, _) = run(&m, cl.as_bytes(), &Options::new(&m));
@@ -1244,4 +1247,40 @@ fn inserted_blocks_outside_travel_are_limit_errors() {
         "{n} blocks outside travel, {errs} errors, {} blocks",
         sink.blocks.len()
     );
+}
+
+/// A cut that starts with the tool along the singular direction and tilts away (common CAM
+/// output): the machine positions onto the first point with the free rotary already where the
+/// cut needs it, so the cut turns only the tilt and the tool axis stays on the CL orientation.
+/// It held C at 0 and turned it 90° during the cut, the axis up to 11.4° off.
+#[test]
+fn a_cut_from_the_singular_direction_turns_its_free_rotary_while_positioning() {
+    for id in ["spinner-u5-620", "haas-umc750", "dmg-dmc75v"] {
+        let m = machine(id);
+        let s = if m.units == Units::Mm { 1.0 } else { 1.0 / 25.4 };
+        let cl = format!(
+            "UNITS/{}\nFEDRAT/{}\nGOTO/0,0,{},0,0,1\nGOTO/{},0,{},0,0.5,0.8660254\n",
+            if m.units == Units::Mm { "MM" } else { "INCHES" },
+            500.0 * s,
+            50.0 * s,
+            10.0 * s,
+            50.0 * s
+        );
+        for tilted_planes in [false, true] {
+            let mut o = Options::new(&m);
+            o.tilted_planes = tilted_planes;
+            let (sink, sum) = run(&m, cl.as_bytes(), &o);
+            assert!(
+                sum.max_singular_deviation_deg < 1e-6,
+                "{id}: {}\n{}",
+                sum.max_singular_deviation_deg,
+                sink.nc
+            );
+            // The free rotary does not move after the approach.
+            let c = |b: &BlockInfo| b.joints.0[5];
+            let feed: Vec<_> = sink.blocks.iter().filter(|b| !b.rapid).collect();
+            assert!(feed.iter().all(|b| c(b) == c(feed[0])), "{id}: {}", sink.nc);
+            assert_eq!(sum.errors, 0, "{id}: {:?}", sink.diags);
+        }
+    }
 }

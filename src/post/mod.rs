@@ -459,6 +459,8 @@ struct Emitter<'a, S: Sink + ?Sized> {
     /// The point being written is a rapid whose fixed tool axis holds, in the look-ahead, until
     /// the next rapid with another axis (or a tool change, or the end): a plane may start there.
     plane_ahead: bool,
+    /// For a singular point: the free rotary's angle where the cut after it fixes it.
+    free_hint: Option<f64>,
     /// Per axis letter (X Y Z A B C): extents and travel, moved into the summary at the end.
     stats: [Option<AxisStats>; 6],
     /// cos of the singular cone and the singular direction, once (they are checked per block).
@@ -472,6 +474,24 @@ struct Tilt {
     rotary: [f64; 3],
     frame: nalgebra::Matrix3<f64>,
     axis: Vec3,
+}
+
+/// The free rotary's angle at the first point ahead of a singular one that fixes it, within the
+/// cut (up to a rapid, a tool change or the end, and [`LOOK_AHEAD`] items): what a machine that
+/// positions onto the singular point turns to, instead of turning it during the cut that follows.
+fn free_angle_ahead(free: usize, ahead: &VecDeque<Out>) -> Option<f64> {
+    for o in ahead.iter().take(LOOK_AHEAD) {
+        match o {
+            Out::Event(ProgEvent::Tool { .. } | ProgEvent::End) => return None,
+            Out::Event(_) => {}
+            Out::Point(c) if c.pt.rapid => return None,
+            Out::Point(c) => match &c.cand {
+                Some(k) if k.sol.singular.is_none() => return Some(k.sol.actual[free]),
+                _ => {}
+            },
+        }
+    }
+    None
 }
 
 /// Items held back for the tilted-plane look-ahead (about one planner commit).
@@ -508,8 +528,26 @@ fn deliver<S: Sink + ?Sized>(e: &mut Emitter<'_, S>, pending: &mut VecDeque<Out>
         pending.push_back(x);
         return;
     }
-    if let Err(err) = e.take(x, pending) {
-        *failed = Some(err);
+    // A singular point the machine positions onto waits for the point that fixes its free
+    // rotary (see `free_angle_ahead`); everything else goes straight through.
+    if pending.is_empty() && !e.positions_onto_singular(&x) {
+        if let Err(err) = e.take(x, pending) {
+            *failed = Some(err);
+        }
+        return;
+    }
+    let resolves = match &x {
+        Out::Point(c) => c.pt.rapid || c.cand.as_ref().is_some_and(|k| k.sol.singular.is_none()),
+        Out::Event(ev) => matches!(ev, ProgEvent::Tool { .. } | ProgEvent::End),
+    };
+    pending.push_back(x);
+    if resolves || pending.len() > LOOK_AHEAD {
+        while let Some(o) = pending.pop_front() {
+            if let Err(err) = e.take(o, pending) {
+                *failed = Some(err);
+                return;
+            }
+        }
     }
 }
 
@@ -561,6 +599,7 @@ pub fn post<R: BufRead, S: Sink + ?Sized>(input: R, m: &Machine, o: &Options, si
         said_once: Vec::new(),
         tilt: None,
         plane_ahead: false,
+        free_hint: None,
         stats: Default::default(),
         singular: kinematics::singular_direction(m).map(|d| (d.normalize(), o.singular_cone.cos())),
     };
@@ -692,6 +731,10 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
     /// Writes what the planner committed, keeping [`LOOK_AHEAD`] items back (until `all`) when
     /// tilted planes are on: whether a fixed-axis run ends at a rapid is decided from them.
     fn drain(&mut self, pending: &mut VecDeque<Out>, all: bool) -> Result<(), Error> {
+        // Without tilted planes only a held singular point waits here (`deliver` releases it).
+        if !all && !self.o.tilted_planes {
+            return Ok(());
+        }
         let keep = if all || !self.o.tilted_planes { 0 } else { LOOK_AHEAD };
         while pending.len() > keep {
             let Some(o) = pending.pop_front() else { break };
@@ -700,12 +743,29 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         Ok(())
     }
 
+    /// A committed singular point that the machine reaches by positioning (the first move, after
+    /// a tool change, a rapid): its free rotary is best taken from the cut that follows.
+    fn positions_onto_singular(&self, x: &Out) -> bool {
+        match x {
+            Out::Point(c) => {
+                c.cand.as_ref().is_some_and(|k| k.sol.singular.is_some())
+                    && (self.at.is_none() || self.tool_changed || c.pt.rapid)
+            }
+            Out::Event(_) => false,
+        }
+    }
+
     /// One committed item, with what is known to follow it (the tilted-plane look-ahead).
     fn take(&mut self, o: Out, ahead: &VecDeque<Out>) -> Result<(), Error> {
         match o {
             Out::Event(ev) => self.event(ev),
             Out::Point(c) => {
                 self.plane_ahead = c.pt.rapid && self.o.tilted_planes && fixed_run_ahead(&c.pt.pose.axis, ahead);
+                self.free_hint = c
+                    .cand
+                    .as_ref()
+                    .and_then(|k| k.sol.singular)
+                    .and_then(|free| free_angle_ahead(free, ahead));
                 self.point(c)
             }
         }
@@ -843,10 +903,24 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
 
     /// The chosen candidate with its unbounded windings and singular free angle resolved against
     /// where the machine is.
-    fn resolve(&mut self, pose: &Pose, cand: &Cand) -> Option<(Joints, [f64; 3], i8)> {
+    fn resolve(&mut self, pose: &Pose, cand: &Cand, positioning: bool) -> Option<(Joints, [f64; 3], i8)> {
         let mut sol = cand.sol;
         if let Some(free) = sol.singular {
             let prev = self.at.map_or(0.0, |a| a.actual[free]);
+            // Positioning onto a singular point (the first move, after a tool change or a rapid)
+            // turns the free rotary to where the cut after it needs it: held at the old angle,
+            // it turned during that cut, the tool axis off the CL orientation by up to 11° (a
+            // cut from vertical to a 30° tilt on spinner-u5-620).
+            let prev = match self.free_hint {
+                Some(h) if positioning => {
+                    if self.m.rotaries[free].limits.is_some() {
+                        h
+                    } else {
+                        prev + wrap(h - prev)
+                    }
+                }
+                _ => prev,
+            };
             let opt = IkOptions {
                 free_angle: prev,
                 ..Default::default()
@@ -929,7 +1003,8 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             )?;
             return Ok(());
         };
-        let Some((mut joints, mut actual, branch)) = self.resolve(&pt.pose, &cand) else {
+        let positioning = self.at.is_none() || self.tool_changed || pt.rapid;
+        let Some((mut joints, mut actual, branch)) = self.resolve(&pt.pose, &cand, positioning) else {
             return Ok(());
         };
         self.ensure_comp()?;
@@ -1861,7 +1936,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             .as_ref()
             .filter(|k| k.feasible)
             .ok_or("the hole's start is not reachable within travel")?;
-        let (joints, actual, branch) = self.resolve(&c.pt.pose, cand).ok_or("no solution")?;
+        let (joints, actual, branch) = self.resolve(&c.pt.pose, cand, true).ok_or("no solution")?;
         let start = joints.linear[2];
         let (bottom, r) = (start - h.start - h.depth, start - h.start + h.clear);
         let in_plane = self.o.tilted_planes && self.plane_refused().is_none();
