@@ -47,6 +47,30 @@ fn run(m: &Machine, cl: &[u8], o: &Options) -> (Collect, Summary) {
     (sink, s)
 }
 
+/// The profile's defaults in `mode`, written as word address (what `NcReader` and `verify` read).
+fn fanuc(m: &Machine, mode: Mode) -> Options {
+    let mut o = Options::new(m);
+    o.mode = mode;
+    o.dialect = &kinepost::nc::FANUC;
+    o
+}
+
+/// A tip the machine reaches: the controlled point at mid travel, rotaries at zero.
+fn mid_travel_tip(m: &Machine, setup: &Setup) -> Vec3 {
+    let mut j = Joints::default();
+    for (i, l) in m.linears.iter().enumerate() {
+        if let Some(l) = l {
+            j.linear[i] = 0.5 * (l.min + l.max);
+        }
+    }
+    fk(m, &j, setup).tip
+}
+
+/// `d` turned by `rad` about `e`.
+fn tilt(d: Vec3, e: Vec3, rad: f64) -> Vec3 {
+    nalgebra::Rotation3::from_axis_angle(&nalgebra::Unit::new_normalize(e), rad) * d
+}
+
 #[test]
 fn every_copied_corpus_file_reads_without_error_diagnostics() {
     let mut n = 0;
@@ -125,11 +149,9 @@ fn generated_paths_on_every_profile_post_clean_in_joint_and_tcp_mode() {
         kinepost::testgen::write_path(m, n, 7, m.default_tool_length, &mut cl).unwrap();
         let cl_text = String::from_utf8(cl.clone()).unwrap();
         for mode in [Mode::Joint, Mode::Tcp] {
-            let mut o = Options::new(m);
-            o.mode = mode;
             // The engine under test; word address so the replay below can read it (every dialect
             // is checked by tests/dialects.rs and, in CI, by the shared verifier).
-            o.dialect = &kinepost::nc::FANUC;
+            let o = fanuc(m, mode);
             let (sink, s) = run(m, &cl, &o);
             let errors: Vec<_> = sink.diags.iter().filter(|d| d.severity == Severity::Error).collect();
             assert!(errors.is_empty(), "{} {mode:?}: {errors:?}", m.id);
@@ -612,8 +634,7 @@ fn a_singular_tolerance_holds_the_free_rotary_within_its_bound_and_reports_what_
 fn nx_arcs_turn_the_way_the_nx_post_cuts_them() {
     let m = machine("haas-umc750");
     let cl = std::fs::read(data("nx_clsf_mech491_simple_mill_plane_mm.cls")).unwrap();
-    let mut o = Options::new(&m);
-    o.dialect = &kinepost::nc::FANUC;
+    let mut o = fanuc(&m, Mode::Joint);
     let (sink, _) = run(&m, &cl, &o);
     assert!(
         sink.nc.contains("G3 X-10.4331 Y6.4961 Z3.9370 I0.2953 J0.0000"),
@@ -763,8 +784,7 @@ fn rapids_that_turn_rotaries_retract_first_and_turn_alone() {
     let cl = format!(
         "UNITS/MM\nFEDRAT/500,MMPM\nGOTO/0,0,10,0,0,1\nGOTO/10,0,10,0,0,1\nRAPID\nGOTO/20,5,30,{s30},0,{c30}\nGOTO/25,5,28,{s30},0,{c30}\n"
     );
-    let mut o = Options::new(&m);
-    o.dialect = &kinepost::nc::FANUC;
+    let mut o = fanuc(&m, Mode::Joint);
     let (sink, s) = run(&m, cl.as_bytes(), &o);
     assert_eq!(s.errors, 0);
     let lines: Vec<&str> = sink.nc.lines().collect();
@@ -850,18 +870,8 @@ fn a_segment_through_the_singular_direction_keeps_every_block_on_its_pose() {
         let Some(s1) = kinepost::kinematics::singular_direction(m) else {
             continue;
         };
-        // A reachable tip: the controlled point at mid travel, rotaries at zero.
-        let mut j = Joints::default();
-        for (i, l) in m.linears.iter().enumerate() {
-            if let Some(l) = l {
-                j.linear[i] = 0.5 * (l.min + l.max);
-            }
-        }
         let setup = Setup::new(m.default_tool_length, Vec3::zeros());
-        let tip = fk(m, &j, &setup).tip;
-        let tilt = |d: Vec3, e: Vec3, deg: f64| {
-            nalgebra::Rotation3::from_axis_angle(&nalgebra::Unit::new_normalize(e), deg.to_radians()) * d
-        };
+        let tip = mid_travel_tip(m, &setup);
         let reachable = |a: Vec3| {
             let pose = kinepost::kinematics::Pose { tip, axis: a };
             kinepost::kinematics::ik(m, &pose, &setup, &Default::default()).is_ok()
@@ -872,11 +882,11 @@ fn a_segment_through_the_singular_direction_keeps_every_block_on_its_pose() {
             .into_iter()
             .flat_map(|d| [Vec3::x(), Vec3::y(), Vec3::z()].map(|w| (d, d.cross(&w))))
             .filter_map(|(d, e)| Some((d, e.try_normalize(1e-9)?)))
-            .find(|&(d, e)| reachable(tilt(d, e, -20.0)) && reachable(tilt(d, e, 20.0)))
+            .find(|&(d, e)| reachable(tilt(d, e, -20f64.to_radians())) && reachable(tilt(d, e, 20f64.to_radians())))
         else {
             panic!("{}: no reachable tilt about {s1:?}", m.id)
         };
-        let (a1, a2) = (tilt(d, e, -20.0), tilt(d, e, 20.0));
+        let (a1, a2) = (tilt(d, e, -20f64.to_radians()), tilt(d, e, 20f64.to_radians()));
         let cl = format!(
             "UNITS/{}\nFEDRAT/500\nGOTO/{},{},{},{},{},{}\nGOTO/{},{},{},{},{},{}\n",
             if m.units == Units::Inch { "INCHES" } else { "MM" },
@@ -1087,19 +1097,12 @@ fn near_singular_path(id: &str, seed: &[f64]) -> Result<bool, proptest::test_run
         return Ok(false);
     };
     let setup = Setup::new(m.default_tool_length, Vec3::zeros());
-    let mut j = Joints::default();
-    for (i, l) in m.linears.iter().enumerate() {
-        if let Some(l) = l {
-            j.linear[i] = 0.5 * (l.min + l.max);
-        }
-    }
-    let base = fk(&m, &j, &setup).tip;
+    let base = mid_travel_tip(&m, &setup);
     let reachable = |a: Vec3| {
         let pose = kinepost::kinematics::Pose { tip: base, axis: a };
         kinepost::kinematics::ik(&m, &pose, &setup, &Default::default())
             .is_ok_and(|sols| sols.iter().any(|s| kinepost::kinematics::reachable_within_limits(&m, s)))
     };
-    let tilt = |d: Vec3, e: Vec3, rad: f64| nalgebra::Rotation3::from_axis_angle(&nalgebra::Unit::new_normalize(e), rad) * d;
     let perp = |d: Vec3| {
         [Vec3::x(), Vec3::y(), Vec3::z()]
             .into_iter()
@@ -1147,9 +1150,7 @@ fn near_singular_path(id: &str, seed: &[f64]) -> Result<bool, proptest::test_run
         cl += &format!("GOTO/{},{},{},{:.12},{:.12},{:.12}\n", tip.x, tip.y, tip.z, a.x, a.y, a.z);
     }
     for mode in [Mode::Joint, Mode::Tcp] {
-        let mut o = Options::new(&m);
-        o.mode = mode;
-        o.dialect = &kinepost::nc::FANUC;
+        let o = fanuc(&m, mode);
         let (sink, s) = run(&m, cl.as_bytes(), &o);
         let errors: Vec<_> = sink.diags.iter().filter(|d| d.severity == Severity::Error).collect();
         prop_assert!(errors.is_empty(), "{id} {mode:?}: {errors:?}\n{cl}");
@@ -1221,9 +1222,7 @@ fn no_feed_block_turns_a_rotary_past_the_step_limit() {
 fn inserted_blocks_outside_travel_are_limit_errors() {
     let m = machine("htm50200-horizontal");
     let cl = std::fs::read(data("generated/htm_shuffled.cls")).unwrap();
-    let mut o = Options::new(&m);
-    o.dialect = &kinepost::nc::FANUC;
-    let (sink, _) = run(&m, &cl, &o);
+    let (sink, _) = run(&m, &cl, &fanuc(&m, Mode::Joint));
     let outside = |b: &BlockInfo| {
         let w = &b.joints.0;
         m.linears.iter().enumerate().any(|(i, l)| {

@@ -480,18 +480,21 @@ struct Tilt {
 /// cut (up to a rapid, a tool change or the end, and [`LOOK_AHEAD`] items): what a machine that
 /// positions onto the singular point turns to, instead of turning it during the cut that follows.
 fn free_angle_ahead(free: usize, ahead: &VecDeque<Out>) -> Option<f64> {
-    for o in ahead.iter().take(LOOK_AHEAD) {
-        match o {
-            Out::Event(ProgEvent::Tool { .. } | ProgEvent::End) => return None,
-            Out::Event(_) => {}
-            Out::Point(c) if c.pt.rapid => return None,
-            Out::Point(c) => match &c.cand {
-                Some(k) if k.sol.singular.is_none() => return Some(k.sol.actual[free]),
-                _ => {}
-            },
-        }
+    ahead.iter().take(LOOK_AHEAD).find_map(|o| free_angle_at(o, free)).flatten()
+}
+
+/// What `o` says of the free angle (rotary `free`) of a singular point before it: `Some(Some(a))`
+/// a point that fixes it at `a`, `Some(None)` the cut ends first (a rapid, a tool change, the
+/// end), `None` nothing yet.
+fn free_angle_at(o: &Out, free: usize) -> Option<Option<f64>> {
+    match o {
+        Out::Event(ev) => matches!(ev, ProgEvent::Tool { .. } | ProgEvent::End).then_some(None),
+        Out::Point(c) if c.pt.rapid => Some(None),
+        Out::Point(c) => match &c.cand {
+            Some(k) if k.sol.singular.is_none() => Some(Some(k.sol.actual[free])),
+            _ => None,
+        },
     }
-    None
 }
 
 /// Items held back for the tilted-plane look-ahead (about one planner commit).
@@ -536,10 +539,8 @@ fn deliver<S: Sink + ?Sized>(e: &mut Emitter<'_, S>, pending: &mut VecDeque<Out>
         }
         return;
     }
-    let resolves = match &x {
-        Out::Point(c) => c.pt.rapid || c.cand.as_ref().is_some_and(|k| k.sol.singular.is_none()),
-        Out::Event(ev) => matches!(ev, ProgEvent::Tool { .. } | ProgEvent::End),
-    };
+    // Whatever the free rotary's index, the same items settle it.
+    let resolves = free_angle_at(&x, 0).is_some();
     pending.push_back(x);
     if resolves || pending.len() > LOOK_AHEAD {
         while let Some(o) = pending.pop_front() {
@@ -747,12 +748,15 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
     /// a tool change, a rapid): its free rotary is best taken from the cut that follows.
     fn positions_onto_singular(&self, x: &Out) -> bool {
         match x {
-            Out::Point(c) => {
-                c.cand.as_ref().is_some_and(|k| k.sol.singular.is_some())
-                    && (self.at.is_none() || self.tool_changed || c.pt.rapid)
-            }
+            Out::Point(c) => c.cand.as_ref().is_some_and(|k| k.sol.singular.is_some()) && self.positioning(&c.pt),
             Out::Event(_) => false,
         }
+    }
+
+    /// The machine reaches `pt` by positioning, not by cutting: the first move, the first after
+    /// a tool change, a rapid.
+    fn positioning(&self, pt: &MotionPt) -> bool {
+        self.at.is_none() || self.tool_changed || pt.rapid
     }
 
     /// One committed item, with what is known to follow it (the tilted-plane look-ahead).
@@ -1003,8 +1007,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             )?;
             return Ok(());
         };
-        let positioning = self.at.is_none() || self.tool_changed || pt.rapid;
-        let Some((mut joints, mut actual, branch)) = self.resolve(&pt.pose, &cand, positioning) else {
+        let Some((mut joints, mut actual, branch)) = self.resolve(&pt.pose, &cand, self.positioning(&pt)) else {
             return Ok(());
         };
         self.ensure_comp()?;
@@ -1047,12 +1050,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             && let Some(v) = kinematics::limit_violation(self.m, &joints, 1e-6)
         {
             self.outside_line = Some(pt.line);
-            diags.push(Diagnostic::new(
-                Code::LimitViolation,
-                Severity::Error,
-                Some(pt.line),
-                format!("{} = {:.4} outside its travel [{}, {}]", v.axis, v.value, v.min, v.max),
-            ));
+            diags.push(limit_error(&v, pt.line, ""));
         }
         let target = At {
             joints,
@@ -1644,28 +1642,24 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             Some((d, at)) if d <= 1e-4 => return Some(at),
             Some((d, at)) if missing_linear => return (d <= limit).then_some(at),
             None if missing_linear => return None,
-            Some((d, at)) => {
-                // Microradians from a singular direction the exact free rotary chases the
-                // azimuth of an all but vertical axis (and the rounding of i, j, k) to and fro:
-                // where the interpolated rotaries miss the orientation by less than a rotary
-                // word can say, they are the better midpoint (it never converged 14 halvings
-                // deep, C wandering by a degree at a standing tip).
-                let (held, dev) = self.held_midpoint(a, &want, &tip, &axis);
-                if dev <= 0.5 * 10f64.powi(-(self.f.fmt.rotary as i32)) {
-                    self.sum.max_singular_deviation_deg = self.sum.max_singular_deviation_deg.max(dev);
-                    return Some(held);
-                }
-                if d <= limit {
-                    return Some(at);
-                }
-            }
-            None => {}
+            _ => {}
         }
         // Near a singular direction the exact midpoint's free rotary follows the azimuth of a
         // nearly aligned axis and swings wildly. Keep the interpolated rotaries (the motion the
         // control makes between the two blocks anyway), put the tip exactly on the chord, and
         // account for the orientation this leaves (bounded by how near the path passes).
+        // Microradians from it the exact rotary chases the azimuth of an all but vertical axis
+        // (and the rounding of i, j, k) to and fro: where the interpolated rotaries miss the
+        // orientation by less than a rotary word can say, they are the better midpoint even
+        // within the swing limit (it never converged 14 halvings deep, C wandering by a degree
+        // at a standing tip).
         let (held, dev) = self.held_midpoint(a, &want, &tip, &axis);
+        if let Some((d, at)) = best
+            && d <= limit
+            && dev > 0.5 * 10f64.powi(-(self.f.fmt.rotary as i32))
+        {
+            return Some(at);
+        }
         self.sum.max_singular_deviation_deg = self.sum.max_singular_deviation_deg.max(dev);
         Some(held)
     }
@@ -2268,14 +2262,10 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             && self.outside_line != Some(pt.line)
             && let Some(v) = kinematics::limit_violation(m, &to.joints, 1e-6)
         {
-            diags.push(Diagnostic::new(
-                Code::LimitViolation,
-                Severity::Error,
-                Some(pt.line),
-                format!(
-                    "{} = {:.4} outside its travel [{}, {}] (a block kinepost inserted: linearization, retract or approach)",
-                    v.axis, v.value, v.min, v.max
-                ),
+            diags.push(limit_error(
+                &v,
+                pt.line,
+                " (a block kinepost inserted: linearization, retract or approach)",
             ));
         }
         for (i, r) in m.rotaries.iter().enumerate() {
@@ -2409,6 +2399,16 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
 /// Rotary distance (radians, summed) from the joint-space midpoint beyond which an exact midpoint
 /// is not taken: the segment passes near a singular direction.
 const NEAR_SINGULAR_SWING: f64 = 0.0873;
+
+/// The error a block outside travel carries: axis, value and travel, and what the block is.
+fn limit_error(v: &kinematics::LimitViolation, line: u32, what: &str) -> Diagnostic {
+    Diagnostic::new(
+        Code::LimitViolation,
+        Severity::Error,
+        Some(line),
+        format!("{} = {:.4} outside its travel [{}, {}]{what}", v.axis, v.value, v.min, v.max),
+    )
+}
 
 /// Distance of `p` from the segment [a, b].
 pub fn seg_dist(p: &Vec3, a: &Vec3, b: &Vec3) -> f64 {
