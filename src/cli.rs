@@ -620,6 +620,7 @@ fn run(cli: Cli) -> Result<(), String> {
                 tolerance: tolerance.unwrap_or(if m.units == Units::Mm { 0.01 } else { 0.0004 }),
                 angle_tolerance_deg: 0.01,
                 cl_units: cl_units.map(Units::from),
+                cl_tool_length: setup.tool_length.is_none(),
             };
             let rep = verify::verify(open_input(&cl)?, open_input(&nc)?, m, &o).map_err(|e| e.to_string())?;
             println!("{}", serde_json::to_string_pretty(&rep).map_err(|e| e.to_string())?);

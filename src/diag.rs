@@ -37,6 +37,7 @@ pub enum Code {
     ArcLinearized,
     CycleExpanded,
     SurfaceSpeed,
+    ToolLength,
 }
 
 impl Code {
@@ -64,6 +65,7 @@ impl Code {
             Code::ArcLinearized => "arc_linearized",
             Code::CycleExpanded => "cycle_expanded",
             Code::SurfaceSpeed => "surface_speed",
+            Code::ToolLength => "tool_length",
         }
     }
 }

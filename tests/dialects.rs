@@ -511,9 +511,10 @@ fn same_holes(what: &str, got: &[DrilledHole], want: &[DrilledHole]) {
     }
 }
 
-/// Canned output on every profile: the ISO programs replayed through `kinepost verify` (its
-/// reader expands G81/G82/G83 into the moves a control makes) reach every CL point; holes that
-/// run along the machine's Z are cycles, the rest stay moves and say why.
+/// Canned output on every profile: the ISO and Siemens programs replayed through `kinepost
+/// verify` (its reader expands G81/G82/G83 and `MCALL CYCLE81/82/83` into the moves a control
+/// makes) reach every CL point; holes that run along the machine's Z are cycles, the rest stay
+/// moves and say why.
 #[test]
 fn canned_cycles_reach_every_hole_on_every_profile() {
     use kinepost::post::verify::{VerifyOptions, verify};
@@ -533,11 +534,16 @@ fn canned_cycles_reach_every_hole_on_every_profile() {
     ] {
         let p = lib.get(id).unwrap();
         let m = &p.machine;
-        for d in ["fanuc", "haas", "linuxcnc"] {
+        // Siemens' `MCALL CYCLE8x` holes are read back too (not ISO: no `iso_holes`).
+        for d in ["fanuc", "haas", "linuxcnc", "siemens"] {
             let (sink, sum, diags) = canned(id, Some(d), Mode::Joint);
             assert_eq!(sum.errors, 0, "{id} {d}: {diags:?}");
             assert_eq!(sum.canned_holes, want, "{id} {d}");
-            assert_eq!(iso_holes(&sink.nc, d == "fanuc").len() as u64, want, "{id} {d}:\n{}", sink.nc);
+            if d == "siemens" {
+                assert!(sink.nc.contains("MCALL CYCLE8"), "{id}:\n{}", sink.nc);
+            } else {
+                assert_eq!(iso_holes(&sink.nc, d == "fanuc").len() as u64, want, "{id} {d}:\n{}", sink.nc);
+            }
             if want < 8 {
                 assert!(
                     diags.iter().any(|x| x.message.contains("does not run along the machine's Z")),
@@ -554,6 +560,7 @@ fn canned_cycles_reach_every_hole_on_every_profile() {
                 },
                 angle_tolerance_deg: 0.01,
                 cl_units: None,
+                cl_tool_length: true,
             };
             let r = verify(HOLES.as_bytes(), sink.nc.as_bytes(), m, &vo).unwrap();
             assert!(r.ok && r.matched == 12, "{id} {d}: {r:?}\n{}", sink.nc);
@@ -622,6 +629,7 @@ fn verify_catches_a_wrong_canned_cycle() {
         tolerance: 0.01,
         angle_tolerance_deg: 0.01,
         cl_units: None,
+        cl_tool_length: true,
     };
     let first = iso_holes(&sink.nc, true)[0];
     let r_word = format!("R{:.3}", first.r);
@@ -721,6 +729,7 @@ fn random_holes(id: &str, seed: &[f64]) -> Result<(), proptest::test_runner::Tes
         tolerance: if m.units == Units::Mm { 0.01 } else { 0.0004 },
         angle_tolerance_deg: 0.01,
         cl_units: None,
+        cl_tool_length: true,
     };
     let r = verify(cl.as_bytes(), sink.nc.as_bytes(), m, &vo).unwrap();
     prop_assert!(r.ok && r.matched == holes as u64, "{r:?}\n{cl}\n{}", sink.nc);
@@ -967,6 +976,7 @@ fn random_planes(id: &str, seed: &[f64]) -> Result<(), proptest::test_runner::Te
             tolerance: tol,
             angle_tolerance_deg: 0.01,
             cl_units: None,
+            cl_tool_length: true,
         };
         let r = verify(cl.as_bytes(), sink.nc.as_bytes(), m, &vo).unwrap();
         prop_assert!(r.ok && r.matched == r.cl_points, "{id} {d}: {r:?}\n{cl}\n{}", sink.nc);
@@ -1039,6 +1049,7 @@ fn a_plane_left_inside_a_cut_is_repositioned_out_of_it() {
         tolerance: 0.01,
         angle_tolerance_deg: 0.01,
         cl_units: None,
+        cl_tool_length: true,
     };
     let r = verify(cl.as_bytes(), sink.nc.as_bytes(), m, &vo).unwrap();
     assert!(r.ok && r.matched == 2003, "{r:?}");

@@ -178,6 +178,7 @@ fn generated_paths_on_every_profile_post_clean_in_joint_and_tcp_mode() {
                 tolerance: o.tolerance,
                 angle_tolerance_deg: 0.01,
                 cl_units: None,
+                cl_tool_length: true,
             };
             let r = kinepost::post::verify::verify(cl_text.as_bytes(), sink.nc.as_bytes(), m, &vo).unwrap();
             assert!(r.ok, "{} {mode:?}: {r:?}", m.id);
@@ -574,6 +575,7 @@ fn verify_replays_any_program_and_names_the_cl_lines_it_misses() {
         tolerance: 0.0004,
         angle_tolerance_deg: 0.01,
         cl_units: None,
+        cl_tool_length: true,
     };
     let ours = verify(&cl[..], sink.nc.as_bytes(), &m, &vo).unwrap();
     assert!(ours.ok && ours.matched == 348, "{ours:?}");
@@ -622,6 +624,7 @@ fn a_singular_tolerance_holds_the_free_rotary_within_its_bound_and_reports_what_
         tolerance: 0.0004,
         angle_tolerance_deg: 0.5 + 1e-3,
         cl_units: None,
+        cl_tool_length: true,
     };
     assert!(verify(&cl[..], sink.nc.as_bytes(), &m, &vo).unwrap().ok);
 }
@@ -1064,6 +1067,7 @@ fn linearization_follows_a_near_singular_swing_and_is_bounded() {
         tolerance: o.tolerance,
         angle_tolerance_deg: 0.01,
         cl_units: None,
+        cl_tool_length: true,
     };
     let r = kinepost::post::verify::verify(cl.as_bytes(), sink.nc.as_bytes(), &m, &vo).unwrap();
     assert!(r.ok, "{r:?}");
@@ -1085,23 +1089,22 @@ fn linearization_follows_a_near_singular_swing_and_is_bounded() {
     assert_eq!(told.len(), 1, "{told:?}");
 }
 
-/// A random path about a reachable tip whose tool axis stays within a few degrees of a
-/// two-rotary profile's singular direction: exactly on it, symmetric about it, jittered by
-/// microradians to degrees. What fuzzing found there (a midpoint 35 mm off its pose, the free
-/// rotary chasing the azimuth until linearization gave up): every block reproduces its pose, the
-/// motion between blocks stays on the CL segments, joint and TCP mode.
-fn near_singular_path(id: &str, seed: &[f64]) -> Result<bool, proptest::test_runner::TestCaseError> {
-    use proptest::prelude::*;
-    let m = machine(id);
-    let Some(s1) = kinepost::kinematics::singular_direction(&m) else {
-        return Ok(false);
-    };
-    let setup = Setup::new(m.default_tool_length, Vec3::zeros());
-    let base = mid_travel_tip(&m, &setup);
+/// Where a two-rotary profile meets its singular direction: a tip at mid travel, the direction
+/// (`±s1`) the tool reaches there and at `reach` radians from it, two unit vectors across it.
+struct SingularFrame {
+    base: Vec3,
+    d: Vec3,
+    e1: Vec3,
+    e2: Vec3,
+}
+
+fn singular_frame(m: &Machine, setup: &Setup, reach: f64) -> Option<SingularFrame> {
+    let s1 = kinepost::kinematics::singular_direction(m)?;
+    let base = mid_travel_tip(m, setup);
     let reachable = |a: Vec3| {
         let pose = kinepost::kinematics::Pose { tip: base, axis: a };
-        kinepost::kinematics::ik(&m, &pose, &setup, &Default::default())
-            .is_ok_and(|sols| sols.iter().any(|s| kinepost::kinematics::reachable_within_limits(&m, s)))
+        kinepost::kinematics::ik(m, &pose, setup, &Default::default())
+            .is_ok_and(|sols| sols.iter().any(|s| kinepost::kinematics::reachable_within_limits(m, s)))
     };
     let perp = |d: Vec3| {
         [Vec3::x(), Vec3::y(), Vec3::z()]
@@ -1110,13 +1113,29 @@ fn near_singular_path(id: &str, seed: &[f64]) -> Result<bool, proptest::test_run
             .unwrap()
     };
     // htm50200-horizontal reaches its singular direction (±X) only with a work offset.
-    let Some(d) = [s1, -s1]
+    let d = [s1, -s1]
         .into_iter()
-        .find(|&d| reachable(tilt(d, perp(d), 0.03)) && reachable(d))
-    else {
+        .find(|&d| reachable(tilt(d, perp(d), reach)) && reachable(d))?;
+    Some(SingularFrame {
+        base,
+        d,
+        e1: perp(d),
+        e2: d.cross(&perp(d)),
+    })
+}
+
+/// A random path about a reachable tip whose tool axis stays within a few degrees of a
+/// two-rotary profile's singular direction: exactly on it, symmetric about it, jittered by
+/// microradians to degrees. What fuzzing found there (a midpoint 35 mm off its pose, the free
+/// rotary chasing the azimuth until linearization gave up): every block reproduces its pose, the
+/// motion between blocks stays on the CL segments, joint and TCP mode.
+fn near_singular_path(id: &str, seed: &[f64]) -> Result<bool, proptest::test_runner::TestCaseError> {
+    use proptest::prelude::*;
+    let m = machine(id);
+    let setup = Setup::new(m.default_tool_length, Vec3::zeros());
+    let Some(SingularFrame { base, d, e1, e2, .. }) = singular_frame(&m, &setup, 0.03) else {
         return Ok(false);
     };
-    let (e1, e2) = (perp(d), d.cross(&perp(d)));
     let scale = if m.units == Units::Mm { 1.0 } else { 1.0 / 25.4 };
     let mut cl = format!(
         "UNITS/{}\nFEDRAT/{}\n",
@@ -1149,21 +1168,95 @@ fn near_singular_path(id: &str, seed: &[f64]) -> Result<bool, proptest::test_run
         let a = tilt(d, e, r);
         cl += &format!("GOTO/{},{},{},{:.12},{:.12},{:.12}\n", tip.x, tip.y, tip.z, a.x, a.y, a.z);
     }
-    for mode in [Mode::Joint, Mode::Tcp] {
-        let o = fanuc(&m, mode);
-        let (sink, s) = run(&m, cl.as_bytes(), &o);
-        let errors: Vec<_> = sink.diags.iter().filter(|d| d.severity == Severity::Error).collect();
-        prop_assert!(errors.is_empty(), "{id} {mode:?}: {errors:?}\n{cl}");
+    for (_, s, _) in post_and_verify(&m, &cl)? {
         prop_assert_eq!(s.cl_points, n as u64);
-        let vo = kinepost::post::verify::VerifyOptions {
-            mode,
-            setup,
-            tolerance: o.tolerance,
-            angle_tolerance_deg: 0.01,
-            cl_units: None,
-        };
-        let r = kinepost::post::verify::verify(cl.as_bytes(), sink.nc.as_bytes(), &m, &vo).unwrap();
-        prop_assert!(r.ok, "{id} {mode:?}: {r:?}\n{cl}");
+    }
+    Ok(true)
+}
+
+type PathCheck = fn(&str, &[f64]) -> Result<bool, proptest::test_runner::TestCaseError>;
+
+/// `check` on every shipped profile; it says whether the profile could take its path (a
+/// two-rotary chain that reaches its singular direction), and at least five must.
+fn on_two_rotary_profiles(check: PathCheck, seed: &[f64]) -> Result<(), proptest::test_runner::TestCaseError> {
+    let lib = Library::load_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap();
+    let mut exercised = 0;
+    for p in lib.iter() {
+        exercised += check(&p.machine.id, seed)? as u32;
+    }
+    proptest::prop_assert!(exercised >= 5, "{exercised} profiles");
+    Ok(())
+}
+
+/// What `kinepost verify` is given for a program posted with `o`: its mode and tolerance, the
+/// profile's tool length until the CL sets one, no work offset.
+fn verify_options(m: &Machine, o: &Options) -> kinepost::post::verify::VerifyOptions {
+    kinepost::post::verify::VerifyOptions {
+        mode: o.mode,
+        setup: Setup::new(m.default_tool_length, Vec3::zeros()),
+        tolerance: o.tolerance,
+        angle_tolerance_deg: 0.01,
+        cl_units: None,
+        cl_tool_length: true,
+    }
+}
+
+/// `cl` posted on `m` in joint and TCP mode (word address), each program replayed through
+/// `verify`: no error diagnostic, every check passed. Returns mode, summary and report.
+fn post_and_verify(
+    m: &Machine,
+    cl: &str,
+) -> Result<Vec<(Mode, Summary, kinepost::post::verify::Report)>, proptest::test_runner::TestCaseError> {
+    use proptest::prelude::*;
+    let mut out = Vec::new();
+    for mode in [Mode::Joint, Mode::Tcp] {
+        let o = fanuc(m, mode);
+        let (sink, s) = run(m, cl.as_bytes(), &o);
+        let errors: Vec<_> = sink.diags.iter().filter(|d| d.severity == Severity::Error).collect();
+        prop_assert!(errors.is_empty(), "{} {mode:?}: {errors:?}\n{cl}", m.id);
+        let r = kinepost::post::verify::verify(cl.as_bytes(), sink.nc.as_bytes(), m, &verify_options(m, &o)).unwrap();
+        prop_assert!(r.ok, "{} {mode:?}: {r:?}\n{cl}\n{}", m.id, sink.nc);
+        out.push((mode, s, r));
+    }
+    Ok(out)
+}
+
+/// A cut that tilts onto the singular direction and leaves it toward another azimuth (a vertical
+/// stretch between two tilted ones), on every two-rotary profile, joint and TCP: the free rotary
+/// turns at the singular point, tip standing, where any angle of it holds the CL orientation;
+/// every block between CL points keeps the tool axis on the CL arc. It turned during the cut
+/// after the point: 0.7° off the arc for a 2° step on spinner-u5-620, 31° for a 90° tilt.
+fn leaving_the_singular_direction(id: &str, seed: &[f64]) -> Result<bool, proptest::test_runner::TestCaseError> {
+    use proptest::prelude::*;
+    let m = machine(id);
+    let setup = Setup::new(m.default_tool_length, Vec3::zeros());
+    let (step_in, step_out) = ((0.5 + 4.5 * seed[0]).to_radians(), (0.5 + 14.5 * seed[1]).to_radians());
+    let Some(SingularFrame { base, d, e1, e2 }) = singular_frame(&m, &setup, 3.0 * step_out.max(step_in)) else {
+        return Ok(false);
+    };
+    let (phi_in, phi_out) = (6.3 * seed[2], 6.3 * seed[3]);
+    let scale = if m.units == Units::Mm { 1.0 } else { 1.0 / 25.4 };
+    let mut cl = format!(
+        "UNITS/{}\nFEDRAT/{}\n",
+        if m.units == Units::Mm { "MM" } else { "INCHES" },
+        500.0 * scale
+    );
+    let dir = |phi: f64| e1 * phi.cos() + e2 * phi.sin();
+    let mut goto = |k: f64, a: Vec3| {
+        let tip = base + (e1 * (seed[4] - 0.5) + e2 * (seed[5] - 0.5)) * (8.0 * k * scale);
+        cl += &format!("GOTO/{},{},{},{:.12},{:.12},{:.12}\n", tip.x, tip.y, tip.z, a.x, a.y, a.z);
+    };
+    for k in 0..=3 {
+        goto(k as f64 - 3.0, tilt(d, dir(phi_in), (3 - k) as f64 * step_in));
+    }
+    for k in 1..=3 {
+        goto(k as f64, tilt(d, dir(phi_out), k as f64 * step_out));
+    }
+    for (mode, s, r) in post_and_verify(&m, &cl)? {
+        prop_assert!(s.max_singular_deviation_deg < 1e-9, "{id} {mode:?}: {s:?}\n{cl}");
+        prop_assert_eq!(r.matched, 7);
+        // Rotary words of 4 decimals leave the axis within 1e-4° of its pose.
+        prop_assert!(r.max_axis_off_arc_deg < 1e-3, "{id} {mode:?}: {r:?}\n{cl}");
     }
     Ok(true)
 }
@@ -1174,12 +1267,38 @@ proptest::proptest! {
     fn paths_about_the_singular_direction_post_clean_on_every_two_rotary_profile(
         seed in proptest::collection::vec(0.0f64..1.0, 64)
     ) {
-        let lib = Library::load_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap();
-        let mut exercised = 0;
-        for p in lib.iter() {
-            exercised += near_singular_path(&p.machine.id, &seed)? as u32;
+        on_two_rotary_profiles(near_singular_path, &seed)?;
+    }
+
+    #[test]
+    fn a_cut_leaving_the_singular_direction_turns_the_free_rotary_at_it(
+        seed in proptest::collection::vec(0.0f64..1.0, 6)
+    ) {
+        on_two_rotary_profiles(leaving_the_singular_direction, &seed)?;
+    }
+}
+
+/// One feed segment tilting a nutating table's tool axis by 60°, nowhere near its singular
+/// direction: the exact midpoints leave the joint interpolation by degrees, which is no swing of
+/// a free rotary. Taken for one, the interpolated rotaries were held: 1.3° off the CL arc (a
+/// CATIA file's 90° tilt: 31°), reported as a singular deviation.
+#[test]
+fn a_long_tilt_on_a_nutating_table_keeps_its_orientation() {
+    let m = machine("dmu-nutating-45");
+    let ax = |t: f64| {
+        let (t, az) = (t.to_radians(), 30f64.to_radians());
+        (t.sin() * az.cos(), t.sin() * az.sin(), t.cos())
+    };
+    let ((a, b, c), (i, j, k)) = (ax(10.0), ax(70.0));
+    let cl = format!("UNITS/MM\nFEDRAT/500\nGOTO/0,0,20,{a},{b},{c}\nGOTO/20,0,20,{i},{j},{k}\n");
+    for (mode, s, r) in post_and_verify(&m, &cl).unwrap() {
+        assert_eq!(s.max_singular_deviation_deg, 0.0, "{mode:?}");
+        assert!(r.max_axis_off_arc_deg < 1e-3, "{mode:?}: {r:?}");
+        // The segment was checked at all: every cut's first one was exempt (its start's match, a
+        // rapid, counted as a block between).
+        if mode == Mode::Joint {
+            assert!(r.max_off_segment > 0.0 && r.max_nonlinear > 0.0, "{r:?}");
         }
-        proptest::prop_assert!(exercised >= 5, "{exercised} profiles");
     }
 }
 
@@ -1215,23 +1334,24 @@ fn no_feed_block_turns_a_rotary_past_the_step_limit() {
 }
 
 /// Blocks inserted between two points within travel can leave it (a long segment with large
-/// turns: Z above 0 on htm50200-horizontal): each such block is a limit error naming the axis,
-/// as the shared verifier finds them (108 here); none was reported before. Checked against the
-/// profile's travel block by block, independently of the engine's own check.
+/// turns on htm50200-horizontal: the table sweeps the tip around its axis): each such block is a
+/// limit error naming the axis, as the shared verifier finds them; none was reported before.
+/// Checked against the profile's travel block by block, independently of the engine's own check.
 #[test]
 fn inserted_blocks_outside_travel_are_limit_errors() {
     let m = machine("htm50200-horizontal");
     let cl = std::fs::read(data("generated/htm_shuffled.cls")).unwrap();
     let (sink, _) = run(&m, &cl, &fanuc(&m, Mode::Joint));
+    // The engine's slack: 1e-6 units, 1e-9 rad (B 90.0009° is outside [−15°, 90°]).
     let outside = |b: &BlockInfo| {
         let w = &b.joints.0;
         m.linears.iter().enumerate().any(|(i, l)| {
             l.as_ref()
-                .is_some_and(|l| w[i].is_some_and(|v| v < l.min - 1e-3 || v > l.max + 1e-3))
+                .is_some_and(|l| w[i].is_some_and(|v| v < l.min - 1e-6 || v > l.max + 1e-6))
         }) || m.rotaries.iter().any(|r| {
             let k = 3 + (r.name as u8 - b'A') as usize;
             r.limits
-                .is_some_and(|(lo, hi)| w[k].is_some_and(|v| v < lo.to_degrees() - 1e-3 || v > hi.to_degrees() + 1e-3))
+                .is_some_and(|(lo, hi)| w[k].is_some_and(|v| v.to_radians() < lo - 1e-9 || v.to_radians() > hi + 1e-9))
         })
     };
     let mut n = 0;
@@ -1275,11 +1395,101 @@ fn a_cut_from_the_singular_direction_turns_its_free_rotary_while_positioning() {
                 sum.max_singular_deviation_deg,
                 sink.nc
             );
-            // The free rotary does not move after the approach.
+            // The free rotary does not move after the approach: no unwind of a bounded table
+            // to another winding of the same angle either (dmg-dmc75v positioned C at +90° for a
+            // cut the planner put at −270°, then retracted and turned it a full circle).
             let c = |b: &BlockInfo| b.joints.0[5];
             let feed: Vec<_> = sink.blocks.iter().filter(|b| !b.rapid).collect();
             assert!(feed.iter().all(|b| c(b) == c(feed[0])), "{id}: {}", sink.nc);
             assert_eq!(sum.errors, 0, "{id}: {:?}", sink.diags);
+            let moved = |d: &&Diagnostic| matches!(d.code, Code::Unwind | Code::BranchChange) || d.message.contains("turned");
+            assert!(!sink.diags.iter().any(|d| moved(&d)), "{id}: {:?}\n{}", sink.diags, sink.nc);
         }
     }
+}
+
+/// The CL sets the tool length (`LOADTL/n,LENGTH,l`; NX's `TLDATA`), here two tools' on head
+/// machines, where it moves every X Y Z: the program is cut for each and says so where it takes
+/// effect (its header is out before the CL is read and only knew the profile's), and `verify`
+/// follows the CL as `post` does, also reading Siemens 840D (`TRAORI`, `TRAFOOF`). It failed
+/// kinepost's own programs: by 0.3 in on fryer-5x-45 (the profile's 3 in for the CL's 100 mm),
+/// and at `TRAORI`, the first line of every Siemens TCP program.
+#[test]
+fn the_cls_tool_lengths_are_stated_and_verify_follows_them() {
+    for id in ["fryer-5x-45", "dmg-dmc75v"] {
+        let m = machine(id);
+        let (l1, l2) = (1.3 * m.default_tool_length, 1.1 * m.default_tool_length);
+        let mut out = Vec::new();
+        kinepost::testgen::write_path(&m, 120, 7, l1, &mut out).unwrap();
+        let text = String::from_utf8(out).unwrap();
+        let gotos = text.lines().filter(|l| l.starts_with("GOTO")).count();
+        let mut cl = String::new();
+        let mut seen = 0;
+        for line in text.lines() {
+            if line.starts_with("GOTO") {
+                seen += 1;
+                if seen == gotos / 2 {
+                    cl += &format!("LOADTL/2,LENGTH,{l2}\n");
+                }
+            }
+            cl += line;
+            cl.push('\n');
+        }
+        let said = |l: f64| format!("TOOL LENGTH {l:.*} FROM THE CL", if m.units == Units::Mm { 3 } else { 4 });
+        for dialect in [&kinepost::nc::FANUC, &kinepost::nc::SIEMENS] {
+            for mode in [Mode::Joint, Mode::Tcp] {
+                let mut o = fanuc(&m, mode);
+                o.dialect = dialect;
+                let (sink, s) = run(&m, cl.as_bytes(), &o);
+                assert!(sink.nc.contains("UNTIL THE CL SETS ONE"), "{id}: {}", sink.nc);
+                assert!(
+                    sink.nc.contains(&said(l1)) && sink.nc.contains(&said(l2)),
+                    "{id}: {}",
+                    sink.nc
+                );
+                assert_eq!(s.tool_length, l2);
+                let verify = |cl_tool_length: bool| {
+                    let vo = kinepost::post::verify::VerifyOptions {
+                        cl_tool_length,
+                        ..verify_options(&m, &o)
+                    };
+                    kinepost::post::verify::verify(cl.as_bytes(), sink.nc.as_bytes(), &m, &vo).unwrap()
+                };
+                let r = verify(true);
+                assert!(r.ok && r.matched == gotos as u64, "{id} {} {mode:?}: {r:?}", dialect.name);
+                // The profile's length throughout is another program (joint mode: TCP X Y Z are
+                // the tip whatever the length).
+                if mode == Mode::Joint {
+                    assert!(!verify(false).ok, "{id} {}", dialect.name);
+                }
+            }
+        }
+        // The job fixes the length: the CL's are told, not followed.
+        let mut o = fanuc(&m, Mode::Joint);
+        o.tool_length = Some(m.default_tool_length);
+        let (sink, s) = run(&m, cl.as_bytes(), &o);
+        assert!(
+            !sink.nc.contains("UNTIL THE CL") && !sink.nc.contains("FROM THE CL"),
+            "{}",
+            sink.nc
+        );
+        assert_eq!(s.tool_length, m.default_tool_length);
+        let told = sink.diags.iter().filter(|d| d.code == Code::ToolLength).count();
+        assert_eq!(told, 2, "{:?}", sink.diags);
+    }
+}
+
+/// `verify` reads word address; a Heidenhain conversational program is named as such at its first
+/// line (it failed at its first `C+…` word: "C without a value").
+#[test]
+fn verify_names_a_heidenhain_program_it_cannot_read() {
+    let m = machine("dmg-dmc75v");
+    let cl = std::fs::read(data("nx_clsf_mech491_simple_mill_plane_mm.cls")).unwrap();
+    let mut o = Options::new(&m);
+    o.dialect = &kinepost::nc::HEIDENHAIN;
+    let (sink, _) = run(&m, &cl, &o);
+    let e = kinepost::post::verify::verify(&cl[..], sink.nc.as_bytes(), &m, &verify_options(&m, &o))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("NC line 1") && e.contains("Heidenhain conversational"), "{e}");
 }

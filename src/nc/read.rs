@@ -1,5 +1,6 @@
-//! Reads word-address NC (Fanuc-like) back into motion blocks, for `kinepost verify`: modal axis
-//! values after each block, motion kind, units, TCP state. Streaming, one line at a time.
+//! Reads word-address NC (Fanuc-like; Siemens 840D's `TRAORI`, `MCALL` cycles and `CYCLE800`)
+//! back into motion blocks, for `kinepost verify`: modal axis values after each block, motion
+//! kind, units, TCP state. Streaming, one line at a time.
 
 use crate::kinematics::Units;
 
@@ -144,6 +145,39 @@ impl<R: std::io::BufRead> NcReader<R> {
         Ok(())
     }
 
+    /// Siemens' modal call `MCALL CYCLE81|82|83(RTP, RFP, SDIS, DP …)`: every positioning block
+    /// after it drills as ISO G81 with R at RFP + SDIS, the bottom at DP and the return to RTP;
+    /// a bare `MCALL` ends it. The pecks and dwells of 82 and 83 do not move the tip elsewhere.
+    fn mcall(&mut self, call: &str) -> Result<(), Error> {
+        if call.is_empty() {
+            self.cycle = None;
+            return Ok(());
+        }
+        let unsupported = |problem: String| Error::Unsupported {
+            line: self.line,
+            problem,
+        };
+        let upper = call.to_ascii_uppercase();
+        let args = ["CYCLE81(", "CYCLE82(", "CYCLE83("]
+            .iter()
+            .find_map(|c| upper.strip_prefix(c))
+            .ok_or_else(|| unsupported(format!("MCALL {call}: only CYCLE81, CYCLE82 and CYCLE83 are read")))?;
+        let args: Vec<&str> = args.strip_suffix(')').unwrap_or(args).split(',').map(str::trim).collect();
+        let arg = |k: usize, name: &str| {
+            args.get(k)
+                .and_then(|a| a.parse::<f64>().ok())
+                .ok_or_else(|| unsupported(format!("MCALL {call}: {name} (argument {}) is not a number", k + 1)))
+        };
+        let (rtp, rfp, sdis, dp) = (arg(0, "RTP")?, arg(1, "RFP")?, arg(2, "SDIS")?, arg(3, "DP")?);
+        self.return_initial = true;
+        self.cycle = Some(Cycle {
+            bottom: Some(dp),
+            r: Some(rfp + sdis),
+            initial: Some(rtp),
+        });
+        Ok(())
+    }
+
     fn parse_line(&mut self, raw: &str) -> Result<Option<NcBlock>, Error> {
         // Siemens' swivel cycle, whose parentheses are arguments, not a comment.
         let bare = raw.trim_start();
@@ -157,6 +191,23 @@ impl<R: std::io::BufRead> NcReader<R> {
             let args = bare[9..].split(';').next().unwrap_or("").trim_end();
             self.content = true;
             return self.cycle800(args.strip_suffix(')').unwrap_or(args)).map(|_| None);
+        }
+        // Heidenhain's conversational language is no word address: say so at its first line
+        // (its `L X+… C+…` read as words failed later, at "C without a value").
+        let unnumbered = bare.trim_start_matches(|c: char| c.is_ascii_digit()).trim_start();
+        if unnumbered.len() >= 9 && unnumbered[..9].eq_ignore_ascii_case("BEGIN PGM") {
+            self.content = true;
+            return Err(Error::Unsupported {
+                line: self.line,
+                problem: "a Heidenhain conversational program: verify reads word-address NC (post it with \
+                          --dialect fanuc, haas, siemens or linuxcnc to check it)"
+                    .into(),
+            });
+        }
+        if bare.len() >= 5 && bare[..5].eq_ignore_ascii_case("MCALL") {
+            let call = bare[5..].split(';').next().unwrap_or("").trim();
+            self.content = true;
+            return self.mcall(call).map(|_| None);
         }
         let mut comment = String::new();
         let mut code = String::with_capacity(raw.len());
@@ -198,6 +249,15 @@ impl<R: std::io::BufRead> NcReader<R> {
             let c = b[i] as char;
             if !c.is_ascii_alphabetic() {
                 i += 1;
+                continue;
+            }
+            // Siemens' transformation on and off: words, not addresses (T R A …).
+            if let Some((kw, on)) = [("TRAORI", true), ("TRAFOOF", false)]
+                .into_iter()
+                .find(|(kw, _)| code[i..].starts_with(kw) && !b.get(i + kw.len()).is_some_and(u8::is_ascii_alphabetic))
+            {
+                self.tcp = on;
+                i += kw.len();
                 continue;
             }
             let start = i + 1;

@@ -407,6 +407,10 @@ struct At {
     actual: [f64; 3],
     pose: Pose,
     branch: i8,
+    /// The rotary whose angle is free here (the tool axis along the singular direction): any
+    /// angle of it holds this pose, with other linears. A byte: `At` stays 128 bytes, copied
+    /// inline (a word more made every block's copies `memcpy` calls, +3.7 % instructions).
+    free: Option<u8>,
 }
 
 struct Emitter<'a, S: Sink + ?Sized> {
@@ -427,6 +431,8 @@ struct Emitter<'a, S: Sink + ?Sized> {
     standing: f64,
     /// The CL line of the last block written (a retract at a tool change or the end has none).
     last_line: u32,
+    /// The tool length the program last said it is cut for (a comment).
+    length_said: Option<f64>,
     tool: Option<u32>,
     comp_on: bool,
     rpm: Option<f64>,
@@ -459,7 +465,8 @@ struct Emitter<'a, S: Sink + ?Sized> {
     /// The point being written is a rapid whose fixed tool axis holds, in the look-ahead, until
     /// the next rapid with another axis (or a tool change, or the end): a plane may start there.
     plane_ahead: bool,
-    /// For a singular point: the free rotary's angle where the cut after it fixes it.
+    /// For a singular point: the free rotary's word (the planner's winding) where the cut after it
+    /// fixes it.
     free_hint: Option<f64>,
     /// Per axis letter (X Y Z A B C): extents and travel, moved into the summary at the end.
     stats: [Option<AxisStats>; 6],
@@ -490,8 +497,9 @@ fn free_angle_at(o: &Out, free: usize) -> Option<Option<f64>> {
     match o {
         Out::Event(ev) => matches!(ev, ProgEvent::Tool { .. } | ProgEvent::End).then_some(None),
         Out::Point(c) if c.pt.rapid => Some(None),
+        // The planner's word: a bounded table's winding is there, not in the IK's angle.
         Out::Point(c) => match &c.cand {
-            Some(k) if k.sol.singular.is_none() => Some(Some(k.sol.actual[free])),
+            Some(k) if k.sol.singular.is_none() => Some(Some(k.sol.joints.rotary[free])),
             _ => None,
         },
     }
@@ -601,6 +609,7 @@ pub fn post<R: BufRead, S: Sink + ?Sized>(input: R, m: &Machine, o: &Options, si
         tilt: None,
         plane_ahead: false,
         free_hint: None,
+        length_said: None,
         stats: Default::default(),
         singular: kinematics::singular_direction(m).map(|d| (d.normalize(), o.singular_cone.cos())),
     };
@@ -618,8 +627,7 @@ pub fn post<R: BufRead, S: Sink + ?Sized>(input: R, m: &Machine, o: &Options, si
                 planner.finish(&mut |x| deliver(&mut e, &mut pending, &mut failed, x));
                 e.drain(&mut pending, true)?;
                 planner.setup.tool_length = l;
-                e.setup.tool_length = l;
-                e.sum.tool_length = l;
+                e.cl_tool_length(l)?;
             }
             Item::Event(ev) => planner.push_event(ev, &mut |x| deliver(&mut e, &mut pending, &mut failed, x)),
         }
@@ -697,13 +705,19 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         let mut lines = vec![
             format!("KINEPOST {} FOR {} ({})", env!("CARGO_PKG_VERSION"), self.m.id, self.m.name),
             format!(
-                "MODE {} UNITS {} TOOL LENGTH {} TOLERANCE {}",
+                "MODE {} UNITS {} TOOL LENGTH {}{} TOLERANCE {}",
                 match self.o.mode {
                     Mode::Joint => "JOINT",
                     Mode::Tcp => "TCP",
                 },
                 self.m.units.as_str(),
                 self.setup.tool_length,
+                // The header is out before the CL is read: say which length the NC is cut for.
+                if self.o.tool_length.is_some() {
+                    ""
+                } else {
+                    " UNTIL THE CL SETS ONE"
+                },
                 self.o.tolerance
             ),
         ];
@@ -716,6 +730,23 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             self.out(&l)?;
         }
         Ok(())
+    }
+
+    /// The CL sets the tool length (the job fixed none): the NC from here on is cut for it, so
+    /// the program says so where it takes effect (the header only knew the profile's).
+    fn cl_tool_length(&mut self, l: f64) -> std::io::Result<()> {
+        self.setup.tool_length = l;
+        self.sum.tool_length = l;
+        // When it changes: NX repeats TLDATA with every operation (before its LOAD/TOOL).
+        if self.length_said == Some(l) {
+            return Ok(());
+        }
+        self.length_said = Some(l);
+        let c = self
+            .f
+            .comment(&format!("TOOL LENGTH {l:.*} FROM THE CL", self.f.fmt.linear as usize))
+            .to_string();
+        self.out(&c)
     }
 
     fn program_end(&mut self) -> Result<(), Error> {
@@ -805,8 +836,18 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                 self.tool_changed = true;
             }
             ProgEvent::ToolLength(l) => {
-                // Only when the job fixed the length (else handled before planning).
-                let _ = l;
+                // Only when the job fixed the length (else `cl_tool_length`, before planning).
+                if (l - self.setup.tool_length).abs() > 0.5 * 10f64.powi(-(self.f.fmt.linear as i32)) {
+                    self.note(Diagnostic::new(
+                        Code::ToolLength,
+                        Severity::Info,
+                        None,
+                        format!(
+                            "the CL sets tool length {l:.*}; the job's {:.*} is used",
+                            self.f.fmt.linear as usize, self.f.fmt.linear as usize, self.setup.tool_length
+                        ),
+                    ))?;
+                }
             }
             ProgEvent::Spindle(c) => {
                 let (speed, cw) = match c {
@@ -907,7 +948,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
 
     /// The chosen candidate with its unbounded windings and singular free angle resolved against
     /// where the machine is.
-    fn resolve(&mut self, pose: &Pose, cand: &Cand, positioning: bool) -> Option<(Joints, [f64; 3], i8)> {
+    fn resolve(&mut self, pose: &Pose, cand: &Cand, positioning: bool) -> Option<(Joints, [f64; 3], i8, Option<u8>)> {
         let mut sol = cand.sol;
         if let Some(free) = sol.singular {
             let prev = self.at.map_or(0.0, |a| a.actual[free]);
@@ -915,9 +956,10 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             // turns the free rotary to where the cut after it needs it: held at the old angle,
             // it turned during that cut, the tool axis off the CL orientation by up to 11° (a
             // cut from vertical to a 30° tilt on spinner-u5-620).
-            let prev = match self.free_hint {
+            let r = &self.m.rotaries[free];
+            let prev = match self.free_hint.map(|w| r.actual(w)) {
                 Some(h) if positioning => {
-                    if self.m.rotaries[free].limits.is_some() {
+                    if r.limits.is_some() {
                         h
                     } else {
                         prev + wrap(h - prev)
@@ -956,7 +998,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                 actual[i] = r.actual(joints.rotary[i]);
             }
         }
-        Some((joints, actual, sol.branch))
+        Some((joints, actual, sol.branch, sol.singular.map(|f| f as u8)))
     }
 
     /// One committed CL point; a rapid that starts a fixed-axis run (seen ahead) tilts the
@@ -1007,7 +1049,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             )?;
             return Ok(());
         };
-        let Some((mut joints, mut actual, branch)) = self.resolve(&pt.pose, &cand, self.positioning(&pt)) else {
+        let Some((mut joints, mut actual, branch, mut free)) = self.resolve(&pt.pose, &cand, self.positioning(&pt)) else {
             return Ok(());
         };
         self.ensure_comp()?;
@@ -1029,7 +1071,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                 self.exact_travel += d;
                 self.exact_prev = Some(actual[oi]);
             }
-            (joints, actual, pose.axis) = (sm.0, sm.1, sm.2);
+            (joints, actual, pose.axis, free) = (sm.0, sm.1, sm.2, None);
         } else if let Some(oi) = outer {
             self.exact_travel += wrap(actual[oi] - self.exact_prev.unwrap_or(actual[oi])).abs();
             self.exact_prev = Some(actual[oi]);
@@ -1057,6 +1099,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             actual,
             pose,
             branch,
+            free,
         };
         // After a tool change the machine stands where the change left it, not at the last
         // block: the next move, feed or not, positions as a rapid that turns rotaries does.
@@ -1070,6 +1113,11 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         }
         match self.at {
             Some(prev) if !pt.rapid => {
+                let prev = if prev.free.is_some() {
+                    self.turn_free(prev, &target, &pt)?
+                } else {
+                    prev
+                };
                 let unwind =
                     self.m.rotaries.iter().enumerate().any(|(i, r)| {
                         r.limits.is_some() && (joints.rotary[i] - prev.joints.rotary[i]).abs() > std::f64::consts::PI
@@ -1100,6 +1148,82 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         }
         self.block(target, &pt, pt.rapid || self.at.is_none(), diags, pt.inserted, None)?;
         Ok(())
+    }
+
+    /// Leaving a singular point by feed toward a pose that fixes its free rotary elsewhere: the
+    /// rotary turns at the point, tip standing, where every angle of it holds the CL orientation,
+    /// and the cut after it starts where it needs it. Turned during that cut instead, it tilted
+    /// the tool axis off the CL orientation (0.8° for a 2° step on spinner-u5-620, 11° for 30°),
+    /// and a bounded one far off retracted to unwind. Returns where the machine stands.
+    #[cold]
+    fn turn_free(&mut self, prev: At, to: &At, pt: &MotionPt) -> Result<At, Error> {
+        let Some(f) = prev.free.map(usize::from) else {
+            return Ok(prev);
+        };
+        if to.free.is_some() || self.tilt.is_some() {
+            return Ok(prev);
+        }
+        // Spread over the cut, the turn leaves the axis within twice the cut's angle from the
+        // singular direction (both the machine's axis and the CL's stay within that angle of
+        // it): below half a rotary word, or the singular tolerance, nothing to stop for.
+        let half_word = (0.5 * 10f64.powi(-(self.f.fmt.rotary as i32))).to_radians();
+        let arc = angle_between(&prev.pose.axis, &to.pose.axis);
+        if 2.0 * arc <= half_word.max(self.o.singular_tolerance) {
+            return Ok(prev);
+        }
+        // The angle the cut leaves the point with: the exact solution on `to`'s branch a hair
+        // along the CL arc. On an orthogonal table it is `to`'s; a nutating one twists the
+        // azimuth as it tilts (C −172.5° just off vertical, −180° at the end of a 90° tilt).
+        let t = (1e-7 / arc).min(0.5);
+        let near = Pose {
+            tip: prev.pose.tip + (to.pose.tip - prev.pose.tip) * t,
+            axis: (prev.pose.axis * (1.0 - t) + to.pose.axis * t).normalize(),
+        };
+        let mut want = to.actual[f];
+        if ik_into(self.m, &near, &self.setup, &IkOptions::default(), &mut self.buf).is_ok()
+            && let Some(s) = self.buf.iter().find(|s| s.singular.is_none() && s.branch == to.branch)
+        {
+            want += wrap(s.actual[f] - want);
+        }
+        if (want - prev.actual[f]).abs() <= half_word {
+            return Ok(prev);
+        }
+        let opt = IkOptions {
+            free_angle: want,
+            ..Default::default()
+        };
+        let Some(s) = ik_into(self.m, &prev.pose, &self.setup, &opt, &mut self.buf)
+            .ok()
+            .and_then(|_| self.buf.iter().find(|s| s.singular == Some(f)).copied())
+        else {
+            return Ok(prev);
+        };
+        let mut turned = At {
+            joints: s.joints,
+            actual: s.actual,
+            ..prev
+        };
+        for (i, r) in self.m.rotaries.iter().enumerate() {
+            if i != f {
+                turned.actual[i] = prev.actual[i] + wrap(s.actual[i] - prev.actual[i]);
+            }
+            turned.joints.rotary[i] = r.word(turned.actual[i]);
+        }
+        let r = &self.m.rotaries[f];
+        let d = Diagnostic::new(
+            Code::Singular,
+            Severity::Info,
+            Some(pt.line),
+            format!(
+                "{} turned {:.4}° to {:.4}° where the tool axis is along it (line {}), tip standing: the cut after it needs it there",
+                r.name,
+                (want - prev.actual[f]).to_degrees(),
+                turned.joints.rotary[f].to_degrees(),
+                self.last_line
+            ),
+        );
+        self.segment(prev, turned, pt, vec![d], 0)?;
+        Ok(turned)
     }
 
     /// `a` out of the way: joint mode at the top of Z travel (same X Y and rotaries), TCP or a
@@ -1352,9 +1476,8 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             }
             let at = At {
                 joints: j,
-                actual: b.actual,
                 pose: Pose { tip, axis: b.pose.axis },
-                branch: b.branch,
+                ..b
             };
             self.block(at, pt, false, Vec::new(), true, None)?;
         }
@@ -1460,6 +1583,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                 actual,
                 pose,
                 branch: s.branch,
+                free: s.singular.map(|f| f as u8),
             };
         }
         a
@@ -1625,6 +1749,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                         actual,
                         pose,
                         branch: s.branch,
+                        free: s.singular.map(|f| f as u8),
                     },
                 ));
             }
@@ -1642,6 +1767,10 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             Some((d, at)) if d <= 1e-4 => return Some(at),
             Some((d, at)) if missing_linear => return (d <= limit).then_some(at),
             None if missing_linear => return None,
+            // Outside the singular cone nothing swings: the exact midpoint can still leave the
+            // interpolation far (a 90° tilt on a nutating table: B 65.5° against 90°), and holding
+            // the interpolated rotaries there put the tool axis 31° off the CL orientation.
+            Some((d, at)) if d <= std::f64::consts::FRAC_PI_2 && !self.in_singular_cone(&axis) => return Some(at),
             _ => {}
         }
         // Near a singular direction the exact midpoint's free rotary follows the azimuth of a
@@ -1664,6 +1793,13 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         Some(held)
     }
 
+    /// Whether `axis` lies within the singular cone (`Options::singular_cone`) of the singular
+    /// direction, either way: where the free rotary is held.
+    fn in_singular_cone(&self, axis: &Vec3) -> bool {
+        self.singular
+            .is_some_and(|(dir, cone_cos)| axis.dot(&dir).abs() > cone_cos * axis.norm())
+    }
+
     /// The midpoint with the rotaries at `want` (actual angles), the tip exactly at `tip`, and
     /// the angle (degrees) by which its tool axis misses `axis`.
     fn held_midpoint(&self, a: &At, want: &[f64; 3], tip: &Vec3, axis: &Vec3) -> (At, f64) {
@@ -1684,6 +1820,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                 axis: axis_fk,
             },
             branch: a.branch,
+            free: None,
         };
         (at, angle_between(&axis_fk, axis).to_degrees())
     }
@@ -1930,7 +2067,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             .as_ref()
             .filter(|k| k.feasible)
             .ok_or("the hole's start is not reachable within travel")?;
-        let (joints, actual, branch) = self.resolve(&c.pt.pose, cand, true).ok_or("no solution")?;
+        let (joints, actual, branch, free) = self.resolve(&c.pt.pose, cand, true).ok_or("no solution")?;
         let start = joints.linear[2];
         let (bottom, r) = (start - h.start - h.depth, start - h.start + h.clear);
         let in_plane = self.o.tilted_planes && self.plane_refused().is_none();
@@ -1960,6 +2097,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             actual,
             pose: c.pt.pose,
             branch,
+            free,
         };
         Ok((cb, at))
     }
@@ -2286,9 +2424,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                 ));
             }
         }
-        if let Some((dir, cone_cos)) = self.singular
-            && to.pose.axis.dot(&dir).abs() > cone_cos * to.pose.axis.norm()
-        {
+        if self.in_singular_cone(&to.pose.axis) {
             diags.push(Diagnostic::new(
                 Code::Singular,
                 Severity::Info,

@@ -193,19 +193,44 @@ pub struct Planner<'m> {
 
 /// Rotary travel (degrees) between two candidates, and whether the move changes branch or
 /// unwinds a bounded axis. Unbounded axes compare modulo a turn (the emitter picks the nearest
-/// winding); the free axis of a singular candidate costs nothing (it keeps the previous angle).
+/// winding); the free axis of a singular candidate costs nothing into it (it keeps the previous
+/// angle, which `relax` gives it) and its turn out of it is travel, no unwind (the emitter turns
+/// it at the singular point, tip standing).
 /// Returns the cost without the branch penalty, and whether that penalty may apply (it needs
 /// the fold check, which callers skip when the move cannot win anyway).
 #[inline(always)]
 fn transition(ax: &PlanAxes, a: &Cand, b: &Cand, rapid: bool) -> (f64, bool) {
     let (ja, jb) = (&a.sol.joints.rotary, &b.sol.joints.rotary);
-    let (sa, sb) = (a.sol.singular, b.sol.singular);
+    // Plain indices (no rotary is 3): `Option` compares cost 60 instructions a point here.
+    let (sa, sb) = (a.sol.singular.unwrap_or(3), b.sol.singular.unwrap_or(3));
+    // Neither singular (nearly every pair): no axis to leave out.
+    let (travel, unwind) = if sa & sb == 3 {
+        rotary_travel::<false>(ax, ja, jb, sa, sb)
+    } else {
+        rotary_travel::<true>(ax, ja, jb, sa, sb)
+    };
+    let mut cost = travel.to_degrees();
+    if !rapid && unwind {
+        cost += UNWIND_PENALTY;
+    }
+    if !b.feasible {
+        cost += INFEASIBLE;
+    }
+    (cost, !rapid && a.sol.branch * b.sol.branch < 0)
+}
+
+/// Rotary travel (radians) from `ja` to `jb` and whether a bounded axis unwinds. With `SINGULAR`:
+/// `b`'s free axis (`sb`) costs nothing (it keeps the angle); `a`'s (`sa`) turns without an unwind,
+/// or, without an inherited angle (`PlanAxes::inherit`), costs nothing either.
+#[inline(always)]
+fn rotary_travel<const SINGULAR: bool>(ax: &PlanAxes, ja: &[f64; 3], jb: &[f64; 3], sa: usize, sb: usize) -> (f64, bool) {
+    let free_a = if ax.inherit { 3 } else { sa };
     let (mut travel, mut unwind) = (0.0, false);
     let mut axis = |i: usize| {
-        if sa != Some(i) && sb != Some(i) {
+        if !SINGULAR || (sb != i && free_a != i) {
             let d = jb[i] - ja[i];
             let d = if ax.unbounded[i] { wrap(d) } else { d }.abs();
-            unwind |= d > std::f64::consts::PI;
+            unwind |= d > std::f64::consts::PI && (!SINGULAR || sa != i);
             travel += d;
         }
     };
@@ -219,14 +244,7 @@ fn transition(ax: &PlanAxes, a: &Cand, b: &Cand, rapid: bool) -> (f64, bool) {
     if ax.n > 2 {
         axis(2);
     }
-    let mut cost = travel.to_degrees();
-    if !rapid && unwind {
-        cost += UNWIND_PENALTY;
-    }
-    if !b.feasible {
-        cost += INFEASIBLE;
-    }
-    (cost, !rapid && a.sol.branch * b.sol.branch < 0)
+    (travel, unwind)
 }
 
 /// What [`transition`] needs of the machine, as plain arrays (it runs for every pair of
@@ -234,6 +252,10 @@ fn transition(ax: &PlanAxes, a: &Cand, b: &Cand, rapid: bool) -> (f64, bool) {
 struct PlanAxes {
     n: usize,
     unbounded: [bool; 3],
+    /// A singular candidate takes its free angle from its predecessor: where the emitter's IK
+    /// places the tip at any free angle (three linears). A chain missing one (three rotaries)
+    /// has only some, and the candidate must stay the solution the planner's IK found.
+    inherit: bool,
 }
 
 impl PlanAxes {
@@ -245,6 +267,7 @@ impl PlanAxes {
         PlanAxes {
             n: m.rotaries.len().min(3),
             unbounded,
+            inherit: m.linears.iter().all(|l| l.is_some()),
         }
     }
 }
@@ -352,6 +375,24 @@ fn relax(
         }
         cost[b] = best;
         back[b] = arg;
+    }
+    // A singular candidate's free rotary stands where the move into it left it (the emitter
+    // holds it there), so that the move out of it pays for turning it: free everywhere, it left
+    // the winding of a bounded table to the order of the list (C −270° for +90°).
+    if !axes.inherit {
+        return;
+    }
+    for (cb, &arg) in cands.iter_mut().zip(back.iter()) {
+        if let Some(f) = cb.sol.singular {
+            let from = match prev {
+                Some(p) => p.cands.get(arg as usize),
+                None => root.as_ref().map(|(r, _)| r),
+            };
+            if let Some(a) = from {
+                cb.sol.joints.rotary[f] = a.sol.joints.rotary[f];
+                cb.sol.actual[f] = a.sol.actual[f];
+            }
+        }
     }
 }
 

@@ -3,7 +3,7 @@
 //! reproduced, in order, by a block; blocks between two matched feed points must lie on the CL
 //! segment.
 
-use super::source::{HolePart, Item, Source};
+use super::source::{HolePart, Item, ProgEvent, Source};
 use super::{Mode, seg_dist};
 use crate::kinematics::{Joints, Machine, Setup, Units, Vec3, angle_between, fk};
 use crate::nc::read::{NcBlock, NcReader};
@@ -36,6 +36,9 @@ pub struct Report {
     /// Largest distance of a block between two matched feed points from their CL segment.
     pub max_off_segment: f64,
     pub off_segment_blocks: u64,
+    /// Largest angle (degrees) from the tool axis of such a block to the CL great-circle arc
+    /// between the two points' axes: reported, not failed (a singular tolerance allows some).
+    pub max_axis_off_arc_deg: f64,
     /// Joint mode: largest distance from the CL segment of the joint-space motion between two
     /// blocks (sampled at ¼, ½, ¾), and how many block pairs exceed the tolerance.
     pub max_nonlinear: f64,
@@ -58,10 +61,13 @@ pub struct VerifyOptions {
     pub tolerance: f64,
     pub angle_tolerance_deg: f64,
     pub cl_units: Option<Units>,
+    /// Take the tool length the CL file sets (`LOADTL/n,LENGTH,l`, `TLDATA`) from where it sets
+    /// it, as `post` does when the job fixes none (`setup`'s length until then).
+    pub cl_tool_length: bool,
 }
 
 /// The pose a block reaches, in profile units: FK of its words (TCP: its X Y Z are the tip).
-fn block_joints(m: &Machine, b: &NcBlock, o: &VerifyOptions) -> Option<Joints> {
+fn block_joints(m: &Machine, b: &NcBlock) -> Option<Joints> {
     if b.plane.is_some() {
         return None; // plane coordinates, not joints: the control moves straight in the plane
     }
@@ -77,11 +83,11 @@ fn block_joints(m: &Machine, b: &NcBlock, o: &VerifyOptions) -> Option<Joints> {
     for (i, r) in m.rotaries.iter().enumerate() {
         j.rotary[i] = b.axes[r.slot()].unwrap_or(0.0).to_radians();
     }
-    let _ = o;
     Some(j)
 }
 
-fn block_pose(m: &Machine, b: &NcBlock, o: &VerifyOptions) -> Option<(Vec3, Vec3)> {
+/// Tip and tool axis of a block with the tool length in force (`setup`, not `o.setup`).
+fn block_pose(m: &Machine, b: &NcBlock, o: &VerifyOptions, setup: &Setup) -> Option<(Vec3, Vec3)> {
     let s = b.units.factor_to(m.units);
     let mut j = Joints::default();
     for i in 0..3 {
@@ -94,13 +100,13 @@ fn block_pose(m: &Machine, b: &NcBlock, o: &VerifyOptions) -> Option<(Vec3, Vec3
     for (i, r) in m.rotaries.iter().enumerate() {
         j.rotary[i] = b.axes[r.slot()].unwrap_or(0.0).to_radians();
     }
-    let p = fk(m, &j, &o.setup);
+    let p = fk(m, &j, setup);
     if let Some(pl) = &b.plane {
         // A tilted plane: X Y Z in it, from its origin in the untilted program coordinates (the
         // joint-mode zero); a dynamic work offset's frame is the rotaries'.
         let f = pl.frame.unwrap_or_else(|| crate::kinematics::machine_frame(m, &j.rotary));
         let q = Vec3::from(j.linear);
-        let tip = Vec3::from(pl.origin) * s + f * q - o.setup.work_offset;
+        let tip = Vec3::from(pl.origin) * s + f * q - setup.work_offset;
         return Some((tip, p.axis));
     }
     let tip = if o.mode == Mode::Tcp {
@@ -122,10 +128,22 @@ pub fn verify<C: BufRead, N: BufRead>(cl: C, nc: N, m: &Machine, o: &VerifyOptio
         ..Default::default()
     };
     let mut nc_done = false;
-    let mut last: Option<(Vec3, bool)> = None; // previous matched CL tip, and whether it was matched
+    let mut last: Option<(Vec3, Vec3, bool)> = None; // previous CL tip and axis, and whether it was matched
     let mut last_block: Option<NcBlock> = None; // the block that matched it
+    let mut setup = o.setup;
     while let Some(item) = src.next_item()? {
-        let Item::Motion(pt) = item else { continue };
+        let pt = match item {
+            Item::Motion(pt) => pt,
+            // From here on the CL is cut with this length: so are the blocks not yet matched.
+            Item::Event(ProgEvent::ToolLength(l)) if o.cl_tool_length => {
+                setup.tool_length = l;
+                for (b, p) in ahead.iter_mut() {
+                    *p = block_pose(m, b, o, &setup);
+                }
+                continue;
+            }
+            Item::Event(_) => continue,
+        };
         if pt.inserted {
             continue; // arcs and cycles expanded by the reader are not CL points of the file
         }
@@ -141,7 +159,7 @@ pub fn verify<C: BufRead, N: BufRead>(cl: C, nc: N, m: &Machine, o: &VerifyOptio
                 match reader.next_block()? {
                     Some(b) => {
                         rep.nc_blocks += 1;
-                        let p = block_pose(m, &b, o);
+                        let p = block_pose(m, &b, o, &setup);
                         ahead.push_back((b, p));
                     }
                     None => {
@@ -187,26 +205,31 @@ pub fn verify<C: BufRead, N: BufRead>(cl: C, nc: N, m: &Machine, o: &VerifyOptio
                 rep.max_tip_error = rep.max_tip_error.max(dp);
                 rep.max_axis_error_deg = rep.max_axis_error_deg.max(da);
                 // Blocks between two matched feed points must lie on the CL segment (a rapid
-                // among them makes it a reposition, exempt).
-                if let Some((prev_tip, true)) = last
+                // among them makes it a reposition, exempt). The front block is the last point's
+                // match (kept: a repeated point matches it again), not between them: counted, its
+                // rapid exempted every cut's first segment.
+                let between = || ahead.iter().take(i).skip(1);
+                if let Some((prev_tip, prev_axis, true)) = last
                     && !pt.rapid
                     && pt.arc.is_none()
-                    && !ahead.iter().take(i).any(|(b, _)| b.rapid)
+                    && !between().any(|(b, _)| b.rapid)
                 {
-                    for (_, p) in ahead.iter().take(i) {
-                        if let Some((tip, _)) = p {
+                    for (_, p) in between() {
+                        if let Some((tip, axis)) = p {
                             let d = seg_dist(tip, &prev_tip, &pt.pose.tip);
                             rep.max_off_segment = rep.max_off_segment.max(d);
                             if d > o.tolerance {
                                 rep.off_segment_blocks += 1;
                             }
+                            let da = angle_from_arc(axis, &prev_axis, &pt.pose.axis).to_degrees();
+                            rep.max_axis_off_arc_deg = rep.max_axis_off_arc_deg.max(da);
                         }
                     }
                     if o.mode == Mode::Joint
                         && let Some(first) = &last_block
                     {
                         let chain = std::iter::once(first).chain(ahead.iter().take(i + 1).map(|(b, _)| b));
-                        let joints: Vec<Option<Joints>> = chain.map(|b| block_joints(m, b, o)).collect();
+                        let joints: Vec<Option<Joints>> = chain.map(|b| block_joints(m, b)).collect();
                         for w in joints.windows(2) {
                             let (Some(ja), Some(jb)) = (w[0], w[1]) else { continue };
                             for t in [0.25, 0.5, 0.75] {
@@ -215,7 +238,7 @@ pub fn verify<C: BufRead, N: BufRead>(cl: C, nc: N, m: &Machine, o: &VerifyOptio
                                     j.linear[k] += t * (jb.linear[k] - ja.linear[k]);
                                     j.rotary[k] += t * (jb.rotary[k] - ja.rotary[k]);
                                 }
-                                let d = seg_dist(&fk(m, &j, &o.setup).tip, &prev_tip, &pt.pose.tip);
+                                let d = seg_dist(&fk(m, &j, &setup).tip, &prev_tip, &pt.pose.tip);
                                 rep.max_nonlinear = rep.max_nonlinear.max(d);
                                 if d > o.tolerance {
                                     rep.nonlinear_blocks += 1;
@@ -227,7 +250,7 @@ pub fn verify<C: BufRead, N: BufRead>(cl: C, nc: N, m: &Machine, o: &VerifyOptio
                 }
                 last_block = Some(ahead[i].0.clone());
                 ahead.drain(..i);
-                last = Some((pt.pose.tip, true));
+                last = Some((pt.pose.tip, pt.pose.axis, true));
             }
             None => {
                 if rep.misses.len() < 20 {
@@ -238,11 +261,42 @@ pub fn verify<C: BufRead, N: BufRead>(cl: C, nc: N, m: &Machine, o: &VerifyOptio
                         axis_error_deg: nearest.map(|n| n.2),
                     });
                 }
-                last = Some((pt.pose.tip, false));
+                last = Some((pt.pose.tip, pt.pose.axis, false));
                 last_block = None;
             }
         }
     }
     rep.ok = rep.matched == rep.cl_points && rep.off_segment_blocks == 0 && rep.nonlinear_blocks == 0;
     Ok(rep)
+}
+
+/// Angle (radians) from `a` to the shorter great-circle arc from `u1` to `u2`.
+fn angle_from_arc(a: &Vec3, u1: &Vec3, u2: &Vec3) -> f64 {
+    let Some(n) = u1.cross(u2).try_normalize(1e-12) else {
+        return angle_between(a, u1);
+    };
+    // Within the arc's lune: the angle to its plane; else to the nearer end.
+    let p = a - n * a.dot(&n);
+    if u1.cross(&p).dot(&n) >= 0.0 && p.cross(u2).dot(&n) >= 0.0 {
+        (a.dot(&n).abs() / a.norm()).min(1.0).asin()
+    } else {
+        angle_between(a, u1).min(angle_between(a, u2))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn angle_from_arc_measures_to_the_arc_not_its_great_circle() {
+        let (x, y, z) = (Vec3::x(), Vec3::y(), Vec3::z());
+        let d = |a: Vec3, u1: Vec3, u2: Vec3| angle_from_arc(&a, &u1, &u2).to_degrees();
+        assert!(d((x + y).normalize(), x, y) < 1e-12); // on it
+        assert!((d(z, x, y) - 90.0).abs() < 1e-9); // off its plane
+        assert!((d(-x, x, y) - 90.0).abs() < 1e-9); // on the great circle, beyond the end at y
+        let tilted = (x + y + z * 0.1).normalize();
+        assert!((d(tilted, x, y) - 0.1f64.atan2(2f64.sqrt()).to_degrees()).abs() < 1e-9);
+        assert!(d(x, z, z) < 1e-12 + 90.0 && (d(x, z, z) - 90.0).abs() < 1e-9); // a point arc
+    }
 }
