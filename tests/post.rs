@@ -1493,3 +1493,28 @@ fn verify_names_a_heidenhain_program_it_cannot_read() {
         .to_string();
     assert!(e.contains("NC line 1") && e.contains("Heidenhain conversational"), "{e}");
 }
+
+/// A load of the tool already in the spindle (CATIA writes `LOADTL/1` then `LOADTL/1,1`) writes
+/// no second change: it stopped the spindle, retracted and changed tool 1 for tool 1. A tool that
+/// comes back after another is changed as any.
+#[test]
+fn loading_the_tool_in_the_spindle_again_changes_nothing() {
+    let m = machine("spinner-u5-620");
+    let changes = |tools: &[u32]| {
+        let mut cl = String::from("UNITS/MM\nFEDRAT/500\n");
+        for (k, t) in tools.iter().enumerate() {
+            cl += &format!("LOADTL/{t}\nGOTO/{},0,10,0,0,1\n", 10 * k);
+        }
+        let (sink, s) = run(&m, cl.as_bytes(), &fanuc(&m, Mode::Joint));
+        assert_eq!(s.errors, 0, "{:?}", sink.diags);
+        let told = sink
+            .diags
+            .iter()
+            .filter(|d| d.message.contains("in the spindle already"))
+            .count();
+        (sink.nc.lines().filter(|l| l.contains(" M6")).count(), told)
+    };
+    assert_eq!(changes(&[1, 1]), (1, 1));
+    assert_eq!(changes(&[1, 2, 1]), (3, 0));
+    assert_eq!(changes(&[3, 3, 3, 4]), (2, 2));
+}

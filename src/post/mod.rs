@@ -815,7 +815,18 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             self.cancel_cycle()?;
         }
         match ev {
-            ProgEvent::Tool { number, .. } => {
+            ProgEvent::Tool { number, line } => {
+                // The tool in the spindle loaded again (CATIA writes `LOADTL/1` then `LOADTL/1,1`):
+                // a second change would only stop the spindle and retract.
+                if self.tool == Some(number) {
+                    self.note(Diagnostic::new(
+                        Code::IgnoredRecord,
+                        Severity::Info,
+                        Some(line),
+                        format!("tool {number} is in the spindle already: no tool change written"),
+                    ))?;
+                    return Ok(());
+                }
                 self.leave_plane(false)?;
                 self.retract_up()?;
                 if self.comp_on {
@@ -1173,7 +1184,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         }
         // The angle the cut leaves the point with: the exact solution on `to`'s branch a hair
         // along the CL arc. On an orthogonal table it is `to`'s; a nutating one twists the
-        // azimuth as it tilts (C −172.5° just off vertical, −180° at the end of a 90° tilt).
+        // azimuth as it tilts (C −90° just off vertical, −180° at the end of a 90° tilt).
         let t = (1e-7 / arc).min(0.5);
         let near = Pose {
             tip: prev.pose.tip + (to.pose.tip - prev.pose.tip) * t,
@@ -1215,7 +1226,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             Severity::Info,
             Some(pt.line),
             format!(
-                "{} turned {:.4}° to {:.4}° where the tool axis is along it (line {}), tip standing: the cut after it needs it there",
+                "{} turned by {:.4}° to {:.4}°, tip standing, where the tool axis is along it (line {}): the cut after it needs it there",
                 r.name,
                 (want - prev.actual[f]).to_degrees(),
                 turned.joints.rotary[f].to_degrees(),
