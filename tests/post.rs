@@ -326,7 +326,8 @@ fn a_feed_per_revolution_at_s0_is_not_f0() {
     let m = machine("spinner-u5-620");
     let cl = "UNITS/MM\nSPINDL/0,RPM\nFEDRAT/0.2,MMPR\nGOTO/1,2,3\nGOTO/5,0,0\n";
     let (sink, _) = run(&m, cl.as_bytes(), &Options::new(&m));
-    assert!(sink.nc.contains("G1 X5.000 Y0.000 Z0.000 F0.2"), "{}", sink.nc);
+    // Fed to the first point from the clearance over it, then on to the next: F0.2 per minute.
+    assert!(sink.nc.contains("G1 Z3.000 F0.2\nX5.000 Y0.000 Z0.000\n"), "{}", sink.nc);
     assert!(
         sink.diags
             .iter()
@@ -395,8 +396,10 @@ fn a_turn_about_a_standing_tip_takes_the_machine_axes_time() {
 /// The tool leaves the part before a tool change and before the end (joint: to the top of Z;
 /// TCP: the clearance along the tool axis). After the change the machine is not where the last
 /// tool left off: the next move (here a feed, the CL file gives no RAPID) positions as a
-/// rotary-turning rapid does (retract, turn, over the point, down), never a feed interpolated
-/// from the old tool's last block.
+/// rotary-turning rapid does (retract, turn, over the point, down to the clearance along the
+/// tool axis), never a feed interpolated from the old tool's last block; the feed point itself
+/// is reached at feed (it was reached at rapid: a plunge onto the part, the shared verifier's
+/// `motion_kind`).
 #[test]
 fn the_first_move_after_a_tool_change_positions_at_rapid() {
     let m = machine("spinner-u5-620");
@@ -436,10 +439,16 @@ fn the_first_move_after_a_tool_change_positions_at_rapid() {
             "{mode:?}:\n{}",
             sink.nc
         );
-        // The cut starts at the CL point the positioning reached.
-        assert!(moves[cut - 1].contains("Z50.000"), "{mode:?}:\n{}", sink.nc);
+        // Positioning ends at the clearance over the CL point (50 mm along the vertical axis);
+        // the point is fed to, then the cut goes on.
+        assert!(moves[cut - 1].contains("Z100.000"), "{mode:?}:\n{}", sink.nc);
         assert!(
-            moves[cut].contains("X10.000") && moves[cut].contains("Z40.000"),
+            moves[cut].contains("Z50.000") && !moves[cut].contains('X'),
+            "{mode:?}:\n{}",
+            sink.nc
+        );
+        assert!(
+            moves[cut + 1].contains("X10.000") && moves[cut + 1].contains("Z40.000"),
             "{mode:?}:\n{}",
             sink.nc
         );
@@ -447,23 +456,30 @@ fn the_first_move_after_a_tool_change_positions_at_rapid() {
 }
 
 /// The program's first move comes from home: the rotaries turn with the tool at the top of Z
-/// travel, over the point, and the tool then comes straight down; nothing turns on the way down.
+/// travel, over the point, and the tool then comes straight down, at rapid to the clearance
+/// along the tool axis and at feed onto the point (a feed point: it may lie on the part);
+/// nothing turns on the way down.
 #[test]
 fn the_first_move_turns_the_rotaries_at_the_top_then_comes_down() {
     let m = machine("spinner-u5-620");
     let zmax = m.linears[2].as_ref().unwrap().max;
     let cl = "UNITS/MM\nFEDRAT/500,MMPM\nGOTO/0,0,50,0.5,0,0.8660254\nGOTO/10,0,40,0.5,0,0.8660254\n";
-    let (sink, _) = run(&m, cl.as_bytes(), &Options::new(&m));
-    let [over, down] = [&sink.blocks[0], &sink.blocks[1]];
-    assert!(over.rapid && down.rapid, "{}", sink.nc);
+    let o = Options::new(&m);
+    let (sink, _) = run(&m, cl.as_bytes(), &o);
+    let [over, near, down] = [&sink.blocks[0], &sink.blocks[1], &sink.blocks[2]];
+    assert!(over.rapid && near.rapid && !down.rapid, "{}", sink.nc);
     assert_eq!(over.joints.0[2], Some(zmax), "{}", sink.nc);
-    for k in [0, 1, 3, 4, 5] {
-        assert_eq!(
-            over.joints.0[k], down.joints.0[k],
-            "only Z moves on the way down:\n{}",
-            sink.nc
-        );
+    for b in [near, down] {
+        for k in [0, 1, 3, 4, 5] {
+            let (a, w) = (over.joints.0[k].unwrap_or(0.0), b.joints.0[k].unwrap_or(0.0));
+            assert!((a - w).abs() < 1e-9, "only Z moves on the way down:\n{}", sink.nc);
+        }
     }
+    let along = Vec3::from(near.tip) - Vec3::from(down.tip);
+    assert!(
+        (along - Vec3::new(0.5, 0.0, 0.8660254) * o.clearance).norm() < 1e-6,
+        "{along:?}"
+    );
     assert!((down.tip[2] - 50.0).abs() < 1e-9 && down.joints.0[4].is_some_and(|b| (b - 30.0).abs() < 1e-6));
 }
 

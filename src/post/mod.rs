@@ -1294,7 +1294,24 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         let over = self.above(to);
         self.block(over, pt, true, diags, true, Some("APPROACH"))?;
         self.lock_all()?;
-        self.block(to, pt, true, Vec::new(), pt.inserted, None)
+        self.descend(to, pt)
+    }
+
+    /// The end of positioning, from over the point (joint mode: the top of Z; else the clearance
+    /// along the tool axis) onto it: at rapid onto a rapid point; onto a feed point at rapid to
+    /// the clearance along the tool axis, then at feed, as a reposition re-approaches. A feed
+    /// point may lie on the part: after a tool change it was reached at rapid.
+    fn descend(&mut self, to: At, pt: &MotionPt) -> Result<(), Error> {
+        if pt.rapid || pt.feed.is_none() {
+            return self.block(to, pt, true, Vec::new(), pt.inserted, None);
+        }
+        if self.z_top().is_some() {
+            let near = self.lifted(to, self.o.clearance);
+            if kinematics::limit_violation(self.m, &near.joints, 1e-6).is_none() {
+                self.block(near, pt, true, Vec::new(), true, None)?;
+            }
+        }
+        self.block(to, pt, false, Vec::new(), pt.inserted, None)
     }
 
     /// An axis within 1 % of its travel (1° for rotaries) of an end: worth knowing before the
@@ -1515,7 +1532,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         if self.z_top().is_none() {
             self.block(up, pt, true, diags, true, Some("RETRACT"))?;
             self.block(over, pt, true, Vec::new(), true, Some("ROTARY REPOSITION"))?;
-            return self.block(to, pt, true, Vec::new(), pt.inserted, None);
+            return self.descend(to, pt);
         }
         // Turned at the top, still over the old X Y; then over the new one, then down.
         let mut joints = up.joints;
@@ -1529,7 +1546,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         self.block(turned, pt, true, Vec::new(), true, Some("ROTARY REPOSITION"))?;
         self.block(over, pt, true, Vec::new(), true, None)?;
         self.lock_all()?;
-        self.block(to, pt, true, Vec::new(), pt.inserted, None)
+        self.descend(to, pt)
     }
 
     /// Retract along the tool axis, turn at clearance, re-approach: for an unwind of a bounded

@@ -270,10 +270,11 @@ pub fn verify<C: BufRead, N: BufRead>(cl: C, nc: N, m: &Machine, o: &VerifyOptio
     Ok(rep)
 }
 
-/// Angle (radians) from `a` to the shorter great-circle arc from `u1` to `u2`.
+/// Angle (radians) from `a` to the shorter great-circle arc from `u1` to `u2`; 0 between
+/// opposite axes, which every half great circle joins (a reversal names no arc).
 fn angle_from_arc(a: &Vec3, u1: &Vec3, u2: &Vec3) -> f64 {
     let Some(n) = u1.cross(u2).try_normalize(1e-12) else {
-        return angle_between(a, u1);
+        return if u1.dot(u2) < 0.0 { 0.0 } else { angle_between(a, u1) };
     };
     // Within the arc's lune: the angle to its plane; else to the nearer end.
     let p = a - n * a.dot(&n);
@@ -297,6 +298,7 @@ mod tests {
         assert!((d(-x, x, y) - 90.0).abs() < 1e-9); // on the great circle, beyond the end at y
         let tilted = (x + y + z * 0.1).normalize();
         assert!((d(tilted, x, y) - 0.1f64.atan2(2f64.sqrt()).to_degrees()).abs() < 1e-9);
-        assert!(d(x, z, z) < 1e-12 + 90.0 && (d(x, z, z) - 90.0).abs() < 1e-9); // a point arc
+        assert!((d(x, z, z) - 90.0).abs() < 1e-9); // a point arc
+        assert_eq!(d(x, z, -z), 0.0); // a reversal: every half great circle joins its ends
     }
 }
