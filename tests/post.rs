@@ -1534,3 +1534,36 @@ fn loading_the_tool_in_the_spindle_again_changes_nothing() {
     assert_eq!(changes(&[1, 2, 1]), (3, 0));
     assert_eq!(changes(&[3, 3, 3, 4]), (2, 2));
 }
+
+/// A singular point stands at the free angle held from the point before it, not the IK's: where
+/// that puts a linear outside travel, the point is a limit error. The planner judged travel at
+/// the IK's angle and the emitter checked only points the planner found outside, so the block
+/// went out told as "within 1% of its travel" (mikron-ucp710, fuzzed: C held at 666°, Y -277 of
+/// ±275). Here spinner-u5-620: C held at 90° turns X 270 of the part into machine Y 270 of ±260.
+#[test]
+fn a_singular_point_outside_travel_at_its_held_angle_is_a_limit_error() {
+    let m = machine("spinner-u5-620");
+    let cl = "UNITS/MM\nRAPID\nGOTO/250,0,50,0,0.5,0.8660254\nFEDRAT/500\nGOTO/270,0,50,0,0,1\n";
+    let (sink, s) = run(&m, cl.as_bytes(), &fanuc(&m, Mode::Joint));
+    let last = sink
+        .blocks
+        .iter()
+        .rev()
+        .find(|b| b.source_line == Some(5) && !b.rapid)
+        .expect("the vertical point's block");
+    let y = last.joints.0[1].unwrap();
+    assert!(y.abs() > 260.0, "held C puts Y out of travel: {y}\n{}", sink.nc);
+    assert!(
+        last.diagnostics
+            .iter()
+            .any(|d| d.code == Code::LimitViolation && d.severity == Severity::Error && d.message.starts_with("Y = ")),
+        "{:?}",
+        last.diagnostics
+    );
+    assert!(
+        !sink.diags.iter().any(|d| d.code == Code::NearLimit && d.line == Some(5)),
+        "{:?}",
+        sink.diags
+    );
+    assert!(s.errors > 0);
+}

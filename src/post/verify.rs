@@ -40,7 +40,8 @@ pub struct Report {
     /// between the two points' axes: reported, not failed (a singular tolerance allows some).
     pub max_axis_off_arc_deg: f64,
     /// Joint mode: largest distance from the CL segment of the joint-space motion between two
-    /// blocks (sampled at ¼, ½, ¾), and how many block pairs exceed the tolerance.
+    /// blocks (sampled as the engine does, every eighth), and how many block pairs exceed the
+    /// tolerance.
     pub max_nonlinear: f64,
     pub nonlinear_blocks: u64,
     pub misses: Vec<Miss>,
@@ -232,7 +233,7 @@ pub fn verify<C: BufRead, N: BufRead>(cl: C, nc: N, m: &Machine, o: &VerifyOptio
                         let joints: Vec<Option<Joints>> = chain.map(|b| block_joints(m, b)).collect();
                         for w in joints.windows(2) {
                             let (Some(ja), Some(jb)) = (w[0], w[1]) else { continue };
-                            for t in [0.25, 0.5, 0.75] {
+                            for t in super::NONLINEAR_SAMPLES {
                                 let mut j = ja;
                                 for k in 0..3 {
                                     j.linear[k] += t * (jb.linear[k] - ja.linear[k]);
