@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """Fuzzes the engine with generated paths made hard: every shipped profile, joint, TCP and tilted
-planes, word-address dialects. A program that kinepost wrote without an error diagnostic must
+planes, fanuc, siemens and heidenhain. A program that kinepost wrote without an error diagnostic must
 pass `kinepost verify` (every point, every segment, the joint-space motion) with its blocks on the
 CL orientation (within what the summary owns up to as singular deviation), and, in fanuc, the
 independent verifier in ../shared. Programs with errors (the CL asks for what the machine cannot
@@ -97,7 +97,7 @@ def main():
                 for mode in ['joint', 'tcp', 'planes']:
                     if mode == 'planes' and kind != 'fixed_axis':
                         continue
-                    for dialect in ['fanuc', 'siemens']:
+                    for dialect in ['fanuc', 'siemens', 'heidenhain']:
                         tag = f'{m} {kind} seed={seed} {mode} {dialect}'
                         opts = ['--mode', 'joint', '--tilted-planes', '--canned-cycles'] if mode == 'planes' else ['--mode', mode]
                         r = run([K, 'post', '--machine', m, *opts, '--dialect', dialect, cl_path, '-o', nc_path,

@@ -1495,19 +1495,37 @@ fn the_cls_tool_lengths_are_stated_and_verify_follows_them() {
     }
 }
 
-/// `verify` reads word address; a Heidenhain conversational program is named as such at its first
-/// line (it failed at its first `C+…` word: "C without a value").
+/// `verify` reads Heidenhain conversational (the default of dmg-dmc75v and mikron-ucp710): `L`
+/// blocks with `FMAX` rapid for their block only, `C` arcs, `FUNCTION TCPM`. It failed at the
+/// first `C+…` word ("C without a value"). What it does not read is named with its line.
 #[test]
-fn verify_names_a_heidenhain_program_it_cannot_read() {
+fn verify_reads_heidenhain_conversational() {
+    for id in ["dmg-dmc75v", "mikron-ucp710"] {
+        let m = machine(id);
+        for file in [
+            "nx_clsf_mech491_variable_axis_inch_5ax.cls",
+            "nx_clsf_mech491_simple_mill_plane_mm.cls",
+        ] {
+            let cl = std::fs::read(data(file)).unwrap();
+            for mode in [Mode::Joint, Mode::Tcp] {
+                let mut o = Options::new(&m);
+                o.mode = mode;
+                o.dialect = &kinepost::nc::HEIDENHAIN;
+                let (sink, s) = run(&m, &cl, &o);
+                let r = kinepost::post::verify::verify(&cl[..], sink.nc.as_bytes(), &m, &verify_options(&m, &o)).unwrap();
+                assert!(r.ok && r.matched == s.cl_points, "{id} {file} {mode:?}: {r:?}");
+                assert!(r.max_axis_off_arc_deg <= s.max_singular_deviation_deg + 0.01, "{r:?} {s:?}");
+            }
+        }
+    }
     let m = machine("dmg-dmc75v");
-    let cl = std::fs::read(data("nx_clsf_mech491_simple_mill_plane_mm.cls")).unwrap();
-    let mut o = Options::new(&m);
-    o.dialect = &kinepost::nc::HEIDENHAIN;
-    let (sink, _) = run(&m, &cl, &o);
-    let e = kinepost::post::verify::verify(&cl[..], sink.nc.as_bytes(), &m, &verify_options(&m, &o))
+    let o = fanuc(&m, Mode::Joint);
+    let polar = "0 BEGIN PGM 1 MM\n1 L X+0 Y+0 Z+50 FMAX\n2 LP PR+10 PA+30 F500\n3 END PGM 1 MM\n";
+    let cl = "UNITS/MM\nGOTO/0,0,50\n";
+    let e = kinepost::post::verify::verify(cl.as_bytes(), polar.as_bytes(), &m, &verify_options(&m, &o))
         .unwrap_err()
         .to_string();
-    assert!(e.contains("NC line 1") && e.contains("Heidenhain conversational"), "{e}");
+    assert!(e.contains("NC line 3") && e.contains("LP"), "{e}");
 }
 
 /// A load of the tool already in the spindle (CATIA writes `LOADTL/1` then `LOADTL/1,1`) writes

@@ -1,6 +1,7 @@
-//! Reads word-address NC (Fanuc-like; Siemens 840D's `TRAORI`, `MCALL` cycles and `CYCLE800`)
-//! back into motion blocks, for `kinepost verify`: modal axis values after each block, motion
-//! kind, units, TCP state. Streaming, one line at a time.
+//! Reads NC back into motion blocks, for `kinepost verify`: word address (Fanuc-like; Siemens
+//! 840D's `TRAORI`, `MCALL` cycles and `CYCLE800`) and Heidenhain conversational (from its
+//! `BEGIN PGM`): modal axis values after each block, motion kind, units, TCP state. Streaming,
+//! one line at a time.
 
 use crate::kinematics::Units;
 
@@ -62,6 +63,12 @@ pub struct NcReader<R> {
     /// A `%` after program text ends the tape: what follows is not part of the program.
     percents: u32,
     content: bool,
+    /// A Heidenhain conversational program (it began with `BEGIN PGM`).
+    conversational: bool,
+    /// Heidenhain `CYCL DEF 200`: the Q parameters read so far while its `~` lines go on, and
+    /// the cycle it defines, which each `M99` block then drills.
+    cycl_def: Option<Vec<(u32, f64)>>,
+    cycl: Option<Cycle>,
 }
 
 impl<R: std::io::BufRead> NcReader<R> {
@@ -81,6 +88,9 @@ impl<R: std::io::BufRead> NcReader<R> {
             incremental: false,
             percents: 0,
             content: false,
+            conversational: false,
+            cycl_def: None,
+            cycl: None,
         }
     }
 
@@ -178,6 +188,163 @@ impl<R: std::io::BufRead> NcReader<R> {
         Ok(())
     }
 
+    /// One Heidenhain line (its number already stripped): `L` and `C` blocks (`FMAX` is rapid for
+    /// its block, an `F` feed), `CYCL DEF 200` with its `~`-continued Q parameters and the `M99`
+    /// that drills it, `PLANE SPATIAL` / `PLANE RESET`, `FUNCTION TCPM` / `FUNCTION RESET TCPM`,
+    /// `BEGIN PGM … MM|INCH` / `END PGM`; the rest (`TOOL CALL`, `CC`, M words) moves nothing.
+    fn conversational_line(&mut self, line: &str) -> Result<Option<NcBlock>, Error> {
+        let continued = line.trim_end().ends_with('~');
+        let (code, comment) = match line.split_once(';') {
+            Some((c, k)) => (c, k.trim_end_matches([' ', '~', '\r', '\n'])),
+            None => (line, ""),
+        };
+        let code = code.trim().trim_end_matches('~').trim_end().to_ascii_uppercase();
+        let words: Vec<&str> = code.split_whitespace().collect();
+        let number = |w: &str, at: usize| -> Result<f64, Error> {
+            w[at..].parse::<f64>().map_err(|_| Error::Unsupported {
+                line: self.line,
+                problem: format!("{w}: not a number after {}", &w[..at]),
+            })
+        };
+        if let Some(def) = self.cycl_def.as_mut() {
+            for w in &words {
+                if let Some((q, v)) = w.strip_prefix('Q').and_then(|r| r.split_once('='))
+                    && let (Ok(q), Ok(v)) = (q.parse::<u32>(), v.parse::<f64>())
+                {
+                    def.push((q, v));
+                }
+            }
+            if !continued {
+                let def = self.cycl_def.take().unwrap_or_default();
+                let q = |n: u32| def.iter().rev().find(|(k, _)| *k == n).map(|(_, v)| *v);
+                let (Some(clear), Some(depth), Some(surface)) = (q(200), q(201), q(203)) else {
+                    return Err(Error::Unsupported {
+                        line: self.line,
+                        problem: "CYCL DEF 200 without Q200, Q201 and Q203".into(),
+                    });
+                };
+                // Down to Q203 + Q201 from the set-up clearance, back to the 2nd one.
+                let second = q(204).unwrap_or(0.0).max(clear);
+                self.cycl = Some(Cycle {
+                    bottom: Some(surface + depth),
+                    r: Some(surface + clear),
+                    initial: Some(surface + second),
+                });
+            }
+            return Ok(None);
+        }
+        match words.as_slice() {
+            ["BEGIN", "PGM", .., u] => {
+                self.units = if *u == "INCH" { Units::Inch } else { Units::Mm };
+                return Ok(None);
+            }
+            ["END", "PGM", ..] => {
+                self.percents = u32::MAX; // what follows is no part of the program
+                return Ok(None);
+            }
+            ["FUNCTION", "TCPM", ..] => self.tcp = true,
+            ["FUNCTION", "RESET", "TCPM", ..] => self.tcp = false,
+            ["PLANE", "RESET", ..] => self.plane = None,
+            ["PLANE", "SPATIAL", rest @ ..] => {
+                let mut a = [0.0; 3];
+                for (k, name) in ["SPA", "SPB", "SPC"].iter().enumerate() {
+                    let w = rest.iter().find(|w| w.starts_with(name)).ok_or_else(|| Error::Unsupported {
+                        line: self.line,
+                        problem: format!("PLANE SPATIAL without {name}"),
+                    })?;
+                    a[k] = number(w, 3)?.to_radians();
+                }
+                self.plane = Some(Plane {
+                    origin: [0.0; 3],
+                    frame: Some(super::plane::from_spatial(a)),
+                });
+            }
+            ["PLANE", other, ..] => {
+                return Err(Error::Unsupported {
+                    line: self.line,
+                    problem: format!("PLANE {other}: only PLANE SPATIAL and PLANE RESET are read"),
+                });
+            }
+            ["CYCL", "DEF", "200", ..] => {
+                self.cycl_def = Some(Vec::new());
+                if !continued {
+                    return Err(Error::Unsupported {
+                        line: self.line,
+                        problem: "CYCL DEF 200 without its Q parameters".into(),
+                    });
+                }
+            }
+            ["CYCL", "DEF", other, ..] => {
+                return Err(Error::Unsupported {
+                    line: self.line,
+                    problem: format!("CYCL DEF {other}: only cycle 200 (drilling) is read"),
+                });
+            }
+            [polar @ ("LP" | "CP" | "RND" | "CHF"), ..] => {
+                return Err(Error::Unsupported {
+                    line: self.line,
+                    problem: format!("{polar}: polar moves, roundings and chamfers are not read"),
+                });
+            }
+            ["L" | "C" | "CR" | "CT", rest @ ..] => {
+                let mut vals: [Option<f64>; 6] = [None; 6];
+                let (mut rapid, mut call) = (false, false);
+                for w in rest {
+                    match *w {
+                        "FMAX" => rapid = true,
+                        "M99" => call = true,
+                        _ if w.len() > 1 && w.starts_with('I') && "XYZABC".contains(&w[1..2]) => {
+                            return Err(Error::Unsupported {
+                                line: self.line,
+                                problem: format!("{w}: incremental positions are not supported"),
+                            });
+                        }
+                        _ => {
+                            if let Some(k) = "XYZABC".find(&w[..1])
+                                && w.len() > 1
+                                && (w.as_bytes()[1] == b'+' || w.as_bytes()[1] == b'-' || w.as_bytes()[1].is_ascii_digit())
+                            {
+                                vals[k] = Some(number(w, 1)?);
+                            }
+                        }
+                    }
+                }
+                if self.incremental || vals.iter().all(|v| v.is_none()) && !call {
+                    return Ok(None);
+                }
+                for (k, v) in vals.iter().enumerate() {
+                    if v.is_some() {
+                        self.axes[k] = *v;
+                    }
+                }
+                let block = |axes: [Option<f64>; 6], rapid: bool| NcBlock {
+                    line: self.line,
+                    rapid,
+                    axes,
+                    units: self.units,
+                    tcp: self.tcp,
+                    plane: self.plane,
+                    comment: comment.trim().to_string(),
+                };
+                let (Some(c), true) = (self.cycl, call) else {
+                    return Ok(Some(block(self.axes, rapid)));
+                };
+                // Over the hole at the height it was called from, then as G81 with G98.
+                let (Some(bottom), Some(r), Some(back)) = (c.bottom, c.r, c.initial) else {
+                    return Ok(None);
+                };
+                let here = self.axes[2].unwrap_or(back);
+                for (z, rapid) in [(here, true), (r, true), (bottom, false), (back, true)] {
+                    self.axes[2] = Some(z);
+                    self.pending.push_back(block(self.axes, rapid));
+                }
+                return Ok(None);
+            }
+            _ => {}
+        }
+        Ok(None)
+    }
+
     fn parse_line(&mut self, raw: &str) -> Result<Option<NcBlock>, Error> {
         // Siemens' swivel cycle, whose parentheses are arguments, not a comment.
         let bare = raw.trim_start();
@@ -192,17 +359,15 @@ impl<R: std::io::BufRead> NcReader<R> {
             self.content = true;
             return self.cycle800(args.strip_suffix(')').unwrap_or(args)).map(|_| None);
         }
-        // Heidenhain's conversational language is no word address: say so at its first line
-        // (its `L X+… C+…` read as words failed later, at "C without a value").
+        // Heidenhain's conversational language is no word address (its `L X+… C+…` read as
+        // words failed at "C without a value"): its own reader from `BEGIN PGM` on.
         let unnumbered = bare.trim_start_matches(|c: char| c.is_ascii_digit()).trim_start();
-        if unnumbered.len() >= 9 && unnumbered[..9].eq_ignore_ascii_case("BEGIN PGM") {
+        if !self.content && unnumbered.len() >= 9 && unnumbered[..9].eq_ignore_ascii_case("BEGIN PGM") {
+            self.conversational = true;
+        }
+        if self.conversational {
             self.content = true;
-            return Err(Error::Unsupported {
-                line: self.line,
-                problem: "a Heidenhain conversational program: verify reads word-address NC (post it with \
-                          --dialect fanuc, haas, siemens or linuxcnc to check it)"
-                    .into(),
-            });
+            return self.conversational_line(unnumbered);
         }
         if bare.len() >= 5 && bare[..5].eq_ignore_ascii_case("MCALL") {
             let call = bare[5..].split(';').next().unwrap_or("").trim();
