@@ -295,6 +295,16 @@ impl Formats {
         10f64.powi(-(self.feed_decimals(mode) as i32))
     }
 
+    /// Half the last digit of a linear word: lengths closer than this write the same word.
+    pub fn half_linear(&self) -> f64 {
+        0.5 * 10f64.powi(-(self.linear as i32))
+    }
+
+    /// Half the last digit of a rotary word, in degrees.
+    pub fn half_rotary(&self) -> f64 {
+        0.5 * 10f64.powi(-(self.rotary as i32))
+    }
+
     pub fn for_units(u: Units) -> Formats {
         match u {
             Units::Mm => Formats {

@@ -309,7 +309,7 @@ impl<R: std::io::BufRead> NcReader<R> {
                         }
                     }
                 }
-                if self.incremental || vals.iter().all(|v| v.is_none()) && !call {
+                if vals.iter().all(|v| v.is_none()) && !call {
                     return Ok(None);
                 }
                 for (k, v) in vals.iter().enumerate() {
@@ -317,26 +317,12 @@ impl<R: std::io::BufRead> NcReader<R> {
                         self.axes[k] = *v;
                     }
                 }
-                let block = |axes: [Option<f64>; 6], rapid: bool| NcBlock {
-                    line: self.line,
-                    rapid,
-                    axes,
-                    units: self.units,
-                    tcp: self.tcp,
-                    plane: self.plane,
-                    comment: comment.trim().to_string(),
-                };
                 let (Some(c), true) = (self.cycl, call) else {
-                    return Ok(Some(block(self.axes, rapid)));
+                    return Ok(Some(self.block(rapid, comment)));
                 };
-                // Over the hole at the height it was called from, then as G81 with G98.
-                let (Some(bottom), Some(r), Some(back)) = (c.bottom, c.r, c.initial) else {
-                    return Ok(None);
-                };
-                let here = self.axes[2].unwrap_or(back);
-                for (z, rapid) in [(here, true), (r, true), (bottom, false), (back, true)] {
-                    self.axes[2] = Some(z);
-                    self.pending.push_back(block(self.axes, rapid));
+                // Over the hole, then as G81 with G98.
+                if let (Some(bottom), Some(r), Some(back)) = (c.bottom, c.r, c.initial) {
+                    self.drill(r, bottom, back, comment);
                 }
                 return Ok(None);
             }
@@ -550,18 +536,7 @@ impl<R: std::io::BufRead> NcReader<R> {
                 }
             }
             let back = if self.return_initial { c.initial.unwrap_or(r) } else { r };
-            for (z, rapid) in [(self.axes[2].unwrap_or(back), true), (r, true), (bottom, false), (back, true)] {
-                self.axes[2] = Some(z);
-                self.pending.push_back(NcBlock {
-                    line: self.line,
-                    rapid,
-                    axes: self.axes,
-                    units: self.units,
-                    tcp: self.tcp,
-                    plane: self.plane,
-                    comment: comment.trim().to_string(),
-                });
-            }
+            self.drill(r, bottom, back, &comment);
             return Ok(None);
         }
         for (k, v) in vals.iter().enumerate() {
@@ -569,14 +544,28 @@ impl<R: std::io::BufRead> NcReader<R> {
                 self.axes[k] = *v;
             }
         }
-        Ok(Some(NcBlock {
+        Ok(Some(self.block(self.rapid, &comment)))
+    }
+
+    /// A block to where the axes now stand, in the program's state.
+    fn block(&self, rapid: bool, comment: &str) -> NcBlock {
+        NcBlock {
             line: self.line,
-            rapid: self.rapid,
+            rapid,
             axes: self.axes,
             units: self.units,
             tcp: self.tcp,
             plane: self.plane,
             comment: comment.trim().to_string(),
-        }))
+        }
+    }
+
+    /// The moves a drilling cycle makes at the X Y the axes stand at: rapid there (at the height
+    /// it was called from) and to `r`, feed to `bottom`, rapid back to `back`.
+    fn drill(&mut self, r: f64, bottom: f64, back: f64, comment: &str) {
+        for (z, rapid) in [(self.axes[2].unwrap_or(back), true), (r, true), (bottom, false), (back, true)] {
+            self.axes[2] = Some(z);
+            self.pending.push_back(self.block(rapid, comment));
+        }
     }
 }

@@ -578,7 +578,7 @@ pub fn post<R: BufRead, S: Sink + ?Sized>(input: R, m: &Machine, o: &Options, si
         outside_line: None,
         split_told: false,
         last_line: 0,
-        standing: 0.5 * 10f64.powi(-(formats.linear as i32)),
+        standing: formats.half_linear(),
         tool: None,
         comp_on: false,
         rpm: None,
@@ -848,7 +848,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             }
             ProgEvent::ToolLength(l) => {
                 // Only when the job fixed the length (else `cl_tool_length`, before planning).
-                if (l - self.setup.tool_length).abs() > 0.5 * 10f64.powi(-(self.f.fmt.linear as i32)) {
+                if (l - self.setup.tool_length).abs() > self.f.fmt.half_linear() {
                     self.note(Diagnostic::new(
                         Code::ToolLength,
                         Severity::Info,
@@ -1179,7 +1179,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         // Spread over the cut, the turn leaves the axis within twice the cut's angle from the
         // singular direction (both the machine's axis and the CL's stay within that angle of
         // it): below half a rotary word, or the singular tolerance, nothing to stop for.
-        let half_word = (0.5 * 10f64.powi(-(self.f.fmt.rotary as i32))).to_radians();
+        let half_word = self.f.fmt.half_rotary().to_radians();
         let arc = angle_between(&prev.pose.axis, &to.pose.axis);
         if 2.0 * arc <= half_word.max(self.o.singular_tolerance) {
             return Ok(prev);
@@ -1823,7 +1823,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         let (held, dev) = self.held_midpoint(a, &want, &tip, &axis);
         if let Some((d, at)) = best
             && d <= limit
-            && dev > 0.5 * 10f64.powi(-(self.f.fmt.rotary as i32))
+            && dev > self.f.fmt.half_rotary()
         {
             return Some(at);
         }
