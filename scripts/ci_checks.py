@@ -99,6 +99,29 @@ def main():
             if bad or c['matched'] != c['cl_points']:
                 fails.append(f'verify {f} {mid} {mode}: {rep.get("failed")}')
 
+    # Every corpus file on every profile, joint and TCP: whatever the CL asks (much of it outside
+    # some machine's travel, and said so), no block kinepost writes may miss its pose under its
+    # own FK replay (`verify_deviation`). The propeller machine's arcs and singular roots did.
+    replays = 0
+    for path in sorted(glob.glob(os.path.join(machines, '*.toml'))):
+        mid = os.path.basename(path)[:-5]
+        for f in sorted(glob.glob(os.path.join(corpus, '*.*'))):
+            if f.endswith('.md'):
+                continue
+            for mode in ('joint', 'tcp'):
+                nd = os.path.join(tmp, 'replay.ndjson')
+                p = run([a.kinepost, 'post', '--machine', mid, '--mode', mode, f, '-o', os.devnull, '--diagnostics', nd])
+                counts = {}
+                for line in open(nd):
+                    o = json.loads(line)
+                    if o.get('type') == 'summary':
+                        counts = o['summary']['counts']
+                replays += 1
+                if p.returncode or counts.get('verify_deviation'):
+                    fails.append(f'replay {os.path.basename(f)} {mid} {mode}: exit {p.returncode}, '
+                                 f'{counts.get("verify_deviation", 0)} blocks miss their pose')
+    print(f'corpus x profiles replayed: {replays} programs')
+
     # 3+2 corpus files in tilted planes (holes as canned cycles in them). The shared verifier reads
     # no plane commands: kinepost's own `verify` replays plane coordinates × the plane's frame.
     planes = 0
@@ -135,7 +158,7 @@ def main():
 
     for f in fails:
         print('FAIL', f)
-    print(f'{ok + len(CORPUS) * 2 + planes - len(fails)} passed, {len(fails)} failed')
+    print(f'{ok + len(CORPUS) * 2 + planes + replays - len(fails)} passed, {len(fails)} failed')
     return 1 if fails else 0
 
 

@@ -1585,3 +1585,21 @@ fn a_singular_point_outside_travel_at_its_held_angle_is_a_limit_error() {
     );
     assert!(s.errors > 0);
 }
+
+/// The propeller machine (no X: the rotaries place the tip too) on flat work. An arc's chords
+/// held the rotaries of the arc's end while Y and Z moved (9.6 mm off the pose: every chord of
+/// the NX facing file's arcs), and a singular point (the tool along the A axis, A free) took the
+/// first of its roots, C a half turn from the planned one, with the planned B: the tool 180° off.
+/// Every chord end and every singular point is now an exact solution on the planned root.
+#[test]
+fn the_propeller_machine_places_the_tip_with_its_rotaries() {
+    let m = machine("propeller-3r2l");
+    let facing = std::fs::read_to_string(data("nx_clsf_mech491_simple_mill_plane_mm.cls")).unwrap();
+    let (_, s, _) = &post_and_verify(&m, &facing).unwrap()[0];
+    assert!(s.counts.get("arc_linearized").is_some_and(|&n| n > 0), "{s:?}");
+    // A tool along −X: C turns it onto ±Y, A's axis, on two roots; the cut stays on one.
+    let cl = "UNITS/MM\nLOADTL/1\nFEDRAT/500,MMPM\nGOTO/-0.5,0,-50,-1,0,0\nGOTO/-0.5,0,0,-1,0,0\nGOTO/-0.5,0,40,-1,0,0\n";
+    for (mode, s, _) in post_and_verify(&m, cl).unwrap() {
+        assert!(s.max_tip_deviation < 1e-3, "{mode:?}: {s:?}");
+    }
+}

@@ -982,10 +982,13 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                 free_angle: prev,
                 ..Default::default()
             };
+            // The planned root: a chain missing a linear has several singular ones (C a half
+            // turn apart), and the first of them, with the planner's A and B windings copied in,
+            // put the tool 180° off the pose (propeller-3r2l).
             if ik_into(self.m, pose, &self.setup, &opt, &mut self.buf).is_ok()
-                && let Some(s) = self.buf.iter().find(|s| s.singular == Some(free))
+                && let Some(s) = nearest_singular(&self.buf, free, &cand.sol.actual)
             {
-                sol = *s;
+                sol = s;
             }
             // The bounded windings the planner chose stay as chosen.
             for (i, r) in self.m.rotaries.iter().enumerate() {
@@ -1207,7 +1210,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         };
         let Some(s) = ik_into(self.m, &prev.pose, &self.setup, &opt, &mut self.buf)
             .ok()
-            .and_then(|_| self.buf.iter().find(|s| s.singular == Some(f)).copied())
+            .and_then(|_| nearest_singular(&self.buf, f, &prev.actual))
         else {
             return Ok(prev);
         };
@@ -1495,10 +1498,41 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         let (ra, rb) = (a.pose.tip - arc.center, b.pose.tip - arc.center);
         let (h0, h1) = (k.dot(&ra), k.dot(&rb));
         let ap = ra - k * h0;
-        for i in 1..segs {
+        let mut diags = diags;
+        if segs > 1 {
+            diags.push(Diagnostic::new(
+                Code::ArcLinearized,
+                Severity::Info,
+                Some(pt.line),
+                format!("arc of {:.1}° written as {segs} chords", arc.sweep.to_degrees()),
+            ));
+        }
+        let chord_tip = |i: usize| {
             let t = i as f64 / segs as f64;
             let (s, c) = (arc.sweep * t).sin_cos();
-            let tip = arc.center + ap * c + k.cross(&ap) * s + k * (h0 + (h1 - h0) * t);
+            arc.center + ap * c + k.cross(&ap) * s + k * (h0 + (h1 - h0) * t)
+        };
+        if !full_linears {
+            // Without a linear the rotaries place the tip too: every chord end is an exact
+            // solution (the one nearest the last), and every chord a feed segment, linearized
+            // (it held the end's rotaries: 9.6 mm off on propeller-3r2l).
+            let mut prev = a;
+            for i in 1..segs {
+                let pose = Pose {
+                    tip: chord_tip(i),
+                    axis: b.pose.axis,
+                };
+                let Some(at) = self.exact_near(pose, &prev) else {
+                    continue;
+                };
+                self.segment(prev, at, pt, Vec::new(), 0)?;
+                prev = at;
+            }
+            self.segment(prev, b, pt, diags, 0)?;
+            return Ok(());
+        }
+        for i in 1..segs {
+            let tip = chord_tip(i);
             let cp = kinematics::controlled_point(m, &b.actual, &tip, &self.setup);
             let mut j = b.joints;
             for n in 0..3 {
@@ -1510,15 +1544,6 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                 ..b
             };
             self.block(at, pt, false, Vec::new(), true, None)?;
-        }
-        let mut diags = diags;
-        if segs > 1 {
-            diags.push(Diagnostic::new(
-                Code::ArcLinearized,
-                Severity::Info,
-                Some(pt.line),
-                format!("arc of {:.1}° written as {segs} chords", arc.sweep.to_degrees()),
-            ));
         }
         self.block(b, pt, false, diags, pt.inserted, None)
     }
@@ -1591,32 +1616,35 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             j.linear = [cp.x, cp.y, cp.z];
             return At { joints: j, pose, ..a };
         }
-        // A singular pose keeps its free rotary where it stands: the retract is along the axis.
+        self.exact_near(pose, &a).unwrap_or(a)
+    }
+
+    /// The exact solution of `pose` nearest `a` in the rotaries, wound next to `a`'s angles. On a
+    /// chain missing a linear the rotaries place the tip too: a pose of `a`'s orientation
+    /// elsewhere needs other angles. A singular pose keeps its free rotary where `a` has it.
+    fn exact_near(&mut self, pose: Pose, a: &At) -> Option<At> {
         let opt = IkOptions {
             free_angle: kinematics::free_rotary(self.m).map_or(0.0, |f| a.actual[f]),
             ..Default::default()
         };
-        if ik_into(self.m, &pose, &self.setup, &opt, &mut self.buf).is_ok()
-            && let Some(s) = self.buf.iter().min_by(|x, y| {
-                let d = |s: &kinematics::Solution| (0..3).map(|i| wrap(s.actual[i] - a.actual[i]).abs()).sum::<f64>();
-                d(x).total_cmp(&d(y))
-            })
-        {
-            let mut actual = s.actual;
-            let mut joints = s.joints;
-            for (i, r) in self.m.rotaries.iter().enumerate() {
-                actual[i] = a.actual[i] + wrap(s.actual[i] - a.actual[i]);
-                joints.rotary[i] = r.word(actual[i]);
-            }
-            return At {
-                joints,
-                actual,
-                pose,
-                branch: s.branch,
-                free: s.singular.map(|f| f as u8),
-            };
+        ik_into(self.m, &pose, &self.setup, &opt, &mut self.buf).ok()?;
+        let s = self.buf.iter().min_by(|x, y| {
+            let d = |s: &kinematics::Solution| (0..3).map(|i| wrap(s.actual[i] - a.actual[i]).abs()).sum::<f64>();
+            d(x).total_cmp(&d(y))
+        })?;
+        let mut actual = s.actual;
+        let mut joints = s.joints;
+        for (i, r) in self.m.rotaries.iter().enumerate() {
+            actual[i] = a.actual[i] + wrap(s.actual[i] - a.actual[i]);
+            joints.rotary[i] = r.word(actual[i]);
         }
-        a
+        Some(At {
+            joints,
+            actual,
+            pose,
+            branch: s.branch,
+            free: s.singular.map(|f| f as u8),
+        })
     }
 
     /// A feed move from `a` to `b`, subdivided where the rotaries step too far in one block or
@@ -2568,6 +2596,21 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         }
         Ok(())
     }
+}
+
+/// The solution with `free` free whose other rotaries lie nearest `actual`: the same root. A chain
+/// missing a linear has several (the outer rotary a half turn apart).
+fn nearest_singular(sols: &kinematics::Solutions, free: usize, actual: &[f64; 3]) -> Option<kinematics::Solution> {
+    let off = |s: &&kinematics::Solution| -> f64 {
+        (0..3)
+            .filter(|&i| i != free)
+            .map(|i| wrap(s.actual[i] - actual[i]).abs())
+            .sum()
+    };
+    sols.iter()
+        .filter(|s| s.singular == Some(free))
+        .min_by(|x, y| off(x).total_cmp(&off(y)))
+        .copied()
 }
 
 /// Where the joint-space motion between two blocks is measured against the CL chord: every
