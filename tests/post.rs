@@ -1603,3 +1603,53 @@ fn the_propeller_machine_places_the_tip_with_its_rotaries() {
         assert!(s.max_tip_deviation < 1e-3, "{mode:?}: {s:?}");
     }
 }
+
+/// A retract, approach or re-approach along the tool axis stops where the travel ends (told as a
+/// `near_limit` warning): fryer-5x-45's Z ends 1 in over the NX facing file's clearance point,
+/// and in TCP mode every approach and retract went there, a limit error on a program that was
+/// otherwise within travel.
+#[test]
+fn retracts_along_the_tool_axis_stay_within_travel() {
+    let m = machine("fryer-5x-45");
+    let cl = std::fs::read(data("nx_clsf_mech491_simple_mill_plane_mm.cls")).unwrap();
+    let (sink, s) = run(&m, &cl, &fanuc(&m, Mode::Tcp));
+    assert_eq!(s.errors, 0, "{:?}", sink.diags);
+    let z = m.linears[2].as_ref().unwrap();
+    let top = sink.blocks.iter().filter_map(|b| b.joints.0[2]).fold(f64::MIN, f64::max);
+    assert!(
+        top <= z.max + 1e-6 && top > z.max - 1e-3,
+        "highest Z {top}, travel ends at {}",
+        z.max
+    );
+    let told = sink
+        .diags
+        .iter()
+        .filter(|d| d.code == Code::NearLimit && d.message.contains("shortened"))
+        .count();
+    assert!(told >= 2, "{:?}", sink.diags);
+}
+
+/// A drilling cycle with no feed anywhere (CATIA's tapping demo: `CYCLE/TAP,50.786017,1.0`, no
+/// FEDRAT) drives the tool into the part at rapid: an error at each hole's line, no longer a
+/// warning, and a strict run refuses the program.
+#[test]
+fn a_drilling_cycle_without_a_feed_is_an_error() {
+    let m = machine("vmc-3axis");
+    let cl = "UNITS/MM\nRAPID\nGOTO/10,20,5\nCYCLE/TAP,20,1\nGOTO/10,20,0\nCYCLE/OFF\n";
+    let (sink, s) = run(&m, cl.as_bytes(), &Options::new(&m));
+    let d = sink
+        .diags
+        .iter()
+        .find(|d| d.code == Code::NoFeed)
+        .expect("a no_feed diagnostic");
+    assert_eq!((d.severity, d.line), (Severity::Error, Some(5)), "{d}");
+    assert!(d.message.starts_with("tapping cycle without a feed"), "{d}");
+    assert!(s.errors >= 1);
+    let mut o = Options::new(&m);
+    o.strict = true;
+    let r = post::post(cl.as_bytes(), &m, &o, &mut Collect::default());
+    assert!(
+        matches!(r, Err(post::Error::Strict(ref d)) if d.code == Code::NoFeed),
+        "{r:?}"
+    );
+}

@@ -426,6 +426,8 @@ struct Emitter<'a, S: Sink + ?Sized> {
     split_budget: u32,
     /// The CL line of the last point outside travel: blocks inserted for it say nothing more.
     outside_line: Option<u32>,
+    /// Retracts [`Emitter::lifted`] shortened to stay within travel, told on the next block.
+    lift_notes: Vec<Diagnostic>,
     split_told: bool,
     /// Tip moves shorter than this (half the X Y Z words' last digit) are a standing tip.
     standing: f64,
@@ -576,6 +578,7 @@ pub fn post<R: BufRead, S: Sink + ?Sized>(input: R, m: &Machine, o: &Options, si
         tool_changed: false,
         split_budget: 0,
         outside_line: None,
+        lift_notes: Vec::new(),
         split_told: false,
         last_line: 0,
         standing: formats.half_linear(),
@@ -1603,20 +1606,54 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         Ok(())
     }
 
-    /// The same orientation `clear` further along the tool axis. With three linears only the
-    /// linears move; a chain missing one needs the exact solution nearest the current one.
+    /// The same orientation `clear` further along the tool axis, or less where the travel ends
+    /// first (a `near_limit` warning on the next block says how much): a retract, approach or
+    /// re-approach point past the travel stopped the machine on overtravel (fryer-5x-45 in TCP
+    /// mode: every approach 1 in over Z's end). With three linears only the linears move; a
+    /// chain missing one needs the exact solution nearest the current one.
     fn lifted(&mut self, a: At, clear: f64) -> At {
-        let pose = Pose {
-            tip: a.pose.tip + a.pose.axis * clear,
-            axis: a.pose.axis,
+        let at = |e: &mut Self, t: f64| -> At {
+            let pose = Pose {
+                tip: a.pose.tip + a.pose.axis * t,
+                axis: a.pose.axis,
+            };
+            if e.m.linears.iter().all(|l| l.is_some()) {
+                let cp = kinematics::controlled_point(e.m, &a.actual, &pose.tip, &e.setup);
+                let mut j = a.joints;
+                j.linear = [cp.x, cp.y, cp.z];
+                return At { joints: j, pose, ..a };
+            }
+            e.exact_near(pose, &a).unwrap_or(a)
         };
-        if self.m.linears.iter().all(|l| l.is_some()) {
-            let cp = kinematics::controlled_point(self.m, &a.actual, &pose.tip, &self.setup);
-            let mut j = a.joints;
-            j.linear = [cp.x, cp.y, cp.z];
-            return At { joints: j, pose, ..a };
+        let full = at(self, clear);
+        let Some(v) = kinematics::limit_violation(self.m, &full.joints, 1e-6) else {
+            return full;
+        };
+        // From a point within travel only (one outside is its own error): the longest retract
+        // that stays within, by bisection (the linears are affine in it with three linears, not
+        // with two; 40 halvings leave nanometres).
+        if kinematics::limit_violation(self.m, &a.joints, 1e-6).is_some() {
+            return full;
         }
-        self.exact_near(pose, &a).unwrap_or(a)
+        let (mut lo, mut hi) = (0.0, clear);
+        for _ in 0..40 {
+            let mid = 0.5 * (lo + hi);
+            if kinematics::limit_violation(self.m, &at(self, mid).joints, 1e-6).is_some() {
+                hi = mid;
+            } else {
+                lo = mid;
+            }
+        }
+        self.lift_notes.push(Diagnostic::new(
+            Code::NearLimit,
+            Severity::Warning,
+            None,
+            format!(
+                "retract along the tool axis shortened to {lo:.4} of {clear} by {}'s travel [{}, {}]",
+                v.axis, v.min, v.max
+            ),
+        ));
+        at(self, lo)
     }
 
     /// The exact solution of `pose` nearest `a` in the rotaries, wound next to `a`'s angles. On a
@@ -2458,6 +2495,12 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                 .sum::<f64>())
             .sqrt();
             time = len / self.rapid_rate();
+        }
+        if !self.lift_notes.is_empty() {
+            for mut d in self.lift_notes.drain(..) {
+                d.line = Some(pt.line);
+                diags.push(d);
+            }
         }
         // Diagnostics of the pose itself. A CL point's travel was checked where it was planned;
         // a block inserted between two points within travel (linearization, a retract along the

@@ -490,11 +490,21 @@ impl<R: BufRead> Source<R> {
             self.feed = Some((f * s, unit));
         }
         if self.feed.is_none() {
+            // A drill, let alone a tap, driven at rapid into the part breaks: not a program to
+            // run. Written (G0 to depth) so that it can be read, and an error.
             self.diag(
-                Code::BadRecord,
-                Severity::Warning,
+                Code::NoFeed,
+                Severity::Error,
                 line,
-                "drilling cycle without a feed: holes rapid to depth".into(),
+                format!(
+                    "{} cycle without a feed (no FEDRAT and none in the CYCLE record): its holes are written at rapid to depth",
+                    match c.kind {
+                        CycleKind::Tap => "tapping",
+                        CycleKind::Deep => "deep drilling",
+                        CycleKind::Bore => "boring",
+                        CycleKind::Drill | CycleKind::Other => "drilling",
+                    }
+                ),
             );
         }
         // Rapid to the R plane, feed through the hole's point (the CL GOTO) to depth, rapid out.
