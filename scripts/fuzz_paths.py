@@ -4,7 +4,8 @@ planes, fanuc, siemens and heidenhain. A program that kinepost wrote without an 
 pass `kinepost verify` (every point, every segment, the joint-space motion) with its blocks on the
 CL orientation (within what the summary owns up to as singular deviation), and, in fanuc, the
 independent verifier in ../shared. Programs with errors (the CL asks for what the machine cannot
-do) are counted, and fail only where a block misses its pose under the engine's own replay. Seeded: the same seeds give the same paths. Exit 1 on any finding.
+do) are counted, and fail only where a block misses its pose under the engine's own replay.
+Seeded: the same seeds give the same paths. Exit 1 on any finding.
 
     python3 scripts/fuzz_paths.py --kinepost target/release/kinepost --shared ../shared --seeds 1 3
 
@@ -81,6 +82,13 @@ def main():
     tmp = tempfile.mkdtemp(prefix='kinepost-fuzz-')
     cl_path, nc_path, nd_path = (os.path.join(tmp, n) for n in ('path.cls', 'out.nc', 'out.ndjson'))
     findings, programs, with_errors = [], 0, 0
+
+    def keep(tag):
+        """The CL of the last finding, if it is this program's, kept and named in it."""
+        if findings and findings[-1].startswith(tag):
+            path = os.path.join(tmp, f'finding-{len(findings)}.cls')
+            shutil.copy(cl_path, path)
+            findings[-1] += f' ({path})'
     for seed in range(*a.seeds):
         for m in machines:
             gen = run([K, 'generate', '--machine', m, '--points', str(a.points), '--seed', str(seed)]).stdout.splitlines()
@@ -113,7 +121,7 @@ def main():
                             # engine's own replay.
                             if summary['counts'].get('verify_deviation'):
                                 findings.append(f'{tag}: {summary["counts"]["verify_deviation"]} blocks miss their pose')
-                                shutil.copy(cl_path, os.path.join(tmp, f'finding-{len(findings)}.cls'))
+                                keep(tag)
                             continue
                         v = run([K, 'verify', '--machine', m, '--mode', 'joint' if mode == 'planes' else mode,
                                  '--cl', cl_path, '--nc', nc_path])
@@ -137,10 +145,7 @@ def main():
                             bad = {k: c['first'][:1] for k, c in checks.items() if not c.get('ok', True)}
                             if bad:
                                 findings.append(f'{tag}: shared verifier: {bad}')
-                        if findings and findings[-1].startswith(tag):
-                            keep = os.path.join(tmp, f'finding-{len(findings)}.cls')
-                            shutil.copy(cl_path, keep)
-                            findings[-1] += f' ({keep})'
+                        keep(tag)
     for f in findings:
         print('FINDING', f)
     print(f'{programs} programs, {with_errors} with error diagnostics (counted, not judged), {len(findings)} findings')

@@ -2496,11 +2496,9 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             .sqrt();
             time = len / self.rapid_rate();
         }
-        if !self.lift_notes.is_empty() {
-            for mut d in self.lift_notes.drain(..) {
-                d.line = Some(pt.line);
-                diags.push(d);
-            }
+        for mut d in self.lift_notes.drain(..) {
+            d.line = Some(pt.line);
+            diags.push(d);
         }
         // Diagnostics of the pose itself. A CL point's travel was checked where it was planned;
         // a block inserted between two points within travel (linearization, a retract along the
