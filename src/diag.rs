@@ -37,6 +37,7 @@ pub enum Code {
     ArcLinearized,
     CycleExpanded,
     SurfaceSpeed,
+    SpindleSpeed,
     ToolLength,
 }
 
@@ -65,6 +66,7 @@ impl Code {
             Code::ArcLinearized => "arc_linearized",
             Code::CycleExpanded => "cycle_expanded",
             Code::SurfaceSpeed => "surface_speed",
+            Code::SpindleSpeed => "spindle_speed",
             Code::ToolLength => "tool_length",
         }
     }

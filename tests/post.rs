@@ -1653,3 +1653,31 @@ fn a_drilling_cycle_without_a_feed_is_an_error() {
         "{r:?}"
     );
 }
+
+/// CATIA's tap demo starts the spindle at 0.398 RPM: the NC says S0, a tool that does not turn
+/// fed into the part. An error naming the line, and strict mode refuses the program.
+#[test]
+fn a_spindle_speed_that_rounds_to_zero_is_an_error() {
+    let m = machine("vmc-3axis");
+    let cl = "UNITS/MM\nSPINDL/    0.3980,RPM,CLW\nFEDRAT/100,MMPM\nGOTO/10,20,5\nGOTO/10,20,0\n";
+    let (sink, s) = run(&m, cl.as_bytes(), &Options::new(&m));
+    let d = sink
+        .diags
+        .iter()
+        .find(|d| d.code == Code::SpindleSpeed)
+        .expect("a spindle_speed diagnostic");
+    assert_eq!((d.severity, d.line), (Severity::Error, Some(2)), "{d}");
+    assert!(d.message.contains("0.398") && d.message.contains("S0"), "{d}");
+    assert_eq!(s.errors, 1);
+    let mut o = Options::new(&m);
+    o.strict = true;
+    let r = post::post(cl.as_bytes(), &m, &o, &mut Collect::default());
+    assert!(
+        matches!(r, Err(post::Error::Strict(ref d)) if d.code == Code::SpindleSpeed),
+        "{r:?}"
+    );
+    // 0.5 RPM and up is a turning spindle, written S1: no diagnostic.
+    let ok = cl.replace("0.3980", "0.5");
+    let (sink, _) = run(&m, ok.as_bytes(), &Options::new(&m));
+    assert!(!sink.diags.iter().any(|d| d.code == Code::SpindleSpeed));
+}

@@ -1520,17 +1520,26 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             // solution (the one nearest the last), and every chord a feed segment, linearized
             // (it held the end's rotaries: 9.6 mm off on propeller-3r2l).
             let mut prev = a;
+            let mut skipped = Vec::new();
             for i in 1..segs {
                 let pose = Pose {
                     tip: chord_tip(i),
                     axis: b.pose.axis,
                 };
                 let Some(at) = self.exact_near(pose, &prev) else {
+                    // The next chord spans this end too; its own checks judge the result.
+                    skipped.push(Diagnostic::new(
+                        Code::Unreachable,
+                        Severity::Warning,
+                        Some(pt.line),
+                        format!("chord end {i} of the arc's {segs} has no solution: the next chord spans two"),
+                    ));
                     continue;
                 };
-                self.segment(prev, at, pt, Vec::new(), 0)?;
+                self.segment(prev, at, pt, std::mem::take(&mut skipped), 0)?;
                 prev = at;
             }
+            diags.append(&mut skipped);
             self.segment(prev, b, pt, diags, 0)?;
             return Ok(());
         }
