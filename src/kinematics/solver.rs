@@ -362,7 +362,9 @@ fn push(
 
 /// `T(φ)(p) − head offset(θ)` from (cos, sin) pairs: the same composition as `fk`, in plain
 /// scalars (the hot path of every solution; nalgebra's generic ops cost 3× the instructions here).
-#[inline]
+/// Always inlined: called, it read back a `tip + offset` just stored as halves with one wide load,
+/// a store-forwarding stall that was 8% of a joint-mode run.
+#[inline(always)]
 fn controlled_point_cs(m: &Machine, cs: &[Cs; 3], p_w: &Vec3, tool_length: f64) -> Vec3 {
     #[inline(always)]
     fn turn(k: &[f64; 3], o: &[f64; 3], c: f64, s: f64, p: [f64; 3]) -> [f64; 3] {
