@@ -1680,4 +1680,14 @@ fn a_spindle_speed_that_rounds_to_zero_is_an_error() {
     let ok = cl.replace("0.3980", "0.5");
     let (sink, _) = run(&m, ok.as_bytes(), &Options::new(&m));
     assert!(!sink.diags.iter().any(|d| d.code == Code::SpindleSpeed));
+    // A surface speed with no cutter to convert it is written as S: the same rule.
+    let sfm = cl.replace("0.3980,RPM,CLW", "0.2,SFM,CLW");
+    let (sink, _) = run(&m, sfm.as_bytes(), &Options::new(&m));
+    assert!(
+        sink.diags
+            .iter()
+            .any(|d| d.code == Code::SpindleSpeed && d.line == Some(2) && d.severity == Severity::Error),
+        "{:?}",
+        sink.diags
+    );
 }

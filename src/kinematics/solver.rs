@@ -362,8 +362,8 @@ fn push(
 
 /// `T(φ)(p) − head offset(θ)` from (cos, sin) pairs: the same composition as `fk`, in plain
 /// scalars (the hot path of every solution; nalgebra's generic ops cost 3× the instructions here).
-/// Always inlined: called, it read back a `tip + offset` just stored as halves with one wide load,
-/// a store-forwarding stall that was 8% of a joint-mode run.
+/// Always inlined: called, it read back a `tip + offset` just stored as halves with one wide load
+/// (a store-forwarding stall: 17% of this function's samples, itself 8% of a joint-mode run).
 #[inline(always)]
 fn controlled_point_cs(m: &Machine, cs: &[Cs; 3], p_w: &Vec3, tool_length: f64) -> Vec3 {
     #[inline(always)]

@@ -318,14 +318,15 @@ impl<R: BufRead> Source<R> {
                 let c = self.spindle_rpm(c, line);
                 // A speed that rounds to S0 starts a spindle that does not turn, and the next feed
                 // drives a standing tool into the part (CATIA's tap demo: `SPINDL/0.3980,RPM`).
-                if let SpindleCmd::Rpm { speed, .. } = c
+                // A surface speed left unconverted is written as S too.
+                if let SpindleCmd::Rpm { speed, .. } | SpindleCmd::Surface { speed, .. } = c
                     && speed.round() < 1.0
                 {
                     self.diag(
                         Code::SpindleSpeed,
                         Severity::Error,
                         line,
-                        format!("spindle speed {speed} RPM is written S0: the spindle would not turn"),
+                        format!("spindle speed {speed} is written S0: the spindle would not turn"),
                     );
                 }
                 self.out.push_back(Item::Event(ProgEvent::Spindle(c)))
