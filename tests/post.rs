@@ -1645,13 +1645,15 @@ fn a_drilling_cycle_without_a_feed_is_an_error() {
     assert_eq!((d.severity, d.line), (Severity::Error, Some(5)), "{d}");
     assert!(d.message.starts_with("tapping cycle without a feed"), "{d}");
     assert!(s.errors >= 1);
-    let mut o = Options::new(&m);
+    refused_in_strict_mode(&m, cl, Code::NoFeed);
+}
+
+/// A strict run of `cl` fails on its first `code` diagnostic.
+fn refused_in_strict_mode(m: &Machine, cl: &str, code: Code) {
+    let mut o = Options::new(m);
     o.strict = true;
-    let r = post::post(cl.as_bytes(), &m, &o, &mut Collect::default());
-    assert!(
-        matches!(r, Err(post::Error::Strict(ref d)) if d.code == Code::NoFeed),
-        "{r:?}"
-    );
+    let r = post::post(cl.as_bytes(), m, &o, &mut Collect::default());
+    assert!(matches!(r, Err(post::Error::Strict(ref d)) if d.code == code), "{r:?}");
 }
 
 /// CATIA's tap demo starts the spindle at 0.398 RPM: the NC says S0, a tool that does not turn
@@ -1669,13 +1671,7 @@ fn a_spindle_speed_that_rounds_to_zero_is_an_error() {
     assert_eq!((d.severity, d.line), (Severity::Error, Some(2)), "{d}");
     assert!(d.message.contains("0.398") && d.message.contains("S0"), "{d}");
     assert_eq!(s.errors, 1);
-    let mut o = Options::new(&m);
-    o.strict = true;
-    let r = post::post(cl.as_bytes(), &m, &o, &mut Collect::default());
-    assert!(
-        matches!(r, Err(post::Error::Strict(ref d)) if d.code == Code::SpindleSpeed),
-        "{r:?}"
-    );
+    refused_in_strict_mode(&m, cl, Code::SpindleSpeed);
     // 0.5 RPM and up is a turning spindle, written S1: no diagnostic.
     let ok = cl.replace("0.3980", "0.5");
     let (sink, _) = run(&m, ok.as_bytes(), &Options::new(&m));

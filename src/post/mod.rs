@@ -1544,17 +1544,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             return Ok(());
         }
         for i in 1..segs {
-            let tip = chord_tip(i);
-            let cp = kinematics::controlled_point(m, &b.actual, &tip, &self.setup);
-            let mut j = b.joints;
-            for n in 0..3 {
-                j.linear[n] = if m.linears[n].is_some() { cp[n] } else { 0.0 };
-            }
-            let at = At {
-                joints: j,
-                pose: Pose { tip, axis: b.pose.axis },
-                ..b
-            };
+            let at = self.at_tip(&b, chord_tip(i));
             self.block(at, pt, false, Vec::new(), true, None)?;
         }
         self.block(b, pt, false, diags, pt.inserted, None)
@@ -1622,16 +1612,11 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
     /// chain missing one needs the exact solution nearest the current one.
     fn lifted(&mut self, a: At, clear: f64) -> At {
         let at = |e: &mut Self, t: f64| -> At {
-            let pose = Pose {
-                tip: a.pose.tip + a.pose.axis * t,
-                axis: a.pose.axis,
-            };
+            let tip = a.pose.tip + a.pose.axis * t;
             if e.m.linears.iter().all(|l| l.is_some()) {
-                let cp = kinematics::controlled_point(e.m, &a.actual, &pose.tip, &e.setup);
-                let mut j = a.joints;
-                j.linear = [cp.x, cp.y, cp.z];
-                return At { joints: j, pose, ..a };
+                return e.at_tip(&a, tip);
             }
+            let pose = Pose { tip, axis: a.pose.axis };
             e.exact_near(pose, &a).unwrap_or(a)
         };
         let full = at(self, clear);
@@ -1665,6 +1650,19 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         at(self, lo)
     }
 
+    /// `a`'s rotaries and orientation with the tip at `tip`: only the linears move. For a machine
+    /// with all three linears (on one missing a linear the rotaries place the tip too).
+    fn at_tip(&self, a: &At, tip: Vec3) -> At {
+        let cp = kinematics::controlled_point(self.m, &a.actual, &tip, &self.setup);
+        let mut joints = a.joints;
+        joints.linear = [cp.x, cp.y, cp.z];
+        At {
+            joints,
+            pose: Pose { tip, axis: a.pose.axis },
+            ..*a
+        }
+    }
+
     /// The exact solution of `pose` nearest `a` in the rotaries, wound next to `a`'s angles. On a
     /// chain missing a linear the rotaries place the tip too: a pose of `a`'s orientation
     /// elsewhere needs other angles. A singular pose keeps its free rotary where `a` has it.
@@ -1674,10 +1672,10 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             ..Default::default()
         };
         ik_into(self.m, &pose, &self.setup, &opt, &mut self.buf).ok()?;
-        let s = self.buf.iter().min_by(|x, y| {
-            let d = |s: &kinematics::Solution| (0..3).map(|i| wrap(s.actual[i] - a.actual[i]).abs()).sum::<f64>();
-            d(x).total_cmp(&d(y))
-        })?;
+        let s = self
+            .buf
+            .iter()
+            .min_by(|x, y| rotary_offset(x, &a.actual, None).total_cmp(&rotary_offset(y, &a.actual, None)))?;
         let mut actual = s.actual;
         let mut joints = s.joints;
         for (i, r) in self.m.rotaries.iter().enumerate() {
@@ -2651,16 +2649,19 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
 /// The solution with `free` free whose other rotaries lie nearest `actual`: the same root. A chain
 /// missing a linear has several (the outer rotary a half turn apart).
 fn nearest_singular(sols: &kinematics::Solutions, free: usize, actual: &[f64; 3]) -> Option<kinematics::Solution> {
-    let off = |s: &&kinematics::Solution| -> f64 {
-        (0..3)
-            .filter(|&i| i != free)
-            .map(|i| wrap(s.actual[i] - actual[i]).abs())
-            .sum()
-    };
     sols.iter()
         .filter(|s| s.singular == Some(free))
-        .min_by(|x, y| off(x).total_cmp(&off(y)))
+        .min_by(|x, y| rotary_offset(x, actual, Some(free)).total_cmp(&rotary_offset(y, actual, Some(free))))
         .copied()
+}
+
+/// How far a solution's rotaries lie from `actual`, each the short way round (`skip`: a free one
+/// left out).
+fn rotary_offset(s: &kinematics::Solution, actual: &[f64; 3], skip: Option<usize>) -> f64 {
+    (0..3)
+        .filter(|&i| Some(i) != skip)
+        .map(|i| wrap(s.actual[i] - actual[i]).abs())
+        .sum()
 }
 
 /// Where the joint-space motion between two blocks is measured against the CL chord: every
