@@ -38,6 +38,7 @@ pub enum Code {
     CycleExpanded,
     SurfaceSpeed,
     SpindleSpeed,
+    SpindleStopped,
     ToolLength,
 }
 
@@ -67,6 +68,7 @@ impl Code {
             Code::CycleExpanded => "cycle_expanded",
             Code::SurfaceSpeed => "surface_speed",
             Code::SpindleSpeed => "spindle_speed",
+            Code::SpindleStopped => "spindle_stopped",
             Code::ToolLength => "tool_length",
         }
     }

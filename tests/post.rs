@@ -1687,3 +1687,78 @@ fn a_spindle_speed_that_rounds_to_zero_is_an_error() {
         sink.diags
     );
 }
+
+/// NX's CLSF listings carry no SPINDL (the real post takes the speed from the operation): the NC
+/// fed a tool that does not turn into the part without a word. Told once at the first cut until
+/// a spindle starts; rapids alone say nothing.
+#[test]
+fn a_cut_with_the_spindle_standing_is_told_once() {
+    let m = machine("vmc-3axis");
+    let stopped = |cl: &str| {
+        let (sink, _) = run(&m, cl.as_bytes(), &Options::new(&m));
+        sink.diags
+            .into_iter()
+            .filter(|d| d.code == Code::SpindleStopped)
+            .map(|d| (d.severity, d.line))
+            .collect::<Vec<_>>()
+    };
+    let cut = "UNITS/MM\nLOADTL/1\nGOTO/10,20,5\nFEDRAT/100,MMPM\nGOTO/10,20,0\nGOTO/30,20,0\n";
+    assert_eq!(stopped(cut), [(Severity::Warning, Some(5))]);
+    assert_eq!(stopped("UNITS/MM\nLOADTL/1\nGOTO/10,20,5\nRAPID\nGOTO/10,20,9\n"), []);
+    let on = cut.replace("LOADTL/1\n", "LOADTL/1\nSPINDL/1000,RPM,CLW\n");
+    assert_eq!(stopped(&on), []);
+    // Stopped by the CL in the middle, started again: one warning, at the cut after the stop.
+    let off = format!("{on}SPINDL/OFF\nGOTO/40,20,0\nGOTO/50,20,0\nSPINDL/900,RPM\nGOTO/60,20,0\n");
+    assert_eq!(stopped(&off), [(Severity::Warning, Some(9))]);
+    // A drilling cycle cuts too.
+    let mut o = Options::new(&m);
+    o.canned_cycles = true;
+    let cl = "UNITS/MM\nLOADTL/1\nGOTO/0,0,20\nCYCLE/DRILL,5,MMPM,100\nGOTO/5,5,0\nCYCLE/OFF\n";
+    let (sink, _) = run(&m, cl.as_bytes(), &o);
+    assert!(sink.nc.contains("G81"), "{}", sink.nc);
+    assert!(
+        sink.diags.iter().any(|d| d.code == Code::SpindleStopped && d.line == Some(5)),
+        "{:?}",
+        sink.diags
+    );
+}
+
+/// M6 stops the spindle on every control, but APT's SPINDL is modal: where the CL does not say
+/// it again after a tool change, the spindle starts again (same speed and direction) before the
+/// new tool's first move, with an info naming the change; where it does, nothing is added.
+#[test]
+fn a_tool_change_restarts_the_spindle_the_cl_left_on() {
+    let m = machine("vmc-3axis");
+    let cl = "UNITS/MM\nLOADTL/1\nSPINDL/1000,RPM,CCLW\nFEDRAT/100,MMPM\nGOTO/10,20,5\nGOTO/10,20,0\n\
+              LOADTL/2\nGOTO/30,20,5\nGOTO/30,20,0\n";
+    let (sink, _) = run(&m, cl.as_bytes(), &Options::new(&m));
+    let after = &sink.nc[sink.nc.find("T2 M6").expect("a tool change")..];
+    let (s, g43) = (after.find("S1000 M4").expect("a restart"), after.find("G43 H2").unwrap());
+    assert!(s < g43 && g43 < after.find("G0").unwrap(), "{after}");
+    let infos: Vec<_> = sink.diags.iter().filter(|d| d.code == Code::SpindleStopped).collect();
+    assert_eq!(infos.len(), 1, "{infos:?}");
+    assert_eq!((infos[0].severity, infos[0].line), (Severity::Info, Some(7)));
+    // Said again by the CL: written once, as the CL says it.
+    let restated = cl.replace("LOADTL/2\n", "LOADTL/2\nSPINDL/2000,RPM,CLW\n");
+    let (sink, _) = run(&m, restated.as_bytes(), &Options::new(&m));
+    assert_eq!(
+        sink.nc.matches(" M4").count() + sink.nc.matches(" M3").count(),
+        2,
+        "{}",
+        sink.nc
+    );
+    assert!(sink.nc.contains("S2000 M3"), "{}", sink.nc);
+    assert!(!sink.diags.iter().any(|d| d.code == Code::SpindleStopped), "{:?}", sink.diags);
+    // Stopped before the change: stays stopped, and the new tool's first feed (line 9: onto its
+    // point from the clearance) says so.
+    let off = cl.replace("LOADTL/2\n", "SPINDL/OFF\nLOADTL/2\n");
+    let (sink, _) = run(&m, off.as_bytes(), &Options::new(&m));
+    assert_eq!(sink.nc.matches("S1000").count(), 1, "{}", sink.nc);
+    assert!(
+        sink.diags
+            .iter()
+            .any(|d| d.code == Code::SpindleStopped && d.severity == Severity::Warning && d.line == Some(9)),
+        "{:?}",
+        sink.diags
+    );
+}

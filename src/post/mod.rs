@@ -444,6 +444,13 @@ struct Emitter<'a, S: Sink + ?Sized> {
     strict_error: Option<Diagnostic>,
     warned_no_tool: bool,
     warned_per_rev: bool,
+    /// The spindle as the NC leaves it: turning (and which way), to be restarted before the next
+    /// motion (a tool change stopped it and the CL did not say SPINDL again: APT's spindle is
+    /// modal, M6 stops it on every control), and whether a cut with it standing was told.
+    spindle_on: bool,
+    spindle_cw: bool,
+    spindle_restore: Option<u32>,
+    warned_spindle: bool,
     /// Outer-rotary travel of the exact solutions and of what was written, at CL points: what
     /// the singular tolerance saved, honestly (a held block's saving is partly paid back later).
     /// Which clamped rotaries are locked now (a clamped axis is taken as locked at the start).
@@ -599,6 +606,10 @@ pub fn post<R: BufRead, S: Sink + ?Sized>(input: R, m: &Machine, o: &Options, si
         strict_error: None,
         warned_no_tool: false,
         warned_per_rev: false,
+        spindle_on: false,
+        spindle_cw: true,
+        spindle_restore: None,
+        warned_spindle: false,
         arc_words: None,
         locked: [true; 3],
         plane: "G17",
@@ -848,6 +859,9 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                 self.f.reset_modal();
                 self.tool = Some(number);
                 self.tool_changed = true;
+                if std::mem::take(&mut self.spindle_on) {
+                    self.spindle_restore = Some(line);
+                }
             }
             ProgEvent::ToolLength(l) => {
                 // Only when the job fixed the length (else `cl_tool_length`, before planning).
@@ -878,28 +892,14 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                     SpindleCmd::Off => (None, true),
                 };
                 self.rpm = speed;
-                let t = self.tool.unwrap_or(1);
+                self.spindle_restore = None;
                 match speed {
-                    Some(v) => {
-                        let s = v.round() as i64;
-                        if d.style == crate::nc::Style::Conversational {
-                            // TNC: the speed with a speed-only TOOL CALL, the direction alone.
-                            for w in [d.spindle, if cw { d.spindle_cw } else { d.spindle_ccw }] {
-                                if let Some(l) = self.f.line(w, t, s) {
-                                    self.out(&l)?;
-                                }
-                            }
-                        } else {
-                            let w = format!("{} {}", d.spindle, if cw { d.spindle_cw } else { d.spindle_ccw });
-                            if let Some(l) = self.f.line(&w, t, s) {
-                                self.out(&l)?;
-                            }
-                        }
-                    }
+                    Some(v) => self.spindle_start(v, cw)?,
                     None => {
-                        if let Some(l) = self.f.line(d.spindle_off, t, 0) {
+                        if let Some(l) = self.f.line(d.spindle_off, self.tool.unwrap_or(1), 0) {
                             self.out(&l)?;
                         }
+                        self.spindle_on = false;
                     }
                 }
             }
@@ -928,10 +928,58 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         Ok(())
     }
 
-    /// Length compensation (or TCP) on, before the first motion of a tool.
+    /// S and M3/M4 (TNC: a speed-only TOOL CALL, then the direction alone).
+    fn spindle_start(&mut self, speed: f64, cw: bool) -> std::io::Result<()> {
+        let d = self.o.dialect;
+        let (t, s) = (self.tool.unwrap_or(1), speed.round() as i64);
+        let dir = if cw { d.spindle_cw } else { d.spindle_ccw };
+        if d.style == crate::nc::Style::Conversational {
+            for w in [d.spindle, dir] {
+                if let Some(l) = self.f.line(w, t, s) {
+                    self.out(&l)?;
+                }
+            }
+        } else if let Some(l) = self.f.line(&format!("{} {dir}", d.spindle), t, s) {
+            self.out(&l)?;
+        }
+        (self.spindle_on, self.spindle_cw, self.warned_spindle) = (true, cw, false);
+        Ok(())
+    }
+
+    /// A cut with the spindle standing (a tool fed into the part without turning breaks): told
+    /// once until the spindle starts. A warning, not an error: a probe or a scribe cuts nothing.
+    fn spindle_standing(&mut self, line: u32) -> Option<Diagnostic> {
+        if self.spindle_on || self.warned_spindle {
+            return None;
+        }
+        self.warned_spindle = true;
+        Some(Diagnostic::new(
+            Code::SpindleStopped,
+            Severity::Warning,
+            Some(line),
+            "feed move with the spindle standing: the CL starts none before it (no SPINDL with a speed, or SPINDL/OFF since)",
+        ))
+    }
+
+    /// Length compensation (or TCP) on, before the first motion of a tool; and the spindle again
+    /// where the tool change stopped it.
     fn ensure_comp(&mut self) -> std::io::Result<()> {
         if self.comp_on {
             return Ok(());
+        }
+        if let Some(line) = self.spindle_restore.take()
+            && let Some(v) = self.rpm
+        {
+            self.note(Diagnostic::new(
+                Code::SpindleStopped,
+                Severity::Info,
+                Some(line),
+                format!(
+                    "the tool change stopped the spindle and the CL did not start it again: S{} restarted",
+                    v.round()
+                ),
+            ))?;
+            self.spindle_start(v, self.spindle_cw)?;
         }
         let t = match self.tool {
             Some(t) => t,
@@ -2312,6 +2360,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         let diags: Vec<Diagnostic> = self
             .replayed(pt.line, tip_dev, ax_dev, "the cycle's bottom misses the hole")
             .into_iter()
+            .chain(self.spindle_standing(pt.line))
             .collect();
         for d in &diags {
             self.count(d);
@@ -2502,6 +2551,9 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                 .sum::<f64>())
             .sqrt();
             time = len / self.rapid_rate();
+        }
+        if !rapid && let Some(d) = self.spindle_standing(pt.line) {
+            diags.push(d);
         }
         for mut d in self.lift_notes.drain(..) {
             d.line = Some(pt.line);

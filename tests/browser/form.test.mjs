@@ -79,7 +79,7 @@ try {
   await page.locator('#view3d canvas').scrollIntoViewIfNeeded();
   const target = await page.evaluate(() => {
     const v = window.kinepostView;
-    const i = v.markers.findIndex((m) => m.n !== null);
+    const i = v.markers.findIndex((m) => m.n !== null && m.diagnostics.some((d) => d.code === 'unwind' || d.code === 'branch_change'));
     return { i, n: v.markers[i].n, at: v.markerScreen(i) };
   });
   const box = await page.locator('#view3d canvas').boundingBox();
