@@ -414,6 +414,11 @@ pub struct PostArgs {
     /// SPATIAL) with their motion in plane coordinates; default: 5-axis positioning.
     #[arg(long)]
     pub tilted_planes: bool,
+    /// Work coordinate system the program selects: G54 (default) to G59 (siemens: G57), or none
+    /// (the control's active one). Its origin must be where X Y Z are measured from (joint
+    /// mode: the profile's origin; TCP: the part's).
+    #[arg(long)]
+    pub work_coordinates: Option<String>,
     /// Write per-block diagnostics as NDJSON to this file.
     #[arg(long)]
     pub diagnostics: Option<PathBuf>,
@@ -714,6 +719,7 @@ fn post_cmd(p: &machines::Profile, a: &PostArgs) -> Result<(), String> {
         cl_units: a.cl_units.map(|u| Units::from(u).as_str().to_string()),
         cycles: a.canned_cycles.then(|| "canned".into()),
         planes: a.tilted_planes.then(|| "tilted".into()),
+        work_coordinates: a.work_coordinates.clone(),
     };
     let mut o = settings.profile_options(p)?;
     o.header.push(format!("DATE {} UTC", utc_now()));

@@ -152,6 +152,10 @@ fn bad_arguments_are_clear_errors() {
             vec!["ik", "--machine", "spinner-u5-620", "1", "2", "3", "0", "0", "0"],
             "axis non-zero",
         ),
+        (
+            vec!["post", "--machine", "spinner-u5-620", "--work-coordinates", "G60", "-"],
+            "work_coordinates \"G60\": fanuc takes G54, G55, G56, G57, G58, G59 or none",
+        ),
     ] {
         let (code, _, err) = kinepost(&args);
         assert_ne!(code, 0, "{args:?}");
@@ -175,6 +179,8 @@ fn post_verify_lint_and_generate_as_a_user_runs_them() {
         "--work-offset",
         "-1500,-1600,-400",
         "--sequence-numbers",
+        "--work-coordinates",
+        "g55",
         "--diagnostics",
         nd.to_str().unwrap(),
         "-o",
@@ -188,6 +194,7 @@ fn post_verify_lint_and_generate_as_a_user_runs_them() {
         text.starts_with("%\nO1000\n") && text.trim_end().ends_with("M30\n%"),
         "{text}"
     );
+    assert!(text.contains(" G80 G55\n"), "the work coordinates asked for: {text}");
     assert!(
         text.contains("N5 ") && text.contains("G93"),
         "joint mode with rotary motion writes inverse time"

@@ -1063,3 +1063,49 @@ fn program_numbers_are_checked_against_the_dialects_program_frame() {
         }
     }
 }
+
+/// The X Y Z words are measured from one origin (joint mode: the profile's; TCP: the part's): the
+/// program selects the work coordinate system that holds it (G54 by default) instead of running
+/// in whatever the control has active from the last job. Each control takes only its own: a Sinumerik's G58/G59
+/// are additive offsets, a TNC selects its preset on the control.
+#[test]
+fn the_program_selects_its_work_coordinates() {
+    let lib = Library::load_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap();
+    let m = &lib.get("spinner-u5-620").unwrap().machine;
+    let cl = "UNITS/MM\nLOADTL/1\nSPINDL/1000\nGOTO/10,20,30,0,0,1\nFINI\n";
+    let program = |dialect: &str, wcs: Option<&str>| -> Result<String, String> {
+        let o = post::Settings {
+            dialect: Some(dialect.into()),
+            work_coordinates: wcs.map(str::to_string),
+            ..Default::default()
+        }
+        .options(m)?;
+        let mut nc = Vec::new();
+        post::post(cl.as_bytes(), m, &o, &mut post::TextSink(&mut nc)).unwrap();
+        Ok(String::from_utf8(nc).unwrap())
+    };
+    // The safe-start line, with the work coordinates last: nothing else moves.
+    for (dialect, start) in [
+        ("fanuc", "G90 G17 G40 G49 G80"),
+        ("haas", "G90 G17 G40 G49 G80"),
+        ("linuxcnc", "G90 G17 G40 G49 G80"),
+        ("siemens", "G90 G17 G40 G64"),
+    ] {
+        let nc = program(dialect, None).unwrap();
+        assert!(nc.contains(&format!("\n{start} G54\n")), "{dialect}: {nc}");
+        let nc = program(dialect, Some("G56")).unwrap();
+        assert!(
+            nc.contains(&format!("\n{start} G56\n")) && !nc.contains("G54"),
+            "{dialect}: {nc}"
+        );
+        let nc = program(dialect, Some("none")).unwrap();
+        assert!(nc.contains(&format!("\n{start}\n")) && !nc.contains("G5"), "{dialect}: {nc}");
+    }
+    let nc = program("heidenhain", None).unwrap();
+    assert!(!nc.contains("G54"), "{nc}");
+    assert_eq!(program("heidenhain", Some("none")).unwrap(), nc);
+    let refused = |dialect: &str, wcs: &str| program(dialect, Some(wcs)).unwrap_err();
+    assert!(refused("heidenhain", "G54").contains("heidenhain selects none"));
+    assert!(refused("siemens", "G59").contains("siemens takes G54, G55, G56, G57 or none"));
+    assert!(refused("fanuc", "G54.1").contains("fanuc takes G54"));
+}

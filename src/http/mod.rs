@@ -461,6 +461,9 @@ pub struct DialectDto {
     pub canned_cycles: String,
     /// How 3+2 work is written with `planes=tilted`.
     pub tilted_planes: String,
+    /// The work coordinate systems a program can select (`work_coordinates`); the first is the
+    /// default. Empty: the program selects none (the control's preset).
+    pub work_coordinates: Vec<String>,
     pub notes: String,
 }
 
@@ -490,6 +493,7 @@ async fn list_dialects(State(st): State<Arc<AppState>>) -> Json<Vec<DialectDto>>
                     .collect(),
                 canned_cycles: d.cycles.describe().into(),
                 tilted_planes: d.planes.describe().into(),
+                work_coordinates: d.work_coordinates.iter().map(|s| s.to_string()).collect(),
                 notes: d.notes.into(),
             })
             .collect(),

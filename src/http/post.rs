@@ -60,6 +60,10 @@ pub struct PostParams {
     /// 3+2 work: `positioning` (default) or `tilted` (a tilted working plane per fixed-axis run:
     /// G68.2/G53.1, G254, CYCLE800, PLANE SPATIAL; joint mode).
     pub planes: Option<String>,
+    /// Work coordinate system the program selects: `G54` (default) to `G59` (siemens: `G57`), or
+    /// `none`; its origin must be where X Y Z are measured from (joint mode: the profile's
+    /// origin; TCP: the part's). heidenhain: none only.
+    pub work_coordinates: Option<String>,
 }
 
 impl PostParams {
@@ -78,6 +82,7 @@ impl PostParams {
             cl_units: self.cl_units.clone(),
             cycles: self.cycles.clone(),
             planes: self.planes.clone(),
+            work_coordinates: self.work_coordinates.clone(),
         }
     }
 
@@ -113,6 +118,7 @@ impl PostParams {
             "cl_units" => self.cl_units = Some(v).filter(|s| !s.is_empty()),
             "cycles" => self.cycles = Some(v).filter(|s| !s.is_empty()),
             "planes" => self.planes = Some(v).filter(|s| !s.is_empty()),
+            "work_coordinates" => self.work_coordinates = Some(v).filter(|s| !s.is_empty()),
             other => return Err(ApiError::BadParameter(format!("unknown form field {other:?}"))),
         }
         Ok(())

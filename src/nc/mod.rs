@@ -37,6 +37,9 @@ pub struct Dialect {
     pub units_mm: &'static str,
     pub units_inch: &'static str,
     pub safe_start: &'static str,
+    /// The work coordinate systems a program can select (the first is the default, written on
+    /// the safe-start line); none where the control takes its datum otherwise (a TNC's preset).
+    pub work_coordinates: &'static [&'static str],
     pub rapid: &'static str,
     pub feed: &'static str,
     pub feed_per_min: &'static str,
@@ -151,6 +154,7 @@ pub const FANUC: Dialect = Dialect {
     units_mm: "G21",
     units_inch: "G20",
     safe_start: "G90 G17 G40 G49 G80",
+    work_coordinates: &["G54", "G55", "G56", "G57", "G58", "G59"],
     rapid: "G0",
     feed: "G1",
     feed_per_min: "G94",
@@ -208,6 +212,8 @@ pub const SIEMENS: Dialect = Dialect {
     units_mm: "G71",
     units_inch: "G70",
     safe_start: "G90 G17 G40 G64",
+    // G58 and G59 are programmable (additive) offsets on a Sinumerik, not settable datums.
+    work_coordinates: &["G54", "G55", "G56", "G57"],
     tool_change: &["T{t}", "M6", "D1"],
     length_comp: "",
     tcp_on: "TRAORI",
@@ -228,6 +234,7 @@ pub const HEIDENHAIN: Dialect = Dialect {
     units_mm: "",
     units_inch: "",
     safe_start: "",
+    work_coordinates: &[],
     rapid: "FMAX",
     feed: "",
     feed_per_min: "",
@@ -463,7 +470,8 @@ impl Formatter {
     }
 
     /// Program start: the dialect's opening lines, the header comments, units, safe start.
-    pub fn header(&mut self, program_number: u32, units: Units, comments: &[String]) -> Vec<String> {
+    /// The program frame's start: `wcs` (a work coordinate word) joins the safe-start line.
+    pub fn header(&mut self, program_number: u32, units: Units, comments: &[String], wcs: Option<&str>) -> Vec<String> {
         self.program_number = program_number;
         self.units = match units {
             Units::Mm => "MM",
@@ -481,7 +489,12 @@ impl Formatter {
             Units::Mm => self.d.units_mm,
             Units::Inch => self.d.units_inch,
         };
-        for w in [u, self.d.safe_start] {
+        let start = match wcs {
+            Some(w) if self.d.safe_start.is_empty() => w.to_string(),
+            Some(w) => format!("{} {w}", self.d.safe_start),
+            None => self.d.safe_start.to_string(),
+        };
+        for w in [u, &start] {
             if !w.is_empty() {
                 out.push(self.words(w).to_string());
             }

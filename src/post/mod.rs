@@ -65,6 +65,11 @@ pub struct Options {
     /// with their motion in plane coordinates (joint mode); else, and by default, 5-axis
     /// positioning.
     pub tilted_planes: bool,
+    /// The work coordinate system the program selects (`G54`…): its origin must be where the
+    /// X Y Z words are measured from (joint mode: the profile's origin; TCP: the part's). `None`: the
+    /// dialect's first (none on a control without one); `Some("none")`: the program selects
+    /// none and runs in whatever the control has active.
+    pub work_coordinates: Option<String>,
 }
 
 impl Options {
@@ -88,6 +93,16 @@ impl Options {
             header: Vec::new(),
             canned_cycles: false,
             tilted_planes: false,
+            work_coordinates: None,
+        }
+    }
+
+    /// The work coordinate word the program writes, if any.
+    pub fn wcs_word(&self) -> Option<&str> {
+        match self.work_coordinates.as_deref() {
+            None => self.dialect.work_coordinates.first().copied(),
+            Some("none") => None,
+            Some(w) => Some(w),
         }
     }
 }
@@ -127,6 +142,12 @@ pub struct Settings {
     /// (a tilted working plane per fixed-axis run, motion in plane coordinates; joint mode).
     #[serde(default)]
     pub planes: Option<String>,
+    /// Work coordinate system the program selects: `G54` (default) to `G59` (Sinumerik: `G57`),
+    /// or `none` (the control's active one). Its origin must be where the X Y Z words are measured
+    /// from (joint mode: the profile's origin; TCP: the part's). A Heidenhain program selects none
+    /// (the TNC's preset is chosen on the control).
+    #[serde(default)]
+    pub work_coordinates: Option<String>,
 }
 
 impl Settings {
@@ -205,6 +226,26 @@ impl Settings {
             Some("tilted") => true,
             Some(x) => return Err(format!("planes {x:?}: expected positioning or tilted")),
         };
+        if let Some(w) = self.work_coordinates.as_deref().map(str::trim).filter(|w| !w.is_empty()) {
+            let known = o.dialect.work_coordinates;
+            let w = w.to_ascii_uppercase();
+            if w == "NONE" {
+                o.work_coordinates = Some("none".into());
+            } else if known.contains(&w.as_str()) {
+                o.work_coordinates = Some(w);
+            } else if known.is_empty() {
+                return Err(format!(
+                    "work_coordinates {w:?}: {} selects none (its datum is the control's preset); expected none",
+                    o.dialect.name
+                ));
+            } else {
+                return Err(format!(
+                    "work_coordinates {w:?}: {} takes {} or none",
+                    o.dialect.name,
+                    known.join(", ")
+                ));
+            }
+        }
         Ok(o)
     }
 }
@@ -740,7 +781,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             lines.push(format!("WORK OFFSET {},{},{}", wo.x, wo.y, wo.z));
         }
         lines.extend(self.o.header.iter().cloned());
-        for l in self.f.header(self.o.program_number, self.m.units, &lines) {
+        for l in self.f.header(self.o.program_number, self.m.units, &lines, self.o.wcs_word()) {
             self.out(&l)?;
         }
         Ok(())
