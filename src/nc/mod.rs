@@ -469,8 +469,8 @@ impl Formatter {
         Some(self.words(&w).to_string())
     }
 
-    /// Program start: the dialect's opening lines, the header comments, units, safe start.
-    /// The program frame's start: `wcs` (a work coordinate word) joins the safe-start line.
+    /// Program start: the dialect's opening lines, the header comments, units, safe start (with
+    /// `wcs`, a work coordinate word, last on it).
     pub fn header(&mut self, program_number: u32, units: Units, comments: &[String], wcs: Option<&str>) -> Vec<String> {
         self.program_number = program_number;
         self.units = match units {

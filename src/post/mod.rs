@@ -66,9 +66,9 @@ pub struct Options {
     /// positioning.
     pub tilted_planes: bool,
     /// The work coordinate system the program selects (`G54`…): its origin must be where the
-    /// X Y Z words are measured from (joint mode: the profile's origin; TCP: the part's). `None`: the
-    /// dialect's first (none on a control without one); `Some("none")`: the program selects
-    /// none and runs in whatever the control has active.
+    /// X Y Z words are measured from (joint mode: the profile's origin; TCP: the part's).
+    /// `None`: the dialect's first (none on a control without one); `Some("none")`: the program
+    /// selects none and runs in whatever the control has active.
     pub work_coordinates: Option<String>,
 }
 
@@ -492,14 +492,14 @@ struct Emitter<'a, S: Sink + ?Sized> {
     spindle_cw: bool,
     spindle_restore: Option<u32>,
     warned_spindle: bool,
-    /// Outer-rotary travel of the exact solutions and of what was written, at CL points: what
-    /// the singular tolerance saved, honestly (a held block's saving is partly paid back later).
     /// Which clamped rotaries are locked now (a clamped axis is taken as locked at the start).
     locked: [bool; 3],
     /// Set for the next block: an arc (G3 when true) with its centre words.
     arc_words: Option<(bool, String)>,
     /// The active circular-interpolation plane word (G17/G18/G19).
     plane: &'static str,
+    /// Outer-rotary travel of the exact solutions and of what was written, at CL points: what
+    /// the singular tolerance saved, honestly (a held block's saving is partly paid back later).
     exact_prev: Option<f64>,
     exact_travel: f64,
     held_prev: Option<f64>,
