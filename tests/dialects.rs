@@ -141,6 +141,18 @@ fn iso_dialects_read_back_with_an_independent_gcode_parser() {
             let text = tape_body(&p.nc);
             let prog = gcode::parse(&text).unwrap_or_else(|e| panic!("{d} {m}: the gcode crate rejects our program: {e:?}"));
             for block in &prog.blocks {
+                // G53: machine coordinates, not a block of the program's (no joints of ours).
+                let g53 = |g: &gcode::GeneralCode| {
+                    let n: String = g.to_string()[1..]
+                        .chars()
+                        .take_while(|c| c.is_ascii_digit() || *c == '.')
+                        .collect();
+                    n.parse::<f64>() == Ok(53.0)
+                };
+                if block.codes.iter().any(|c| matches!(c, gcode::Code::General(g) if g53(g))) {
+                    modal = [None; 6];
+                    continue;
+                }
                 let mut axis_words = false;
                 let mut words: Vec<&gcode::Argument> = Vec::new();
                 for c in &block.codes {
@@ -1108,4 +1120,45 @@ fn the_program_selects_its_work_coordinates() {
     assert!(refused("heidenhain", "G54").contains("heidenhain selects none"));
     assert!(refused("siemens", "G59").contains("siemens takes G54, G55, G56, G57 or none"));
     assert!(refused("fanuc", "G54.1").contains("fanuc takes G54"));
+}
+
+/// A TCP program's X Y Z are the tip: its retracts go the clearance along the tool axis, and
+/// cannot name the top of Z. Before a tool change and at the end it leaves the part by machine
+/// Z home once compensation is off (`G53 G0 Z0`, as the real NX post for the Haas does), on the
+/// controls whose machine Z0 is the top of travel; joint mode goes to the top of Z travel already.
+#[test]
+fn a_tcp_program_leaves_the_part_by_machine_z_home() {
+    let lib = Library::load_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap();
+    let m = &lib.get("spinner-u5-620").unwrap().machine;
+    let cl = "UNITS/MM\nLOADTL/1\nSPINDL/1000\nFEDRAT/500\nGOTO/10,20,30,0,0,1\nGOTO/10,20,0,0,0,1\n\
+              LOADTL/2\nGOTO/30,20,30,0,0,1\nGOTO/30,20,0,0,0,1\nFINI\n";
+    let program = |dialect: &str, mode: &str| {
+        let o = post::Settings {
+            dialect: Some(dialect.into()),
+            mode: Some(mode.into()),
+            ..Default::default()
+        }
+        .options(m)
+        .unwrap();
+        let mut nc = Vec::new();
+        post::post(cl.as_bytes(), m, &o, &mut post::TextSink(&mut nc)).unwrap();
+        String::from_utf8(nc).unwrap()
+    };
+    for dialect in ["fanuc", "haas"] {
+        let nc = program(dialect, "tcp");
+        assert_eq!(nc.matches("\nG49\nG53 G0 Z0\n").count(), 2, "{dialect}: {nc}");
+        let (up, change, end) = (nc.find("G53").unwrap(), nc.find("T2 M6").unwrap(), nc.rfind("G53").unwrap());
+        assert!(
+            up < change && end > change && nc[end..].starts_with("G53 G0 Z0\nM30"),
+            "{dialect}: {nc}"
+        );
+        assert!(!program(dialect, "joint").contains("G53"), "{dialect} joint");
+    }
+    for dialect in ["linuxcnc", "siemens", "heidenhain"] {
+        let nc = program(dialect, "tcp");
+        assert!(
+            !nc.contains("G53") && !nc.contains("SUPA") && !nc.contains("M91"),
+            "{dialect}: {nc}"
+        );
+    }
 }

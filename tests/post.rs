@@ -415,10 +415,13 @@ fn the_first_move_after_a_tool_change_positions_at_rapid() {
         // Up and away before the change and before the end, in the orientation the tool has.
         let end = lines.iter().position(|l| has(l, "M30")).expect("M30");
         for at in [t2, end] {
+            // (TCP: then machine Z home, once TCP is off.)
+            let up = lines[..at].iter().rposition(|l| l.starts_with("G53 G0 Z0"));
+            assert_eq!(up.is_some(), mode == Mode::Tcp, "{mode:?}:\n{}", sink.nc);
             let last = lines[..at]
                 .iter()
                 .rev()
-                .find(|l| l.contains(" Z") || l.starts_with('Z'))
+                .find(|l| (l.contains(" Z") || l.starts_with('Z')) && !l.starts_with("G53"))
                 .unwrap();
             assert!(last.contains("RETRACT") && has(last, "G0"), "{mode:?}: {last}\n{}", sink.nc);
             if mode == Mode::Joint {

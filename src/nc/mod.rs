@@ -50,6 +50,11 @@ pub struct Dialect {
     pub length_comp: &'static str,
     pub tcp_on: &'static str,
     pub tcp_off: &'static str,
+    /// Spindle to the machine's Z home in machine coordinates, compensation off (`G53 G0 Z0`,
+    /// where machine Z0 is the top of travel, as on every Haas): what a TCP program leaves the
+    /// part with before a tool change and at the end, where its X Y Z (tip coordinates) cannot
+    /// name the top of Z. Empty where the control's machine zero is not known to be the top.
+    pub machine_z_up: &'static str,
     pub spindle: &'static str,
     pub spindle_cw: &'static str,
     pub spindle_ccw: &'static str,
@@ -163,6 +168,7 @@ pub const FANUC: Dialect = Dialect {
     length_comp: "G43 H{t}",
     tcp_on: "G43.4 H{t}",
     tcp_off: "G49",
+    machine_z_up: "G53 G0 Z0",
     spindle: "S{s}",
     spindle_cw: "M3",
     spindle_ccw: "M4",
@@ -195,6 +201,8 @@ pub const LINUXCNC: Dialect = Dialect {
     end: &[("M30", true), ("%", false)],
     tcp_on: "G43 H{t} (TCP: SWITCH THE KINEMATICS TO TOOL-TIP MODE IN THE MACHINE CONFIG)",
     tcp_off: "G49",
+    // Homing sets machine Z0 where the configuration says: not always the top.
+    machine_z_up: "",
     coolant_through: "M8",
     cycles: Cycles::Iso { dwell_ms: false },
     planes: Planes::None,
@@ -218,6 +226,7 @@ pub const SIEMENS: Dialect = Dialect {
     length_comp: "",
     tcp_on: "TRAORI",
     tcp_off: "TRAFOOF",
+    machine_z_up: "",
     cycles: Cycles::Siemens,
     planes: Planes::Siemens,
     notes: "TCP with TRAORI; tool offset with D1; inverse time G93; rotaries programmed as linear (not modulo) axes",
@@ -243,6 +252,7 @@ pub const HEIDENHAIN: Dialect = Dialect {
     length_comp: "",
     tcp_on: "FUNCTION TCPM F TCP AXIS POS PATHCTRL AXIS",
     tcp_off: "FUNCTION RESET TCPM",
+    machine_z_up: "",
     spindle: "TOOL CALL S{s}",
     spindle_cw: "M3",
     spindle_ccw: "M4",
@@ -502,10 +512,12 @@ impl Formatter {
         out
     }
 
-    /// Program end: spindle and coolant off, compensation off, the dialect's closing lines.
-    pub fn footer(&mut self) -> Vec<String> {
+    /// Program end: spindle and coolant off, compensation off (then, `z_up`, the spindle to
+    /// machine Z home), the dialect's closing lines.
+    pub fn footer(&mut self, z_up: bool) -> Vec<String> {
         let mut out = Vec::new();
-        for w in [self.d.spindle_off, self.d.coolant_off, self.d.tcp_off] {
+        let up = if z_up { self.d.machine_z_up } else { "" };
+        for w in [self.d.spindle_off, self.d.coolant_off, self.d.tcp_off, up] {
             if !w.is_empty() {
                 out.push(self.words(w).to_string());
             }

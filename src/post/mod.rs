@@ -809,7 +809,10 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         self.leave_plane(false)?;
         self.retract_up()?;
         self.lock_all()?;
-        for l in self.f.footer() {
+        // TCP: X Y Z are the tip, and the retract above went the clearance along the tool axis;
+        // machine Z home takes the spindle clear of the part whatever comes next.
+        let z_up = self.o.mode == Mode::Tcp && self.at.is_some();
+        for l in self.f.footer(z_up) {
             self.out(&l)?;
         }
         Ok(())
@@ -889,6 +892,12 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                         self.out(&l)?;
                     }
                     self.comp_on = false;
+                    // TCP: the retract went the clearance along the tool axis (see `program_end`).
+                    if self.o.mode == Mode::Tcp
+                        && let Some(l) = self.f.line(d.machine_z_up, number, 0)
+                    {
+                        self.out(&l)?;
+                    }
                 }
                 let c = self.f.comment(&format!("TOOL {number}")).to_string();
                 self.out(&c)?;
