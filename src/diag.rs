@@ -39,6 +39,7 @@ pub enum Code {
     SurfaceSpeed,
     SpindleSpeed,
     SpindleStopped,
+    CoolantRestored,
     ToolLength,
 }
 
@@ -69,6 +70,7 @@ impl Code {
             Code::SurfaceSpeed => "surface_speed",
             Code::SpindleSpeed => "spindle_speed",
             Code::SpindleStopped => "spindle_stopped",
+            Code::CoolantRestored => "coolant_restored",
             Code::ToolLength => "tool_length",
         }
     }

@@ -1765,3 +1765,41 @@ fn a_tool_change_restarts_the_spindle_the_cl_left_on() {
         sink.diags
     );
 }
+
+/// Coolant on through a tool change sprays into the open spindle and the changer (through-spindle
+/// coolant above all): M9 before it. APT's COOLNT is modal, so where the CL does not say it again
+/// the next tool's first move turns the same coolant on, with an info naming the change.
+#[test]
+fn a_tool_change_turns_the_coolant_off_and_on_again() {
+    let m = machine("vmc-3axis");
+    let cl = "UNITS/MM\nLOADTL/1\nSPINDL/1000\nCOOLNT/THRU\nFEDRAT/100,MMPM\nGOTO/10,20,5\nGOTO/10,20,0\n\
+              LOADTL/2\nGOTO/30,20,5\nGOTO/30,20,0\n";
+    let (sink, _) = run(&m, cl.as_bytes(), &Options::new(&m));
+    let lines: Vec<&str> = sink.nc.lines().collect();
+    let at = |w: &str| {
+        lines
+            .iter()
+            .position(|l| *l == w)
+            .unwrap_or_else(|| panic!("{w}:\n{}", sink.nc))
+    };
+    let (off, change, on, comp) = (
+        at("M9"),
+        at("T2 M6"),
+        lines.iter().rposition(|l| *l == "M88").unwrap(),
+        at("G43 H2"),
+    );
+    assert!(off < change && change < on && on < comp, "{}", sink.nc);
+    let infos: Vec<_> = sink.diags.iter().filter(|d| d.code == Code::CoolantRestored).collect();
+    assert_eq!(infos.len(), 1, "{infos:?}");
+    assert_eq!((infos[0].severity, infos[0].line), (Severity::Info, Some(8)));
+    // Said again by the CL: as it says; off before the change: stays off.
+    let restated = cl.replace("LOADTL/2\n", "LOADTL/2\nCOOLNT/MIST\n");
+    let (sink, _) = run(&m, restated.as_bytes(), &Options::new(&m));
+    assert_eq!(sink.nc.matches("M88").count(), 1, "{}", sink.nc);
+    assert!(sink.nc.contains("T2 M6\nM7\n"), "{}", sink.nc);
+    assert!(!sink.diags.iter().any(|d| d.code == Code::CoolantRestored));
+    let off = cl.replace("LOADTL/2\n", "COOLNT/OFF\nLOADTL/2\n");
+    let (sink, _) = run(&m, off.as_bytes(), &Options::new(&m));
+    assert_eq!(sink.nc.matches("M88").count(), 1, "{}", sink.nc);
+    assert!(!sink.diags.iter().any(|d| d.code == Code::CoolantRestored));
+}

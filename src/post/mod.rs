@@ -492,6 +492,11 @@ struct Emitter<'a, S: Sink + ?Sized> {
     spindle_cw: bool,
     spindle_restore: Option<u32>,
     warned_spindle: bool,
+    /// The coolant word the CL has on (APT's COOLNT is modal too), and the tool change that
+    /// turned it off (M9 before M6: coolant, through-spindle above all, sprays into an open
+    /// spindle and the changer) until the next tool's first move turns it on again.
+    coolant: Option<&'static str>,
+    coolant_restore: Option<u32>,
     /// Which clamped rotaries are locked now (a clamped axis is taken as locked at the start).
     locked: [bool; 3],
     /// Set for the next block: an arc (G3 when true) with its centre words.
@@ -651,6 +656,8 @@ pub fn post<R: BufRead, S: Sink + ?Sized>(input: R, m: &Machine, o: &Options, si
         spindle_cw: true,
         spindle_restore: None,
         warned_spindle: false,
+        coolant: None,
+        coolant_restore: None,
         arc_words: None,
         locked: [true; 3],
         plane: "G17",
@@ -899,6 +906,13 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                         self.out(&l)?;
                     }
                 }
+                if self.coolant.is_some()
+                    && self.coolant_restore.is_none()
+                    && let Some(l) = self.f.line(d.coolant_off, number, 0)
+                {
+                    self.out(&l)?;
+                    self.coolant_restore = Some(line);
+                }
                 let c = self.f.comment(&format!("TOOL {number}")).to_string();
                 self.out(&c)?;
                 for t in d.tool_change {
@@ -963,6 +977,8 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                 if let Some(l) = self.f.line(w, 0, 0) {
                     self.out(&l)?;
                 }
+                self.coolant = (c != CoolantCmd::Off).then_some(w);
+                self.coolant_restore = None;
             }
             ProgEvent::Comment(t) => {
                 let c = self.f.comment(&t).to_string();
@@ -1030,6 +1046,18 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                 ),
             ))?;
             self.spindle_start(v, self.spindle_cw)?;
+        }
+        if let Some(line) = self.coolant_restore.take()
+            && let Some(w) = self.coolant
+            && let Some(l) = self.f.line(w, 0, 0)
+        {
+            self.note(Diagnostic::new(
+                Code::CoolantRestored,
+                Severity::Info,
+                Some(line),
+                format!("coolant off for the tool change and the CL did not turn it on again: {l} restarted"),
+            ))?;
+            self.out(&l)?;
         }
         let t = match self.tool {
             Some(t) => t,
