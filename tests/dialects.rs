@@ -1076,6 +1076,14 @@ fn program_numbers_are_checked_against_the_dialects_program_frame() {
     }
 }
 
+/// The NC of `cl` posted with `settings`, or the settings' error.
+fn nc_with(m: &kinepost::kinematics::Machine, cl: &str, settings: post::Settings) -> Result<String, String> {
+    let o = settings.options(m)?;
+    let mut nc = Vec::new();
+    post::post(cl.as_bytes(), m, &o, &mut post::TextSink(&mut nc)).unwrap();
+    Ok(String::from_utf8(nc).unwrap())
+}
+
 /// The X Y Z words are measured from one origin (joint mode: the profile's; TCP: the part's): the
 /// program selects the work coordinate system that holds it (G54 by default) instead of running
 /// in whatever the control has active from the last job. Each control takes only its own: a Sinumerik's G58/G59
@@ -1085,16 +1093,16 @@ fn the_program_selects_its_work_coordinates() {
     let lib = Library::load_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap();
     let m = &lib.get("spinner-u5-620").unwrap().machine;
     let cl = "UNITS/MM\nLOADTL/1\nSPINDL/1000\nGOTO/10,20,30,0,0,1\nFINI\n";
-    let program = |dialect: &str, wcs: Option<&str>| -> Result<String, String> {
-        let o = post::Settings {
-            dialect: Some(dialect.into()),
-            work_coordinates: wcs.map(str::to_string),
-            ..Default::default()
-        }
-        .options(m)?;
-        let mut nc = Vec::new();
-        post::post(cl.as_bytes(), m, &o, &mut post::TextSink(&mut nc)).unwrap();
-        Ok(String::from_utf8(nc).unwrap())
+    let program = |dialect: &str, wcs: Option<&str>| {
+        nc_with(
+            m,
+            cl,
+            post::Settings {
+                dialect: Some(dialect.into()),
+                work_coordinates: wcs.map(str::to_string),
+                ..Default::default()
+            },
+        )
     };
     // The safe-start line, with the work coordinates last: nothing else moves.
     for (dialect, start) in [
@@ -1133,16 +1141,12 @@ fn a_tcp_program_leaves_the_part_by_machine_z_home() {
     let cl = "UNITS/MM\nLOADTL/1\nSPINDL/1000\nFEDRAT/500\nGOTO/10,20,30,0,0,1\nGOTO/10,20,0,0,0,1\n\
               LOADTL/2\nGOTO/30,20,30,0,0,1\nGOTO/30,20,0,0,0,1\nFINI\n";
     let program = |dialect: &str, mode: &str| {
-        let o = post::Settings {
+        let settings = post::Settings {
             dialect: Some(dialect.into()),
             mode: Some(mode.into()),
             ..Default::default()
-        }
-        .options(m)
-        .unwrap();
-        let mut nc = Vec::new();
-        post::post(cl.as_bytes(), m, &o, &mut post::TextSink(&mut nc)).unwrap();
-        String::from_utf8(nc).unwrap()
+        };
+        nc_with(m, cl, settings).unwrap()
     };
     for dialect in ["fanuc", "haas"] {
         let nc = program(dialect, "tcp");

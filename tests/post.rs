@@ -41,6 +41,23 @@ impl Sink for Collect {
     }
 }
 
+impl Collect {
+    /// The first diagnostic with `code` (the test fails without one).
+    fn first(&self, code: Code) -> &Diagnostic {
+        self.diags
+            .iter()
+            .find(|d| d.code == code)
+            .unwrap_or_else(|| panic!("no {} diagnostic: {:?}", code.as_str(), self.diags))
+    }
+
+    /// The one diagnostic with `code` (the test fails on none or several).
+    fn only(&self, code: Code) -> &Diagnostic {
+        let all: Vec<_> = self.diags.iter().filter(|d| d.code == code).collect();
+        assert_eq!(all.len(), 1, "one {} diagnostic: {all:?}", code.as_str());
+        all[0]
+    }
+}
+
 fn run(m: &Machine, cl: &[u8], o: &Options) -> (Collect, Summary) {
     let mut sink = Collect::default();
     let s = post::post(cl, m, o, &mut sink).unwrap();
@@ -260,14 +277,10 @@ fn bad_records_are_diagnostics_with_line_and_column_and_the_rest_goes_on() {
     let m = machine("spinner-u5-620");
     let cl = "UNITS/MM\nFEDRAT/500,MMPM\nGOTO/0,0,50,0,0,1\nGOTO/1,2,abc\nGOTO/10,0,50,0,0,1\nFROBNICATE/1\nGOTO/20,0,50,0,0,1\n";
     let (sink, s) = run(&m, cl.as_bytes(), &Options::new(&m));
-    let bad = sink
-        .diags
-        .iter()
-        .find(|d| d.code == Code::BadRecord)
-        .expect("bad record reported");
+    let bad = sink.first(Code::BadRecord);
     assert_eq!((bad.line, bad.column), (Some(4), Some(10)), "{bad}");
     assert!(bad.message.contains("expected a finite number"), "{bad}");
-    let unknown = sink.diags.iter().find(|d| d.code == Code::UnknownRecord).unwrap();
+    let unknown = sink.first(Code::UnknownRecord);
     assert_eq!(unknown.severity, Severity::Warning);
     assert_eq!(s.cl_points, 3, "the good records all went through");
     assert!(sink.nc.trim_end().ends_with("M30\n%") || sink.nc.trim_end().ends_with('%'));
@@ -341,7 +354,7 @@ fn a_file_without_motion_is_told() {
     let m = machine("spinner-u5-620");
     for cl in ["", "PARTNO/EMPTY\nUNITS/MM\nFINI\n", "\u{1}\u{2}PNG\n"] {
         let (sink, s) = run(&m, cl.as_bytes(), &Options::new(&m));
-        let d = sink.diags.iter().find(|d| d.code == Code::NoMotion).expect("no_motion");
+        let d = sink.first(Code::NoMotion);
         assert_eq!((d.severity, s.cl_points), (Severity::Warning, 0));
     }
     let (sink, _) = run(&m, b"UNITS/MM\nGOTO/1,2,3\n", &Options::new(&m));
@@ -545,10 +558,10 @@ fn unreachable_poses_name_the_line_and_limits_name_the_axis() {
     let m = machine("vmc-3axis");
     let cl = "UNITS/MM\nFEDRAT/500,MMPM\nGOTO/0,0,50,0,0,1\nGOTO/0,0,50,0,0.5,0.866025\nGOTO/0,0,40,0,0,1\nGOTO/900,0,40,0,0,1\n";
     let (sink, s) = run(&m, cl.as_bytes(), &Options::new(&m));
-    let u = sink.diags.iter().find(|d| d.code == Code::Unreachable).unwrap();
+    let u = sink.first(Code::Unreachable);
     assert_eq!(u.line, Some(4));
     assert!(u.message.contains("30.0"), "{u}");
-    let l = sink.diags.iter().find(|d| d.code == Code::LimitViolation).unwrap();
+    let l = sink.first(Code::LimitViolation);
     assert_eq!(l.line, Some(6));
     assert!(l.message.starts_with("X = 900"), "{l}");
     assert_eq!(s.errors, 2);
@@ -1640,11 +1653,7 @@ fn a_drilling_cycle_without_a_feed_is_an_error() {
     let m = machine("vmc-3axis");
     let cl = "UNITS/MM\nRAPID\nGOTO/10,20,5\nCYCLE/TAP,20,1\nGOTO/10,20,0\nCYCLE/OFF\n";
     let (sink, s) = run(&m, cl.as_bytes(), &Options::new(&m));
-    let d = sink
-        .diags
-        .iter()
-        .find(|d| d.code == Code::NoFeed)
-        .expect("a no_feed diagnostic");
+    let d = sink.first(Code::NoFeed);
     assert_eq!((d.severity, d.line), (Severity::Error, Some(5)), "{d}");
     assert!(d.message.starts_with("tapping cycle without a feed"), "{d}");
     assert!(s.errors >= 1);
@@ -1666,11 +1675,7 @@ fn a_spindle_speed_that_rounds_to_zero_is_an_error() {
     let m = machine("vmc-3axis");
     let cl = "UNITS/MM\nSPINDL/    0.3980,RPM,CLW\nFEDRAT/100,MMPM\nGOTO/10,20,5\nGOTO/10,20,0\n";
     let (sink, s) = run(&m, cl.as_bytes(), &Options::new(&m));
-    let d = sink
-        .diags
-        .iter()
-        .find(|d| d.code == Code::SpindleSpeed)
-        .expect("a spindle_speed diagnostic");
+    let d = sink.first(Code::SpindleSpeed);
     assert_eq!((d.severity, d.line), (Severity::Error, Some(2)), "{d}");
     assert!(d.message.contains("0.398") && d.message.contains("S0"), "{d}");
     assert_eq!(s.errors, 1);
@@ -1738,9 +1743,8 @@ fn a_tool_change_restarts_the_spindle_the_cl_left_on() {
     let after = &sink.nc[sink.nc.find("T2 M6").expect("a tool change")..];
     let (s, g43) = (after.find("S1000 M4").expect("a restart"), after.find("G43 H2").unwrap());
     assert!(s < g43 && g43 < after.find("G0").unwrap(), "{after}");
-    let infos: Vec<_> = sink.diags.iter().filter(|d| d.code == Code::SpindleStopped).collect();
-    assert_eq!(infos.len(), 1, "{infos:?}");
-    assert_eq!((infos[0].severity, infos[0].line), (Severity::Info, Some(7)));
+    let info = sink.only(Code::SpindleStopped);
+    assert_eq!((info.severity, info.line), (Severity::Info, Some(7)));
     // Said again by the CL: written once, as the CL says it.
     let restated = cl.replace("LOADTL/2\n", "LOADTL/2\nSPINDL/2000,RPM,CLW\n");
     let (sink, _) = run(&m, restated.as_bytes(), &Options::new(&m));
@@ -1789,9 +1793,8 @@ fn a_tool_change_turns_the_coolant_off_and_on_again() {
         at("G43 H2"),
     );
     assert!(off < change && change < on && on < comp, "{}", sink.nc);
-    let infos: Vec<_> = sink.diags.iter().filter(|d| d.code == Code::CoolantRestored).collect();
-    assert_eq!(infos.len(), 1, "{infos:?}");
-    assert_eq!((infos[0].severity, infos[0].line), (Severity::Info, Some(8)));
+    let info = sink.only(Code::CoolantRestored);
+    assert_eq!((info.severity, info.line), (Severity::Info, Some(8)));
     // Said again by the CL: as it says; off before the change: stays off.
     let restated = cl.replace("LOADTL/2\n", "LOADTL/2\nCOOLNT/MIST\n");
     let (sink, _) = run(&m, restated.as_bytes(), &Options::new(&m));
