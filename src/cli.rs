@@ -419,6 +419,10 @@ pub struct PostArgs {
     /// mode: the profile's origin; TCP: the part's).
     #[arg(long)]
     pub work_coordinates: Option<String>,
+    /// Spindle speed (RPM, clockwise) for a tool the CL starts no spindle for before its first
+    /// move (NX CLSF listings carry no SPINDL); the CL's own SPINDL and SPINDL/OFF win.
+    #[arg(long, allow_hyphen_values = true)]
+    pub spindle_speed: Option<f64>,
     /// Write per-block diagnostics as NDJSON to this file.
     #[arg(long)]
     pub diagnostics: Option<PathBuf>,
@@ -720,6 +724,7 @@ fn post_cmd(p: &machines::Profile, a: &PostArgs) -> Result<(), String> {
         cycles: a.canned_cycles.then(|| "canned".into()),
         planes: a.tilted_planes.then(|| "tilted".into()),
         work_coordinates: a.work_coordinates.clone(),
+        spindle_speed: a.spindle_speed,
     };
     let mut o = settings.profile_options(p)?;
     o.header.push(format!("DATE {} UTC", utc_now()));

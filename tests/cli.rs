@@ -156,6 +156,10 @@ fn bad_arguments_are_clear_errors() {
             vec!["post", "--machine", "spinner-u5-620", "--work-coordinates", "G60", "-"],
             "work_coordinates \"G60\": fanuc takes G54, G55, G56, G57, G58, G59 or none",
         ),
+        (
+            vec!["post", "--machine", "spinner-u5-620", "--spindle-speed", "-100", "-"],
+            "spindle_speed must be from 1 to 200000 RPM",
+        ),
     ] {
         let (code, _, err) = kinepost(&args);
         assert_ne!(code, 0, "{args:?}");

@@ -165,6 +165,38 @@ async fn post_as_a_multipart_form() {
     assert!(nc.contains("(SOURCE PLATE.NCL)") && nc.contains("N5 "), "{}", &nc[..400]);
 }
 
+/// NX's CLSF has no SPINDL: a spindle speed given with the job (query or form field) starts the
+/// spindle before the first move; a bad one is refused with the setting named.
+#[tokio::test]
+async fn a_spindle_speed_for_a_cl_without_one() {
+    let base = server(cfg()).await;
+    let c = reqwest::Client::new();
+    let cl = data("nx_clsf_mech491_simple_mill_plane_mm.cls");
+    let post = |q: &str| {
+        c.post(format!("{base}/v1/post?machine=vmc-3axis{q}"))
+            .header("content-type", "text/plain")
+            .body(cl.clone())
+    };
+    let nc = post("").text_ok().await;
+    assert!(!nc.contains(" M3"), "the CL starts no spindle: {nc}");
+    let nc = post("&spindle_speed=9000").text_ok().await;
+    assert!(nc.contains("\nS9000 M3\nG43 H"), "{nc}");
+    let r = post("&spindle_speed=0").send().await.unwrap();
+    assert_eq!(r.status(), 400);
+    assert!(r.text().await.unwrap().contains("spindle_speed"));
+    let body = format!(
+        "--XYZ\r\nContent-Disposition: form-data; name=\"machine\"\r\n\r\nvmc-3axis\r\n--XYZ\r\nContent-Disposition: form-data; name=\"spindle_speed\"\r\n\r\n7500\r\n--XYZ\r\nContent-Disposition: form-data; name=\"file\"; filename=\"plane.cls\"\r\nContent-Type: text/plain\r\n\r\n{}\r\n--XYZ--\r\n",
+        String::from_utf8(cl.clone()).unwrap()
+    );
+    let nc = c
+        .post(format!("{base}/v1/post"))
+        .header("content-type", "multipart/form-data; boundary=XYZ")
+        .body(body)
+        .text_ok()
+        .await;
+    assert!(nc.contains("\nS7500 M3\n"), "{nc}");
+}
+
 #[tokio::test]
 async fn drilling_cycles_as_canned_cycles_on_request() {
     let base = server(cfg()).await;

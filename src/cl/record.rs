@@ -102,12 +102,14 @@ pub enum Record {
     ToolAxis([f64; 3]),
     /// The next GOTO ends an arc about this centre and axis. `clockwise`: the motion turns
     /// clockwise about the axis (right-hand rule) — NX CLSF's 11-value form; APT from Creo,
-    /// SOLIDWORKS CAM and CAMWorks turns counter-clockwise about it.
+    /// SOLIDWORKS CAM and CAMWorks turns counter-clockwise about it. `turns`: NX's `TIMES,n`, a
+    /// helix that passes the end's angle n times (n − 1 whole turns before the arc to it).
     Circle {
         center: [f64; 3],
         axis: [f64; 3],
         radius: Option<f64>,
         clockwise: bool,
+        turns: u32,
     },
     Cycle(CycleParams),
     CycleOff,
@@ -201,6 +203,26 @@ pub fn parse_statement(stmt: &str, line: u32, diags: &mut Vec<Diagnostic>) -> Op
         return Some(r);
     }
     parse_general(stmt, line, diags)
+}
+
+/// The most turns a `CIRCLE/…,TIMES,n` may ask for: a helix of more is a typo, and each turn
+/// is blocks.
+pub const MAX_CIRCLE_TURNS: u32 = 1000;
+
+/// The lines NX's information listing puts around a CLSF: a header (`Information listing created
+/// by`, `Date`, `Current work part`, `Node name`, each a tab and a value) and the trailer `Tool
+/// Path Listing has 388 lines.`
+fn is_nx_listing(s: &str) -> bool {
+    let w: Vec<&str> = s.split_whitespace().collect();
+    let starts = |head: &[&str]| w.len() > head.len() && w.iter().zip(head).all(|(a, b)| a == b);
+    starts(&["Information", "listing", "created", "by"])
+        || starts(&["Date"]) && s.contains('\t')
+        || starts(&["Current", "work", "part"])
+        || starts(&["Node", "name"])
+        || matches!(w.as_slice(), [t, p, l, h, n, e]
+            if [*t, *p, *l, *h].iter().zip(["TOOL", "PATH", "LISTING", "HAS"]).all(|(a, b)| a.eq_ignore_ascii_case(b))
+                && n.bytes().all(|b| b.is_ascii_digit())
+                && e.trim_end_matches('.').eq_ignore_ascii_case("lines"))
 }
 
 /// Every statement the long way (the fast path's reference in tests).
@@ -478,9 +500,27 @@ fn parse_general(stmt: &str, line: u32, diags: &mut Vec<Diagnostic>) -> Option<R
             // direction word that the axis already states (motion is counter-clockwise about it).
             let mut v = Vec::with_capacity(11);
             let mut words = Vec::new();
+            let mut turns = 1;
             for a in &args {
                 match num(a.text) {
                     Some(x) if x.is_finite() && words.is_empty() => v.push(x),
+                    Some(x) if words.last().is_some_and(|w| w == "TIMES") => {
+                        // A helical ramp's turns: taken once it plunged 7× as steep (NX's 3° ramp
+                        // of TIMES,7 at 21°).
+                        if !(x >= 1.0 && x.fract() == 0.0 && x <= MAX_CIRCLE_TURNS as f64) {
+                            bad(
+                                diags,
+                                a.col,
+                                format!(
+                                    "CIRCLE: TIMES expects a whole number of turns from 1 to {MAX_CIRCLE_TURNS}, found {:?}",
+                                    a.text.trim()
+                                ),
+                            );
+                            return None;
+                        }
+                        turns = x as u32;
+                        words.push("TIMES n".into());
+                    }
                     Some(_) if !words.is_empty() => {}
                     _ if v.len() >= 6 && a.text.trim().chars().all(|c| c.is_ascii_alphabetic()) => words.push(word(a)),
                     _ => {
@@ -500,16 +540,9 @@ fn parse_general(stmt: &str, line: u32, diags: &mut Vec<Diagnostic>) -> Option<R
                 );
                 return None;
             }
-            if words.iter().any(|w| w == "TIMES") {
-                diags.push(
-                    Diagnostic::new(
-                        Code::IgnoredRecord,
-                        Severity::Warning,
-                        Some(line),
-                        "CIRCLE: TIMES (repeated turns) not supported: the arc is taken once",
-                    )
-                    .at(rest_col),
-                );
+            if words.last().is_some_and(|w| w == "TIMES") {
+                bad(diags, rest_col, "CIRCLE: TIMES without its number of turns".into());
+                return None;
             }
             // NX writes CIRCLE/x,y,z,i,j,k,r,tol,d,a,b and turns clockwise about (i,j,k): its own
             // post writes G03 for an axis of (0,0,-1), and 98 of 98 of its arcs in the corpus are
@@ -521,6 +554,7 @@ fn parse_general(stmt: &str, line: u32, diags: &mut Vec<Diagnostic>) -> Option<R
                 axis: [v[3], v[4], v[5]],
                 radius: v.get(6).copied(),
                 clockwise,
+                turns,
             })
         }
         "CYCLE" => parse_cycle(&args, line, rest_col, diags),
@@ -528,6 +562,8 @@ fn parse_general(stmt: &str, line: u32, diags: &mut Vec<Diagnostic>) -> Option<R
             args.first().map(|a| a.text.trim().to_string()).unwrap_or_default(),
         )),
         "END-OF-PATH" => Some(Record::OperationEnd),
+        // NX's information listing around the CLSF: who, when, which part; a count of lines.
+        "INFORMATION" | "DATE" | "CURRENT" | "NODE" | "TOOL" if is_nx_listing(s) => Some(Record::Ignored("NX LISTING".into())),
         "PARTNO" => Some(Record::PartNo(rest.trim().to_string())),
         "PPRINT" | "INSERT" => Some(Record::Comment(rest.trim().to_string())),
         "FINI" | "END" => Some(Record::End),

@@ -64,6 +64,9 @@ pub struct PostParams {
     /// `none`; its origin must be where X Y Z are measured from (joint mode: the profile's
     /// origin; TCP: the part's). heidenhain: none only.
     pub work_coordinates: Option<String>,
+    /// Spindle speed (RPM, clockwise, 1 to 200000) for a tool the CL starts no spindle for
+    /// before its first move (NX CLSF carries no SPINDL); the CL's SPINDL and SPINDL/OFF win.
+    pub spindle_speed: Option<f64>,
 }
 
 impl PostParams {
@@ -83,6 +86,7 @@ impl PostParams {
             cycles: self.cycles.clone(),
             planes: self.planes.clone(),
             work_coordinates: self.work_coordinates.clone(),
+            spindle_speed: self.spindle_speed,
         }
     }
 
@@ -119,6 +123,7 @@ impl PostParams {
             "cycles" => self.cycles = Some(v).filter(|s| !s.is_empty()),
             "planes" => self.planes = Some(v).filter(|s| !s.is_empty()),
             "work_coordinates" => self.work_coordinates = Some(v).filter(|s| !s.is_empty()),
+            "spindle_speed" => self.spindle_speed = if v.trim().is_empty() { None } else { Some(num(&v)?) },
             other => return Err(ApiError::BadParameter(format!("unknown form field {other:?}"))),
         }
         Ok(())

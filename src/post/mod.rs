@@ -70,6 +70,10 @@ pub struct Options {
     /// `None`: the dialect's first (none on a control without one); `Some("none")`: the program
     /// selects none and runs in whatever the control has active.
     pub work_coordinates: Option<String>,
+    /// Spindle speed (RPM, clockwise) for a tool whose CL starts none before its first move (NX's
+    /// CLSF listings carry no SPINDL: its post takes the speed from the operation). `None`: the
+    /// CL's own, and a cut with none is a `spindle_stopped` warning.
+    pub spindle_speed: Option<f64>,
 }
 
 impl Options {
@@ -94,6 +98,7 @@ impl Options {
             canned_cycles: false,
             tilted_planes: false,
             work_coordinates: None,
+            spindle_speed: None,
         }
     }
 
@@ -148,6 +153,10 @@ pub struct Settings {
     /// (the TNC's preset is chosen on the control).
     #[serde(default)]
     pub work_coordinates: Option<String>,
+    /// Spindle speed (RPM, clockwise) for a tool the CL starts no spindle for before its first
+    /// move (NX's CLSF listings carry no SPINDL); the CL's own SPINDL, and SPINDL/OFF, win.
+    #[serde(default)]
+    pub spindle_speed: Option<f64>,
 }
 
 impl Settings {
@@ -246,9 +255,18 @@ impl Settings {
                 ));
             }
         }
+        if let Some(s) = self.spindle_speed {
+            if !(s.is_finite() && (1.0..=MAX_SPINDLE_SPEED).contains(&s)) {
+                return Err(format!("spindle_speed must be from 1 to {MAX_SPINDLE_SPEED} RPM"));
+            }
+            o.spindle_speed = Some(s);
+        }
         Ok(o)
     }
 }
+
+/// The largest `spindle_speed` taken: above any machining spindle (a typo's extra digit fails).
+pub const MAX_SPINDLE_SPEED: f64 = 200_000.0;
 
 /// What a sink is told about a motion block, beside its text.
 #[derive(Clone, Debug, Serialize)]
@@ -492,11 +510,16 @@ struct Emitter<'a, S: Sink + ?Sized> {
     spindle_cw: bool,
     spindle_restore: Option<u32>,
     warned_spindle: bool,
+    /// The CL said SPINDL/OFF since the last tool change: `Options::spindle_speed` starts nothing.
+    spindle_said_off: bool,
     /// The coolant word the CL has on (APT's COOLNT is modal too), and the tool change that
     /// turned it off (M9 before M6: coolant, through-spindle above all, sprays into an open
     /// spindle and the changer) until the next tool's first move turns it on again.
     coolant: Option<&'static str>,
     coolant_restore: Option<u32>,
+    /// Coolant the CL turned on before its first tool and first move (CATIA writes COOLNT/ON
+    /// before LOADTL): written at the first move, not before a tool change that turns it off.
+    coolant_deferred: bool,
     /// Which clamped rotaries are locked now (a clamped axis is taken as locked at the start).
     locked: [bool; 3],
     /// Set for the next block: an arc (G3 when true) with its centre words.
@@ -656,8 +679,10 @@ pub fn post<R: BufRead, S: Sink + ?Sized>(input: R, m: &Machine, o: &Options, si
         spindle_cw: true,
         spindle_restore: None,
         warned_spindle: false,
+        spindle_said_off: false,
         coolant: None,
         coolant_restore: None,
+        coolant_deferred: false,
         arc_words: None,
         locked: [true; 3],
         plane: "G17",
@@ -787,6 +812,9 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         if wo != Vec3::zeros() {
             lines.push(format!("WORK OFFSET {},{},{}", wo.x, wo.y, wo.z));
         }
+        if let Some(s) = self.o.spindle_speed {
+            lines.push(format!("SPINDLE S{} WHERE THE CL STARTS NONE", s.round()));
+        }
         lines.extend(self.o.header.iter().cloned());
         for l in self.f.header(self.o.program_number, self.m.units, &lines, self.o.wcs_word()) {
             self.out(&l)?;
@@ -908,6 +936,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                 }
                 if self.coolant.is_some()
                     && self.coolant_restore.is_none()
+                    && !self.coolant_deferred
                     && let Some(l) = self.f.line(d.coolant_off, number, 0)
                 {
                     self.out(&l)?;
@@ -926,6 +955,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                 if std::mem::take(&mut self.spindle_on) {
                     self.spindle_restore = Some(line);
                 }
+                self.spindle_said_off = false;
             }
             ProgEvent::ToolLength(l) => {
                 // Only when the job fixed the length (else `cl_tool_length`, before planning).
@@ -957,6 +987,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                 };
                 self.rpm = speed;
                 self.spindle_restore = None;
+                self.spindle_said_off = speed.is_none();
                 match speed {
                     Some(v) => self.spindle_start(v, cw)?,
                     None => {
@@ -974,11 +1005,17 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                     CoolantCmd::Through => d.coolant_through,
                     CoolantCmd::Off => d.coolant_off,
                 };
-                if let Some(l) = self.f.line(w, 0, 0) {
+                let on = c != CoolantCmd::Off;
+                // Nothing to cool before the first tool and move, and M6 would only stop it.
+                let early = self.tool.is_none() && self.at.is_none();
+                if !(early && (on || self.coolant_deferred))
+                    && let Some(l) = self.f.line(w, 0, 0)
+                {
                     self.out(&l)?;
                 }
-                self.coolant = (c != CoolantCmd::Off).then_some(w);
+                self.coolant = on.then_some(w);
                 self.coolant_restore = None;
+                self.coolant_deferred = early && on;
             }
             ProgEvent::Comment(t) => {
                 let c = self.f.comment(&t).to_string();
@@ -1023,13 +1060,14 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             Code::SpindleStopped,
             Severity::Warning,
             Some(line),
-            "feed move with the spindle standing: the CL starts none before it (no SPINDL with a speed, or SPINDL/OFF since)",
+            "feed move with the spindle standing: the CL starts none before it (no SPINDL with a speed, or SPINDL/OFF since; spindle_speed gives one)",
         ))
     }
 
-    /// Length compensation (or TCP) on, before the first motion of a tool; and the spindle again
-    /// where the tool change stopped it.
-    fn ensure_comp(&mut self) -> std::io::Result<()> {
+    /// Length compensation (or TCP) on, before the first motion of a tool (at CL `line`); and the
+    /// spindle again where the tool change stopped it, or at `spindle_speed` where the CL started
+    /// none.
+    fn ensure_comp(&mut self, line: u32) -> std::io::Result<()> {
         if self.comp_on {
             return Ok(());
         }
@@ -1046,6 +1084,28 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                 ),
             ))?;
             self.spindle_start(v, self.spindle_cw)?;
+        }
+        if let Some(v) = self.o.spindle_speed
+            && !self.spindle_on
+            && !self.spindle_said_off
+        {
+            self.note(Diagnostic::new(
+                Code::SpindleStopped,
+                Severity::Info,
+                Some(line),
+                format!(
+                    "the CL starts no spindle before this tool's first move: S{} (spindle_speed) started",
+                    v.round()
+                ),
+            ))?;
+            self.rpm = Some(v);
+            self.spindle_start(v, true)?;
+        }
+        if std::mem::take(&mut self.coolant_deferred)
+            && let Some(w) = self.coolant
+            && let Some(l) = self.f.line(w, 0, 0)
+        {
+            self.out(&l)?;
         }
         if let Some(line) = self.coolant_restore.take()
             && let Some(w) = self.coolant
@@ -1195,7 +1255,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         let Some((mut joints, mut actual, branch, mut free)) = self.resolve(&pt.pose, &cand, self.positioning(&pt)) else {
             return Ok(());
         };
-        self.ensure_comp()?;
+        self.ensure_comp(pt.line)?;
         let mut diags: Vec<Diagnostic> = Vec::new();
         let mut pose = pt.pose;
         let outer = kinematics::outer_rotary(self.m);
@@ -1577,21 +1637,44 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             .find(|(k, _, _)| normal[*k].abs() > 1.0 - 1e-9);
         if let (true, true, false, Some((k, word, ij))) = (still, tcp || full_linears, conversational, plane) {
             let ccw = normal[k] > 0.0;
-            let d = center - start;
-            let dec = self.f.fmt.linear;
-            let mut words = String::new();
-            for idx in ij {
-                words.push(['I', 'J', 'K'][idx]);
-                crate::nc::write_fixed(&mut words, crate::nc::round_to(d[idx], dec), dec);
-                words.push(' ');
-            }
             if self.plane != word {
                 let l = self.f.words(word).to_string();
                 self.out(&l)?;
                 self.plane = word;
             }
-            self.arc_words = Some((ccw, words.trim_end().to_string()));
-            return self.block(b, pt, false, diags, pt.inserted, None);
+            // A helix of several turns (NX's TIMES): one block can say at most one, and an end on
+            // its start reads as a full circle on some controls only. Half turns say it anywhere.
+            let pieces = if arc.sweep > std::f64::consts::TAU + 1e-9 {
+                (arc.sweep / std::f64::consts::PI).ceil() as usize
+            } else {
+                1
+            };
+            let mut from = start;
+            for i in 1..=pieces {
+                let to = if i == pieces {
+                    b
+                } else {
+                    self.at_tip(&b, helix_tip(a.pose.tip, b.pose.tip, arc, i as f64 / pieces as f64))
+                };
+                let d = center - from;
+                let dec = self.f.fmt.linear;
+                let mut words = String::new();
+                for idx in ij {
+                    words.push(['I', 'J', 'K'][idx]);
+                    crate::nc::write_fixed(&mut words, crate::nc::round_to(d[idx], dec), dec);
+                    words.push(' ');
+                }
+                self.arc_words = Some((ccw, words.trim_end().to_string()));
+                if i == pieces {
+                    return self.block(b, pt, false, diags, pt.inserted, None);
+                }
+                from = match &tilt {
+                    Some(t) => self.plane_coords(t, &to.pose.tip),
+                    None if tcp => to.pose.tip,
+                    None => Vec3::from(to.joints.linear),
+                };
+                self.block(to, pt, false, Vec::new(), true, None)?;
+            }
         }
         // Heidenhain: `CC` (the centre, absolute) then `C` to the end point with `DR+`/`DR-`, for a
         // flat arc in the working plane (XY: the tool along Z); anything else as chords.
@@ -1623,10 +1706,6 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         // Chords: the arc swept in the part frame, tool axis fixed, linears from the rotaries.
         let step = 2.0 * (1.0 - (self.o.tolerance / arc.radius).min(1.0)).acos();
         let segs = ((arc.sweep / step.max(1e-6)).ceil() as usize).clamp(1, 100_000);
-        let k = arc.normal;
-        let (ra, rb) = (a.pose.tip - arc.center, b.pose.tip - arc.center);
-        let (h0, h1) = (k.dot(&ra), k.dot(&rb));
-        let ap = ra - k * h0;
         let mut diags = diags;
         if segs > 1 {
             diags.push(Diagnostic::new(
@@ -1636,11 +1715,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                 format!("arc of {:.1}° written as {segs} chords", arc.sweep.to_degrees()),
             ));
         }
-        let chord_tip = |i: usize| {
-            let t = i as f64 / segs as f64;
-            let (s, c) = (arc.sweep * t).sin_cos();
-            arc.center + ap * c + k.cross(&ap) * s + k * (h0 + (h1 - h0) * t)
-        };
+        let chord_tip = |i: usize| helix_tip(a.pose.tip, b.pose.tip, arc, i as f64 / segs as f64);
         if !full_linears {
             // Without a linear the rotaries place the tip too: every chord end is an exact
             // solution (the one nearest the last), and every chord a feed segment, linearized
@@ -2184,7 +2259,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             axis: at.pose.axis,
         });
         self.sum.tilted_planes += 1;
-        self.ensure_comp()
+        self.ensure_comp(self.last_line)
     }
 
     /// Back to untilted coordinates; `recomp`: length compensation on again for the blocks that
@@ -2198,7 +2273,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         if let Some(l) = self.f.plane_off() {
             self.out(&l)?;
         }
-        if recomp { self.ensure_comp() } else { Ok(()) }
+        if recomp { self.ensure_comp(self.last_line) } else { Ok(()) }
     }
 
     /// Length compensation off (word-address controls with a G43-style word) around a plane
@@ -2824,6 +2899,17 @@ pub fn seg_dist(p: &Vec3, a: &Vec3, b: &Vec3) -> f64 {
         ((p - a).dot(&ab) / l2).clamp(0.0, 1.0)
     };
     (p - (a + ab * t)).norm()
+}
+
+/// The tip a fraction `t` along `arc` (a helix: the height along its normal in proportion to the
+/// angle) from `from` to `to`.
+fn helix_tip(from: Vec3, to: Vec3, arc: &ArcSpec, t: f64) -> Vec3 {
+    let k = arc.normal;
+    let (ra, rb) = (from - arc.center, to - arc.center);
+    let (h0, h1) = (k.dot(&ra), k.dot(&rb));
+    let ap = ra - k * h0;
+    let (s, c) = (arc.sweep * t).sin_cos();
+    arc.center + ap * c + k.cross(&ap) * s + k * (h0 + (h1 - h0) * t)
 }
 
 /// The unit vector halfway along the great circle from `a` to `b`.

@@ -64,7 +64,7 @@ pub struct ArcSpec {
     pub center: Vec3,
     pub normal: Vec3,
     pub radius: f64,
-    /// Swept angle (radians, in (0, 2π]).
+    /// Swept angle (radians, in (0, 2π], or beyond for a helix of several turns).
     pub sweep: f64,
 }
 
@@ -107,6 +107,7 @@ pub struct Source<R> {
     turning: bool,
     circle: Option<([f64; 3], [f64; 3], Option<f64>)>,
     circle_cw: bool,
+    circle_turns: u32,
     cycle: Option<CycleParams>,
     /// Mark drilling holes for canned-cycle output (and approach them at the start level).
     pub canned_cycles: bool,
@@ -171,6 +172,7 @@ impl<R: BufRead> Source<R> {
             turning: false,
             circle: None,
             circle_cw: false,
+            circle_turns: 1,
             cycle: None,
             canned_cycles: false,
             ended: false,
@@ -366,9 +368,11 @@ impl<R: BufRead> Source<R> {
                 axis,
                 radius,
                 clockwise,
+                turns,
             } => {
                 self.circle = Some((center, axis, radius));
                 self.circle_cw = clockwise;
+                self.circle_turns = turns;
             }
             Record::Cycle(c) => {
                 self.cycle = Some(c);
@@ -484,6 +488,8 @@ impl<R: BufRead> Source<R> {
         if sweep <= 1e-12 {
             sweep += std::f64::consts::TAU;
         }
+        // A helix (NX's TIMES,n) passes the end's angle n times: n − 1 whole turns first.
+        sweep += f64::from(self.circle_turns.saturating_sub(1)) * std::f64::consts::TAU;
         // The plane's centre: where the start point projects onto the axis line.
         let c_plane = center + k * k.dot(&a);
         Some(ArcSpec {

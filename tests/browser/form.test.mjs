@@ -38,6 +38,8 @@ try {
   check(await page.locator('#machine option').count() === 10, 'the machine list comes from the API');
   await page.selectOption('#machine', 'haas-umc750');
   check((await page.textContent('#machine-info')).includes('table-table'), 'machine facts shown');
+  // NX's CLSF carries no SPINDL: the speed comes from the form.
+  await page.fill('#spindle_speed', '9000');
   await runJob(page, 'haas-umc750', 'tcp', 'nx_clsf_mech491_variable_axis_inch_5ax.cls');
   const status = await page.textContent('#status');
   check(status.includes('blocks from 348 CL points'), `status: ${status}`);
@@ -52,6 +54,7 @@ try {
   check(download.suggestedFilename() === 'nx_clsf_mech491_variable_axis_inch_5ax.nc', `download name ${download.suggestedFilename()}`);
   check(nc.startsWith('%\nO01000\n') && nc.trimEnd().endsWith('M30\n%') && nc.includes('G234 H1'), 'downloaded NC is a whole Haas TCP program');
   check(nc.includes('B-22.2015 C1.0496'), 'first orientation as the real NX post');
+  check(/\nS9000 M3\nG234 H1\n/.test(nc), 'the spindle speed from the form started before TCP on');
 
   // The 3D view draws (WebGL, non-blank pixels) and the plots show every axis word.
   await page.waitForSelector('#view3d canvas');

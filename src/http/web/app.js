@@ -48,7 +48,7 @@ async function submit(ev) {
   const f = $('file').files[0];
   if (!f) return;
   const q = new URLSearchParams({ machine: $('machine').value, mode: $('mode').value });
-  for (const k of ['dialect', 'cycles', 'planes', 'work_coordinates', 'tool_length', 'work_offset']) if ($(k).value.trim()) q.set(k, $(k).value.trim());
+  for (const k of ['dialect', 'cycles', 'planes', 'work_coordinates', 'tool_length', 'work_offset', 'spindle_speed']) if ($(k).value.trim()) q.set(k, $(k).value.trim());
   $('go').disabled = true;
   $('error').hidden = true;
   $('result').hidden = true; // never show the previous file's result as this one's
