@@ -1626,7 +1626,7 @@ fn the_propeller_machine_places_the_tip_with_its_rotaries() {
 /// A retract, approach or re-approach along the tool axis stops where the travel ends (told as a
 /// `near_limit` warning): fryer-5x-45's Z ends 1 in over the NX facing file's clearance point,
 /// and in TCP mode every approach and retract went there, a limit error on a program that was
-/// otherwise within travel.
+/// otherwise within travel. The words as written stay within it too, rounding included.
 #[test]
 fn retracts_along_the_tool_axis_stay_within_travel() {
     let m = machine("fryer-5x-45");
@@ -1646,6 +1646,43 @@ fn retracts_along_the_tool_axis_stay_within_travel() {
         .filter(|d| d.code == Code::NearLimit && d.message.contains("shortened"))
         .count();
     assert!(told >= 2, "{:?}", sink.diags);
+    tcp_words_within_travel(&m, &sink.nc, s.tool_length);
+    // A retract shortened to the travel's end exactly: the rounded tip words put dmg-dmc75v's X
+    // 0.0005 mm past -375 at the project file's second tool (1.5 in long).
+    let m = machine("dmg-dmc75v");
+    let cl = std::fs::read_to_string(data("nx_clsf_mech491_project2_inch_5ax.cls")).unwrap();
+    let (sink, _) = run(&m, cl.as_bytes(), &fanuc(&m, Mode::Tcp));
+    let from = sink.nc.find("T2 M6").expect("tool 2");
+    let to = from + sink.nc[from..].find("T1 M6").expect("tool 1 again");
+    tcp_words_within_travel(&m, &sink.nc[from..to], 1.5 * 25.4);
+}
+
+/// Every block of a TCP program (X Y Z the tip, as written and rounded) puts the machine's axes
+/// within travel, for a tool `length` long.
+fn tcp_words_within_travel(m: &Machine, nc: &str, length: f64) {
+    let setup = Setup::new(length, Vec3::zeros());
+    let mut r = NcReader::new(nc.as_bytes(), m.units);
+    let mut n = 0;
+    while let Some(b) = r.next_block().unwrap() {
+        let (Some(x), Some(y), Some(z)) = (b.axes[0], b.axes[1], b.axes[2]) else {
+            continue;
+        };
+        let mut words = [0.0; 3];
+        for (i, rot) in m.rotaries.iter().enumerate() {
+            words[i] = b.axes[3 + (rot.name as u8 - b'A') as usize].unwrap_or(0.0).to_radians();
+        }
+        let cp = kinepost::kinematics::controlled_point(m, &m.actual_angles(&words), &Vec3::new(x, y, z), &setup);
+        let j = Joints {
+            linear: cp.into(),
+            rotary: words,
+        };
+        assert!(
+            kinepost::kinematics::limit_violation(m, &j, 1e-9).is_none(),
+            "{b:?}: machine at {cp:?}"
+        );
+        n += 1;
+    }
+    assert!(n > 30, "{n} blocks read");
 }
 
 /// A drilling cycle with no feed anywhere (CATIA's tapping demo: `CYCLE/TAP,50.786017,1.0`, no
@@ -1895,6 +1932,15 @@ fn a_helix_of_several_turns_turns_them_all() {
         );
     }
     assert!(arcs[0].contains(" G3 ") && !arcs[1].starts_with("G"), "{}", sink.nc);
+    // Timed along the helix (three turns of 2π·10 mm, 3 mm down, at 100 mm/min), not the chords.
+    let t: f64 = sink
+        .blocks
+        .iter()
+        .filter(|b| b.source_line == Some(7))
+        .map(|b| b.time_s)
+        .sum();
+    let want = (60.0 * std::f64::consts::PI).hypot(3.0) / 100.0 * 60.0;
+    assert!((t - want).abs() < 1e-6, "{t} s, not {want} s");
     assert!(!sink.diags.iter().any(|d| d.severity != Severity::Info), "{:?}", sink.diags);
     // No arc word on the TNC for a helix: chords, every end on the helix, down at its pitch.
     let mut o = Options::new(&m);

@@ -522,8 +522,9 @@ struct Emitter<'a, S: Sink + ?Sized> {
     coolant_deferred: bool,
     /// Which clamped rotaries are locked now (a clamped axis is taken as locked at the start).
     locked: [bool; 3],
-    /// Set for the next block: an arc (G3 when true) with its centre words.
-    arc_words: Option<(bool, String)>,
+    /// Set for the next block: an arc (G3 when true) with its centre words, and its length
+    /// (the time at F: a full circle's chord is none).
+    arc_words: Option<(bool, String, f64)>,
     /// The active circular-interpolation plane word (G17/G18/G19).
     plane: &'static str,
     /// Outer-rotary travel of the exact solutions and of what was written, at CL points: what
@@ -1631,6 +1632,8 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             let n = kinematics::controlled_point(m, &b.actual, &(arc.center + arc.normal), &self.setup) - c;
             (c, n, Vec3::from(a.joints.linear))
         };
+        // Along the helix (a flat arc: no rise): what the tool travels at F.
+        let length = (arc.radius * arc.sweep).hypot(arc.normal.dot(&(b.pose.tip - a.pose.tip)));
         // G17: normal ±Z (I J), G18: ±Y (I K), G19: ±X (J K).
         let plane = [(2usize, "G17", [0usize, 1]), (1, "G18", [0, 2]), (0, "G19", [1, 2])]
             .into_iter()
@@ -1664,7 +1667,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                     crate::nc::write_fixed(&mut words, crate::nc::round_to(d[idx], dec), dec);
                     words.push(' ');
                 }
-                self.arc_words = Some((ccw, words.trim_end().to_string()));
+                self.arc_words = Some((ccw, words.trim_end().to_string(), length / pieces as f64));
                 if i == pieces {
                     return self.block(b, pt, false, diags, pt.inserted, None);
                 }
@@ -1700,7 +1703,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             }
             let l = self.f.words(&cc).to_string();
             self.out(&l)?;
-            self.arc_words = Some((ccw, if ccw { "DR+" } else { "DR-" }.to_string()));
+            self.arc_words = Some((ccw, if ccw { "DR+" } else { "DR-" }.to_string(), length));
             return self.block(b, pt, false, diags, pt.inserted, None);
         }
         // Chords: the arc swept in the part frame, tool axis fixed, linears from the rotaries.
@@ -1830,10 +1833,13 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         if kinematics::limit_violation(self.m, &a.joints, 1e-6).is_some() {
             return full;
         }
+        // One word's unit inside the travel: the written, rounded words land within it too (at
+        // the bisection's exact end, TCP's rounded tip put dmg-dmc75v's X 0.0005 mm past -375).
+        let margin = -2.0 * self.f.fmt.half_linear();
         let (mut lo, mut hi) = (0.0, clear);
         for _ in 0..40 {
             let mid = 0.5 * (lo + hi);
-            if kinematics::limit_violation(self.m, &at(self, mid).joints, 1e-6).is_some() {
+            if kinematics::limit_violation(self.m, &at(self, mid).joints, margin).is_some() {
                 hi = mid;
             } else {
                 lo = mid;
@@ -2604,7 +2610,10 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                     None => {}
                 }
             }
-            let len = prev.map_or(0.0, |p| (to.pose.tip - p.pose.tip).norm());
+            let len = match &self.arc_words {
+                Some((_, _, l)) => *l,
+                None => prev.map_or(0.0, |p| (to.pose.tip - p.pose.tip).norm()),
+            };
             let rot_moves =
                 prev.is_some_and(|p| (0..m.rotaries.len()).any(|i| (to.joints.rotary[i] - p.joints.rotary[i]).abs() > 1e-12));
             // The path of the machine's axes, units and degrees combined: what a control without
@@ -2817,10 +2826,10 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         let arc = self.arc_words.take();
         let motion = match (&arc, rapid) {
             (_, true) => Motion::Rapid,
-            (Some((ccw, _)), false) => Motion::Arc { ccw: *ccw },
+            (Some((ccw, _, _)), false) => Motion::Arc { ccw: *ccw },
             (None, false) => Motion::Feed,
         };
-        let extra = arc.as_ref().map_or("", |(_, w)| w.as_str());
+        let extra = arc.as_ref().map_or("", |(_, w, _)| w.as_str());
         self.at = Some(to);
         self.tool_changed = false;
         self.last_line = pt.line;
