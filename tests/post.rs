@@ -1976,6 +1976,37 @@ fn a_helix_of_several_turns_turns_them_all() {
     }
 }
 
+/// NX's `LOAD/TOOL,n,ADJUST,m` names the length offset register: where m is not n, `G43 H n`
+/// took another tool's length (a crash, or a cut in the air). The H word is m, in joint and TCP
+/// mode; a register that is no whole number is an error and no tool change.
+#[test]
+fn the_length_offset_register_is_the_one_the_cl_names() {
+    let m = machine("vmc-3axis");
+    let cl = "UNITS/MM\nLOAD/TOOL,5,ADJUST,25\nSPINDL/1000\nFEDRAT/100,MMPM\nGOTO/10,20,5\nGOTO/10,20,0\n\
+              LOAD/TOOL,6,ADJUST,6\nGOTO/30,20,5\nGOTO/30,20,0\n";
+    for (mode, word) in [(Mode::Joint, "G43"), (Mode::Tcp, "G43.4")] {
+        let (sink, _) = run(&m, cl.as_bytes(), &fanuc(&m, mode));
+        assert!(sink.nc.contains("(TOOL 5 LENGTH OFFSET 25)\nT5 M6\n"), "{}", sink.nc);
+        assert!(
+            sink.nc.contains(&format!("\n{word} H25\n")) && sink.nc.contains(&format!("\n{word} H6\n")),
+            "{}",
+            sink.nc
+        );
+        assert!(!sink.nc.contains("H5\n"), "{}", sink.nc);
+    }
+    // The same tool loaded again with another register: compensation again, with it.
+    let again = cl.replace("LOAD/TOOL,6,ADJUST,6", "LOAD/TOOL,5,ADJUST,35");
+    let (sink, _) = run(&m, again.as_bytes(), &fanuc(&m, Mode::Joint));
+    assert_eq!(sink.nc.matches(" M6").count(), 1, "{}", sink.nc);
+    assert!(sink.nc.contains("\nG43 H35\n"), "{}", sink.nc);
+    for bad in ["ADJUST,2.5", "ADJUST,0", "OSETNO,X", "ADJUST"] {
+        let (sink, _) = run(&m, cl.replace("ADJUST,25", bad).as_bytes(), &fanuc(&m, Mode::Joint));
+        let d = sink.first(Code::BadRecord);
+        assert_eq!((d.severity, d.line), (Severity::Error, Some(2)), "{bad}: {d}");
+        assert!(!sink.nc.contains("T5 M6"), "{bad}: {}", sink.nc);
+    }
+}
+
 /// CATIA writes `COOLNT/ON` before its first `LOADTL`: coolant on with no tool in the spindle,
 /// then off for the change and on again (M8, M9, T1 M6, M8). It goes on once, at the first move.
 #[test]

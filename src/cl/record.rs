@@ -89,6 +89,9 @@ pub enum Record {
     LoadTool {
         number: u32,
         length: Option<f64>,
+        /// The length offset register (`ADJUST,m` or `OSETNO,m`) where it is not the tool's
+        /// number: the H word.
+        adjust: Option<u32>,
     },
     ToolData {
         diameter: Option<f64>,
@@ -393,15 +396,34 @@ fn parse_general(stmt: &str, line: u32, diags: &mut Vec<Diagnostic>) -> Option<R
             }))
         }
         "LOADTL" | "LOAD" => {
-            // LOADTL/n[,LENGTH,l] ; LOAD/TOOL,n
+            // LOADTL/n[,LENGTH,l] ; LOAD/TOOL,n[,ADJUST,m]
             let mut number = None;
             let mut length = None;
+            let mut adjust = None;
             let mut i = 0;
             while i < args.len() {
                 let w = word(&args[i]);
                 if w == "TOOL" {
                 } else if w == "LENGTH" {
                     length = args.get(i + 1).and_then(|a| num(a.text));
+                    i += 1;
+                } else if w == "ADJUST" || w == "OSETNO" {
+                    // The length offset the CAM system named: another register's length is a
+                    // crash (or a cut in the air), never a default.
+                    let (text, col) = args.get(i + 1).map_or(("", args[i].col), |a| (a.text.trim(), a.col));
+                    match num(text) {
+                        Some(x) if (1.0..1e6).contains(&x) && x.fract() == 0.0 => adjust = Some(x as u32),
+                        _ => {
+                            bad(
+                                diags,
+                                col,
+                                format!(
+                                    "{major_uc}: {w} {text:?} is not a length offset number from 1 to 999999: no tool change written"
+                                ),
+                            );
+                            return None;
+                        }
+                    }
                     i += 1;
                 } else if let Some(x) = num(args[i].text) {
                     if number.is_none() {
@@ -420,7 +442,7 @@ fn parse_general(stmt: &str, line: u32, diags: &mut Vec<Diagnostic>) -> Option<R
                             return None;
                         }
                     }
-                } else if !w.is_empty() && !matches!(w.as_str(), "ADJUST" | "OSETNO" | "MILL" | "LATHE") {
+                } else if !w.is_empty() && !matches!(w.as_str(), "MILL" | "LATHE") {
                     diags.push(
                         Diagnostic::new(
                             Code::IgnoredRecord,
@@ -434,7 +456,11 @@ fn parse_general(stmt: &str, line: u32, diags: &mut Vec<Diagnostic>) -> Option<R
                 i += 1;
             }
             match number {
-                Some(number) => Some(Record::LoadTool { number, length }),
+                Some(number) => Some(Record::LoadTool {
+                    number,
+                    length,
+                    adjust: adjust.filter(|&a| a != number),
+                }),
                 None => {
                     bad(diags, rest_col, format!("{major_uc}: no tool number: no tool change written"));
                     None

@@ -495,6 +495,8 @@ struct Emitter<'a, S: Sink + ?Sized> {
     /// The tool length the program last said it is cut for (a comment).
     length_said: Option<f64>,
     tool: Option<u32>,
+    /// The tool's length offset register where the CL names one other than its number.
+    adjust: Option<u32>,
     comp_on: bool,
     rpm: Option<f64>,
     blocks: u64,
@@ -660,6 +662,7 @@ pub fn post<R: BufRead, S: Sink + ?Sized>(input: R, m: &Machine, o: &Options, si
         last_line: 0,
         standing: formats.half_linear(),
         tool: None,
+        adjust: None,
         comp_on: false,
         rpm: None,
         blocks: 0,
@@ -909,10 +912,15 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             self.cancel_cycle()?;
         }
         match ev {
-            ProgEvent::Tool { number, line } => {
+            ProgEvent::Tool { number, adjust, line } => {
                 // The tool in the spindle loaded again (CATIA writes `LOADTL/1` then `LOADTL/1,1`):
                 // a second change would only stop the spindle and retract.
                 if self.tool == Some(number) {
+                    // With another length offset: in force from the next move.
+                    if adjust != self.adjust {
+                        self.adjust = adjust;
+                        self.comp_on = false;
+                    }
                     self.note(Diagnostic::new(
                         Code::IgnoredRecord,
                         Severity::Info,
@@ -943,7 +951,11 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                     self.out(&l)?;
                     self.coolant_restore = Some(line);
                 }
-                let c = self.f.comment(&format!("TOOL {number}")).to_string();
+                let c = match adjust {
+                    Some(a) => format!("TOOL {number} LENGTH OFFSET {a}"),
+                    None => format!("TOOL {number}"),
+                };
+                let c = self.f.comment(&c).to_string();
                 self.out(&c)?;
                 for t in d.tool_change {
                     if let Some(l) = self.f.line(t, number, 0) {
@@ -952,6 +964,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                 }
                 self.f.reset_modal();
                 self.tool = Some(number);
+                self.adjust = adjust;
                 self.tool_changed = true;
                 if std::mem::take(&mut self.spindle_on) {
                     self.spindle_restore = Some(line);
@@ -1140,7 +1153,8 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             Mode::Joint => d.length_comp,
             Mode::Tcp => d.tcp_on,
         };
-        if let Some(l) = self.f.line(w, t, 0) {
+        // The H word: the register the CL named, else the tool's own.
+        if let Some(l) = self.f.line(w, self.adjust.unwrap_or(t), 0) {
             self.out(&l)?;
         }
         self.comp_on = true;

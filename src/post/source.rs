@@ -70,7 +70,12 @@ pub struct ArcSpec {
 
 #[derive(Clone, Debug)]
 pub enum ProgEvent {
-    Tool { number: u32, line: u32 },
+    /// A tool change; `adjust`: its length offset register where it is not `number`.
+    Tool {
+        number: u32,
+        adjust: Option<u32>,
+        line: u32,
+    },
     ToolLength(f64),
     Spindle(SpindleCmd),
     Coolant(CoolantCmd),
@@ -334,11 +339,11 @@ impl<R: BufRead> Source<R> {
                 self.out.push_back(Item::Event(ProgEvent::Spindle(c)))
             }
             Record::Coolant(c) => self.out.push_back(Item::Event(ProgEvent::Coolant(c))),
-            Record::LoadTool { number, length } => {
+            Record::LoadTool { number, length, adjust } => {
                 if let Some(l) = length {
                     self.out.push_back(Item::Event(ProgEvent::ToolLength(l * self.scale)));
                 }
-                self.out.push_back(Item::Event(ProgEvent::Tool { number, line }));
+                self.out.push_back(Item::Event(ProgEvent::Tool { number, adjust, line }));
             }
             Record::ToolData {
                 diameter,
