@@ -143,6 +143,22 @@ def main():
             if not rep.get('ok') or tilts == 0:
                 fails.append(f'planes {f} {dialect}: {tilts} planes, {rep}')
 
+    # CAMWorks' CLT indexes the part with ROTABL (radians) and writes the path in the turned frame:
+    # on the A table a 3+1 program, the turned frame's X Y Z at A-90, arcs in G17, no error. Read
+    # literally (the shared verifier knows no ROTABL), its plunges went sideways through the part.
+    f = 'camworks_clt_interface_glue_rotabl.clt'
+    nc = os.path.join(tmp, 'rotabl.nc')
+    nd = os.path.join(tmp, 'rotabl.ndjson')
+    p = run([a.kinepost, 'post', '--machine', 'vmc-4axis-a', os.path.join(corpus, f), '-o', nc, '--diagnostics', nd])
+    lines = open(nc).read().splitlines() if os.path.exists(nc) else []
+    errors = sum(1 for l in open(nd) if '"severity":"error"' in l) if os.path.exists(nd) else -1
+    first = next((l for l in lines if l.startswith('G0 X')), '')
+    rotabl_ok = (p.returncode == 0 and errors == 0 and first.startswith('G0 X67.500 Y120.500 ') and 'A-90.0000' in first
+                 and not any(l.startswith(('G18', 'G19')) for l in lines))
+    print(f'rotabl {f}: first move {first!r}, {errors} errors, ok={rotabl_ok}')
+    if not rotabl_ok:
+        fails.append(f'rotabl {f}: exit {p.returncode}, {errors} errors, first move {first!r}')
+
     # The NX golden: kinepost's rotary travel and largest step next to NX's.
     nc = os.path.join(tmp, 'va-haas-tcp.nc')
     run([a.kinepost, 'post', '--machine', 'haas-umc750', '--mode', 'tcp', os.path.join(corpus, 'nx_clsf_mech491_variable_axis_inch_5ax.cls'), '-o', nc])
@@ -158,7 +174,7 @@ def main():
 
     for f in fails:
         print('FAIL', f)
-    print(f'{ok + len(CORPUS) * 2 + planes + replays - len(fails)} passed, {len(fails)} failed')
+    print(f'{ok + len(CORPUS) * 2 + planes + replays + 1 - len(fails)} passed, {len(fails)} failed')
     return 1 if fails else 0
 
 

@@ -41,6 +41,7 @@ pub enum Code {
     SpindleStopped,
     CoolantRestored,
     ToolLength,
+    TableIndex,
 }
 
 impl Code {
@@ -72,6 +73,7 @@ impl Code {
             Code::SpindleStopped => "spindle_stopped",
             Code::CoolantRestored => "coolant_restored",
             Code::ToolLength => "tool_length",
+            Code::TableIndex => "table_index",
         }
     }
 }

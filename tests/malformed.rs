@@ -54,6 +54,8 @@ const CASES: &[(&str, &str, Option<u32>)] = &[
     ("LOADTL/-1", "bad_record", Some(8)),
     ("LOADTL/999999999999", "bad_record", Some(8)),
     ("LOAD/TOOL", "bad_record", Some(6)),
+    ("LOAD/TOOL,5,ADJUST,2.5", "bad_record", Some(20)),
+    ("ROTABL/,AAXIS", "bad_record", Some(8)),
     ("LONG", "line_too_long", None),
 ];
 

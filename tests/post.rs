@@ -1976,6 +1976,106 @@ fn a_helix_of_several_turns_turns_them_all() {
     }
 }
 
+/// CAMWorks' CLT indexes the part with `ROTABL` (radians) and writes the path in the turned
+/// frame (plunges along its Z, arcs about its Z) with `TLAXIS` in the part frame: taken
+/// literally, every plunge went sideways through the part. The same path written in the part
+/// frame (6-value GOTOs) must give the same program; a 3+1 program on the A table is the turned
+/// frame's X Y Z with A at -90.
+#[test]
+fn a_rotabl_index_takes_the_path_out_of_the_turned_frame() {
+    let m = machine("vmc-4axis-a");
+    let turned = "UNITS/ MM \nTLAXIS/ 0.000000,-1.000000,0.000000 \nROTABL/ 1.570796,AAXIS,TABLE,CCLW \n\
+                  ROTABL/ -0.000000,BAXIS,TABLE,CCLW \nROTABL/ 0.000000,CAXIS,TABLE,CCLW \nRAPID/ \nGOTO/ 20.0,30.0,25.0 \n\
+                  FEDRAT/ MMPM,500.0\nGOTO/ 20.0,30.0,-5.0 \nGOTO/ 40.0,30.0,-5.0 \n\
+                  CIRCLE/ 40.0,40.0,-5.0,0.0,0.0,1.0,10.0,COUNTERCLOCKWISE \nGOTO/ 50.0,40.0,-5.0 \n\
+                  ROTABL/ -0.000000,CAXIS,TABLE,CCLW \nROTABL/ 0.000000,BAXIS,TABLE,CCLW \nROTABL/ -1.570796,AAXIS,TABLE,CCLW \n";
+    // The same in the part frame: (x, y, z) turned 90° about +X is (x, -z, y).
+    let part = "UNITS/MM\nRAPID\nGOTO/20,-25,30,0,-1,0\nFEDRAT/MMPM,500\nGOTO/20,5,30,0,-1,0\nGOTO/40,5,30,0,-1,0\n\
+                CIRCLE/40,5,40,0,-1,0,10\nGOTO/50,5,40,0,-1,0\n";
+    // ICAM-style APT: degrees, the other sense named.
+    let degrees = turned.replace("1.570796,AAXIS,TABLE,CCLW", "90,AAXIS,CLW");
+    for mode in [Mode::Joint, Mode::Tcp] {
+        let o = fanuc(&m, mode);
+        let (want, _) = run(&m, part.as_bytes(), &o);
+        for cl in [turned, degrees.as_str()] {
+            let (got, _) = run(&m, cl.as_bytes(), &o);
+            assert_eq!(got.blocks.len(), want.blocks.len(), "{}", got.nc);
+            for (g, w) in got.blocks.iter().zip(&want.blocks) {
+                let d = (Vec3::from(g.tip) - Vec3::from(w.tip)).norm() + (Vec3::from(g.axis) - Vec3::from(w.axis)).norm();
+                // 1.570796 is π/2 to six places: 3e-7 rad, 1e-5 mm at 30 mm (a word is 1e-3).
+                assert!(
+                    d < 1e-4,
+                    "{mode:?} block {}: {:?} against {:?}\n{}",
+                    g.n,
+                    g.tip,
+                    w.tip,
+                    got.nc
+                );
+            }
+            let i = got.first(Code::TableIndex);
+            assert_eq!((i.severity, i.line), (Severity::Info, Some(7)), "{i}");
+            assert!(!got.diags.iter().any(|d| d.severity == Severity::Error), "{:?}", got.diags);
+        }
+    }
+    let (got, _) = run(&m, turned.as_bytes(), &fanuc(&m, Mode::Joint));
+    assert!(
+        got.nc.contains(" X20.000 Y30.000 ") && got.nc.contains(" A-90.0000"),
+        "{}",
+        got.nc
+    );
+    assert!(got.nc.contains("\nG3 X50.000 Y40.000 Z-5.000 I0.000 J10.000"), "{}", got.nc);
+    assert!(!got.nc.contains("G18") && !got.nc.contains("G19"), "{}", got.nc);
+}
+
+/// An index the CL does not confirm is an error naming its line, never a guess: about the
+/// tool axis itself (which way?), about two axes (which order?), one that turns the CL's Z
+/// elsewhere than the tool axis, one that names no axis or no angle, and a tool axis that
+/// contradicts the index in force.
+#[test]
+fn a_rotabl_index_the_cl_does_not_confirm_is_an_error() {
+    let m = machine("vmc-4axis-a");
+    let head = "UNITS/MM\nFEDRAT/MMPM,500\n";
+    let cases = [
+        ("TLAXIS/0,0,1\nROTABL/45,CAXIS\nGOTO/10,10,5\n", Code::TableIndex, 5),
+        (
+            "TLAXIS/0,-1,0\nROTABL/90,AAXIS\nROTABL/30,BAXIS\nGOTO/10,10,5\n",
+            Code::TableIndex,
+            6,
+        ),
+        ("TLAXIS/0,-1,0\nROTABL/30,AAXIS\nGOTO/10,10,5\n", Code::TableIndex, 5),
+        ("TLAXIS/0,-1,0\nROTABL/1.5,,TABLE\nGOTO/10,10,5\n", Code::TableIndex, 4),
+        ("TLAXIS/0,-1,0\nROTABL/,AAXIS\nGOTO/10,10,5\n", Code::BadRecord, 4),
+        (
+            "TLAXIS/0,-1,0\nROTABL/90,AAXIS\nGOTO/10,10,5\nTLAXIS/0,0,1\nGOTO/10,10,0\n",
+            Code::TableIndex,
+            7,
+        ),
+    ];
+    for (cl, code, line) in cases {
+        let cl = format!("{head}{cl}");
+        let (got, _) = run(&m, cl.as_bytes(), &fanuc(&m, Mode::Joint));
+        let e = got
+            .diags
+            .iter()
+            .find(|d| d.code == code && d.severity == Severity::Error)
+            .unwrap_or_else(|| panic!("{cl}: no {} error: {:?}", code.as_str(), got.diags));
+        assert_eq!(e.line, Some(line), "{cl}: {e}");
+        let mut strict = fanuc(&m, Mode::Joint);
+        strict.strict = true;
+        assert!(
+            post::post(cl.as_bytes(), &m, &strict, &mut Collect::default()).is_err(),
+            "{cl}"
+        );
+    }
+    // CATIA's `ROTABL/0,,TABLE`: no index, nothing to say.
+    let (got, _) = run(
+        &m,
+        b"UNITS/MM\nROTABL/    0.000000,,TABLE,CLW\nGOTO/10,10,5\n",
+        &fanuc(&m, Mode::Joint),
+    );
+    assert!(!got.diags.iter().any(|d| d.code == Code::TableIndex), "{:?}", got.diags);
+}
+
 /// NX's `LOAD/TOOL,n,ADJUST,m` names the length offset register: where m is not n, `G43 H n`
 /// took another tool's length (a crash, or a cut in the air). The H word is m, in joint and TCP
 /// mode; a register that is no whole number is an error and no tool change.

@@ -103,6 +103,14 @@ pub enum Record {
     Units(Units),
     Multax(bool),
     ToolAxis([f64; 3]),
+    /// `ROTABL/a,AAXIS|BAXIS|CAXIS[,INCR][,TABLE][,CLW|CCLW]`: a rotary indexed to `a` (or by
+    /// it, `incr`), in the record's own number: CAMWorks writes radians, ICAM-style APT degrees.
+    /// `axis` 0..3 for A..C; `None` where the record names none (CATIA's `ROTABL/0,,TABLE`).
+    RotaryTable {
+        axis: Option<usize>,
+        angle: f64,
+        incr: bool,
+    },
     /// The next GOTO ends an arc about this centre and axis. `clockwise`: the motion turns
     /// clockwise about the axis (right-hand rule) — NX CLSF's 11-value form; APT from Creo,
     /// SOLIDWORKS CAM and CAMWorks turns counter-clockwise about it. `turns`: NX's `TIMES,n`, a
@@ -145,7 +153,6 @@ const IGNORED: &[&str] = &[
     "CUTCOM",
     "CLRSRF",
     "MODE",
-    "ROTABL",
     "CLEARP",
     "DISPLY",
     "OPSKIP",
@@ -511,6 +518,32 @@ fn parse_general(stmt: &str, line: u32, diags: &mut Vec<Diagnostic>) -> Option<R
             }
         }
         "MULTAX" => Some(Record::Multax(!matches!(args.first().map(word).as_deref(), Some("OFF")))),
+        "ROTABL" => {
+            let mut angle = None;
+            let mut axis = None;
+            let mut incr = false;
+            for a in &args {
+                match word(a).as_str() {
+                    "AAXIS" => axis = Some(0),
+                    "BAXIS" => axis = Some(1),
+                    "CAXIS" => axis = Some(2),
+                    "INCR" => incr = true,
+                    _ => {
+                        if angle.is_none() {
+                            angle = num(a.text);
+                        }
+                    }
+                }
+            }
+            match angle {
+                Some(angle) => Some(Record::RotaryTable { axis, angle, incr }),
+                None => {
+                    // An index that cannot be read leaves the frame of what follows unknown.
+                    bad(diags, rest_col, "ROTABL: expected an angle".into());
+                    None
+                }
+            }
+        }
         "TLAXIS" => {
             let v: Vec<f64> = args.iter().filter_map(|a| num(a.text)).collect();
             if v.len() >= 3 {

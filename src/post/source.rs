@@ -7,6 +7,7 @@
 use crate::cl::{CoolantCmd, CycleKind, CycleParams, Event, FeedUnit, Reader, Record, SpindleCmd};
 use crate::diag::{Code, Diagnostic, Severity};
 use crate::kinematics::{Pose, Units, Vec3};
+use nalgebra::{Matrix3, Rotation3, Unit};
 use std::collections::VecDeque;
 use std::io::BufRead;
 
@@ -114,6 +115,14 @@ pub struct Source<R> {
     circle_cw: bool,
     circle_turns: u32,
     cycle: Option<CycleParams>,
+    /// `ROTABL` angles (A, B, C) as the CL states them, and the line of the last one.
+    table: [f64; 3],
+    table_line: u32,
+    /// The indexing frame: CL positions (and tool axes a GOTO gives) after a `ROTABL` are in
+    /// the part turned by it, `frame` takes them into the part frame. Resolved at the first
+    /// motion after the index changes (`frame_pending`).
+    frame: Option<Matrix3<f64>>,
+    frame_pending: bool,
     /// Mark drilling holes for canned-cycle output (and approach them at the start level).
     pub canned_cycles: bool,
     ended: bool,
@@ -179,6 +188,10 @@ impl<R: BufRead> Source<R> {
             circle_cw: false,
             circle_turns: 1,
             cycle: None,
+            table: [0.0; 3],
+            table_line: 0,
+            frame: None,
+            frame_pending: false,
             canned_cycles: false,
             ended: false,
             strict_error: None,
@@ -293,8 +306,11 @@ impl<R: BufRead> Source<R> {
         let from = matches!(rec, Record::From { .. });
         match rec {
             Record::Goto { p, axis } | Record::From { p, axis } => {
+                if self.frame_pending {
+                    self.resolve_frame(line);
+                }
                 if let Some(a) = axis
-                    && !self.set_axis(a, line)
+                    && !self.set_axis(self.to_part(Vec3::from(a)).into(), line)
                 {
                     return None;
                 }
@@ -304,8 +320,11 @@ impl<R: BufRead> Source<R> {
                 return self.motion(line, Vec3::from(p));
             }
             Record::GoDelta { d, axis } => {
+                if self.frame_pending {
+                    self.resolve_frame(line);
+                }
                 if let Some(a) = axis
-                    && !self.set_axis(a, line)
+                    && !self.set_axis(self.to_part(Vec3::from(a)).into(), line)
                 {
                     return None;
                 }
@@ -366,8 +385,25 @@ impl<R: BufRead> Source<R> {
                 }
             }
             Record::ToolAxis(a) => {
-                self.set_axis(a, line);
+                // Under an index, a new tool axis must agree with it again.
+                self.frame_pending |= self.set_axis(a, line) && self.table != [0.0; 3];
             }
+            Record::RotaryTable { axis, angle, incr } => match axis {
+                Some(i) => {
+                    self.table[i] = if incr { self.table[i] + angle } else { angle };
+                    self.table_line = line;
+                    self.frame_pending = true;
+                }
+                None if angle == 0.0 => {}
+                None => self.diag(
+                    Code::TableIndex,
+                    Severity::Error,
+                    line,
+                    format!(
+                        "ROTABL {angle} names no axis (AAXIS, BAXIS, CAXIS): the frame of what follows is not known; not applied"
+                    ),
+                ),
+            },
             Record::Circle {
                 center,
                 axis,
@@ -405,6 +441,89 @@ impl<R: BufRead> Source<R> {
         None
     }
 
+    /// A vector of the CL's (indexed) frame in the part frame.
+    fn to_part(&self, v: Vec3) -> Vec3 {
+        self.frame.map_or(v, |r| r * v)
+    }
+
+    /// The frame a `ROTABL` index puts the CL in, where the CL itself confirms it: CAMWorks
+    /// writes `TLAXIS` in the part frame and the path after `ROTABL` in the turned one (plunges
+    /// along its Z, arcs about its Z), its angle in radians where ICAM-style APT has degrees,
+    /// and either sense is in use (CLW/CCLW). The one reading that turns the CL's +Z onto the
+    /// tool axis in force is taken; none or several (an index about the tool axis itself) is an
+    /// error and the CL taken as written, never a guess.
+    fn resolve_frame(&mut self, line: u32) {
+        self.frame_pending = false;
+        self.frame = None;
+        let turned: Vec<usize> = (0..3).filter(|&i| self.table[i] != 0.0).collect();
+        let names = |v: &[usize]| {
+            v.iter()
+                .map(|&i| ['A', 'B', 'C'][i].to_string())
+                .collect::<Vec<_>>()
+                .join(", ")
+        };
+        let at = self.table_line;
+        let i = match turned.as_slice() {
+            [] => return,
+            [i] => *i,
+            _ => {
+                self.diag(
+                    Code::TableIndex,
+                    Severity::Error,
+                    line,
+                    format!(
+                        "ROTABL (line {at}) indexes {} at once: the order they turn in is not known, so neither is the frame of the CL from here; taken as written",
+                        names(&turned)
+                    ),
+                );
+                return;
+            }
+        };
+        let v = self.table[i];
+        let about = Unit::new_normalize(Vec3::from(std::array::from_fn(|k| f64::from(u8::from(k == i)))));
+        let mut found: Vec<(Rotation3<f64>, &str)> = Vec::new();
+        for (angle, unit) in [(v, "radians"), (v.to_radians(), "degrees")] {
+            for s in [1.0, -1.0] {
+                let r = Rotation3::from_axis_angle(&about, s * angle);
+                if (r * Vec3::z() - self.axis).norm() < 1e-4 && !found.iter().any(|(f, _)| f.angle_to(&r) < 1e-9) {
+                    found.push((r, unit));
+                }
+            }
+        }
+        let axis = ['A', 'B', 'C'][i];
+        let (i_, j_, k_) = (self.axis.x, self.axis.y, self.axis.z);
+        match found.as_slice() {
+            [(r, unit)] => {
+                let deg = r.scaled_axis().dot(&about).to_degrees();
+                self.frame = Some(*r.matrix());
+                self.diag(
+                    Code::TableIndex,
+                    Severity::Info,
+                    line,
+                    format!(
+                        "ROTABL {v} about {axis} (line {at}, {unit}): the CL from here is in the part turned {deg:.4}° about {axis}, the tool axis in force ({i_:.4}, {j_:.4}, {k_:.4}) its Z: taken into the part frame"
+                    ),
+                );
+            }
+            [] => self.diag(
+                Code::TableIndex,
+                Severity::Error,
+                line,
+                format!(
+                    "ROTABL {v} about {axis} (line {at}): no reading of it (radians or degrees, either sense) turns the CL's Z onto the tool axis in force ({i_:.4}, {j_:.4}, {k_:.4}): the frame of the CL from here is not known; taken as written"
+                ),
+            ),
+            _ => self.diag(
+                Code::TableIndex,
+                Severity::Error,
+                line,
+                format!(
+                    "ROTABL {v} about {axis} (line {at}): the tool axis in force ({i_:.4}, {j_:.4}, {k_:.4}) does not tell which way, or by how much, the part is turned: the frame of the CL from here is not known; taken as written"
+                ),
+            ),
+        }
+    }
+
     fn push(&mut self, line: u32, p_cl: Vec3, rapid: bool, inserted: bool, comment: Option<&'static str>) {
         let pt = self.motion_pt(line, p_cl, rapid, inserted, comment);
         self.out.push_back(Item::Motion(pt));
@@ -414,7 +533,7 @@ impl<R: BufRead> Source<R> {
         MotionPt {
             line,
             pose: Pose {
-                tip: p_cl * self.scale,
+                tip: self.to_part(p_cl) * self.scale,
                 axis: self.axis,
             },
             rapid,
@@ -498,15 +617,16 @@ impl<R: BufRead> Source<R> {
         // The plane's centre: where the start point projects onto the axis line.
         let c_plane = center + k * k.dot(&a);
         Some(ArcSpec {
-            center: c_plane * self.scale,
-            normal: k,
+            center: self.to_part(c_plane) * self.scale,
+            normal: self.to_part(k),
             radius: a_p.norm() * self.scale,
             sweep,
         })
     }
 
     fn hole(&mut self, line: u32, p: Vec3, c: CycleParams) {
-        let u = self.axis;
+        // Along the tool axis, in the CL's frame (the points go into the part frame as pushed).
+        let u = self.frame.map_or(self.axis, |r| r.transpose() * self.axis);
         let clear = p + u * c.rapid_to;
         let saved = self.feed;
         if let Some((f, unit, units)) = c.feed {
