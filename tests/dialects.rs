@@ -1166,3 +1166,67 @@ fn a_tcp_program_leaves_the_part_by_machine_z_home() {
         );
     }
 }
+
+/// APT's `DELAY` is a dwell (seconds, or `REV,n` spindle revolutions): it was an ignored record,
+/// so a drill meant to break its chip at the bottom of each peck never stopped there. Each
+/// control writes its own dwell (a Haas `P` without a decimal point is milliseconds, a
+/// Sinumerik's `G4 S` revolutions), the cycle time counts it, and `verify` reads the program
+/// back through it.
+#[test]
+fn a_delay_is_each_controls_dwell() {
+    use kinepost::kinematics::{Setup, Vec3};
+    let lib = Library::load_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap();
+    let m = &lib.get("vmc-3axis").unwrap().machine;
+    let cl = "UNITS/MM\nLOADTL/1\nSPINDL/600,RPM,CLW\nRAPID\nGOTO/0,0,5\nFEDRAT/100,MMPM\nGOTO/0,0,-10\n\
+              DELAY/1.5\nGOTO/0,0,5\nGOTO/0,0,-10\nDELAY/REV,10\nGOTO/0,0,5\nFINI\n";
+    let post = |cl: &str, dialect: &str| {
+        let settings = post::Settings {
+            dialect: Some(dialect.into()),
+            ..Default::default()
+        };
+        let o = settings.options(m).unwrap();
+        let mut nc = Vec::new();
+        let s = post::post(cl.as_bytes(), m, &o, &mut post::TextSink(&mut nc)).unwrap();
+        (String::from_utf8(nc).unwrap(), s)
+    };
+    let (_, plain) = post(&cl.replace("DELAY/1.5\n", "").replace("DELAY/REV,10\n", ""), "fanuc");
+    for (dialect, first, second) in [
+        ("fanuc", "\nG4 P1500\n", "\nG4 P1000\n"),
+        ("haas", "\nG4 P1.500\n", "\nG4 P1.000\n"),
+        ("linuxcnc", "\nG4 P1.500\n", "\nG4 P1.000\n"),
+        ("siemens", "\nG4 F1.500\n", "\nG4 F1.000\n"),
+        ("heidenhain", " CYCL DEF 9.1 DWELL 1.500\n", " CYCL DEF 9.1 DWELL 1.000\n"),
+    ] {
+        let (nc, s) = post(cl, dialect);
+        let (a, b) = (nc.find(first), nc.find(second));
+        assert!(a.is_some() && b.is_some() && a < b, "{dialect}: {nc}");
+        // After the first plunge's block, before the move out.
+        assert!(nc[..a.unwrap()].contains("-10."), "{dialect}: {nc}");
+        assert!(
+            (s.cycle_time_s - plain.cycle_time_s - 2.5).abs() < 1e-9,
+            "{dialect}: {} against {}",
+            s.cycle_time_s,
+            plain.cycle_time_s
+        );
+        let vo = post::verify::VerifyOptions {
+            mode: Mode::Joint,
+            setup: Setup::new(m.default_tool_length, Vec3::zeros()),
+            tolerance: 0.01,
+            angle_tolerance_deg: 0.01,
+            cl_units: None,
+            cl_tool_length: true,
+        };
+        let rep = post::verify::verify(cl.as_bytes(), nc.as_bytes(), m, &vo).unwrap();
+        assert!(rep.ok, "{dialect}: {rep:?}\n{nc}");
+    }
+    // Revolutions with the spindle standing: no time to write; a dwell that is no number of
+    // seconds is a bad record.
+    let (nc, _) = post(&cl.replace("SPINDL/600,RPM,CLW", "SPINDL/OFF"), "fanuc");
+    assert!(nc.contains("G4 P1500") && !nc.contains("G4 P1000"), "{nc}");
+    let (nc, s) = post(&cl.replace("DELAY/1.5", "DELAY/-1"), "fanuc");
+    assert!(
+        !nc.contains("G4 P1500") && s.counts.get("bad_record") == Some(&1),
+        "{nc} {:?}",
+        s.counts
+    );
+}

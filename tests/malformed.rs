@@ -56,6 +56,7 @@ const CASES: &[(&str, &str, Option<u32>)] = &[
     ("LOAD/TOOL", "bad_record", Some(6)),
     ("LOAD/TOOL,5,ADJUST,2.5", "bad_record", Some(20)),
     ("ROTABL/,AAXIS", "bad_record", Some(8)),
+    ("DELAY/-1", "bad_record", Some(7)),
     ("LONG", "line_too_long", None),
 ];
 

@@ -103,6 +103,11 @@ pub enum Record {
     Units(Units),
     Multax(bool),
     ToolAxis([f64; 3]),
+    /// `DELAY/t` (seconds) or `DELAY/REV,n` (spindle revolutions): a dwell.
+    Delay {
+        seconds: Option<f64>,
+        revs: Option<f64>,
+    },
     /// `ROTABL/a,AAXIS|BAXIS|CAXIS[,INCR][,TABLE][,CLW|CCLW]`: a rotary indexed to `a` (or by
     /// it, `incr`), in the record's own number: CAMWorks writes radians, ICAM-style APT degrees.
     /// `axis` 0..3 for A..C; `None` where the record names none (CATIA's `ROTABL/0,,TABLE`).
@@ -167,7 +172,6 @@ const IGNORED: &[&str] = &[
     "CYCLE_DEF",
     "SET",
     "ORIGIN",
-    "DELAY",
     "OPTIONS",
     "TECHNO",
     "PREFUN",
@@ -518,6 +522,28 @@ fn parse_general(stmt: &str, line: u32, diags: &mut Vec<Diagnostic>) -> Option<R
             }
         }
         "MULTAX" => Some(Record::Multax(!matches!(args.first().map(word).as_deref(), Some("OFF")))),
+        "DELAY" => {
+            let revs = args.first().is_some_and(|a| word(a) == "REV");
+            let v = args.get(usize::from(revs));
+            match v.and_then(|a| num(a.text)) {
+                Some(t) if (0.0..=3600.0).contains(&t) => Some(Record::Delay {
+                    seconds: (!revs).then_some(t),
+                    revs: revs.then_some(t),
+                }),
+                _ => {
+                    let col = v.map_or(rest_col, |a| a.col);
+                    bad(
+                        diags,
+                        col,
+                        format!(
+                            "DELAY: expected a dwell of 0 to 3600 {}: no dwell written",
+                            if revs { "revolutions" } else { "seconds" }
+                        ),
+                    );
+                    None
+                }
+            }
+        }
         "ROTABL" => {
             let mut angle = None;
             let mut axis = None;

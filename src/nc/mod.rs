@@ -668,6 +668,40 @@ impl Formatter {
         }
     }
 
+    /// A dwell of `seconds` (APT's `DELAY`): `G4 P` in milliseconds on Fanuc, in seconds with a
+    /// decimal point on Haas and LinuxCNC (a Haas `P` without one is milliseconds), `G4 F`
+    /// seconds on a Sinumerik (`G4 S` would be revolutions), cycle 9 on a TNC.
+    pub fn dwell(&mut self, seconds: f64) -> Vec<String> {
+        let mut out = Vec::new();
+        match self.d.cycles {
+            Cycles::Iso { dwell_ms } => {
+                self.start();
+                self.buf.push_str("G4 P");
+                if dwell_ms {
+                    self.buf
+                        .push_str(itoa::Buffer::new().format((seconds * 1000.0).round() as i64));
+                } else {
+                    self.number(seconds, 3, false);
+                }
+                out.push(self.buf.clone());
+            }
+            Cycles::Siemens => {
+                self.start();
+                self.buf.push_str("G4 F");
+                self.number(seconds, 3, false);
+                out.push(self.buf.clone());
+            }
+            Cycles::Heidenhain => {
+                out.push(self.words("CYCL DEF 9.0 DWELL TIME").to_string());
+                self.start();
+                self.buf.push_str("CYCL DEF 9.1 DWELL ");
+                self.number(seconds, 3, false);
+                out.push(self.buf.clone());
+            }
+        }
+        out
+    }
+
     /// The lines of one hole as a canned cycle (the tool already waits above it at `z_start`).
     /// `modal`: the previous hole's cycle is still on with the same levels, feed, peck and
     /// dwell, so only the position is written (it calls the cycle).

@@ -274,6 +274,8 @@ impl<R: std::io::BufRead> NcReader<R> {
                     });
                 }
             }
+            // Cycle 9, a dwell: no motion.
+            ["CYCL", "DEF", "9.0" | "9.1", ..] => return Ok(None),
             ["CYCL", "DEF", other, ..] => {
                 return Err(Error::Unsupported {
                     line: self.line,

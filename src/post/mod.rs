@@ -1039,6 +1039,32 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                 let c = self.f.comment(&format!("OPERATION {name}")).to_string();
                 self.out(&c)?;
             }
+            ProgEvent::Dwell { seconds, revs, line } => {
+                // Revolutions at the speed in force; with no speed to turn them into time the
+                // dwell cannot be written as the CL meant it.
+                let secs = match (seconds, revs, self.rpm.filter(|_| self.spindle_on)) {
+                    (Some(t), _, _) => Some(t),
+                    (None, Some(n), Some(rpm)) => Some(n * 60.0 / rpm),
+                    _ => None,
+                };
+                match secs {
+                    Some(t) => {
+                        for l in self.f.dwell(t) {
+                            self.out(&l)?;
+                        }
+                        self.sum.cycle_time_s += t;
+                    }
+                    None => self.note(Diagnostic::new(
+                        Code::BadRecord,
+                        Severity::Warning,
+                        Some(line),
+                        format!(
+                            "DELAY of {} revolutions with no spindle turning: no dwell written",
+                            revs.unwrap_or(0.0)
+                        ),
+                    ))?,
+                }
+            }
             ProgEvent::Diag(dg) => self.note(dg)?,
             ProgEvent::End => {}
         }

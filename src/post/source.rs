@@ -78,6 +78,12 @@ pub enum ProgEvent {
         line: u32,
     },
     ToolLength(f64),
+    /// A dwell: seconds, or spindle revolutions.
+    Dwell {
+        seconds: Option<f64>,
+        revs: Option<f64>,
+        line: u32,
+    },
     Spindle(SpindleCmd),
     Coolant(CoolantCmd),
     Comment(String),
@@ -388,6 +394,7 @@ impl<R: BufRead> Source<R> {
                 // Under an index, a new tool axis must agree with it again.
                 self.frame_pending |= self.set_axis(a, line) && self.table != [0.0; 3];
             }
+            Record::Delay { seconds, revs } => self.out.push_back(Item::Event(ProgEvent::Dwell { seconds, revs, line })),
             Record::RotaryTable { axis, angle, incr } => match axis {
                 Some(i) => {
                     self.table[i] = if incr { self.table[i] + angle } else { angle };
