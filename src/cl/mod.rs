@@ -6,7 +6,7 @@
 
 mod record;
 
-pub use record::{CoolantCmd, CycleKind, CycleParams, FeedUnit, Record, SpindleCmd, parse_statement};
+pub use record::{CoolantCmd, CycleKind, CycleParams, Dwell, FeedUnit, Record, SpindleCmd, parse_statement};
 
 use crate::diag::{Code, Diagnostic, Severity};
 use std::io::BufRead;

@@ -13,6 +13,13 @@ pub enum FeedUnit {
     PerRev,
 }
 
+/// APT's `DELAY`: a dwell in seconds, or in spindle revolutions (`DELAY/REV,n`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Dwell {
+    Seconds(f64),
+    Revolutions(f64),
+}
+
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum SpindleCmd {
     Rpm {
@@ -103,11 +110,7 @@ pub enum Record {
     Units(Units),
     Multax(bool),
     ToolAxis([f64; 3]),
-    /// `DELAY/t` (seconds) or `DELAY/REV,n` (spindle revolutions): a dwell.
-    Delay {
-        seconds: Option<f64>,
-        revs: Option<f64>,
-    },
+    Delay(Dwell),
     /// `ROTABL/a,AAXIS|BAXIS|CAXIS[,INCR][,TABLE][,CLW|CCLW]`: a rotary indexed to `a` (or by
     /// it, `incr`), in the record's own number: CAMWorks writes radians, ICAM-style APT degrees.
     /// `axis` 0..3 for A..C; `None` where the record names none (CATIA's `ROTABL/0,,TABLE`).
@@ -526,10 +529,9 @@ fn parse_general(stmt: &str, line: u32, diags: &mut Vec<Diagnostic>) -> Option<R
             let revs = args.first().is_some_and(|a| word(a) == "REV");
             let v = args.get(usize::from(revs));
             match v.and_then(|a| num(a.text)) {
-                Some(t) if (0.0..=3600.0).contains(&t) => Some(Record::Delay {
-                    seconds: (!revs).then_some(t),
-                    revs: revs.then_some(t),
-                }),
+                Some(t) if (0.0..=3600.0).contains(&t) => {
+                    Some(Record::Delay(if revs { Dwell::Revolutions(t) } else { Dwell::Seconds(t) }))
+                }
                 _ => {
                     let col = v.map_or(rest_col, |a| a.col);
                     bad(

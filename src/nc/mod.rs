@@ -673,33 +673,28 @@ impl Formatter {
     /// seconds on a Sinumerik (`G4 S` would be revolutions), cycle 9 on a TNC.
     pub fn dwell(&mut self, seconds: f64) -> Vec<String> {
         let mut out = Vec::new();
-        match self.d.cycles {
-            Cycles::Iso { dwell_ms } => {
-                self.start();
-                self.buf.push_str("G4 P");
-                if dwell_ms {
-                    self.buf
-                        .push_str(itoa::Buffer::new().format((seconds * 1000.0).round() as i64));
-                } else {
-                    self.number(seconds, 3, false);
-                }
-                out.push(self.buf.clone());
-            }
-            Cycles::Siemens => {
-                self.start();
-                self.buf.push_str("G4 F");
-                self.number(seconds, 3, false);
-                out.push(self.buf.clone());
-            }
+        let (word, ms) = match self.d.cycles {
+            Cycles::Iso { dwell_ms } => ("G4 P", dwell_ms),
+            Cycles::Siemens => ("G4 F", false),
             Cycles::Heidenhain => {
                 out.push(self.words("CYCL DEF 9.0 DWELL TIME").to_string());
-                self.start();
-                self.buf.push_str("CYCL DEF 9.1 DWELL ");
-                self.number(seconds, 3, false);
-                out.push(self.buf.clone());
+                ("CYCL DEF 9.1 DWELL ", false)
             }
-        }
+        };
+        self.start();
+        self.buf.push_str(word);
+        self.seconds(seconds, ms);
+        out.push(self.buf.clone());
         out
+    }
+
+    /// A time word's value: whole milliseconds, or seconds to 3 decimals (the point says so).
+    fn seconds(&mut self, s: f64, ms: bool) {
+        if ms {
+            self.buf.push_str(itoa::Buffer::new().format((s * 1000.0).round() as i64));
+        } else {
+            self.number(s, 3, false);
+        }
     }
 
     /// The lines of one hole as a canned cycle (the tool already waits above it at `z_start`).
@@ -738,12 +733,7 @@ impl Formatter {
                     }
                     if c.kind == CannedKind::Spot {
                         self.buf.push_str(" P");
-                        if dwell_ms {
-                            self.buf
-                                .push_str(itoa::Buffer::new().format((c.dwell * 1000.0).round() as i64));
-                        } else {
-                            self.number(c.dwell, 3, false);
-                        }
+                        self.seconds(c.dwell, dwell_ms);
                     }
                     self.buf.push_str(" F");
                     write_fixed(&mut self.buf, feed_r, self.fmt.feed);

@@ -13,7 +13,7 @@ pub mod verify;
 
 pub use source::{ArcSpec, Hole, HolePart, Item, MotionPt, ProgEvent, Source};
 
-use crate::cl::{CoolantCmd, CycleKind, FeedUnit, SpindleCmd};
+use crate::cl::{CoolantCmd, CycleKind, Dwell, FeedUnit, SpindleCmd};
 use crate::diag::{Code, Diagnostic, Severity};
 use crate::kinematics::{self, IkOptions, Joints, Machine, Pose, Setup, Solutions, Units, Vec3, angle_between, fk, ik_into};
 use crate::nc::{Canned, CannedKind, Dialect, FeedMode, Formats, Formatter, Motion};
@@ -1039,29 +1039,25 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                 let c = self.f.comment(&format!("OPERATION {name}")).to_string();
                 self.out(&c)?;
             }
-            ProgEvent::Dwell { seconds, revs, line } => {
+            ProgEvent::Dwell { dwell, line } => {
                 // Revolutions at the speed in force; with no speed to turn them into time the
                 // dwell cannot be written as the CL meant it.
-                let secs = match (seconds, revs, self.rpm.filter(|_| self.spindle_on)) {
-                    (Some(t), _, _) => Some(t),
-                    (None, Some(n), Some(rpm)) => Some(n * 60.0 / rpm),
-                    _ => None,
+                let secs = match dwell {
+                    Dwell::Seconds(t) => Ok(t),
+                    Dwell::Revolutions(n) => self.rpm.filter(|_| self.spindle_on).map(|rpm| n * 60.0 / rpm).ok_or(n),
                 };
                 match secs {
-                    Some(t) => {
+                    Ok(t) => {
                         for l in self.f.dwell(t) {
                             self.out(&l)?;
                         }
                         self.sum.cycle_time_s += t;
                     }
-                    None => self.note(Diagnostic::new(
+                    Err(n) => self.note(Diagnostic::new(
                         Code::BadRecord,
                         Severity::Warning,
                         Some(line),
-                        format!(
-                            "DELAY of {} revolutions with no spindle turning: no dwell written",
-                            revs.unwrap_or(0.0)
-                        ),
+                        format!("DELAY of {n} revolutions with no spindle turning: no dwell written"),
                     ))?,
                 }
             }

@@ -4,7 +4,7 @@
 //! by CIRCLE, an active drilling cycle. Arcs and cycles become plain points here (linearized or
 //! expanded) so the planner sees one kind of motion.
 
-use crate::cl::{CoolantCmd, CycleKind, CycleParams, Event, FeedUnit, Reader, Record, SpindleCmd};
+use crate::cl::{CoolantCmd, CycleKind, CycleParams, Dwell, Event, FeedUnit, Reader, Record, SpindleCmd};
 use crate::diag::{Code, Diagnostic, Severity};
 use crate::kinematics::{Pose, Units, Vec3};
 use nalgebra::{Matrix3, Rotation3, Unit};
@@ -78,10 +78,8 @@ pub enum ProgEvent {
         line: u32,
     },
     ToolLength(f64),
-    /// A dwell: seconds, or spindle revolutions.
     Dwell {
-        seconds: Option<f64>,
-        revs: Option<f64>,
+        dwell: Dwell,
         line: u32,
     },
     Spindle(SpindleCmd),
@@ -394,7 +392,7 @@ impl<R: BufRead> Source<R> {
                 // Under an index, a new tool axis must agree with it again.
                 self.frame_pending |= self.set_axis(a, line) && self.table != [0.0; 3];
             }
-            Record::Delay { seconds, revs } => self.out.push_back(Item::Event(ProgEvent::Dwell { seconds, revs, line })),
+            Record::Delay(dwell) => self.out.push_back(Item::Event(ProgEvent::Dwell { dwell, line })),
             Record::RotaryTable { axis, angle, incr } => match axis {
                 Some(i) => {
                     self.table[i] = if incr { self.table[i] + angle } else { angle };
@@ -462,31 +460,39 @@ impl<R: BufRead> Source<R> {
     fn resolve_frame(&mut self, line: u32) {
         self.frame_pending = false;
         self.frame = None;
-        let turned: Vec<usize> = (0..3).filter(|&i| self.table[i] != 0.0).collect();
-        let names = |v: &[usize]| {
-            v.iter()
-                .map(|&i| ['A', 'B', 'C'][i].to_string())
-                .collect::<Vec<_>>()
-                .join(", ")
-        };
+        match self.index_frame() {
+            Ok(None) => {}
+            Ok(Some((r, told))) => {
+                self.frame = Some(r);
+                self.diag(Code::TableIndex, Severity::Info, line, told);
+            }
+            Err(problem) => self.diag(
+                Code::TableIndex,
+                Severity::Error,
+                line,
+                format!("{problem}: the frame of the CL from here is not known; taken as written"),
+            ),
+        }
+    }
+
+    /// [`Self::resolve_frame`]'s reading of the index in force: none, the one frame with what to
+    /// say of it, or why there is none.
+    fn index_frame(&self) -> Result<Option<(Matrix3<f64>, String)>, String> {
+        let names = ['A', 'B', 'C'];
         let at = self.table_line;
+        let turned: Vec<usize> = (0..3).filter(|&i| self.table[i] != 0.0).collect();
         let i = match turned.as_slice() {
-            [] => return,
+            [] => return Ok(None),
             [i] => *i,
             _ => {
-                self.diag(
-                    Code::TableIndex,
-                    Severity::Error,
-                    line,
-                    format!(
-                        "ROTABL (line {at}) indexes {} at once: the order they turn in is not known, so neither is the frame of the CL from here; taken as written",
-                        names(&turned)
-                    ),
-                );
-                return;
+                let axes: Vec<String> = turned.iter().map(|&i| names[i].to_string()).collect();
+                return Err(format!(
+                    "ROTABL (line {at}) indexes {} at once: the order they turn in is not known",
+                    axes.join(", ")
+                ));
             }
         };
-        let v = self.table[i];
+        let (v, axis) = (self.table[i], names[i]);
         let about = Unit::new_normalize(Vec3::from(std::array::from_fn(|k| f64::from(u8::from(k == i)))));
         let mut found: Vec<(Rotation3<f64>, &str)> = Vec::new();
         for (angle, unit) in [(v, "radians"), (v.to_radians(), "degrees")] {
@@ -497,37 +503,23 @@ impl<R: BufRead> Source<R> {
                 }
             }
         }
-        let axis = ['A', 'B', 'C'][i];
         let (i_, j_, k_) = (self.axis.x, self.axis.y, self.axis.z);
         match found.as_slice() {
             [(r, unit)] => {
                 let deg = r.scaled_axis().dot(&about).to_degrees();
-                self.frame = Some(*r.matrix());
-                self.diag(
-                    Code::TableIndex,
-                    Severity::Info,
-                    line,
+                Ok(Some((
+                    *r.matrix(),
                     format!(
                         "ROTABL {v} about {axis} (line {at}, {unit}): the CL from here is in the part turned {deg:.4}° about {axis}, the tool axis in force ({i_:.4}, {j_:.4}, {k_:.4}) its Z: taken into the part frame"
                     ),
-                );
+                )))
             }
-            [] => self.diag(
-                Code::TableIndex,
-                Severity::Error,
-                line,
-                format!(
-                    "ROTABL {v} about {axis} (line {at}): no reading of it (radians or degrees, either sense) turns the CL's Z onto the tool axis in force ({i_:.4}, {j_:.4}, {k_:.4}): the frame of the CL from here is not known; taken as written"
-                ),
-            ),
-            _ => self.diag(
-                Code::TableIndex,
-                Severity::Error,
-                line,
-                format!(
-                    "ROTABL {v} about {axis} (line {at}): the tool axis in force ({i_:.4}, {j_:.4}, {k_:.4}) does not tell which way, or by how much, the part is turned: the frame of the CL from here is not known; taken as written"
-                ),
-            ),
+            [] => Err(format!(
+                "ROTABL {v} about {axis} (line {at}): no reading of it (radians or degrees, either sense) turns the CL's Z onto the tool axis in force ({i_:.4}, {j_:.4}, {k_:.4})"
+            )),
+            _ => Err(format!(
+                "ROTABL {v} about {axis} (line {at}): the tool axis in force ({i_:.4}, {j_:.4}, {k_:.4}) does not tell which way, or by how much, the part is turned"
+            )),
         }
     }
 
