@@ -2137,3 +2137,43 @@ fn coolant_before_the_first_tool_goes_on_at_its_first_move() {
     let (on, first) = (sink.nc.find("\nM8\n").expect("coolant on"), sink.nc.find("\nG0 ").unwrap());
     assert!(on < first, "{}", sink.nc);
 }
+
+/// The self-verification tells every block that misses its pose, not only the first or the
+/// worst: in TCP mode at a tolerance finer than the X Y Z words (0.0004 mm against their 0.0005),
+/// each block whose rounded tip misses by more carries a `verify_deviation` error, the others
+/// none, and the summary's largest miss is the largest of them all (recomputed here from each
+/// block's pose and the words' rounding, independently of the engine's replay).
+#[test]
+fn the_fk_replay_tells_every_block_that_misses_its_pose() {
+    let m = machine("spinner-u5-620");
+    let mut cl = Vec::new();
+    kinepost::testgen::write_path(&m, 400, 3, m.default_tool_length, &mut cl).unwrap();
+    let mut o = fanuc(&m, Mode::Tcp);
+    o.tolerance = 0.0004;
+    let (sink, s) = run(&m, &cl, &o);
+    let (mut over, mut worst) = (0, 0.0f64);
+    for b in &sink.blocks {
+        let miss = (0..3)
+            .map(|i| (kinepost::nc::round_to(b.tip[i], 3) as f64 / 1000.0 - b.tip[i]).powi(2))
+            .sum::<f64>()
+            .sqrt();
+        worst = worst.max(miss);
+        let told = b.diagnostics.iter().any(|d| d.code == Code::VerifyDeviation);
+        assert_eq!(
+            told,
+            miss > o.tolerance,
+            "block {} misses by {miss}: {:?}",
+            b.n,
+            b.diagnostics
+        );
+        over += told as usize;
+    }
+    assert!(over > 50, "only {over} of {} blocks over the tolerance", sink.blocks.len());
+    assert!(over < sink.blocks.len(), "every block over the tolerance");
+    assert!(
+        (s.max_tip_deviation - worst).abs() < 1e-12,
+        "{} against {worst}",
+        s.max_tip_deviation
+    );
+    assert_eq!(s.counts.get("verify_deviation").copied().unwrap_or(0), over as u64);
+}

@@ -553,7 +553,19 @@ struct Emitter<'a, S: Sink + ?Sized> {
     stats: [Option<AxisStats>; 6],
     /// cos of the singular cone and the singular direction, once (they are checked per block).
     singular: Option<(Vec3, f64)>,
+    /// What the linearization bound's lever adds to the tip's distance, less the tool length
+    /// (work offset and pivots), and whether angle-error compensation rules the bound out: both
+    /// fixed for the run, and the bound is taken for every block.
+    lever_base: f64,
+    compensated: bool,
+    /// Squares of the tip miss and of the axis miss's tangent below which a block's replay is
+    /// neither a new largest miss nor an error (kept by `replayed`).
+    quiet_tip2: f64,
+    quiet_tan2: f64,
 }
+
+/// Axis miss (degrees) of an FK replay that is an error.
+const REPLAY_AXIS_DEG: f64 = 0.01;
 
 /// A tilted working plane in force: the rotary words it stands on (radians), its frame as the
 /// control builds it from the words written, and the CL tool axis of its run.
@@ -703,6 +715,10 @@ pub fn post<R: BufRead, S: Sink + ?Sized>(input: R, m: &Machine, o: &Options, si
         length_said: None,
         stats: Default::default(),
         singular: kinematics::singular_direction(m).map(|d| (d.normalize(), o.singular_cone.cos())),
+        lever_base: setup.work_offset.norm() + m.rotaries.iter().map(|r| r.pivot.norm()).sum::<f64>(),
+        compensated: m.rotaries.iter().any(|r| r.angle_error.is_some()),
+        quiet_tip2: 0.0,
+        quiet_tan2: 0.0,
     };
     e.program_start()?;
     let mut planner = Planner::new(m, setup);
@@ -1953,14 +1969,11 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                 .sum::<f64>()
                 .sqrt();
             // Longest distance from a rotary's line to what it moves (tip, pivots, tool).
-            let lever = a.pose.tip.norm().max(b.pose.tip.norm())
-                + self.setup.work_offset.norm()
-                + self.setup.tool_length.abs()
-                + self.m.rotaries.iter().map(|r| r.pivot.norm()).sum::<f64>();
+            let lever =
+                a.pose.tip.norm_squared().max(b.pose.tip.norm_squared()).sqrt() + self.lever_base + self.setup.tool_length.abs();
             // With angle-error compensation the actual angle is not linear in the interpolated
             // word: no bound, always sample.
-            let compensated = self.m.rotaries.iter().any(|r| r.angle_error.is_some());
-            let bound = if compensated {
+            let bound = if self.compensated {
                 f64::INFINITY
             } else {
                 (sum * sum * lever + 2.0 * sum * dlin) / 8.0
@@ -2027,7 +2040,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             }
         }
         let mut diags = diags;
-        let is_last = (b.pose.tip - pt.pose.tip).norm() < 1e-12 && (b.pose.axis - pt.pose.axis).norm() < 1e-12;
+        let is_last = (b.pose.tip - pt.pose.tip).norm_squared() < 1e-24 && (b.pose.axis - pt.pose.axis).norm_squared() < 1e-24;
         if is_last && depth > 0 {
             diags.push(Diagnostic::new(
                 Code::Linearized,
@@ -2243,7 +2256,12 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
     fn replayed(&mut self, line: u32, tip_dev: f64, ax_dev: f64, what: &str) -> Option<Diagnostic> {
         self.sum.max_tip_deviation = self.sum.max_tip_deviation.max(tip_dev);
         self.sum.max_axis_deviation_deg = self.sum.max_axis_deviation_deg.max(ax_dev);
-        (tip_dev > self.o.tolerance || ax_dev > 0.01).then(|| {
+        // What a block may miss by and need no look (see `block`): within both the largest
+        // misses so far and the error thresholds, a little inside them for rounding.
+        let tip = self.sum.max_tip_deviation.min(self.o.tolerance) * (1.0 - 1e-9);
+        let tan = self.sum.max_axis_deviation_deg.min(REPLAY_AXIS_DEG).to_radians().tan() * (1.0 - 1e-9);
+        (self.quiet_tip2, self.quiet_tan2) = (tip * tip, tan * tan);
+        (tip_dev > self.o.tolerance || ax_dev > REPLAY_AXIS_DEG).then(|| {
             Diagnostic::new(
                 Code::VerifyDeviation,
                 Severity::Error,
@@ -2819,16 +2837,27 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             }
         }
         let replay = fk(m, &written, &self.setup);
-        let tip_dev = if let Some(t) = &tilt {
-            (self.plane_tip(t, [words[0], words[1], words[2]].map(|w| w.unwrap_or(0.0))) - to.pose.tip).norm()
+        let tip_miss = if let Some(t) = &tilt {
+            self.plane_tip(t, [words[0], words[1], words[2]].map(|w| w.unwrap_or(0.0))) - to.pose.tip
         } else if tcp {
             // X Y Z are the tip: its deviation is their rounding, already read back above.
-            (Vec3::from(written.linear) - to.pose.tip).norm()
+            Vec3::from(written.linear) - to.pose.tip
         } else {
-            (replay.tip - to.pose.tip).norm()
+            replay.tip - to.pose.tip
         };
-        let ax_dev = angle_between(&replay.axis, &to.pose.axis).to_degrees();
-        diags.extend(self.replayed(pt.line, tip_dev, ax_dev, "the written block misses the pose"));
+        // Nearly every block misses by less than the largest miss so far and the tolerance: that
+        // is told from squares and the tangent's square (no square root, division or arctangent:
+        // their latency was an eighth of this function's time). Only a block beyond either is
+        // measured and recorded.
+        let (d2, s2, c) = (
+            tip_miss.norm_squared(),
+            replay.axis.cross(&to.pose.axis).norm_squared(),
+            replay.axis.dot(&to.pose.axis),
+        );
+        if !(d2 <= self.quiet_tip2 && c > 0.0 && s2 <= self.quiet_tan2 * c * c) {
+            let (tip_dev, ax_dev) = (d2.sqrt(), angle_between(&replay.axis, &to.pose.axis).to_degrees());
+            diags.extend(self.replayed(pt.line, tip_dev, ax_dev, "the written block misses the pose"));
+        }
         // Statistics (per block: an array by axis letter, the summary's map at the end).
         for (k, v) in axes.iter().enumerate() {
             let Some(v) = v else { continue };
