@@ -315,6 +315,12 @@ impl Machine {
         a
     }
 
+    /// Whether any rotary has angle-error compensation: its actual angle is then not linear in
+    /// the word, which rules out bounds that assume it is (linearization, the fold memo).
+    pub fn has_angle_error(&self) -> bool {
+        self.rotaries.iter().any(|r| r.angle_error.is_some())
+    }
+
     pub fn rotary_index(&self, name: char) -> Option<usize> {
         self.rotaries.iter().position(|r| r.name == name)
     }

@@ -716,7 +716,7 @@ pub fn post<R: BufRead, S: Sink + ?Sized>(input: R, m: &Machine, o: &Options, si
         stats: Default::default(),
         singular: kinematics::singular_direction(m).map(|d| (d.normalize(), o.singular_cone.cos())),
         lever_base: setup.work_offset.norm() + m.rotaries.iter().map(|r| r.pivot.norm()).sum::<f64>(),
-        compensated: m.rotaries.iter().any(|r| r.angle_error.is_some()),
+        compensated: m.has_angle_error(),
         quiet_tip2: 0.0,
         quiet_tan2: 0.0,
     };

@@ -97,7 +97,7 @@ const FOLD_BOUND_SLACK: f64 = 1e-7;
 impl FoldMemo {
     pub(crate) fn new(m: &Machine) -> FoldMemo {
         FoldMemo {
-            enabled: m.rotaries.iter().all(|r| r.angle_error.is_none()),
+            enabled: !m.has_angle_error(),
             refs: vec![
                 FoldRef {
                     mid: [0.0; 3],

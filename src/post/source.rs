@@ -310,12 +310,7 @@ impl<R: BufRead> Source<R> {
         let from = matches!(rec, Record::From { .. });
         match rec {
             Record::Goto { p, axis } | Record::From { p, axis } => {
-                if self.frame_pending {
-                    self.resolve_frame(line);
-                }
-                if let Some(a) = axis
-                    && !self.set_axis(self.to_part(Vec3::from(a)).into(), line)
-                {
+                if !self.motion_axis(axis, line) {
                     return None;
                 }
                 // FROM says where the tool stands, it programs no cut: the machine gets there at
@@ -324,12 +319,7 @@ impl<R: BufRead> Source<R> {
                 return self.motion(line, Vec3::from(p));
             }
             Record::GoDelta { d, axis } => {
-                if self.frame_pending {
-                    self.resolve_frame(line);
-                }
-                if let Some(a) = axis
-                    && !self.set_axis(self.to_part(Vec3::from(a)).into(), line)
-                {
+                if !self.motion_axis(axis, line) {
                     return None;
                 }
                 let base = self.tip.unwrap_or_else(Vec3::zeros);
@@ -444,6 +434,16 @@ impl<R: BufRead> Source<R> {
             Record::Ignored(_) => {}
         }
         None
+    }
+
+    /// What a motion record does before its point: the index frame resolved if it changed, and
+    /// the tool axis it gives (CL frame) taken into the part frame. False: the axis is bad and
+    /// the record skipped.
+    fn motion_axis(&mut self, axis: Option<[f64; 3]>, line: u32) -> bool {
+        if self.frame_pending {
+            self.resolve_frame(line);
+        }
+        axis.is_none_or(|a| self.set_axis(self.to_part(Vec3::from(a)).into(), line))
     }
 
     /// A vector of the CL's (indexed) frame in the part frame.
