@@ -115,6 +115,23 @@ fn every_copied_corpus_file_reads_without_error_or_unknown_record_diagnostics() 
     assert_eq!(n, 8);
 }
 
+/// Where a TCP block's tip really is (machine-model.md, TCP mode): the control places the
+/// linears for tip X Y Z at the rotary words taken as the angles (its kinematics are nominal), and
+/// the axes stand at the words plus their angle error.
+fn tcp_real_tip(m: &Machine, words: &Joints, setup: &Setup) -> Vec3 {
+    let p = Vec3::from(words.linear);
+    let q = kinepost::kinematics::controlled_point(m, &words.rotary, &p, setup);
+    fk(
+        m,
+        &Joints {
+            linear: q.into(),
+            rotary: words.rotary,
+        },
+        setup,
+    )
+    .tip
+}
+
 /// The CL points of a generated path, and the NC read back and replayed through FK: each CL
 /// point is reproduced, in order, by a block (an independent check of what the text says, beside
 /// the engine's own FK replay).
@@ -142,7 +159,7 @@ fn replay_matches(m: &Machine, cl: &str, nc: &str, mode: Mode, setup: &Setup, to
         }
         let pose = fk(m, &j, setup);
         let tip = if mode == Mode::Tcp {
-            Vec3::new(j.linear[0], j.linear[1], j.linear[2])
+            tcp_real_tip(m, &j, setup)
         } else {
             pose.tip
         };
@@ -2176,4 +2193,39 @@ fn the_fk_replay_tells_every_block_that_misses_its_pose() {
         s.max_tip_deviation
     );
     assert_eq!(s.counts.get("verify_deviation").copied().unwrap_or(0), over as u64);
+}
+
+/// TCP on htm50200-horizontal (angle error on A): the control's TCP knows only the nominal
+/// kinematics, so X Y Z are not the CL point but the point whose nominal TCP puts the real tip
+/// there. Written as the CL point, the real tip landed up to 37 mm off at a 36° tilt.
+#[test]
+fn tcp_with_angle_error_puts_the_real_tip_on_the_cl_point() {
+    let m = machine("htm50200-horizontal");
+    let mut cl = Vec::new();
+    kinepost::testgen::write_path(&m, 200, 3, m.default_tool_length, &mut cl).unwrap();
+    let o = fanuc(&m, Mode::Tcp);
+    let (sink, s) = run(&m, &cl, &o);
+    assert!(s.max_tip_deviation <= o.tolerance, "FK replay {}", s.max_tip_deviation);
+    let setup = Setup::new(m.default_tool_length, Vec3::zeros());
+    replay_matches(
+        &m,
+        std::str::from_utf8(&cl).unwrap(),
+        &sink.nc,
+        Mode::Tcp,
+        &setup,
+        o.tolerance,
+    );
+    // The words differ from the tips they put there (else nothing was compensated).
+    let widest = sink
+        .blocks
+        .iter()
+        .filter_map(|b| {
+            let w = [b.joints.0[0]?, b.joints.0[1]?, b.joints.0[2]?];
+            Some((Vec3::from(w) - Vec3::from(b.tip)).norm())
+        })
+        .fold(0.0, f64::max);
+    assert!(widest > 1.0, "X Y Z within {widest} mm of the CL points: no compensation");
+    // And between blocks: the control interpolates the words, the real tip stays on the chord.
+    let r = kinepost::post::verify::verify(cl.as_slice(), sink.nc.as_bytes(), &m, &verify_options(&m, &o)).unwrap();
+    assert!(r.ok && r.max_nonlinear <= o.tolerance, "{r:?}");
 }

@@ -130,3 +130,18 @@ pub fn controlled_point(m: &Machine, actual: &[f64; 3], tip_w: &Vec3, setup: &Se
     let (off, _) = head_offset(m, actual, setup.tool_length);
     table_to_machine(m, actual, tip_w + setup.work_offset) - off
 }
+
+/// TCP mode's X Y Z for joints: the tip a control's TCP puts there, its kinematics nominal (the
+/// rotary words taken as the angles: no control knows the angle error a profile declares). With
+/// the linears at the real controlled point, the real tip is the wanted one; on a profile
+/// without angle error this is FK's tip.
+pub fn tcp_point(m: &Machine, joints: &Joints, setup: &Setup) -> Vec3 {
+    fk_actual(m, &joints.linear, &joints.rotary, setup).tip
+}
+
+/// The pose a TCP block really reaches: the control places the linears for tip `p` at the
+/// nominal angles (the rotary words), the axes stand at the words plus their error.
+pub fn tcp_fk(m: &Machine, p: &Vec3, rotary_words: &[f64; 3], setup: &Setup) -> Pose {
+    let q = controlled_point(m, rotary_words, p, setup);
+    fk_actual(m, &[q.x, q.y, q.z], &m.actual_angles(rotary_words), setup)
+}

@@ -1677,8 +1677,13 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                 t.frame.transpose() * arc.normal,
                 self.plane_coords(t, &a.pose.tip),
             )
-        } else if tcp {
+        } else if tcp && !self.compensated {
             (arc.center, arc.normal, a.pose.tip)
+        } else if tcp {
+            // The words' frame is the nominal one: the CL's frame moved rigidly at still rotaries.
+            let c = self.tcp_xyz(&self.at_tip(&b, arc.center));
+            let n = self.tcp_xyz(&self.at_tip(&b, arc.center + arc.normal)) - c;
+            (c, n, self.tcp_xyz(&a))
         } else {
             let c = kinematics::controlled_point(m, &b.actual, &arc.center, &self.setup);
             let n = kinematics::controlled_point(m, &b.actual, &(arc.center + arc.normal), &self.setup) - c;
@@ -1725,7 +1730,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                 }
                 from = match &tilt {
                     Some(t) => self.plane_coords(t, &to.pose.tip),
-                    None if tcp => to.pose.tip,
+                    None if tcp => self.tcp_xyz(&to),
                     None => Vec3::from(to.joints.linear),
                 };
                 self.block(to, pt, false, Vec::new(), true, None)?;
@@ -1735,7 +1740,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         // flat arc in the working plane (XY: the tool along Z); anything else as chords.
         let end = match &tilt {
             Some(t) => self.plane_coords(t, &b.pose.tip),
-            None if tcp => b.pose.tip,
+            None if tcp => self.tcp_xyz(&b),
             None => Vec3::from(b.joints.linear),
         };
         if let (true, true, true, Some((2, _, _))) = (still, tcp || full_linears, conversational, plane)
@@ -1909,6 +1914,16 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         at(self, lo)
     }
 
+    /// A TCP block's X Y Z at `at`: the tip itself, or on a profile with angle error the point
+    /// whose nominal TCP puts the real tip there ([`kinematics::tcp_point`]).
+    fn tcp_xyz(&self, at: &At) -> Vec3 {
+        if self.compensated {
+            kinematics::tcp_point(self.m, &at.joints, &self.setup)
+        } else {
+            at.pose.tip
+        }
+    }
+
     /// `a`'s rotaries and orientation with the tip at `tip`: only the linears move. For a machine
     /// with all three linears (on one missing a linear the rotaries place the tip too).
     fn at_tip(&self, a: &At, tip: Vec3) -> At {
@@ -1957,7 +1972,9 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             .map(|i| (b.joints.rotary[i] - a.joints.rotary[i]).abs())
             .fold(0.0, f64::max);
         let mut split = step > self.o.max_rotary_step;
-        if !split && self.o.mode == Mode::Joint && step > 0.0 {
+        // TCP with angle error: the control interpolates the words, the real tip bends with Δ.
+        let curved = self.o.mode == Mode::Joint || self.compensated;
+        if !split && curved && step > 0.0 {
             // In W the tip follows R(θ(t))·x(t); |P''| ≤ Σ²·lever + 2·Σ·|Δxyz| (rotaries sweeping
             // and turning the moving linears), so the chord error is at most that over 8: below
             // the tolerance there is no need to sample.
@@ -1999,7 +2016,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         }
         if split
             && depth >= MAX_SPLIT_DEPTH
-            && (step > self.o.max_rotary_step || self.o.mode == Mode::Joint && self.nonlinear_over(&a, &b, self.o.tolerance))
+            && (step > self.o.max_rotary_step || curved && self.nonlinear_over(&a, &b, self.o.tolerance))
         {
             // Subdivision did not converge: the solution followed runs into a fold (or, any
             // mode, a rotary still steps too far: it was a feed block turning C 180°).
@@ -2057,6 +2074,12 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
     /// at ½, ¼, ¾ and, where those leave less than half of `limit` proven, at the other eighths
     /// ([`NONLINEAR_SAMPLES`]): every eighth on every block cost curved 5-axis files +47 %.
     fn nonlinear_over(&self, a: &At, b: &At, limit: f64) -> bool {
+        let tcp = self.o.mode == Mode::Tcp;
+        let (pa, pb) = if tcp {
+            (self.tcp_xyz(a), self.tcp_xyz(b))
+        } else {
+            (Vec3::zeros(), Vec3::zeros())
+        };
         let mut worst: f64 = 0.0;
         for (k, t) in [0.5, 0.25, 0.75, 0.125, 0.375, 0.625, 0.875].into_iter().enumerate() {
             if k == 3 && worst < 0.5 * limit {
@@ -2067,7 +2090,11 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                 j.linear[i] += t * (b.joints.linear[i] - a.joints.linear[i]);
                 j.rotary[i] += t * (b.joints.rotary[i] - a.joints.rotary[i]);
             }
-            let p = fk(self.m, &j, &self.setup).tip;
+            let p = if tcp {
+                kinematics::tcp_fk(self.m, &(pa + (pb - pa) * t), &j.rotary, &self.setup).tip
+            } else {
+                fk(self.m, &j, &self.setup).tip
+            };
             worst = worst.max(seg_dist(&p, &a.pose.tip, &b.pose.tip));
             if worst > limit {
                 return true;
@@ -2622,9 +2649,10 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         // The machine's axis values (summary, block info), and the words written (in a tilted
         // plane: plane coordinates, no rotaries).
         let mut axes: [Option<f64>; 6] = [None; 6];
+        let xyz = if tcp { self.tcp_xyz(&to) } else { to.pose.tip };
         for i in 0..3 {
             if m.linears[i].is_some() || tcp {
-                axes[i] = Some(if tcp { to.pose.tip[i] } else { to.joints.linear[i] });
+                axes[i] = Some(if tcp { xyz[i] } else { to.joints.linear[i] });
             }
         }
         for (i, r) in m.rotaries.iter().enumerate() {
@@ -2839,6 +2867,8 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         let replay = fk(m, &written, &self.setup);
         let tip_miss = if let Some(t) = &tilt {
             self.plane_tip(t, [words[0], words[1], words[2]].map(|w| w.unwrap_or(0.0))) - to.pose.tip
+        } else if tcp && self.compensated {
+            kinematics::tcp_fk(m, &Vec3::from(written.linear), &written.rotary, &self.setup).tip - to.pose.tip
         } else if tcp {
             // X Y Z are the tip: its deviation is their rounding, already read back above.
             Vec3::from(written.linear) - to.pose.tip

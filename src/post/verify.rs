@@ -110,8 +110,10 @@ fn block_pose(m: &Machine, b: &NcBlock, o: &VerifyOptions, setup: &Setup) -> Opt
         let tip = Vec3::from(pl.origin) * s + f * q - setup.work_offset;
         return Some((tip, p.axis));
     }
-    let tip = if o.mode == Mode::Tcp {
-        Vec3::new(j.linear[0], j.linear[1], j.linear[2])
+    let tip = if o.mode == Mode::Tcp && m.has_angle_error() {
+        crate::kinematics::tcp_fk(m, &Vec3::from(j.linear), &j.rotary, setup).tip
+    } else if o.mode == Mode::Tcp {
+        Vec3::from(j.linear)
     } else {
         p.tip
     };
@@ -226,7 +228,8 @@ pub fn verify<C: BufRead, N: BufRead>(cl: C, nc: N, m: &Machine, o: &VerifyOptio
                             rep.max_axis_off_arc_deg = rep.max_axis_off_arc_deg.max(da);
                         }
                     }
-                    if o.mode == Mode::Joint
+                    // TCP with angle error: the control interpolates the words, the real tip bends.
+                    if (o.mode == Mode::Joint || m.has_angle_error())
                         && let Some(first) = &last_block
                     {
                         let chain = std::iter::once(first).chain(ahead.iter().take(i + 1).map(|(b, _)| b));
@@ -239,7 +242,11 @@ pub fn verify<C: BufRead, N: BufRead>(cl: C, nc: N, m: &Machine, o: &VerifyOptio
                                     j.linear[k] += t * (jb.linear[k] - ja.linear[k]);
                                     j.rotary[k] += t * (jb.rotary[k] - ja.rotary[k]);
                                 }
-                                let d = seg_dist(&fk(m, &j, &setup).tip, &prev_tip, &pt.pose.tip);
+                                let tip = match o.mode {
+                                    Mode::Tcp => crate::kinematics::tcp_fk(m, &Vec3::from(j.linear), &j.rotary, &setup).tip,
+                                    Mode::Joint => fk(m, &j, &setup).tip,
+                                };
+                                let d = seg_dist(&tip, &prev_tip, &pt.pose.tip);
                                 rep.max_nonlinear = rep.max_nonlinear.max(d);
                                 if d > o.tolerance {
                                     rep.nonlinear_blocks += 1;
