@@ -2,12 +2,12 @@
 
 pub mod calib;
 pub mod cl;
-pub mod cli;
 pub mod diag;
 pub mod http;
 pub mod jobs;
 pub mod kinematics;
 pub mod machines;
 pub mod nc;
+pub mod output;
 pub mod post;
 pub mod testgen;

@@ -1,3 +1,7 @@
+//! The `kinepost` binary: the command line is here and only here (the library knows none of it).
+
+mod cli;
+
 fn main() -> std::process::ExitCode {
-    kinepost::cli::main()
+    cli::main()
 }

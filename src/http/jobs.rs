@@ -293,7 +293,7 @@ pub async fn job_diagnostics(st: State<Arc<AppState>>, Path(id): Path<String>, r
 /// At most 10 000 points (every `stride`-th block, plus the first, the last and each change
 /// between rapid and feed) and 5 000 marks.
 #[utoipa::path(get, path = "/v1/jobs/{id}/preview", params(("id" = String, Path)),
-    responses((status = 200, description = "The preview", body = crate::post::preview::Preview),
+    responses((status = 200, description = "The preview", body = crate::output::preview::Preview),
         (status = 304, description = "Not modified (If-None-Match)"),
         (status = 404, description = "No such job, or a job finished before previews existed", body = super::error::Problem, content_type = "application/problem+json"),
         (status = 409, description = "Not finished", body = super::error::Problem, content_type = "application/problem+json"),

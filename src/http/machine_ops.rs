@@ -230,7 +230,7 @@ pub async fn ik_route(
         column: None,
         code: "unreachable",
     })?;
-    let list: Vec<Value> = sols.iter().map(|s| crate::cli::solution_json(m, s)).collect();
+    let list: Vec<Value> = sols.iter().map(|s| crate::output::solution_json(m, s)).collect();
     Ok(Json(serde_json::json!({ "solutions": list })))
 }
 

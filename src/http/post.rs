@@ -8,6 +8,7 @@
 use super::AppState;
 use super::error::{ApiError, ApiQuery};
 use crate::diag::Diagnostic;
+use crate::output::{ErrorBody, Header, Record};
 use crate::post::{self, BlockInfo, Settings, Sink, Summary};
 use axum::body::Body;
 use axum::extract::{FromRequest, Multipart, Request, State};
@@ -16,7 +17,6 @@ use axum::response::{IntoResponse, Response};
 use bytes::Bytes;
 use futures_util::StreamExt;
 use serde::Deserialize;
-use serde_json::json;
 use std::sync::Arc;
 use tokio::sync::{mpsc, oneshot};
 use tokio_util::io::{StreamReader, SyncIoBridge};
@@ -171,9 +171,8 @@ impl ChannelSink {
             .map_err(|_| std::io::Error::new(std::io::ErrorKind::BrokenPipe, "client went away"))
     }
 
-    fn json_line(&mut self, v: &serde_json::Value) -> std::io::Result<()> {
-        serde_json::to_writer(&mut self.buf, v)?;
-        self.buf.push(b'\n');
+    fn record(&mut self, r: &Record) -> std::io::Result<()> {
+        r.write_to(&mut self.buf)?;
         self.send(false)
     }
 }
@@ -181,13 +180,7 @@ impl ChannelSink {
 impl Sink for ChannelSink {
     fn line(&mut self, text: &str, b: Option<&BlockInfo>) -> std::io::Result<()> {
         if self.ndjson {
-            let v = match b {
-                Some(b) => {
-                    json!({"type": "block", "n": b.n, "nc": text, "source_line": b.source_line, "joints": b.joints, "diagnostics": b.diagnostics})
-                }
-                None => json!({"type": "block", "nc": text}),
-            };
-            return self.json_line(&v);
+            return self.record(&Record::line(text, b));
         }
         self.buf.extend_from_slice(text.as_bytes());
         self.buf.push(b'\n');
@@ -196,14 +189,14 @@ impl Sink for ChannelSink {
 
     fn diagnostic(&mut self, d: &Diagnostic) -> std::io::Result<()> {
         if self.ndjson {
-            return self.json_line(&json!({"type": "diagnostic", "diagnostic": d}));
+            return self.record(&Record::Diagnostic { diagnostic: d });
         }
         Ok(())
     }
 
     fn summary(&mut self, s: &Summary) -> std::io::Result<()> {
         if self.ndjson {
-            return self.json_line(&json!({"type": "summary", "summary": s}));
+            return self.record(&Record::Summary { summary: s });
         }
         Ok(())
     }
@@ -256,7 +249,7 @@ pub async fn post_cl(
     let (params, filename, body) = upload(&st, query, req).await?;
     let profile = params.profile(&st)?.profile;
     let mut opts = params.settings().profile_options(&profile).map_err(ApiError::BadParameter)?;
-    opts.header.push(format!("DATE {} UTC", crate::cli::utc_now()));
+    opts.header.push(format!("DATE {} UTC", crate::output::utc_now()));
     if let Some(f) = &filename {
         opts.header.push(format!("SOURCE {f}"));
     }
@@ -264,10 +257,7 @@ pub async fn post_cl(
     let reader = SyncIoBridge::new(StreamReader::new(
         body.into_data_stream().map(|r| r.map_err(std::io::Error::other)),
     ));
-    let header_line = ndjson.then(|| {
-        json!({"type": "header", "machine": profile.machine.id, "units": profile.machine.units.as_str(), "mode": opts.mode,
-               "dialect": opts.dialect.name, "tolerance": opts.tolerance})
-    });
+    let with_header = ndjson;
     let metrics = st.metrics.clone();
     metrics.streams.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
     tokio::task::spawn_blocking(move || {
@@ -277,8 +267,15 @@ pub async fn post_cl(
             ndjson,
             started: false,
         };
-        if let Some(h) = header_line {
-            let _ = sink.json_line(&h);
+        if with_header {
+            let h = Header {
+                machine: &profile.machine.id,
+                units: profile.machine.units.as_str(),
+                mode: opts.mode,
+                dialect: opts.dialect.name,
+                tolerance: opts.tolerance,
+            };
+            let _ = sink.record(&Record::Header(h));
         }
         let input = std::io::BufReader::with_capacity(64 * 1024, reader);
         let t0 = std::time::Instant::now();
@@ -289,11 +286,12 @@ pub async fn post_cl(
                 let _ = sink.send(true);
             }
             Err(e) => {
+                let body = ErrorBody::from_engine(&e);
                 let err = engine_error(e);
                 if sink.started {
                     // Already streaming: end with an explicit error, never a silent truncation.
                     if ndjson {
-                        let _ = sink.json_line(&json!({"type": "error", "error": err.problem()}));
+                        let _ = sink.record(&Record::Error { error: body });
                     } else {
                         sink.buf
                             .extend_from_slice(format!("(ERROR: {})\n", err.to_string().replace(['(', ')'], " ")).as_bytes());

@@ -14,8 +14,9 @@ mod store;
 pub use store::{Job, Output, State, Store};
 
 use crate::machines::{Catalog, Library, Profile};
-use crate::post::preview::{Caps, PreviewBuilder};
-use crate::post::{self, BlockInfo, FileSink, Sink, Summary};
+use crate::output::preview::{Caps, PreviewBuilder};
+use crate::output::{ErrorBody, FileSink, Record};
+use crate::post::{self, BlockInfo, Sink, Summary};
 use std::collections::HashMap;
 use std::io::Read;
 use std::path::PathBuf;
@@ -370,7 +371,9 @@ fn execute(
         Err(e) => {
             // The diagnostics of a failed job end with the error: never a silent truncation.
             let msg = e.to_string();
-            let _ = sink.files.json(&serde_json::json!({"type": "error", "error": msg}));
+            let _ = sink.files.record(&Record::Error {
+                error: ErrorBody::from_engine(&e),
+            });
             Err(msg)
         }
     };

@@ -93,7 +93,7 @@ pub enum Output {
     Nc,
     /// The NDJSON of blocks, diagnostics and the summary or the error (finished jobs).
     Diagnostics,
-    /// The decimated path, joints and marks (`post::preview`) for display (finished jobs).
+    /// The decimated path, joints and marks (`output::preview`) for display (finished jobs).
     Preview,
 }
 

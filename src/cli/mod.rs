@@ -1,9 +1,11 @@
 //! The command line: a thin edge over the library. Degrees and JSON live here.
 
-use crate::kinematics::{self, IkOptions, Joints, Pose, Setup, Units, Vec3};
-use crate::machines::{self, Library};
 use clap::{Parser, Subcommand};
-use serde_json::{Map, Value, json};
+use kinepost::kinematics::{self, IkOptions, Joints, Pose, Setup, Units, Vec3};
+use kinepost::machines::{self, Library};
+use kinepost::output::{solution_json, utc_now};
+use kinepost::post::parse_triple;
+use serde_json::{Value, json};
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -215,20 +217,20 @@ fn machines_cmd(lib: &Library, dir: &std::path::Path, a: &MachinesCmd) -> Result
                 let d = match (row.get("error"), row.get("dz"), pendulum) {
                     (Some(e), _, _) => *e,
                     (None, Some(dz), Some(l)) => {
-                        crate::calib::delta_from_vertical_error(t, *dz, *l).map_err(|e| e.to_string())?
+                        kinepost::calib::delta_from_vertical_error(t, *dz, *l).map_err(|e| e.to_string())?
                     }
                     _ => return Err("CSV needs an `error` column, or `dz` with --pendulum".into()),
                 };
                 samples.push((t, d));
             }
-            let fits = crate::calib::fit_angle_error(&samples, 2..=5).map_err(|e| e.to_string())?;
+            let fits = kinepost::calib::fit_angle_error(&samples, 2..=5).map_err(|e| e.to_string())?;
             for f in &fits {
                 eprintln!(
                     "degree {}: rms {:.3e}°, max {:.3e}°, coefficients {:?}",
                     f.degree, f.rms, f.max, f.coefficients
                 );
             }
-            let chosen = crate::calib::choose(&fits).ok_or("no fit")?;
+            let chosen = kinepost::calib::choose(&fits).ok_or("no fit")?;
             eprintln!("proposed: degree {}", chosen.degree);
             let range = samples
                 .iter()
@@ -259,12 +261,12 @@ fn machines_cmd(lib: &Library, dir: &std::path::Path, a: &MachinesCmd) -> Result
                 }
                 let joints = parse_words(m, &words)?;
                 let d = |k: &str| row.get(k).copied().ok_or(format!("CSV needs a `{k}` column"));
-                meas.push(crate::calib::Measurement {
+                meas.push(kinepost::calib::Measurement {
                     joints,
                     deviation: Vec3::new(d("dx")?, d("dy")?, d("dz")?),
                 });
             }
-            let fit = crate::calib::fit_pivots(m, &setup, &meas).map_err(|e| e.to_string())?;
+            let fit = kinepost::calib::fit_pivots(m, &setup, &meas).map_err(|e| e.to_string())?;
             eprintln!("rms {:.3e} -> {:.3e} {}", fit.rms_before, fit.rms, m.units.as_str());
             let mut doc = p.doc.clone();
             for (name, off) in &fit.offsets {
@@ -348,11 +350,11 @@ pub enum ModeArg {
     Tcp,
 }
 
-impl From<ModeArg> for crate::post::Mode {
+impl From<ModeArg> for kinepost::post::Mode {
     fn from(m: ModeArg) -> Self {
         match m {
-            ModeArg::Joint => crate::post::Mode::Joint,
-            ModeArg::Tcp => crate::post::Mode::Tcp,
+            ModeArg::Joint => kinepost::post::Mode::Joint,
+            ModeArg::Tcp => kinepost::post::Mode::Tcp,
         }
     }
 }
@@ -457,20 +459,6 @@ impl SetupArgs {
     }
 }
 
-pub fn parse_triple(s: &str) -> Result<Vec3, String> {
-    let v: Vec<f64> = s
-        .split(',')
-        .map(|p| p.trim().parse::<f64>().map_err(|_| format!("{p:?} is not a number")))
-        .collect::<Result<_, _>>()?;
-    match v.as_slice() {
-        [x, y, z] if v.iter().all(|c| crate::kinematics::coordinate_ok(*c)) => Ok(Vec3::new(*x, *y, *z)),
-        _ => Err(format!(
-            "expected three numbers x,y,z within ±{:e}, got {s:?}",
-            crate::kinematics::MAX_COORD
-        )),
-    }
-}
-
 pub fn main() -> ExitCode {
     let cli = Cli::parse();
     match run(cli) {
@@ -498,8 +486,8 @@ pub fn open_input(path: &str) -> Result<Box<dyn std::io::BufRead>, String> {
 }
 
 fn lint(input: &str, verbose: bool) -> Result<(), String> {
-    use crate::cl::{Event, Reader};
-    use crate::diag::Severity;
+    use kinepost::cl::{Event, Reader};
+    use kinepost::diag::Severity;
     let mut counts: std::collections::BTreeMap<String, u64> = Default::default();
     let (mut records, mut errors, mut warnings) = (0u64, 0u64, 0u64);
     for ev in Reader::new(open_input(input)?) {
@@ -552,7 +540,7 @@ fn serve(cli: &Cli, a: &ServeArgs) -> Result<(), String> {
         "text" => builder.init(),
         other => return Err(format!("--log-format {other:?}: expected text or json")),
     }
-    let cfg = crate::http::Config {
+    let cfg = kinepost::http::Config {
         bind: a.bind.clone(),
         machines: cli.machines.clone().unwrap_or_else(machines::default_dir),
         data_dir: a.data_dir.clone(),
@@ -575,7 +563,7 @@ fn serve(cli: &Cli, a: &ServeArgs) -> Result<(), String> {
         shutdown_grace: seconds("shutdown-grace", a.shutdown_grace, 0.0, 86400.0, 1.0)?,
     };
     let rt = tokio::runtime::Runtime::new().map_err(|e| e.to_string())?;
-    let r = rt.block_on(crate::http::serve(cfg));
+    let r = rt.block_on(kinepost::http::serve(cfg));
     // Dropping the runtime would wait for every blocking task (a job mid-run) to end; the queue
     // is durable, so what still runs resumes on the next start.
     rt.shutdown_timeout(std::time::Duration::from_secs(2));
@@ -601,7 +589,7 @@ fn run(cli: Cli) -> Result<(), String> {
             let p = lib.get(&machine).map_err(|e| e.to_string())?;
             let out = std::io::stdout().lock();
             let mut w = std::io::BufWriter::with_capacity(1 << 16, out);
-            crate::testgen::write_path(
+            kinepost::testgen::write_path(
                 &p.machine,
                 points,
                 seed,
@@ -620,7 +608,7 @@ fn run(cli: Cli) -> Result<(), String> {
             tolerance,
             cl_units,
         } => {
-            use crate::post::verify;
+            use kinepost::post::verify;
             let p = lib.get(&machine).map_err(|e| e.to_string())?;
             let m = &p.machine;
             let o = verify::VerifyOptions {
@@ -704,7 +692,7 @@ fn run(cli: Cli) -> Result<(), String> {
 
 fn post_cmd(p: &machines::Profile, a: &PostArgs) -> Result<(), String> {
     let m = &p.machine;
-    use crate::post::{self, Settings};
+    use kinepost::post::{self, Settings};
     use std::io::Write;
     let settings = Settings {
         machine: Some(a.machine.clone()),
@@ -746,7 +734,7 @@ fn post_cmd(p: &machines::Profile, a: &PostArgs) -> Result<(), String> {
         )),
         None => None,
     };
-    let mut sink = post::FileSink::new(out, diag);
+    let mut sink = kinepost::output::FileSink::new(out, diag);
     sink.echo_warnings = true;
     let res = post::post(input, m, &o, &mut sink);
     sink.flush().map_err(|e| e.to_string())?;
@@ -790,49 +778,6 @@ fn post_cmd(p: &machines::Profile, a: &PostArgs) -> Result<(), String> {
         s.cycle_time_s / 60.0
     );
     Ok(())
-}
-
-/// `YYYY-MM-DD HH:MM` of the system clock, UTC (civil-from-days, no calendar crate needed).
-pub fn utc_now() -> String {
-    let secs = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map_or(0, |d| d.as_secs()) as i64;
-    let (days, rem) = (secs.div_euclid(86_400), secs.rem_euclid(86_400));
-    let z = days + 719_468;
-    let era = z.div_euclid(146_097);
-    let doe = z - era * 146_097;
-    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
-    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
-    let mp = (5 * doy + 2) / 153;
-    let d = doy - (153 * mp + 2) / 5 + 1;
-    let m = if mp < 10 { mp + 3 } else { mp - 9 };
-    let y = yoe + era * 400 + (m <= 2) as i64;
-    format!("{y:04}-{m:02}-{d:02} {:02}:{:02}", rem / 3600, rem % 3600 / 60)
-}
-
-/// One solution as the CLI and the API show it: axis words, branch, flags. Rotary words are those
-/// of the actual angle in (−180°, 180°]; they are never wrapped themselves, because angle-error
-/// compensation is not periodic (a word of 183.26° may be the one that stands at 179.41°).
-pub fn solution_json(m: &kinematics::Machine, s: &kinematics::Solution) -> Value {
-    let mut o = Map::new();
-    for (i, l) in m.linears.iter().enumerate() {
-        if l.is_some() {
-            o.insert(kinematics::LINEAR_NAMES[i].to_string(), json!(s.joints.linear[i]));
-        }
-    }
-    for (i, r) in m.rotaries.iter().enumerate() {
-        o.insert(r.name.to_string(), json!(s.joints.rotary[i].to_degrees()));
-    }
-    o.insert("branch".into(), json!(s.branch));
-    if m.rotaries.len() == 3 {
-        o.insert("root".into(), json!(s.root));
-    }
-    o.insert("within_limits".into(), json!(kinematics::reachable_within_limits(m, s)));
-    o.insert("singular".into(), json!(s.singular.is_some()));
-    if let Some(ri) = s.singular {
-        o.insert("free_axis".into(), json!(m.rotaries[ri].name.to_string()));
-    }
-    Value::Object(o)
 }
 
 fn parse_words(m: &kinematics::Machine, words: &[String]) -> Result<Joints, String> {

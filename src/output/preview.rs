@@ -2,9 +2,9 @@
 //! block that deserves a look. Built block by block beside the NC (memory bounded by its caps, not
 //! by the program), finished with one pass over the CL source to quote the lines it points at.
 
-use super::{BlockInfo, Mode, Summary};
 use crate::diag::{Code, Diagnostic, Severity};
 use crate::kinematics::{Machine, Pose};
+use crate::post::{BlockInfo, Mode, Summary};
 use serde::Serialize;
 use std::io::BufRead;
 
@@ -105,7 +105,7 @@ struct Last {
     t: f64,
     tip: [f64; 3],
     axis: [f64; 3],
-    joints: super::AxisWords,
+    joints: crate::post::AxisWords,
 }
 
 struct Kept {

@@ -1,0 +1,126 @@
+//! Tilted working planes (G68.2, G254, CYCLE800, PLANE SPATIAL) for fixed-axis runs: when one
+//! may be used, entering and leaving it, and plane coordinates both ways.
+
+use super::Emitter;
+use crate::diag::Code;
+use crate::kinematics::{self, Vec3, angle_between};
+use crate::post::{Mode, Sink};
+
+/// A tilted working plane in force: the rotary words it stands on (radians), its frame as the
+/// control builds it from the words written, and the CL tool axis of its run.
+#[derive(Clone, Copy, Debug)]
+pub(in crate::post) struct Tilt {
+    pub(in crate::post) rotary: [f64; 3],
+    pub(in crate::post) frame: nalgebra::Matrix3<f64>,
+    pub(in crate::post) axis: Vec3,
+}
+
+impl<S: Sink + ?Sized> Emitter<'_, S> {
+    /// Why a fixed-axis run is not written in a tilted plane, if it cannot be.
+    pub(super) fn plane_refused(&self) -> Option<&'static str> {
+        let m = self.m;
+        if self.o.mode != Mode::Joint {
+            return Some("tilted planes are written in joint mode only (TCP moves the tool in part coordinates already)");
+        }
+        if self.o.dialect.planes == crate::nc::Planes::None {
+            return Some("this dialect has no tilted-plane command");
+        }
+        if m.linears.iter().any(|l| l.is_none()) || m.rotaries.len() != 2 {
+            return Some("tilted planes need three linear and two rotary axes");
+        }
+        if self.o.dialect.planes == crate::nc::Planes::Haas && m.rotaries.iter().any(|r| r.mount != kinematics::Mount::Table) {
+            return Some("G254 (dynamic work offset) needs a table-table machine");
+        }
+        None
+    }
+
+    /// Tilts the working plane where the machine stands (the rapid to `tip` just written), if
+    /// the tool axis there is tilted and the machine and dialect allow it.
+    pub(super) fn enter_plane(&mut self, tip: &Vec3) -> std::io::Result<()> {
+        let Some(at) = self.at else { return Ok(()) };
+        if (at.pose.tip - tip).norm() > 1e-9 || angle_between(&at.pose.axis, &Vec3::z()) < 1e-6 {
+            return Ok(());
+        }
+        if let Some(why) = self.plane_refused() {
+            return self.say_once(why, Code::IgnoredRecord, None, "3+2 written as 5-axis positioning");
+        }
+        self.cancel_cycle()?;
+        let m = self.m;
+        let frame = kinematics::machine_frame(m, &self.written_rotaries(&at.joints.rotary));
+        // The tilting rotary is the one that is not free about the singular direction.
+        let free = kinematics::outer_rotary(m);
+        let master = (0..m.rotaries.len()).find(|&i| Some(i) != free).unwrap_or(0);
+        let positive = at.joints.rotary[master] >= 0.0;
+        let c = self.f.comment("TILTED WORK PLANE").to_string();
+        self.out(&c)?;
+        self.comp_cancel()?;
+        let (lines, written) = self.f.plane_on(&frame, positive);
+        for l in &lines {
+            self.out(l)?;
+        }
+        self.tilt = Some(Tilt {
+            rotary: at.joints.rotary,
+            frame: written,
+            axis: at.pose.axis,
+        });
+        self.sum.tilted_planes += 1;
+        self.ensure_comp(self.last_line)
+    }
+
+    /// Back to untilted coordinates; `recomp`: length compensation on again for the blocks that
+    /// follow (not before a tool change, which sets its own).
+    pub(super) fn leave_plane(&mut self, recomp: bool) -> std::io::Result<()> {
+        if self.tilt.take().is_none() {
+            return Ok(());
+        }
+        self.cancel_cycle()?;
+        self.comp_cancel()?;
+        if let Some(l) = self.f.plane_off() {
+            self.out(&l)?;
+        }
+        if recomp { self.ensure_comp(self.last_line) } else { Ok(()) }
+    }
+
+    /// Length compensation off (word-address controls with a G43-style word) around a plane
+    /// change, which redefines the direction it applies in.
+    pub(super) fn comp_cancel(&mut self) -> std::io::Result<()> {
+        let d = self.o.dialect;
+        if self.comp_on && !d.length_comp.is_empty() && d.style == crate::nc::Style::WordAddress {
+            if let Some(l) = self.f.line(d.tcp_off, self.tool.unwrap_or(1), 0) {
+                self.out(&l)?;
+            }
+            self.comp_on = false;
+        }
+        Ok(())
+    }
+
+    /// The tip in the plane's coordinates (its origin is the joint-mode program zero).
+    pub(super) fn plane_coords(&self, t: &Tilt, tip_w: &Vec3) -> Vec3 {
+        t.frame.transpose() * (tip_w + self.setup.work_offset)
+    }
+
+    /// The inverse, from the words as written (rounded): where the control puts the tip.
+    pub(super) fn plane_tip(&self, t: &Tilt, words: [f64; 3]) -> Vec3 {
+        let q = Vec3::new(
+            self.f.written(words[0], 0),
+            self.f.written(words[1], 1),
+            self.f.written(words[2], 2),
+        );
+        t.frame * q - self.setup.work_offset
+    }
+
+    /// The plane in force, if the rotary words `rotary` stand on it.
+    pub(super) fn plane_at(&self, rotary: &[f64; 3]) -> Option<Tilt> {
+        self.tilt
+            .filter(|t| (0..self.m.rotaries.len()).all(|i| (rotary[i] - t.rotary[i]).abs() <= 1e-9))
+    }
+
+    /// Rotary words (radians) as the control reads them back from the written degrees.
+    pub(super) fn written_rotaries(&self, rotary: &[f64; 3]) -> [f64; 3] {
+        let mut w = [0.0; 3];
+        for (i, r) in self.m.rotaries.iter().enumerate() {
+            w[i] = self.f.written(rotary[i].to_degrees(), r.slot()).to_radians();
+        }
+        w
+    }
+}

@@ -1,0 +1,227 @@
+//! One committed CL point: the planner's candidate resolved against where the machine is, its
+//! pose's diagnostics, and the motion that reaches it (positioning, arc, segment, reposition).
+
+use super::singular::nearest_singular;
+use super::{At, Emitter, limit_error};
+use crate::diag::{Code, Diagnostic, Severity};
+use crate::kinematics::{self, IkOptions, Joints, Pose, angle_between, ik_into};
+use crate::post::lookahead::PLANE_AXIS_EPS;
+use crate::post::plan::{self, Cand, Committed, wrap};
+use crate::post::{Error, HolePart, MotionPt, Sink};
+
+impl<S: Sink + ?Sized> Emitter<'_, S> {
+    /// The machine reaches `pt` by positioning, not by cutting: the first move, the first after
+    /// a tool change, a rapid.
+    pub(in crate::post) fn positioning(&self, pt: &MotionPt) -> bool {
+        self.at.is_none() || self.tool_changed || pt.rapid
+    }
+
+    /// The chosen candidate with its unbounded windings and singular free angle resolved against
+    /// where the machine is.
+    pub(super) fn resolve(&mut self, pose: &Pose, cand: &Cand, positioning: bool) -> Option<(Joints, [f64; 3], i8, Option<u8>)> {
+        let mut sol = cand.sol;
+        if let Some(free) = sol.singular {
+            let prev = self.at.map_or(0.0, |a| a.actual[free]);
+            // Positioning onto a singular point (the first move, after a tool change or a rapid)
+            // turns the free rotary to where the cut after it needs it: held at the old angle,
+            // it turned during that cut, the tool axis off the CL orientation by up to 11° (a
+            // cut from vertical to a 30° tilt on spinner-u5-620).
+            let r = &self.m.rotaries[free];
+            let prev = match self.free_hint.map(|w| r.actual(w)) {
+                Some(h) if positioning => {
+                    if r.limits.is_some() {
+                        h
+                    } else {
+                        prev + wrap(h - prev)
+                    }
+                }
+                _ => prev,
+            };
+            let opt = IkOptions {
+                free_angle: prev,
+                ..Default::default()
+            };
+            // The planned root: a chain missing a linear has several singular ones (C a half
+            // turn apart), and the first of them, with the planner's A and B windings copied in,
+            // put the tool 180° off the pose (propeller-3r2l).
+            if ik_into(self.m, pose, &self.setup, &opt, &mut self.buf).is_ok()
+                && let Some(s) = nearest_singular(&self.buf, free, &cand.sol.actual)
+            {
+                sol = s;
+            }
+            // The bounded windings the planner chose stay as chosen.
+            for (i, r) in self.m.rotaries.iter().enumerate() {
+                if i != free && r.limits.is_some() {
+                    sol.joints.rotary[i] = cand.sol.joints.rotary[i];
+                }
+            }
+        }
+        let mut joints = sol.joints;
+        let mut actual = sol.actual;
+        if let Some(at) = self.at {
+            for (i, r) in self.m.rotaries.iter().enumerate() {
+                if r.limits.is_none() && sol.singular != Some(i) {
+                    actual[i] = at.actual[i] + wrap(sol.actual[i] - at.actual[i]);
+                    joints.rotary[i] = r.word(actual[i]);
+                }
+            }
+        }
+        for (i, r) in self.m.rotaries.iter().enumerate() {
+            if r.limits.is_some() {
+                actual[i] = r.actual(joints.rotary[i]);
+            }
+        }
+        Some((joints, actual, sol.branch, sol.singular.map(|f| f as u8)))
+    }
+
+    /// One committed CL point; a rapid that starts a fixed-axis run (seen ahead) tilts the
+    /// working plane once the machine stands there.
+    pub(in crate::post) fn point(&mut self, c: Committed) -> Result<(), Error> {
+        let (rapid, tip, ahead) = (c.pt.rapid, c.pt.pose.tip, self.plane_ahead);
+        self.point_at(c)?;
+        if rapid && ahead && self.tilt.is_none() {
+            self.enter_plane(&tip)?;
+        }
+        Ok(())
+    }
+
+    pub(super) fn point_at(&mut self, c: Committed) -> Result<(), Error> {
+        if self.o.canned_cycles {
+            match c.pt.hole.as_deref().copied() {
+                Some(HolePart::Start(h)) => {
+                    self.in_hole = false;
+                    match self.canned_check(&c, &h) {
+                        Ok((cb, start)) => return self.canned_hole(c, h, cb, start),
+                        Err(why) => self.expanded(&c.pt, why)?,
+                    }
+                }
+                // The rest of a hole written as a cycle.
+                Some(HolePart::Top) if self.in_hole => {
+                    self.sum.cl_points += 1;
+                    return Ok(());
+                }
+                Some(_) if self.in_hole => return Ok(()),
+                _ => self.in_hole = false,
+            }
+        }
+        self.sum.cl_points += !c.pt.inserted as u64;
+        let pt = c.pt;
+        let Some(cand) = c.cand else {
+            let what = match &c.error {
+                Some(e) => e.to_string(),
+                None => "no solution".into(),
+            };
+            self.note_at(
+                Diagnostic::new(
+                    Code::Unreachable,
+                    Severity::Error,
+                    Some(pt.line),
+                    format!("pose unreachable on {}: {what}; block skipped", self.m.id),
+                ),
+                &pt.pose,
+            )?;
+            return Ok(());
+        };
+        let Some((mut joints, mut actual, branch, mut free)) = self.resolve(&pt.pose, &cand, self.positioning(&pt)) else {
+            return Ok(());
+        };
+        self.ensure_comp(pt.line)?;
+        let mut diags: Vec<Diagnostic> = Vec::new();
+        let mut pose = pt.pose;
+        let outer = kinematics::outer_rotary(self.m);
+        if let Some(sm) = self.smooth(&pt.pose, &joints, &actual, branch) {
+            diags.push(Diagnostic::new(
+                Code::Singular,
+                Severity::Info,
+                Some(pt.line),
+                format!(
+                    "free rotary held: tool axis {:.4}° off the CL orientation ({:.3}° less turn in this block)",
+                    sm.3, sm.4
+                ),
+            ));
+            if let Some(oi) = outer {
+                let d = wrap(actual[oi] - self.exact_prev.unwrap_or(actual[oi])).abs();
+                self.exact_travel += d;
+                self.exact_prev = Some(actual[oi]);
+            }
+            (joints, actual, pose.axis, free) = (sm.0, sm.1, sm.2, None);
+        } else if let Some(oi) = outer {
+            self.exact_travel += wrap(actual[oi] - self.exact_prev.unwrap_or(actual[oi])).abs();
+            self.exact_prev = Some(actual[oi]);
+        }
+        if let Some(oi) = outer {
+            self.held_travel += (actual[oi] - self.held_prev.unwrap_or(actual[oi])).abs();
+            self.held_prev = Some(actual[oi]);
+            if self.o.singular_tolerance > 0.0 {
+                self.sum.smoothing_travel_saved_deg = (self.exact_travel - self.held_travel).to_degrees();
+            }
+        }
+        // The planner judged travel at the IK's free angle; a singular point stands at the one
+        // held (mikron-ucp710: C held at 666° put Y at -277 of ±275, told as "near" its limit).
+        let outside = if !cand.feasible || free.is_some() {
+            kinematics::limit_violation(self.m, &joints, 1e-6)
+        } else {
+            None
+        };
+        if let Some(v) = &outside {
+            self.outside_line = Some(pt.line);
+            diags.push(limit_error(v, pt.line, ""));
+        } else if let Some(v) = self.near_limit(&joints) {
+            diags.push(Diagnostic::new(Code::NearLimit, Severity::Info, Some(pt.line), v));
+        }
+        let target = At {
+            joints,
+            actual,
+            pose,
+            branch,
+            free,
+        };
+        // After a tool change the machine stands where the change left it, not at the last
+        // block: the next move, feed or not, positions as a rapid that turns rotaries does.
+        if let Some(prev) = &self.at
+            && (self.tool_changed
+                || pt.rapid
+                    && (0..self.m.rotaries.len()).any(|i| (joints.rotary[i] - prev.joints.rotary[i]).abs() > 1f64.to_radians()))
+        {
+            self.safe_rapid(*prev, target, &pt, diags)?;
+            return Ok(());
+        }
+        match self.at {
+            Some(prev) if !pt.rapid => {
+                let prev = if prev.free.is_some() {
+                    self.turn_free(prev, &target, &pt)?
+                } else {
+                    prev
+                };
+                let unwind =
+                    self.m.rotaries.iter().enumerate().any(|(i, r)| {
+                        r.limits.is_some() && (joints.rotary[i] - prev.joints.rotary[i]).abs() > std::f64::consts::PI
+                    });
+                let branch_change = prev.branch * branch < 0
+                    && !plan::crosses_fold(self.m, &prev.joints.rotary, &joints.rotary, &prev.pose.axis, &pt.pose.axis);
+                if let (Some(arc), false, false) = (pt.arc.as_deref().copied(), unwind, branch_change) {
+                    self.arc_move(prev, target, &arc, &pt, diags)?;
+                    return Ok(());
+                }
+                // A feed that turns the axis of the plane in force: a cut longer than the look-ahead.
+                if self
+                    .tilt
+                    .is_some_and(|t| angle_between(&t.axis, &pt.pose.axis) > PLANE_AXIS_EPS)
+                {
+                    self.reposition(prev, target, false, &pt)?;
+                } else if unwind || branch_change {
+                    self.reposition(prev, target, unwind, &pt)?;
+                } else {
+                    self.segment(prev, target, &pt, diags, 0)?;
+                    return Ok(());
+                }
+            }
+            _ => {}
+        }
+        if self.at.is_none() && !self.m.rotaries.is_empty() {
+            return self.approach(target, &pt, diags);
+        }
+        self.block(target, &pt, pt.rapid || self.at.is_none(), diags, pt.inserted, None)?;
+        Ok(())
+    }
+}

@@ -1,0 +1,373 @@
+//! Program events: the program's start and end, tool changes, the tool length, spindle, coolant,
+//! comments, dwells; length compensation (or TCP) on before a tool's first move.
+
+use super::Emitter;
+use crate::cl::{CoolantCmd, Dwell, SpindleCmd};
+use crate::diag::{Code, Diagnostic, Severity};
+use crate::kinematics::Vec3;
+use crate::post::{Error, Mode, ProgEvent, Sink};
+
+impl<S: Sink + ?Sized> Emitter<'_, S> {
+    pub(in crate::post) fn program_start(&mut self) -> std::io::Result<()> {
+        let mut lines = vec![
+            format!("KINEPOST {} FOR {} ({})", env!("CARGO_PKG_VERSION"), self.m.id, self.m.name),
+            format!(
+                "MODE {} UNITS {} TOOL LENGTH {}{} TOLERANCE {}",
+                match self.o.mode {
+                    Mode::Joint => "JOINT",
+                    Mode::Tcp => "TCP",
+                },
+                self.m.units.as_str(),
+                self.setup.tool_length,
+                // The header is out before the CL is read: say which length the NC is cut for.
+                if self.o.tool_length.is_some() {
+                    ""
+                } else {
+                    " UNTIL THE CL SETS ONE"
+                },
+                self.o.tolerance
+            ),
+        ];
+        let wo = self.o.work_offset;
+        if wo != Vec3::zeros() {
+            lines.push(format!("WORK OFFSET {},{},{}", wo.x, wo.y, wo.z));
+        }
+        if let Some(s) = self.o.spindle_speed {
+            lines.push(format!("SPINDLE S{} WHERE THE CL STARTS NONE", s.round()));
+        }
+        lines.extend(self.o.header.iter().cloned());
+        for l in self.f.header(self.o.program_number, self.m.units, &lines, self.o.wcs_word()) {
+            self.out(&l)?;
+        }
+        Ok(())
+    }
+
+    /// The CL sets the tool length (the job fixed none): the NC from here on is cut for it, so
+    /// the program says so where it takes effect (the header only knew the profile's).
+    pub(in crate::post) fn cl_tool_length(&mut self, l: f64) -> std::io::Result<()> {
+        self.setup.tool_length = l;
+        self.sum.tool_length = l;
+        // When it changes: NX repeats TLDATA with every operation (before its LOAD/TOOL).
+        if self.length_said == Some(l) {
+            return Ok(());
+        }
+        self.length_said = Some(l);
+        let c = self
+            .f
+            .comment(&format!("TOOL LENGTH {l:.*} FROM THE CL", self.f.fmt.linear as usize))
+            .to_string();
+        self.out(&c)
+    }
+
+    pub(in crate::post) fn program_end(&mut self) -> Result<(), Error> {
+        self.cancel_cycle()?;
+        self.leave_plane(false)?;
+        self.retract_up()?;
+        self.lock_all()?;
+        // TCP: X Y Z are the tip, and the retract above went the clearance along the tool axis;
+        // machine Z home takes the spindle clear of the part whatever comes next.
+        let z_up = self.o.mode == Mode::Tcp && self.at.is_some();
+        for l in self.f.footer(z_up) {
+            self.out(&l)?;
+        }
+        Ok(())
+    }
+
+    pub(in crate::post) fn event(&mut self, ev: ProgEvent) -> Result<(), Error> {
+        if !matches!(
+            ev,
+            ProgEvent::Comment(_) | ProgEvent::Operation(_) | ProgEvent::Diag(_) | ProgEvent::End
+        ) {
+            self.cancel_cycle()?;
+        }
+        match ev {
+            ProgEvent::Tool { number, adjust, line } => self.tool_change(number, adjust, line)?,
+            ProgEvent::ToolLength(l) => {
+                // Only when the job fixed the length (else `cl_tool_length`, before planning).
+                if (l - self.setup.tool_length).abs() > self.f.fmt.half_linear() {
+                    self.note(Diagnostic::new(
+                        Code::ToolLength,
+                        Severity::Info,
+                        None,
+                        format!(
+                            "the CL sets tool length {l:.*}; the job's {:.*} is used",
+                            self.f.fmt.linear as usize, self.f.fmt.linear as usize, self.setup.tool_length
+                        ),
+                    ))?;
+                }
+            }
+            ProgEvent::Spindle(c) => self.spindle(c)?,
+            ProgEvent::Coolant(c) => self.coolant(c)?,
+            ProgEvent::Comment(t) => {
+                let c = self.f.comment(&t).to_string();
+                self.out(&c)?;
+            }
+            ProgEvent::Operation(name) => {
+                let c = self.f.comment(&format!("OPERATION {name}")).to_string();
+                self.out(&c)?;
+            }
+            ProgEvent::Dwell { dwell, line } => self.dwell(dwell, line)?,
+            ProgEvent::Diag(dg) => self.note(dg)?,
+            ProgEvent::End => {}
+        }
+        Ok(())
+    }
+
+    /// A tool change: retract, compensation and coolant off, the dialect's change lines.
+    fn tool_change(&mut self, number: u32, adjust: Option<u32>, line: u32) -> Result<(), Error> {
+        let d = self.o.dialect;
+        // The tool in the spindle loaded again (CATIA writes `LOADTL/1` then `LOADTL/1,1`):
+        // a second change would only stop the spindle and retract.
+        if self.tool == Some(number) {
+            // With another length offset: in force from the next move.
+            if adjust != self.adjust {
+                self.adjust = adjust;
+                self.comp_on = false;
+            }
+            self.note(Diagnostic::new(
+                Code::IgnoredRecord,
+                Severity::Info,
+                Some(line),
+                format!("tool {number} is in the spindle already: no tool change written"),
+            ))?;
+            return Ok(());
+        }
+        self.leave_plane(false)?;
+        self.retract_up()?;
+        if self.comp_on {
+            if let Some(l) = self.f.line(d.tcp_off, number, 0) {
+                self.out(&l)?;
+            }
+            self.comp_on = false;
+            // TCP: the retract went the clearance along the tool axis (see `program_end`).
+            if self.o.mode == Mode::Tcp
+                && let Some(l) = self.f.line(d.machine_z_up, number, 0)
+            {
+                self.out(&l)?;
+            }
+        }
+        if self.coolant.is_some()
+            && self.coolant_restore.is_none()
+            && !self.coolant_deferred
+            && let Some(l) = self.f.line(d.coolant_off, number, 0)
+        {
+            self.out(&l)?;
+            self.coolant_restore = Some(line);
+        }
+        let c = match adjust {
+            Some(a) => format!("TOOL {number} LENGTH OFFSET {a}"),
+            None => format!("TOOL {number}"),
+        };
+        let c = self.f.comment(&c).to_string();
+        self.out(&c)?;
+        for t in d.tool_change {
+            if let Some(l) = self.f.line(t, number, 0) {
+                self.out(&l)?;
+            }
+        }
+        self.f.reset_modal();
+        self.tool = Some(number);
+        self.adjust = adjust;
+        self.tool_changed = true;
+        if std::mem::take(&mut self.spindle_on) {
+            self.spindle_restore = Some(line);
+        }
+        self.spindle_said_off = false;
+        Ok(())
+    }
+
+    /// SPINDL: a speed and direction, or off.
+    fn spindle(&mut self, c: SpindleCmd) -> Result<(), Error> {
+        let d = self.o.dialect;
+        let (speed, cw) = match c {
+            SpindleCmd::Rpm { speed, clockwise } => (Some(speed), clockwise),
+            SpindleCmd::Surface { speed, clockwise, .. } => {
+                self.note(Diagnostic::new(
+                    Code::SurfaceSpeed,
+                    Severity::Warning,
+                    None,
+                    "surface speed not converted (no milling cutter's diameter before it): written as S",
+                ))?;
+                (Some(speed), clockwise)
+            }
+            SpindleCmd::Off => (None, true),
+        };
+        self.rpm = speed;
+        self.spindle_restore = None;
+        self.spindle_said_off = speed.is_none();
+        match speed {
+            Some(v) => self.spindle_start(v, cw)?,
+            None => {
+                if let Some(l) = self.f.line(d.spindle_off, self.tool.unwrap_or(1), 0) {
+                    self.out(&l)?;
+                }
+                self.spindle_on = false;
+            }
+        }
+        Ok(())
+    }
+
+    /// COOLNT: its word, deferred before the first tool and move.
+    fn coolant(&mut self, c: CoolantCmd) -> Result<(), Error> {
+        let d = self.o.dialect;
+        let w = match c {
+            CoolantCmd::Flood => d.coolant_flood,
+            CoolantCmd::Mist => d.coolant_mist,
+            CoolantCmd::Through => d.coolant_through,
+            CoolantCmd::Off => d.coolant_off,
+        };
+        let on = c != CoolantCmd::Off;
+        // Nothing to cool before the first tool and move, and M6 would only stop it.
+        let early = self.tool.is_none() && self.at.is_none();
+        if !(early && (on || self.coolant_deferred))
+            && let Some(l) = self.f.line(w, 0, 0)
+        {
+            self.out(&l)?;
+        }
+        self.coolant = on.then_some(w);
+        self.coolant_restore = None;
+        self.coolant_deferred = early && on;
+        Ok(())
+    }
+
+    /// DELAY: seconds, or revolutions at the speed in force.
+    fn dwell(&mut self, dwell: Dwell, line: u32) -> Result<(), Error> {
+        // Revolutions at the speed in force; with no speed to turn them into time the
+        // dwell cannot be written as the CL meant it.
+        let secs = match dwell {
+            Dwell::Seconds(t) => Ok(t),
+            Dwell::Revolutions(n) => self.rpm.filter(|_| self.spindle_on).map(|rpm| n * 60.0 / rpm).ok_or(n),
+        };
+        match secs {
+            Ok(t) => {
+                for l in self.f.dwell(t) {
+                    self.out(&l)?;
+                }
+                self.sum.cycle_time_s += t;
+            }
+            Err(n) => self.note(Diagnostic::new(
+                Code::BadRecord,
+                Severity::Warning,
+                Some(line),
+                format!("DELAY of {n} revolutions with no spindle turning: no dwell written"),
+            ))?,
+        }
+        Ok(())
+    }
+
+    /// S and M3/M4 (TNC: a speed-only TOOL CALL, then the direction alone).
+    pub(super) fn spindle_start(&mut self, speed: f64, cw: bool) -> std::io::Result<()> {
+        let d = self.o.dialect;
+        let (t, s) = (self.tool.unwrap_or(1), speed.round() as i64);
+        let dir = if cw { d.spindle_cw } else { d.spindle_ccw };
+        if d.style == crate::nc::Style::Conversational {
+            for w in [d.spindle, dir] {
+                if let Some(l) = self.f.line(w, t, s) {
+                    self.out(&l)?;
+                }
+            }
+        } else if let Some(l) = self.f.line(&format!("{} {dir}", d.spindle), t, s) {
+            self.out(&l)?;
+        }
+        (self.spindle_on, self.spindle_cw, self.warned_spindle) = (true, cw, false);
+        Ok(())
+    }
+
+    /// A cut with the spindle standing (a tool fed into the part without turning breaks): told
+    /// once until the spindle starts. A warning, not an error: a probe or a scribe cuts nothing.
+    pub(super) fn spindle_standing(&mut self, line: u32) -> Option<Diagnostic> {
+        if self.spindle_on || self.warned_spindle {
+            return None;
+        }
+        self.warned_spindle = true;
+        Some(Diagnostic::new(
+            Code::SpindleStopped,
+            Severity::Warning,
+            Some(line),
+            "feed move with the spindle standing: the CL starts none before it (no SPINDL with a speed, or SPINDL/OFF since; spindle_speed gives one)",
+        ))
+    }
+
+    /// Length compensation (or TCP) on, before the first motion of a tool (at CL `line`); and the
+    /// spindle again where the tool change stopped it, or at `spindle_speed` where the CL started
+    /// none.
+    pub(super) fn ensure_comp(&mut self, line: u32) -> std::io::Result<()> {
+        if self.comp_on {
+            return Ok(());
+        }
+        if let Some(line) = self.spindle_restore.take()
+            && let Some(v) = self.rpm
+        {
+            self.note(Diagnostic::new(
+                Code::SpindleStopped,
+                Severity::Info,
+                Some(line),
+                format!(
+                    "the tool change stopped the spindle and the CL did not start it again: S{} restarted",
+                    v.round()
+                ),
+            ))?;
+            self.spindle_start(v, self.spindle_cw)?;
+        }
+        if let Some(v) = self.o.spindle_speed
+            && !self.spindle_on
+            && !self.spindle_said_off
+        {
+            self.note(Diagnostic::new(
+                Code::SpindleStopped,
+                Severity::Info,
+                Some(line),
+                format!(
+                    "the CL starts no spindle before this tool's first move: S{} (spindle_speed) started",
+                    v.round()
+                ),
+            ))?;
+            self.rpm = Some(v);
+            self.spindle_start(v, true)?;
+        }
+        if std::mem::take(&mut self.coolant_deferred)
+            && let Some(w) = self.coolant
+            && let Some(l) = self.f.line(w, 0, 0)
+        {
+            self.out(&l)?;
+        }
+        if let Some(line) = self.coolant_restore.take()
+            && let Some(w) = self.coolant
+            && let Some(l) = self.f.line(w, 0, 0)
+        {
+            self.note(Diagnostic::new(
+                Code::CoolantRestored,
+                Severity::Info,
+                Some(line),
+                format!("coolant off for the tool change and the CL did not turn it on again: {l} restarted"),
+            ))?;
+            self.out(&l)?;
+        }
+        let t = match self.tool {
+            Some(t) => t,
+            None => {
+                if !self.warned_no_tool {
+                    self.warned_no_tool = true;
+                    self.note(Diagnostic::new(
+                        Code::IgnoredRecord,
+                        Severity::Info,
+                        None,
+                        "no tool loaded in the CL: length offset H1 used",
+                    ))?;
+                }
+                1
+            }
+        };
+        let d = self.o.dialect;
+        let w = match self.o.mode {
+            Mode::Joint => d.length_comp,
+            Mode::Tcp => d.tcp_on,
+        };
+        // The H word: the register the CL named, else the tool's own.
+        if let Some(l) = self.f.line(w, self.adjust.unwrap_or(t), 0) {
+            self.out(&l)?;
+        }
+        self.comp_on = true;
+        Ok(())
+    }
+}

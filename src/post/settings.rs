@@ -1,0 +1,267 @@
+//! Post options: [`Settings`] as users give them (CLI flags, HTTP fields), validated in one
+//! place, [`Settings::options`], into the engine's [`Options`].
+
+use crate::kinematics::{Machine, Units, Vec3};
+use crate::nc::Dialect;
+use serde::Serialize;
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Mode {
+    /// No TCP on the controller: X Y Z are the machine's linear joints.
+    Joint,
+    /// The controller's tool-centre-point control: X Y Z are the tip in the part frame.
+    Tcp,
+}
+
+#[derive(Clone, Debug)]
+pub struct Options {
+    pub mode: Mode,
+    pub dialect: &'static Dialect,
+    /// Profile units; overrides the CL file's and the profile's default.
+    pub tool_length: Option<f64>,
+    pub work_offset: Vec3,
+    /// Chord tolerance (profile units): linearization, arcs, and the self-verification bound.
+    pub tolerance: f64,
+    pub sequence_numbers: bool,
+    pub program_number: u32,
+    pub strict: bool,
+    pub cl_units: Option<Units>,
+    /// Largest rotary change in one feed block before it is subdivided (radians).
+    pub max_rotary_step: f64,
+    /// Retract distance along the tool axis for unwinds and repositions (profile units).
+    pub clearance: f64,
+    /// Cone (radians) around a singular direction within which blocks are marked `singular`.
+    pub singular_cone: f64,
+    /// Orientation tolerance (radians) the free rotary may use near a singular direction: 0 is
+    /// exact (the default); e.g. 0.5° for a ball-end tool holds the rotary still where the tool
+    /// axis passes within that angle of the singular direction.
+    pub singular_tolerance: f64,
+    /// Per rotary (chain order): the words that lock and unlock it, if the machine clamps it.
+    pub clamps: [Option<(String, String)>; 3],
+    /// Header comment lines (source file name, date …) the caller wants in the program.
+    pub header: Vec<String>,
+    /// Drilling cycles (CL `CYCLE/`) as the control's canned cycles where the hole runs along
+    /// the machine's Z (joint mode); else, and by default, expanded into moves.
+    pub canned_cycles: bool,
+    /// Fixed-axis (3+2) runs in a tilted working plane (G68.2, G254, CYCLE800, PLANE SPATIAL)
+    /// with their motion in plane coordinates (joint mode); else, and by default, 5-axis
+    /// positioning.
+    pub tilted_planes: bool,
+    /// The work coordinate system the program selects (`G54`…): its origin must be where the
+    /// X Y Z words are measured from (joint mode: the profile's origin; TCP: the part's).
+    /// `None`: the dialect's first (none on a control without one); `Some("none")`: the program
+    /// selects none and runs in whatever the control has active.
+    pub work_coordinates: Option<String>,
+    /// Spindle speed (RPM, clockwise) for a tool whose CL starts none before its first move (NX's
+    /// CLSF listings carry no SPINDL: its post takes the speed from the operation). `None`: the
+    /// CL's own, and a cut with none is a `spindle_stopped` warning.
+    pub spindle_speed: Option<f64>,
+}
+
+impl Options {
+    pub fn new(m: &Machine) -> Options {
+        let mm = m.units == Units::Mm;
+        Options {
+            mode: Mode::Joint,
+            dialect: crate::nc::dialect(&m.controller).unwrap_or(&crate::nc::FANUC),
+            tool_length: None,
+            work_offset: Vec3::zeros(),
+            tolerance: if mm { 0.01 } else { 0.0004 },
+            sequence_numbers: false,
+            program_number: 1000,
+            strict: false,
+            cl_units: None,
+            max_rotary_step: 10f64.to_radians(),
+            clearance: if mm { 50.0 } else { 2.0 },
+            singular_cone: 2f64.to_radians(),
+            singular_tolerance: 0.0,
+            clamps: Default::default(),
+            header: Vec::new(),
+            canned_cycles: false,
+            tilted_planes: false,
+            work_coordinates: None,
+            spindle_speed: None,
+        }
+    }
+
+    /// The work coordinate word the program writes, if any.
+    pub fn wcs_word(&self) -> Option<&str> {
+        match self.work_coordinates.as_deref() {
+            None => self.dialect.work_coordinates.first().copied(),
+            Some("none") => None,
+            Some(w) => Some(w),
+        }
+    }
+}
+
+/// Post settings as users give them (CLI flags, HTTP query or form fields): plain values,
+/// validated once, here, into [`Options`].
+#[derive(Clone, Debug, Default, Serialize, serde::Deserialize)]
+pub struct Settings {
+    /// Machine profile id (required over HTTP; the CLI has its own flag).
+    pub machine: Option<String>,
+    /// NC dialect; default: the profile's controller.
+    pub dialect: Option<String>,
+    /// `joint` (default) or `tcp`.
+    pub mode: Option<String>,
+    /// Tool length (gauge line to tip), profile units; default: the CL file's, else the profile's.
+    pub tool_length: Option<f64>,
+    /// Work offset `x,y,z` in profile units.
+    pub work_offset: Option<String>,
+    /// Chord tolerance in profile units (default 0.01 mm / 0.0004 in, at most 1 mm / 0.04 in):
+    /// also the bound of the FK replay's tip check.
+    pub tolerance: Option<f64>,
+    pub sequence_numbers: Option<bool>,
+    /// Program number (default 1000): 1 to 9999 on fanuc (`O` and four digits), 1 to 99999 on
+    /// haas; any on the others, which name the program.
+    pub program_number: Option<u32>,
+    /// Stop at the first error instead of reporting it and going on.
+    pub strict: Option<bool>,
+    /// Degrees of orientation the free rotary may use near a singular direction (0: exact).
+    pub singular_tolerance: Option<f64>,
+    /// Units of the CL when the file does not say: `mm` or `inch`.
+    pub cl_units: Option<String>,
+    /// Drilling cycles: `expand` (default: moves) or `canned` (G81/G82/G83, CYCLE81–83, CYCL DEF
+    /// 200 where the hole runs along the machine's Z).
+    #[serde(default)]
+    pub cycles: Option<String>,
+    /// 3+2 work: `positioning` (default: 5-axis positioning, machine coordinates) or `tilted`
+    /// (a tilted working plane per fixed-axis run, motion in plane coordinates; joint mode).
+    #[serde(default)]
+    pub planes: Option<String>,
+    /// Work coordinate system the program selects: `G54` (default) to `G59` (Sinumerik: `G57`),
+    /// or `none` (the control's active one). Its origin must be where the X Y Z words are measured
+    /// from (joint mode: the profile's origin; TCP: the part's). A Heidenhain program selects none
+    /// (the TNC's preset is chosen on the control).
+    #[serde(default)]
+    pub work_coordinates: Option<String>,
+    /// Spindle speed (RPM, clockwise) for a tool the CL starts no spindle for before its first
+    /// move (NX's CLSF listings carry no SPINDL); the CL's own SPINDL, and SPINDL/OFF, win.
+    #[serde(default)]
+    pub spindle_speed: Option<f64>,
+}
+
+impl Settings {
+    /// Options for a loaded profile: [`Settings::options`] plus what the profile adds beyond
+    /// its kinematics (rotary clamp words).
+    pub fn profile_options(&self, p: &crate::machines::Profile) -> Result<Options, String> {
+        let mut o = self.options(&p.machine)?;
+        o.clamps = p.clamps();
+        Ok(o)
+    }
+
+    /// Validated options for machine `m`; the error names the setting.
+    pub fn options(&self, m: &Machine) -> Result<Options, String> {
+        let mut o = Options::new(m);
+        if let Some(d) = &self.dialect {
+            o.dialect =
+                crate::nc::dialect(d).ok_or_else(|| format!("dialect {d:?}: known dialects are {:?}", crate::nc::DIALECTS))?;
+        }
+        o.mode = match self.mode.as_deref() {
+            None | Some("joint") => Mode::Joint,
+            Some("tcp") => Mode::Tcp,
+            Some(x) => return Err(format!("mode {x:?}: expected joint or tcp")),
+        };
+        if let Some(l) = self.tool_length {
+            if !(l >= 0.0 && crate::kinematics::coordinate_ok(l)) {
+                return Err(format!(
+                    "tool_length must be a length from 0 to {:e}",
+                    crate::kinematics::MAX_COORD
+                ));
+            }
+            o.tool_length = Some(l);
+        }
+        if let Some(w) = &self.work_offset {
+            o.work_offset = parse_triple(w).map_err(|e| format!("work_offset: {e}"))?;
+        }
+        if let Some(t) = self.tolerance {
+            // It is also the FK replay's bound: a huge one would switch the self-verification off.
+            let (max, unit) = if m.units == Units::Mm { (1.0, "mm") } else { (0.04, "in") };
+            if !(t.is_finite() && t > 0.0 && t <= max) {
+                return Err(format!("tolerance must be a positive number up to {max} {unit}"));
+            }
+            o.tolerance = t;
+        }
+        o.sequence_numbers = self.sequence_numbers.unwrap_or(false);
+        o.program_number = self.program_number.unwrap_or(1000);
+        let numbers = o.dialect.program_numbers();
+        if !numbers.contains(&o.program_number) {
+            return Err(format!(
+                "program_number {}: {} takes {} to {}",
+                o.program_number,
+                o.dialect.name,
+                numbers.start(),
+                numbers.end()
+            ));
+        }
+        o.strict = self.strict.unwrap_or(false);
+        if let Some(t) = self.singular_tolerance {
+            if !(t.is_finite() && (0.0..=10.0).contains(&t)) {
+                return Err("singular_tolerance must be between 0 and 10 degrees".into());
+            }
+            o.singular_tolerance = t.to_radians();
+        }
+        o.cl_units = match self.cl_units.as_deref() {
+            None => None,
+            Some("mm") => Some(Units::Mm),
+            Some("inch") => Some(Units::Inch),
+            Some(u) => return Err(format!("cl_units {u:?}: expected mm or inch")),
+        };
+        o.canned_cycles = match self.cycles.as_deref() {
+            None | Some("expand") => false,
+            Some("canned") => true,
+            Some(x) => return Err(format!("cycles {x:?}: expected expand or canned")),
+        };
+        o.tilted_planes = match self.planes.as_deref() {
+            None | Some("positioning") => false,
+            Some("tilted") => true,
+            Some(x) => return Err(format!("planes {x:?}: expected positioning or tilted")),
+        };
+        if let Some(w) = self.work_coordinates.as_deref().map(str::trim).filter(|w| !w.is_empty()) {
+            let known = o.dialect.work_coordinates;
+            let w = w.to_ascii_uppercase();
+            if w == "NONE" {
+                o.work_coordinates = Some("none".into());
+            } else if known.contains(&w.as_str()) {
+                o.work_coordinates = Some(w);
+            } else if known.is_empty() {
+                return Err(format!(
+                    "work_coordinates {w:?}: {} selects none (its datum is the control's preset); expected none",
+                    o.dialect.name
+                ));
+            } else {
+                return Err(format!(
+                    "work_coordinates {w:?}: {} takes {} or none",
+                    o.dialect.name,
+                    known.join(", ")
+                ));
+            }
+        }
+        if let Some(s) = self.spindle_speed {
+            if !(s.is_finite() && (1.0..=MAX_SPINDLE_SPEED).contains(&s)) {
+                return Err(format!("spindle_speed must be from 1 to {MAX_SPINDLE_SPEED} RPM"));
+            }
+            o.spindle_speed = Some(s);
+        }
+        Ok(o)
+    }
+}
+
+/// The largest `spindle_speed` taken: above any machining spindle (a typo's extra digit fails).
+pub const MAX_SPINDLE_SPEED: f64 = 200_000.0;
+
+/// `x,y,z`: three finite coordinates (a work offset, a point on the command line).
+pub fn parse_triple(s: &str) -> Result<Vec3, String> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|p| p.trim().parse::<f64>().map_err(|_| format!("{p:?} is not a number")))
+        .collect::<Result<_, _>>()?;
+    match v.as_slice() {
+        [x, y, z] if v.iter().all(|c| crate::kinematics::coordinate_ok(*c)) => Ok(Vec3::new(*x, *y, *z)),
+        _ => Err(format!(
+            "expected three numbers x,y,z within ±{:e}, got {s:?}",
+            crate::kinematics::MAX_COORD
+        )),
+    }
+}

@@ -1,0 +1,119 @@
+//! Where the program goes: the [`Sink`] a run pushes into, what it is told per block, and the
+//! run's [`Summary`].
+
+use crate::diag::Diagnostic;
+use crate::kinematics::Pose;
+use serde::Serialize;
+use std::collections::BTreeMap;
+
+use super::Mode;
+
+/// What a sink is told about a motion block, beside its text.
+#[derive(Clone, Debug, Serialize)]
+pub struct BlockInfo {
+    /// 1-based index of the motion block in the program.
+    pub n: u64,
+    pub source_line: Option<u32>,
+    /// Axis words as written (X Y Z A B C; profile units, degrees), as a JSON map of the present.
+    pub joints: AxisWords,
+    pub diagnostics: Vec<Diagnostic>,
+    pub rapid: bool,
+    /// The pose this block reaches, in the part frame (profile units): what a preview draws.
+    pub tip: [f64; 3],
+    pub axis: [f64; 3],
+    /// Estimated duration of this block, seconds (the cycle-time estimate's share).
+    pub time_s: f64,
+}
+
+/// X Y Z A B C values of a block, `None` where the block has no such word. A fixed array: one
+/// is built per block, so no allocation.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct AxisWords(pub [Option<f64>; 6]);
+
+impl Serialize for AxisWords {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        use serde::ser::SerializeMap;
+        let mut m = s.serialize_map(Some(self.0.iter().flatten().count()))?;
+        for (k, v) in self.0.iter().enumerate() {
+            if let Some(v) = v {
+                m.serialize_entry(&crate::nc::AXIS_LETTERS[k], v)?;
+            }
+        }
+        m.end()
+    }
+}
+
+/// Where the program goes. The NC file, the NDJSON stream and a golden test are all sinks.
+pub trait Sink {
+    fn line(&mut self, text: &str, block: Option<&BlockInfo>) -> std::io::Result<()>;
+    /// A diagnostic not attached to a block (reader problems, program-level notes).
+    fn diagnostic(&mut self, _d: &Diagnostic) -> std::io::Result<()> {
+        Ok(())
+    }
+    /// A diagnostic about a CL pose (part frame, profile units) that got no block.
+    fn diagnostic_at(&mut self, d: &Diagnostic, _pose: &Pose) -> std::io::Result<()> {
+        self.diagnostic(d)
+    }
+    fn summary(&mut self, _s: &Summary) -> std::io::Result<()> {
+        Ok(())
+    }
+}
+
+/// NC text to any writer, one line each.
+pub struct TextSink<W: std::io::Write>(pub W);
+
+impl<W: std::io::Write> Sink for TextSink<W> {
+    fn line(&mut self, text: &str, _b: Option<&BlockInfo>) -> std::io::Result<()> {
+        self.0.write_all(text.as_bytes())?;
+        self.0.write_all(b"\n")
+    }
+}
+
+/// Per-axis figures of the summary.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct AxisStats {
+    pub min: f64,
+    pub max: f64,
+    /// Rotary axes: total travel in degrees.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub travel: Option<f64>,
+    /// Rotary axes: largest change in one feed block, and the CL line of that block.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub largest_step: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub largest_step_line: Option<u32>,
+}
+
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct Summary {
+    pub machine: String,
+    pub mode: Option<Mode>,
+    pub units: String,
+    pub cl_units: String,
+    pub cl_units_source: String,
+    pub tool_length: f64,
+    pub cl_points: u64,
+    pub blocks: u64,
+    pub inserted_blocks: u64,
+    pub counts: BTreeMap<String, u64>,
+    pub axes: BTreeMap<char, AxisStats>,
+    pub cycle_time_s: f64,
+    /// FK replay of every written block against the pose it was meant to reach.
+    pub max_tip_deviation: f64,
+    pub max_axis_deviation_deg: f64,
+    /// Largest angle between an inserted block's tool axis and the CL orientation, where a
+    /// segment passing near a singular direction is followed in joint space (as the control
+    /// would between the CL points) instead of swinging the free rotary.
+    pub max_singular_deviation_deg: f64,
+    /// With a singular tolerance: blocks whose free rotary was held, the rotary travel that saved,
+    /// and the largest orientation deviation it used.
+    pub smoothed_blocks: u64,
+    pub smoothing_travel_saved_deg: f64,
+    pub smoothing_max_deviation_deg: f64,
+    /// Holes written as canned cycles (with `cycles=canned`).
+    pub canned_holes: u64,
+    /// Tilted working planes written (with `planes=tilted`).
+    pub tilted_planes: u64,
+    pub errors: u64,
+    pub warnings: u64,
+}
