@@ -197,6 +197,13 @@ struct Arg<'a> {
     col: u32,
 }
 
+impl Arg<'_> {
+    /// The argument as a keyword: trimmed, upper-case.
+    fn word(&self) -> String {
+        self.text.trim().to_ascii_uppercase()
+    }
+}
+
 /// A lathe tool (`TURN`, `GROOVE`, `THREAD`) or a milling one (`MILL`, `DRILL`), where the record
 /// names its kind.
 fn tool_kind(args: &[Arg]) -> Option<bool> {
@@ -242,430 +249,478 @@ fn is_nx_listing(s: &str) -> bool {
                 && e.trim_end_matches('.').eq_ignore_ascii_case("lines"))
 }
 
-/// Every statement the long way (the fast path's reference in tests).
+/// Every statement the long way (the fast path's reference in tests): routed by its major word
+/// to the parser of its record family.
 fn parse_general(stmt: &str, line: u32, diags: &mut Vec<Diagnostic>) -> Option<Record> {
-    let s = stmt.trim_start();
-    let lead = (stmt.len() - s.len()) as u32;
-    let (major, rest, rest_col) = match s.find('/') {
-        Some(i) => (s[..i].trim(), &s[i + 1..], lead + i as u32 + 2),
-        None => {
-            let word_end = s.find(char::is_whitespace).unwrap_or(s.len());
-            (&s[..word_end], s[word_end..].trim(), lead + word_end as u32 + 2)
-        }
-    };
-    let major_uc = major.split_whitespace().collect::<Vec<_>>().join(" ").to_ascii_uppercase();
-    let args = split_args(rest, rest_col);
-    let bad = |diags: &mut Vec<Diagnostic>, col: u32, msg: String| {
-        diags.push(Diagnostic::new(Code::BadRecord, Severity::Error, Some(line), msg).at(col));
-    };
-    let word = |a: &Arg| a.text.trim().to_ascii_uppercase();
-
-    match major_uc.as_str() {
-        "GOTO" | "GODLTA" | "FROM" => {
-            let mut v = [0.0; 6];
-            let n = args.len();
-            if !(n == 3 || n >= 6) {
-                let col = args.last().map_or(rest_col, |a| a.col);
-                bad(
-                    diags,
-                    col,
-                    format!("{major_uc}: expected 3 values (x,y,z) or 6 (x,y,z,i,j,k), found {n}"),
-                );
-                return None;
-            }
-            for (k, a) in args.iter().take(6).enumerate() {
-                match num(a.text) {
-                    Some(x) if x.is_finite() => v[k] = x,
-                    _ => {
-                        bad(
-                            diags,
-                            a.col,
-                            format!(
-                                "{major_uc}: expected a finite number as value {}, found {:?}",
-                                k + 1,
-                                a.text.trim()
-                            ),
-                        );
-                        return None;
-                    }
-                }
-            }
-            let p = [v[0], v[1], v[2]];
-            let axis = (n >= 6).then_some([v[3], v[4], v[5]]);
-            if let Some(a) = axis
-                && a.iter().map(|x| x * x).sum::<f64>() < 1e-24
-            {
-                bad(diags, args[3].col, format!("{major_uc}: the tool axis (i,j,k) is zero"));
-                return None;
-            }
-            Some(match major_uc.as_str() {
-                "GOTO" => Record::Goto { p, axis },
-                "GODLTA" => Record::GoDelta { d: p, axis },
-                _ => Record::From { p, axis },
-            })
-        }
+    let st = Stmt::new(stmt, line);
+    match st.major.as_str() {
+        "GOTO" | "GODLTA" | "FROM" => motion(&st, diags),
+        "TLAXIS" => tool_axis(&st, diags),
+        "ROTABL" => rotary_table(&st, diags),
         "RAPID" => Some(Record::Rapid),
-        "FEDRAT" => {
-            let mut value = None;
-            let mut unit = FeedUnit::PerMinute;
-            let mut units = None;
-            for a in &args {
-                let w = word(a);
-                match w.as_str() {
-                    "MMPM" => units = Some(Units::Mm),
-                    "IPM" => units = Some(Units::Inch),
-                    "MMPR" => (unit, units) = (FeedUnit::PerRev, Some(Units::Mm)),
-                    "IPR" => (unit, units) = (FeedUnit::PerRev, Some(Units::Inch)),
-                    "" => {}
-                    _ => match num(a.text) {
-                        Some(x) if x.is_finite() && x > 0.0 && value.is_none() => value = Some(x),
-                        // A zero feed is an alarm on every control, not a move.
-                        Some(x) if x == 0.0 && value.is_none() => {
-                            bad(
-                                diags,
-                                a.col,
-                                "FEDRAT: a feed of 0 cannot move the machine: record skipped".into(),
-                            );
-                            return None;
-                        }
-                        _ => {
-                            bad(
-                                diags,
-                                a.col,
-                                format!(
-                                    "FEDRAT: expected a feed value and MMPM, IPM, MMPR or IPR, found {:?}",
-                                    a.text.trim()
-                                ),
-                            );
-                            return None;
-                        }
-                    },
-                }
+        "FEDRAT" => feedrate(&st, diags),
+        "SPINDL" => spindle(&st, diags),
+        "COOLNT" => coolant(&st, diags),
+        "LOADTL" | "LOAD" => load_tool(&st, diags),
+        "TLDATA" | "TURRET" | "TOOLNO" | "CUTTER" => Some(tool_data(&st)),
+        "CIRCLE" => circle(&st, diags),
+        "CYCLE" => parse_cycle(&st.args, line, st.rest_col, diags),
+        "UNITS" | "UNIT" => units(&st, diags),
+        "MULTAX" => Some(Record::Multax(!matches!(
+            st.args.first().map(Arg::word).as_deref(),
+            Some("OFF")
+        ))),
+        "DELAY" => delay(&st, diags),
+        _ => informational(&st, diags),
+    }
+}
+
+/// One statement cut at its major word, as every family parser reads it.
+struct Stmt<'a> {
+    /// The statement without its leading blanks, `lead` bytes of them.
+    s: &'a str,
+    lead: u32,
+    /// The major word upper-cased, inner runs of blanks made one (`TOOL PATH`).
+    major: String,
+    rest: &'a str,
+    /// Column (1-based) where `rest` begins: where a record with no usable argument is blamed.
+    rest_col: u32,
+    args: Vec<Arg<'a>>,
+    line: u32,
+}
+
+impl<'a> Stmt<'a> {
+    /// The major word ends at the `/`, or (free-text records such as `PPRINT text`) at the first
+    /// blank.
+    fn new(stmt: &'a str, line: u32) -> Stmt<'a> {
+        let s = stmt.trim_start();
+        let lead = (stmt.len() - s.len()) as u32;
+        let (major, rest, rest_col) = match s.find('/') {
+            Some(i) => (s[..i].trim(), &s[i + 1..], lead + i as u32 + 2),
+            None => {
+                let word_end = s.find(char::is_whitespace).unwrap_or(s.len());
+                (&s[..word_end], s[word_end..].trim(), lead + word_end as u32 + 2)
             }
-            match value {
-                Some(value) => Some(Record::Feedrate { value, unit, units }),
-                None => {
-                    bad(diags, rest_col, "FEDRAT: no feed value".into());
-                    None
-                }
-            }
+        };
+        Stmt {
+            s,
+            lead,
+            major: major.split_whitespace().collect::<Vec<_>>().join(" ").to_ascii_uppercase(),
+            rest,
+            rest_col,
+            args: split_args(rest, rest_col),
+            line,
         }
-        "SPINDL" => {
-            let mut speed = None;
-            let (mut cw, mut surface, mut metric, mut off) = (true, false, false, false);
-            for a in &args {
-                match word(a).as_str() {
-                    "RPM" => {}
-                    "SFM" => surface = true,
-                    "SMM" => (surface, metric) = (true, true),
-                    "CLW" => cw = true,
-                    "CCLW" => cw = false,
-                    "OFF" => off = true,
-                    "ON" | "" | "RANGE" | "MAXRPM" => {}
-                    _ => match num(a.text) {
-                        Some(x) if x.is_finite() && x >= 0.0 => speed = speed.or(Some(x)),
-                        _ => {
-                            bad(
-                                diags,
-                                a.col,
-                                format!(
-                                    "SPINDL: expected a speed, RPM, SFM, CLW, CCLW or OFF, found {:?}",
-                                    a.text.trim()
-                                ),
-                            );
-                            return None;
-                        }
-                    },
-                }
-            }
-            Some(Record::Spindle(match (off, speed, surface) {
-                (true, _, _) => SpindleCmd::Off,
-                (false, Some(speed), false) => SpindleCmd::Rpm { speed, clockwise: cw },
-                (false, Some(speed), true) => SpindleCmd::Surface {
-                    speed,
-                    clockwise: cw,
-                    metric,
-                },
-                (false, None, _) => {
-                    bad(diags, rest_col, "SPINDL: expected a speed or OFF".into());
-                    return None;
-                }
-            }))
+    }
+
+    fn bad(&self, diags: &mut Vec<Diagnostic>, col: u32, msg: String) {
+        diags.push(Diagnostic::new(Code::BadRecord, Severity::Error, Some(self.line), msg).at(col));
+    }
+}
+
+/// `GOTO`, `GODLTA`, `FROM`: a point, and the tool axis where six values give one. Bit for bit
+/// what [`fast_goto`] reads, which the tests hold it to.
+fn motion(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
+    let major = &st.major;
+    let n = st.args.len();
+    if !(n == 3 || n >= 6) {
+        let col = st.args.last().map_or(st.rest_col, |a| a.col);
+        st.bad(
+            diags,
+            col,
+            format!("{major}: expected 3 values (x,y,z) or 6 (x,y,z,i,j,k), found {n}"),
+        );
+        return None;
+    }
+    let mut v = [0.0; 6];
+    for (k, a) in st.args.iter().take(6).enumerate() {
+        let Some(x) = num(a.text).filter(|x| x.is_finite()) else {
+            let msg = format!(
+                "{major}: expected a finite number as value {}, found {:?}",
+                k + 1,
+                a.text.trim()
+            );
+            st.bad(diags, a.col, msg);
+            return None;
+        };
+        v[k] = x;
+    }
+    let p = [v[0], v[1], v[2]];
+    let axis = (n >= 6).then_some([v[3], v[4], v[5]]);
+    if let Some(a) = axis
+        && a.iter().map(|x| x * x).sum::<f64>() < 1e-24
+    {
+        st.bad(diags, st.args[3].col, format!("{major}: the tool axis (i,j,k) is zero"));
+        return None;
+    }
+    Some(match major.as_str() {
+        "GOTO" => Record::Goto { p, axis },
+        "GODLTA" => Record::GoDelta { d: p, axis },
+        _ => Record::From { p, axis },
+    })
+}
+
+fn tool_axis(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
+    let v: Vec<f64> = st.args.iter().filter_map(|a| num(a.text)).collect();
+    if v.len() >= 3 {
+        Some(Record::ToolAxis([v[0], v[1], v[2]]))
+    } else {
+        st.bad(diags, st.rest_col, "TLAXIS: expected i,j,k".into());
+        None
+    }
+}
+
+fn rotary_table(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
+    let mut angle = None;
+    let mut axis = None;
+    let mut incr = false;
+    for a in &st.args {
+        match a.word().as_str() {
+            "AAXIS" => axis = Some(0),
+            "BAXIS" => axis = Some(1),
+            "CAXIS" => axis = Some(2),
+            "INCR" => incr = true,
+            _ if angle.is_none() => angle = num(a.text),
+            _ => {}
         }
-        "COOLNT" => {
-            let w = args.first().map(word).unwrap_or_default();
-            Some(Record::Coolant(match w.as_str() {
-                "ON" | "FLOOD" | "" => CoolantCmd::Flood,
-                "MIST" => CoolantCmd::Mist,
-                "THRU" | "THROUGH" | "TAP" => CoolantCmd::Through,
-                "OFF" => CoolantCmd::Off,
-                other => {
-                    bad(
-                        diags,
-                        args[0].col,
-                        format!("COOLNT: expected ON, FLOOD, MIST, THRU or OFF, found {other:?}"),
+    }
+    let Some(angle) = angle else {
+        // An index that cannot be read leaves the frame of what follows unknown.
+        st.bad(diags, st.rest_col, "ROTABL: expected an angle".into());
+        return None;
+    };
+    Some(Record::RotaryTable { axis, angle, incr })
+}
+
+fn feedrate(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
+    let mut value = None;
+    let mut unit = FeedUnit::PerMinute;
+    let mut units = None;
+    for a in &st.args {
+        match a.word().as_str() {
+            "MMPM" => units = Some(Units::Mm),
+            "IPM" => units = Some(Units::Inch),
+            "MMPR" => (unit, units) = (FeedUnit::PerRev, Some(Units::Mm)),
+            "IPR" => (unit, units) = (FeedUnit::PerRev, Some(Units::Inch)),
+            "" => {}
+            _ => value = Some(feed_value(st, a, value.is_some(), diags)?),
+        }
+    }
+    let Some(value) = value else {
+        st.bad(diags, st.rest_col, "FEDRAT: no feed value".into());
+        return None;
+    };
+    Some(Record::Feedrate { value, unit, units })
+}
+
+/// The one feed value of a `FEDRAT`; a second value, or anything else, skips the record.
+fn feed_value(st: &Stmt, a: &Arg, have_one: bool, diags: &mut Vec<Diagnostic>) -> Option<f64> {
+    match num(a.text) {
+        Some(x) if x.is_finite() && x > 0.0 && !have_one => Some(x),
+        // A zero feed is an alarm on every control, not a move.
+        Some(x) if x == 0.0 && !have_one => {
+            st.bad(
+                diags,
+                a.col,
+                "FEDRAT: a feed of 0 cannot move the machine: record skipped".into(),
+            );
+            None
+        }
+        _ => {
+            let msg = format!(
+                "FEDRAT: expected a feed value and MMPM, IPM, MMPR or IPR, found {:?}",
+                a.text.trim()
+            );
+            st.bad(diags, a.col, msg);
+            None
+        }
+    }
+}
+
+fn spindle(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
+    let mut speed = None;
+    let (mut cw, mut surface, mut metric, mut off) = (true, false, false, false);
+    for a in &st.args {
+        match a.word().as_str() {
+            "RPM" => {}
+            "SFM" => surface = true,
+            "SMM" => (surface, metric) = (true, true),
+            "CLW" => cw = true,
+            "CCLW" => cw = false,
+            "OFF" => off = true,
+            "ON" | "" | "RANGE" | "MAXRPM" => {}
+            _ => {
+                let Some(x) = num(a.text).filter(|x| x.is_finite() && *x >= 0.0) else {
+                    let msg = format!(
+                        "SPINDL: expected a speed, RPM, SFM, CLW, CCLW or OFF, found {:?}",
+                        a.text.trim()
                     );
+                    st.bad(diags, a.col, msg);
                     return None;
-                }
-            }))
+                };
+                speed = speed.or(Some(x));
+            }
         }
-        "LOADTL" | "LOAD" => {
-            // LOADTL/n[,LENGTH,l] ; LOAD/TOOL,n[,ADJUST,m]
-            let mut number = None;
-            let mut length = None;
-            let mut adjust = None;
-            let mut i = 0;
-            while i < args.len() {
-                let w = word(&args[i]);
-                if w == "TOOL" {
-                } else if w == "LENGTH" {
-                    length = args.get(i + 1).and_then(|a| num(a.text));
-                    i += 1;
-                } else if w == "ADJUST" || w == "OSETNO" {
-                    // The length offset the CAM system named: another register's length is a
-                    // crash (or a cut in the air), never a default.
-                    let (text, col) = args.get(i + 1).map_or(("", args[i].col), |a| (a.text.trim(), a.col));
-                    match num(text) {
-                        Some(x) if (1.0..1e6).contains(&x) && x.fract() == 0.0 => adjust = Some(x as u32),
-                        _ => {
-                            bad(
-                                diags,
-                                col,
-                                format!(
-                                    "{major_uc}: {w} {text:?} is not a length offset number from 1 to 999999: no tool change written"
-                                ),
-                            );
-                            return None;
-                        }
-                    }
-                    i += 1;
-                } else if let Some(x) = num(args[i].text) {
-                    if number.is_none() {
-                        if x >= 0.0 && x.fract() == 0.0 && x < 1e9 {
-                            number = Some(x as u32);
-                        } else {
-                            // Another tool than the one the CAM system meant is a crash: say so.
-                            bad(
-                                diags,
-                                args[i].col,
-                                format!(
-                                    "{major_uc}: tool number {:?} is not a whole number from 0 to 999999999: no tool change written",
-                                    args[i].text.trim()
-                                ),
-                            );
-                            return None;
-                        }
-                    }
-                } else if !w.is_empty() && !matches!(w.as_str(), "MILL" | "LATHE") {
-                    diags.push(
-                        Diagnostic::new(
-                            Code::IgnoredRecord,
-                            Severity::Info,
-                            Some(line),
-                            format!("{major_uc}: {w} not used"),
-                        )
-                        .at(args[i].col),
-                    );
-                }
+    }
+    Some(Record::Spindle(match (off, speed, surface) {
+        (true, _, _) => SpindleCmd::Off,
+        (false, Some(speed), false) => SpindleCmd::Rpm { speed, clockwise: cw },
+        (false, Some(speed), true) => SpindleCmd::Surface {
+            speed,
+            clockwise: cw,
+            metric,
+        },
+        (false, None, _) => {
+            st.bad(diags, st.rest_col, "SPINDL: expected a speed or OFF".into());
+            return None;
+        }
+    }))
+}
+
+fn coolant(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
+    let w = st.args.first().map(Arg::word).unwrap_or_default();
+    Some(Record::Coolant(match w.as_str() {
+        "ON" | "FLOOD" | "" => CoolantCmd::Flood,
+        "MIST" => CoolantCmd::Mist,
+        "THRU" | "THROUGH" | "TAP" => CoolantCmd::Through,
+        "OFF" => CoolantCmd::Off,
+        other => {
+            let msg = format!("COOLNT: expected ON, FLOOD, MIST, THRU or OFF, found {other:?}");
+            st.bad(diags, st.args[0].col, msg);
+            return None;
+        }
+    }))
+}
+
+/// `LOADTL/n[,LENGTH,l]` and `LOAD/TOOL,n[,ADJUST,m]`.
+fn load_tool(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
+    let args = &st.args;
+    let (mut number, mut length, mut adjust) = (None, None, None);
+    let mut i = 0;
+    while i < args.len() {
+        let w = args[i].word();
+        match w.as_str() {
+            "TOOL" => {}
+            "LENGTH" => {
+                length = args.get(i + 1).and_then(|a| num(a.text));
                 i += 1;
             }
-            match number {
-                Some(number) => Some(Record::LoadTool {
-                    number,
-                    length,
-                    adjust: adjust.filter(|&a| a != number),
-                }),
-                None => {
-                    bad(diags, rest_col, format!("{major_uc}: no tool number: no tool change written"));
-                    None
-                }
+            "ADJUST" | "OSETNO" => {
+                adjust = Some(length_offset(st, i, &w, diags)?);
+                i += 1;
             }
+            _ => match num(args[i].text) {
+                Some(x) if number.is_none() => number = Some(tool_number(st, &args[i], x, diags)?),
+                Some(_) => {}
+                None if w.is_empty() || matches!(w.as_str(), "MILL" | "LATHE") => {}
+                None => diags.push(
+                    Diagnostic::new(
+                        Code::IgnoredRecord,
+                        Severity::Info,
+                        Some(st.line),
+                        format!("{}: {w} not used", st.major),
+                    )
+                    .at(args[i].col),
+                ),
+            },
         }
+        i += 1;
+    }
+    let Some(number) = number else {
+        st.bad(
+            diags,
+            st.rest_col,
+            format!("{}: no tool number: no tool change written", st.major),
+        );
+        return None;
+    };
+    Some(Record::LoadTool {
+        number,
+        length,
+        adjust: adjust.filter(|&a| a != number),
+    })
+}
+
+/// The length offset register after `ADJUST` or `OSETNO` (the word at `i`): the one the CAM
+/// system named, since another register's length is a crash (or a cut in the air), never a
+/// default.
+fn length_offset(st: &Stmt, i: usize, w: &str, diags: &mut Vec<Diagnostic>) -> Option<u32> {
+    let (text, col) = st.args.get(i + 1).map_or(("", st.args[i].col), |a| (a.text.trim(), a.col));
+    match num(text) {
+        Some(x) if (1.0..1e6).contains(&x) && x.fract() == 0.0 => Some(x as u32),
+        _ => {
+            let msg = format!(
+                "{}: {w} {text:?} is not a length offset number from 1 to 999999: no tool change written",
+                st.major
+            );
+            st.bad(diags, col, msg);
+            None
+        }
+    }
+}
+
+/// A tool number as given: another tool than the one the CAM system meant is a crash.
+fn tool_number(st: &Stmt, a: &Arg, x: f64, diags: &mut Vec<Diagnostic>) -> Option<u32> {
+    if x >= 0.0 && x.fract() == 0.0 && x < 1e9 {
+        return Some(x as u32);
+    }
+    let msg = format!(
+        "{}: tool number {:?} is not a whole number from 0 to 999999999: no tool change written",
+        st.major,
+        a.text.trim()
+    );
+    st.bad(diags, a.col, msg);
+    None
+}
+
+/// What a tool is, by the record that describes it.
+fn tool_data(st: &Stmt) -> Record {
+    let args = &st.args;
+    match st.major.as_str() {
+        // TLDATA/MILL,diameter,corner radius,length,…
         "TLDATA" => {
-            // TLDATA/MILL,diameter,corner radius,length,…
             let nums: Vec<f64> = args.iter().filter_map(|a| num(a.text)).collect();
-            let turning = tool_kind(&args);
-            Some(Record::ToolData {
+            let turning = tool_kind(args);
+            Record::ToolData {
                 diameter: nums.first().copied().filter(|_| turning != Some(true)),
                 length: nums.get(2).copied().filter(|l| *l > 0.0 && turning != Some(true)),
                 turning,
-            })
+            }
         }
         // TURRET/… selects a lathe's turret station (a mill's tool change is LOADTL): what
         // CATIA's lathe output says of its tools.
-        "TURRET" => Some(Record::ToolData {
+        "TURRET" => Record::ToolData {
             diameter: None,
             length: None,
             turning: Some(true),
-        }),
+        },
         // TOOLNO/number,TURN,… (CATIA): only what kind of tool it is.
-        "TOOLNO" => Some(Record::ToolData {
+        "TOOLNO" => Record::ToolData {
             diameter: None,
             length: None,
-            turning: tool_kind(&args),
-        }),
-        "CUTTER" => Some(Record::ToolData {
+            turning: tool_kind(args),
+        },
+        _ => Record::ToolData {
             diameter: args.first().and_then(|a| num(a.text)),
             length: None,
             turning: None,
-        }),
-        "UNITS" | "UNIT" => {
-            let w = args.first().map(word).unwrap_or_default();
-            match w.as_str() {
-                "MM" | "MILLIMETERS" | "METRIC" => Some(Record::Units(Units::Mm)),
-                "INCHES" | "INCH" | "IN" => Some(Record::Units(Units::Inch)),
-                other => {
-                    bad(
-                        diags,
-                        args.first().map_or(rest_col, |a| a.col),
-                        format!("{major_uc}: expected MM or INCHES, found {other:?}"),
-                    );
-                    None
-                }
+        },
+    }
+}
+
+/// Centre, axis[, radius[, tolerances…]], then optional words: SOLIDWORKS CAM leaves the radius
+/// out (the next point implies it), NX appends TIMES,n, CAMWorks a direction word that the axis
+/// already states (motion is counter-clockwise about it).
+fn circle(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
+    let mut v = Vec::with_capacity(11);
+    let mut words = Vec::new();
+    let mut turns = 1;
+    for a in &st.args {
+        match num(a.text) {
+            Some(x) if x.is_finite() && words.is_empty() => v.push(x),
+            Some(x) if words.last().is_some_and(|w| w == "TIMES") => {
+                turns = circle_turns(st, a, x, diags)?;
+                words.push("TIMES n".into());
             }
-        }
-        "MULTAX" => Some(Record::Multax(!matches!(args.first().map(word).as_deref(), Some("OFF")))),
-        "DELAY" => {
-            let revs = args.first().is_some_and(|a| word(a) == "REV");
-            let v = args.get(usize::from(revs));
-            match v.and_then(|a| num(a.text)) {
-                Some(t) if (0.0..=3600.0).contains(&t) => {
-                    Some(Record::Delay(if revs { Dwell::Revolutions(t) } else { Dwell::Seconds(t) }))
-                }
-                _ => {
-                    let col = v.map_or(rest_col, |a| a.col);
-                    bad(
-                        diags,
-                        col,
-                        format!(
-                            "DELAY: expected a dwell of 0 to 3600 {}: no dwell written",
-                            if revs { "revolutions" } else { "seconds" }
-                        ),
-                    );
-                    None
-                }
-            }
-        }
-        "ROTABL" => {
-            let mut angle = None;
-            let mut axis = None;
-            let mut incr = false;
-            for a in &args {
-                match word(a).as_str() {
-                    "AAXIS" => axis = Some(0),
-                    "BAXIS" => axis = Some(1),
-                    "CAXIS" => axis = Some(2),
-                    "INCR" => incr = true,
-                    _ => {
-                        if angle.is_none() {
-                            angle = num(a.text);
-                        }
-                    }
-                }
-            }
-            match angle {
-                Some(angle) => Some(Record::RotaryTable { axis, angle, incr }),
-                None => {
-                    // An index that cannot be read leaves the frame of what follows unknown.
-                    bad(diags, rest_col, "ROTABL: expected an angle".into());
-                    None
-                }
-            }
-        }
-        "TLAXIS" => {
-            let v: Vec<f64> = args.iter().filter_map(|a| num(a.text)).collect();
-            if v.len() >= 3 {
-                Some(Record::ToolAxis([v[0], v[1], v[2]]))
-            } else {
-                bad(diags, rest_col, "TLAXIS: expected i,j,k".into());
-                None
-            }
-        }
-        "CIRCLE" => {
-            // Centre, axis[, radius[, tolerances…]], then optional words: SOLIDWORKS CAM leaves
-            // the radius out (the next point implies it), NX appends TIMES,n, CAMWorks a
-            // direction word that the axis already states (motion is counter-clockwise about it).
-            let mut v = Vec::with_capacity(11);
-            let mut words = Vec::new();
-            let mut turns = 1;
-            for a in &args {
-                match num(a.text) {
-                    Some(x) if x.is_finite() && words.is_empty() => v.push(x),
-                    Some(x) if words.last().is_some_and(|w| w == "TIMES") => {
-                        // A helical ramp's turns: taken once it plunged 7× as steep (NX's 3° ramp
-                        // of TIMES,7 at 21°).
-                        if !(x >= 1.0 && x.fract() == 0.0 && x <= MAX_CIRCLE_TURNS as f64) {
-                            bad(
-                                diags,
-                                a.col,
-                                format!(
-                                    "CIRCLE: TIMES expects a whole number of turns from 1 to {MAX_CIRCLE_TURNS}, found {:?}",
-                                    a.text.trim()
-                                ),
-                            );
-                            return None;
-                        }
-                        turns = x as u32;
-                        words.push("TIMES n".into());
-                    }
-                    Some(_) if !words.is_empty() => {}
-                    _ if v.len() >= 6 && a.text.trim().chars().all(|c| c.is_ascii_alphabetic()) => words.push(word(a)),
-                    _ => {
-                        bad(diags, a.col, format!("CIRCLE: expected a number, found {:?}", a.text.trim()));
-                        return None;
-                    }
-                }
-            }
-            if v.len() < 6 {
-                bad(
-                    diags,
-                    rest_col,
-                    format!(
-                        "CIRCLE: expected centre and axis (6 values) and a radius, found {} values",
-                        v.len()
-                    ),
-                );
+            Some(_) if !words.is_empty() => {}
+            _ if v.len() >= 6 && a.text.trim().chars().all(|c| c.is_ascii_alphabetic()) => words.push(a.word()),
+            _ => {
+                st.bad(diags, a.col, format!("CIRCLE: expected a number, found {:?}", a.text.trim()));
                 return None;
             }
-            if words.last().is_some_and(|w| w == "TIMES") {
-                bad(diags, rest_col, "CIRCLE: TIMES without its number of turns".into());
-                return None;
-            }
-            // NX writes CIRCLE/x,y,z,i,j,k,r,tol,d,a,b and turns clockwise about (i,j,k): its own
-            // post writes G03 for an axis of (0,0,-1), and 98 of 98 of its arcs in the corpus are
-            // tangent to the next move only that way; the other systems' arcs are tangent the
-            // other way (Creo 81/81, SOLIDWORKS CAM 1155/1182).
-            let clockwise = v.len() >= 10;
-            Some(Record::Circle {
-                center: [v[0], v[1], v[2]],
-                axis: [v[3], v[4], v[5]],
-                radius: v.get(6).copied(),
-                clockwise,
-                turns,
-            })
         }
-        "CYCLE" => parse_cycle(&args, line, rest_col, diags),
+    }
+    if v.len() < 6 {
+        let msg = format!(
+            "CIRCLE: expected centre and axis (6 values) and a radius, found {} values",
+            v.len()
+        );
+        st.bad(diags, st.rest_col, msg);
+        return None;
+    }
+    if words.last().is_some_and(|w| w == "TIMES") {
+        st.bad(diags, st.rest_col, "CIRCLE: TIMES without its number of turns".into());
+        return None;
+    }
+    // NX writes CIRCLE/x,y,z,i,j,k,r,tol,d,a,b and turns clockwise about (i,j,k): its own
+    // post writes G03 for an axis of (0,0,-1), and 98 of 98 of its arcs in the corpus are
+    // tangent to the next move only that way; the other systems' arcs are tangent the
+    // other way (Creo 81/81, SOLIDWORKS CAM 1155/1182).
+    let clockwise = v.len() >= 10;
+    Some(Record::Circle {
+        center: [v[0], v[1], v[2]],
+        axis: [v[3], v[4], v[5]],
+        radius: v.get(6).copied(),
+        clockwise,
+        turns,
+    })
+}
+
+/// A helical ramp's turns after `TIMES`: taken once it plunged 7× as steep (NX's 3° ramp of
+/// TIMES,7 at 21°).
+fn circle_turns(st: &Stmt, a: &Arg, x: f64, diags: &mut Vec<Diagnostic>) -> Option<u32> {
+    if x >= 1.0 && x.fract() == 0.0 && x <= MAX_CIRCLE_TURNS as f64 {
+        return Some(x as u32);
+    }
+    let msg = format!(
+        "CIRCLE: TIMES expects a whole number of turns from 1 to {MAX_CIRCLE_TURNS}, found {:?}",
+        a.text.trim()
+    );
+    st.bad(diags, a.col, msg);
+    None
+}
+
+fn units(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
+    let w = st.args.first().map(Arg::word).unwrap_or_default();
+    match w.as_str() {
+        "MM" | "MILLIMETERS" | "METRIC" => Some(Record::Units(Units::Mm)),
+        "INCHES" | "INCH" | "IN" => Some(Record::Units(Units::Inch)),
+        other => {
+            let col = st.args.first().map_or(st.rest_col, |a| a.col);
+            st.bad(diags, col, format!("{}: expected MM or INCHES, found {other:?}", st.major));
+            None
+        }
+    }
+}
+
+fn delay(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
+    let revs = st.args.first().is_some_and(|a| a.word() == "REV");
+    let v = st.args.get(usize::from(revs));
+    match v.and_then(|a| num(a.text)) {
+        Some(t) if (0.0..=3600.0).contains(&t) => {
+            Some(Record::Delay(if revs { Dwell::Revolutions(t) } else { Dwell::Seconds(t) }))
+        }
+        _ => {
+            let col = v.map_or(st.rest_col, |a| a.col);
+            let what = if revs { "revolutions" } else { "seconds" };
+            st.bad(
+                diags,
+                col,
+                format!("DELAY: expected a dwell of 0 to 3600 {what}: no dwell written"),
+            );
+            None
+        }
+    }
+}
+
+/// Operation bounds, the part name, comments, the end, and the records recognised only to be
+/// ignored; anything else is unknown (a warning, no record).
+fn informational(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
+    match st.major.as_str() {
         "TOOL PATH" => Some(Record::OperationStart(
-            args.first().map(|a| a.text.trim().to_string()).unwrap_or_default(),
+            st.args.first().map(|a| a.text.trim().to_string()).unwrap_or_default(),
         )),
         "END-OF-PATH" => Some(Record::OperationEnd),
         // NX's information listing around the CLSF: who, when, which part; a count of lines.
-        "INFORMATION" | "DATE" | "CURRENT" | "NODE" | "TOOL" if is_nx_listing(s) => Some(Record::Ignored("NX LISTING".into())),
-        "PARTNO" => Some(Record::PartNo(rest.trim().to_string())),
-        "PPRINT" | "INSERT" => Some(Record::Comment(rest.trim().to_string())),
+        "INFORMATION" | "DATE" | "CURRENT" | "NODE" | "TOOL" if is_nx_listing(st.s) => Some(Record::Ignored("NX LISTING".into())),
+        "PARTNO" => Some(Record::PartNo(st.rest.trim().to_string())),
+        "PPRINT" | "INSERT" => Some(Record::Comment(st.rest.trim().to_string())),
         "FINI" | "END" => Some(Record::End),
         m if IGNORED.contains(&m) || m.starts_with("CSI_") => Some(Record::Ignored(m.to_string())),
         m => {
-            let shown: String = s.chars().take(60).collect();
-            diags.push(
-                Diagnostic::new(
-                    Code::UnknownRecord,
-                    Severity::Warning,
-                    Some(line),
-                    format!("unknown record {:?}: ignored", if m.is_empty() { &shown } else { m }),
-                )
-                .at(lead + 1),
-            );
+            let shown: String = st.s.chars().take(60).collect();
+            let msg = format!("unknown record {:?}: ignored", if m.is_empty() { &shown } else { m });
+            diags.push(Diagnostic::new(Code::UnknownRecord, Severity::Warning, Some(st.line), msg).at(st.lead + 1));
             None
         }
     }
@@ -818,9 +873,10 @@ const POW10_EXACT: [f64; 16] = [
     1e0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9, 1e10, 1e11, 1e12, 1e13, 1e14, 1e15,
 ];
 
+/// `CYCLE/kind,…`: its values by keyword (`FEDTO`, `RAPTO`, …) or, as CAMWorks writes them,
+/// by position around the keywords.
 fn parse_cycle(args: &[Arg], line: u32, rest_col: u32, diags: &mut Vec<Diagnostic>) -> Option<Record> {
-    let w = |a: &Arg| a.text.trim().to_ascii_uppercase();
-    let first = args.first().map(w).unwrap_or_default();
+    let first = args.first().map(Arg::word).unwrap_or_default();
     let kind = match first.as_str() {
         "OFF" => return Some(Record::CycleOff),
         "INIT" | "ON" | "" => return Some(Record::Ignored("CYCLE".into())),
@@ -839,54 +895,44 @@ fn parse_cycle(args: &[Arg], line: u32, rest_col: u32, diags: &mut Vec<Diagnosti
         peck: None,
         dwell: None,
     };
-    let value = |i: usize, diags: &mut Vec<Diagnostic>| -> Option<f64> {
-        let a = args.get(i)?;
-        // CAMWorks writes one value as "46.927686 46.927686": take the first, say so.
-        let t = a.text.trim();
-        match num(t) {
-            Some(x) => Some(x),
-            None => {
-                let first = t.split_whitespace().next().and_then(num);
-                if first.is_some() {
-                    diags.push(
-                        Diagnostic::new(
-                            Code::BadRecord,
-                            Severity::Warning,
-                            Some(line),
-                            format!("CYCLE: value {t:?} has extra text; used the first number"),
-                        )
-                        .at(a.col),
-                    );
-                }
-                first
-            }
-        }
+    let positional = cycle_keywords(args, line, &mut p, diags);
+    cycle_positional(&mut p, &positional);
+    let warn = |diags: &mut Vec<Diagnostic>, msg: String| {
+        diags.push(Diagnostic::new(Code::BadRecord, Severity::Warning, Some(line), msg).at(rest_col));
     };
-    let mut i = 1;
+    if p.depth.is_nan() {
+        warn(diags, format!("CYCLE/{first}: no depth given; holes are positioned only"));
+        p.depth = 0.0;
+    } else if p.depth < 0.0 {
+        // A depth is measured down the tool axis from the hole's point: a negative one would
+        // drill upward out of the hole, which no cycle means.
+        warn(
+            diags,
+            format!("CYCLE/{first}: depth {} is negative; holes are positioned only", p.depth),
+        );
+        p.depth = 0.0;
+    }
+    Some(Record::Cycle(p))
+}
+
+/// Sets the values a keyword names (the number after it) and returns the numbers no keyword
+/// names, in order.
+fn cycle_keywords(args: &[Arg], line: u32, p: &mut CycleParams, diags: &mut Vec<Diagnostic>) -> Vec<f64> {
     let mut positional = Vec::new();
+    let mut i = 1;
     while i < args.len() {
-        let k = w(&args[i]);
+        let k = args[i].word();
+        // The keyword's value: the argument after it, taken.
+        let mut next = || {
+            i += 1;
+            cycle_value(args, i, line, diags)
+        };
         match k.as_str() {
-            "FEDTO" | "DEPTH" => {
-                p.depth = value(i + 1, diags).unwrap_or(f64::NAN);
-                i += 1;
-            }
-            "RAPTO" | "CLEAR" => {
-                p.rapid_to = value(i + 1, diags).unwrap_or(f64::NAN);
-                i += 1;
-            }
-            "RTRCTO" => {
-                p.retract_to = value(i + 1, diags);
-                i += 1;
-            }
-            "1STPECK" | "STEP" => {
-                p.peck = value(i + 1, diags);
-                i += 1;
-            }
-            "DWELL" => {
-                p.dwell = value(i + 1, diags);
-                i += 1;
-            }
+            "FEDTO" | "DEPTH" => p.depth = next().unwrap_or(f64::NAN),
+            "RAPTO" | "CLEAR" => p.rapid_to = next().unwrap_or(f64::NAN),
+            "RTRCTO" => p.retract_to = next(),
+            "1STPECK" | "STEP" => p.peck = next(),
+            "DWELL" => p.dwell = next(),
             "MMPM" | "IPM" | "MMPR" | "IPR" => {
                 let unit = if k.ends_with("PR") {
                     FeedUnit::PerRev
@@ -894,18 +940,18 @@ fn parse_cycle(args: &[Arg], line: u32, rest_col: u32, diags: &mut Vec<Diagnosti
                     FeedUnit::PerMinute
                 };
                 let units = if k.starts_with("MM") { Units::Mm } else { Units::Inch };
-                p.feed = value(i + 1, diags).map(|f| (f, unit, Some(units)));
-                i += 1;
+                p.feed = next().map(|f| (f, unit, Some(units)));
             }
-            _ => {
-                if let Some(x) = value(i, diags) {
-                    positional.push(x)
-                }
-            }
+            _ => positional.extend(cycle_value(args, i, line, diags)),
         }
         i += 1;
     }
-    // CAMWorks: DRILL,G98,depth,PECKING,a,b,MMPM,feed,clear,retract — positional around keywords.
+    positional
+}
+
+/// CAMWorks: DRILL,G98,depth,PECKING,a,b,MMPM,feed,clear,retract — positional around keywords:
+/// the first number is the depth, the last two the clearance and retract.
+fn cycle_positional(p: &mut CycleParams, positional: &[f64]) {
     if p.depth.is_nan() && !positional.is_empty() {
         p.depth = positional[0];
     }
@@ -919,32 +965,22 @@ fn parse_cycle(args: &[Arg], line: u32, rest_col: u32, diags: &mut Vec<Diagnosti
             p.retract_to = positional.last().copied();
         }
     }
-    if p.depth.is_nan() {
-        diags.push(
-            Diagnostic::new(
-                Code::BadRecord,
-                Severity::Warning,
-                Some(line),
-                format!("CYCLE/{first}: no depth given; holes are positioned only"),
-            )
-            .at(rest_col),
-        );
-        p.depth = 0.0;
-    } else if p.depth < 0.0 {
-        // A depth is measured down the tool axis from the hole's point: a negative one would
-        // drill upward out of the hole, which no cycle means.
-        diags.push(
-            Diagnostic::new(
-                Code::BadRecord,
-                Severity::Warning,
-                Some(line),
-                format!("CYCLE/{first}: depth {} is negative; holes are positioned only", p.depth),
-            )
-            .at(rest_col),
-        );
-        p.depth = 0.0;
+}
+
+/// The number of argument `i`. CAMWorks writes one value as "46.927686 46.927686": the first is
+/// taken, with a warning.
+fn cycle_value(args: &[Arg], i: usize, line: u32, diags: &mut Vec<Diagnostic>) -> Option<f64> {
+    let a = args.get(i)?;
+    let t = a.text.trim();
+    if let Some(x) = num(t) {
+        return Some(x);
     }
-    Some(Record::Cycle(p))
+    let first = t.split_whitespace().next().and_then(num);
+    if first.is_some() {
+        let msg = format!("CYCLE: value {t:?} has extra text; used the first number");
+        diags.push(Diagnostic::new(Code::BadRecord, Severity::Warning, Some(line), msg).at(a.col));
+    }
+    first
 }
 
 fn split_args(rest: &str, start_col: u32) -> Vec<Arg<'_>> {
