@@ -4,6 +4,8 @@
 //! one statement (bounded by [`MAX_STATEMENT`]); a malformed record becomes an error diagnostic
 //! naming line, column and what was expected, and reading goes on.
 
+mod cycle;
+mod fast;
 mod record;
 
 pub use record::{CoolantCmd, CycleKind, CycleParams, Dwell, FeedUnit, Record, SpindleCmd, parse_statement};
@@ -216,7 +218,7 @@ impl<R: BufRead> Reader<R> {
         let buf = self.input.fill_buf().ok()?;
         let end = memchr(b'\n', buf)?;
         // A `$` anywhere (continuation, comment) is outside fast_goto's grammar: it declines.
-        let record = record::fast_goto(buf[..end].trim_ascii())?;
+        let record = fast::fast_goto(buf[..end].trim_ascii())?;
         self.input.consume(end + 1);
         self.line_no += 1;
         Some(Statement {

@@ -2,6 +2,7 @@
 //! CATIA: spaces around `/` and `,`, `6.` and `.9625`, units before or after values, free-text
 //! records without a slash.
 
+use super::fast::fast_goto;
 use crate::diag::{Code, Diagnostic, Severity};
 use crate::kinematics::Units;
 
@@ -192,14 +193,14 @@ const IGNORED: &[&str] = &[
     "PITCH",
 ];
 
-struct Arg<'a> {
-    text: &'a str,
-    col: u32,
+pub(super) struct Arg<'a> {
+    pub(super) text: &'a str,
+    pub(super) col: u32,
 }
 
 impl Arg<'_> {
     /// The argument as a keyword: trimmed, upper-case.
-    fn word(&self) -> String {
+    pub(super) fn word(&self) -> String {
         self.text.trim().to_ascii_uppercase()
     }
 }
@@ -264,7 +265,7 @@ fn parse_general(stmt: &str, line: u32, diags: &mut Vec<Diagnostic>) -> Option<R
         "LOADTL" | "LOAD" => load_tool(&st, diags),
         "TLDATA" | "TURRET" | "TOOLNO" | "CUTTER" => Some(tool_data(&st)),
         "CIRCLE" => circle(&st, diags),
-        "CYCLE" => parse_cycle(&st.args, line, st.rest_col, diags),
+        "CYCLE" => super::cycle::parse_cycle(&st.args, line, st.rest_col, diags),
         "UNITS" | "UNIT" => units(&st, diags),
         "MULTAX" => Some(Record::Multax(!matches!(
             st.args.first().map(Arg::word).as_deref(),
@@ -726,263 +727,6 @@ fn informational(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
     }
 }
 
-/// `GOTO/x,y,z[,i,j,k]` with plain numbers, parsed without allocating: nearly every statement
-/// of a large file. Anything else (or anything odd) goes to the general parser.
-#[inline]
-pub(crate) fn fast_goto(stmt: &[u8]) -> Option<Record> {
-    let len = stmt.len();
-    if len < 6 || !stmt[..4].eq_ignore_ascii_case(b"GOTO") {
-        return None;
-    }
-    let slash = 4 + stmt[4..].iter().position(|c| !c.is_ascii_whitespace())?;
-    if stmt[slash] != b'/' {
-        return None;
-    }
-    let rest = &stmt[slash + 1..];
-    // One pass over the arguments, each a sign, at most 15 digits and a point, spaces around.
-    // Then the digits as an integer and 10^decimals are both exact doubles, and one IEEE division
-    // rounds their quotient correctly (Clinger's fast path): the same double as the general
-    // parser. Anything else (exponents, long mantissas, junk) goes to the general parser, which
-    // also names what is wrong and where.
-    let mut parts = [(0u64, 0usize, false); 6];
-    let mut n = 0;
-    let mut i = 0;
-    loop {
-        while i < rest.len() && rest[i].is_ascii_whitespace() {
-            i += 1;
-        }
-        let neg = match rest.get(i) {
-            Some(b'-') => {
-                i += 1;
-                true
-            }
-            Some(b'+') => {
-                i += 1;
-                false
-            }
-            _ => false,
-        };
-        let (mut m, mut digits, mut decimals) = (0u64, 0usize, 0usize);
-        while let Some(&c) = rest.get(i)
-            && c.is_ascii_digit()
-        {
-            m = m * 10 + (c - b'0') as u64;
-            digits += 1;
-            i += 1;
-            if digits > 15 {
-                return None; // beyond an exact double: the general parser rounds it
-            }
-        }
-        if rest.get(i) == Some(&b'.') {
-            i += 1;
-            // Up to eight fraction digits at a time, off the one-digit dependency chain, while
-            // eight bytes are left to load (the last few of a line go one by one below).
-            while let Some(c) = rest.get(i..i + 8) {
-                let w = u64::from_le_bytes([c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7]]);
-                let k = leading_digits(w);
-                if k == 0 {
-                    break;
-                }
-                if digits + k > 15 {
-                    return None;
-                }
-                m = m * POW10_U64[k] + digits_value(w, k);
-                (digits, decimals, i) = (digits + k, decimals + k, i + k);
-                if k < 8 {
-                    break;
-                }
-            }
-            while let Some(&c) = rest.get(i)
-                && c.is_ascii_digit()
-            {
-                m = m * 10 + (c - b'0') as u64;
-                (digits, decimals, i) = (digits + 1, decimals + 1, i + 1);
-                if digits > 15 {
-                    return None;
-                }
-            }
-        }
-        if digits == 0 || n == 6 {
-            return None;
-        }
-        parts[n] = (m, decimals, neg);
-        n += 1;
-        while i < rest.len() && rest[i].is_ascii_whitespace() {
-            i += 1;
-        }
-        match rest.get(i) {
-            None => break,
-            Some(b',') => i += 1,
-            Some(_) => return None,
-        }
-    }
-    // The divisions last: independent of each other, they overlap.
-    let v = parts.map(|(m, decimals, neg)| {
-        let x = m as f64 / POW10_EXACT[decimals];
-        if neg { -x } else { x }
-    });
-    match n {
-        3 => Some(Record::Goto {
-            p: [v[0], v[1], v[2]],
-            axis: None,
-        }),
-        // A zero axis goes to the general parser, which reports it with its column.
-        6 if v[3] * v[3] + v[4] * v[4] + v[5] * v[5] >= 1e-24 => Some(Record::Goto {
-            p: [v[0], v[1], v[2]],
-            axis: Some([v[3], v[4], v[5]]),
-        }),
-        _ => None,
-    }
-}
-
-const ZEROS: u64 = 0x3030_3030_3030_3030;
-
-/// How many of the eight bytes of `w` (the first in the lowest byte) are ASCII digits before the
-/// first that is not. A digit is 0x30..=0x39: high nibble 3, and adding 6 keeps it 3 (a carry out
-/// of a byte ≥ 0xFA only reaches bytes after that non-digit).
-#[inline]
-fn leading_digits(w: u64) -> usize {
-    const HIGH: u64 = 0xF0F0_F0F0_F0F0_F0F0;
-    let bad = ((w & HIGH) ^ ZEROS) | ((w.wrapping_add(0x0606_0606_0606_0606) & HIGH) ^ ZEROS);
-    (bad.trailing_zeros() / 8) as usize
-}
-
-/// The value of the first `k` (1..=8) bytes of `w`, ASCII digits: shifted to the top with '0's
-/// below, which as leading zeros change nothing. The SWAR reduction of fast_float's
-/// `parse_eight_digits`.
-#[inline]
-fn digits_value(w: u64, k: usize) -> u64 {
-    let w = if k >= 8 {
-        w
-    } else {
-        (w << (8 * (8 - k))) | (ZEROS >> (8 * k))
-    };
-    let mut v = w - ZEROS;
-    v = v.wrapping_mul(10).wrapping_add(v >> 8);
-    const MASK: u64 = 0x0000_00FF_0000_00FF;
-    let v1 = (v & MASK).wrapping_mul(100 + (1_000_000 << 32));
-    let v2 = ((v >> 16) & MASK).wrapping_mul(1 + (10_000 << 32));
-    (v1.wrapping_add(v2) >> 32) as u32 as u64
-}
-
-/// 10^k for k ≤ 8.
-const POW10_U64: [u64; 9] = [1, 10, 100, 1000, 10_000, 100_000, 1_000_000, 10_000_000, 100_000_000];
-
-/// 10^k for k ≤ 15: each an exact double.
-const POW10_EXACT: [f64; 16] = [
-    1e0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9, 1e10, 1e11, 1e12, 1e13, 1e14, 1e15,
-];
-
-/// `CYCLE/kind,…`: its values by keyword (`FEDTO`, `RAPTO`, …) or, as CAMWorks writes them,
-/// by position around the keywords.
-fn parse_cycle(args: &[Arg], line: u32, rest_col: u32, diags: &mut Vec<Diagnostic>) -> Option<Record> {
-    let first = args.first().map(Arg::word).unwrap_or_default();
-    let kind = match first.as_str() {
-        "OFF" => return Some(Record::CycleOff),
-        "INIT" | "ON" | "" => return Some(Record::Ignored("CYCLE".into())),
-        "DRILL" | "FACE" | "CSINK" => CycleKind::Drill,
-        "DEEP" | "DEEP2" | "BRKCHP" | "PECK" => CycleKind::Deep,
-        "TAP" | "RGDTAP" => CycleKind::Tap,
-        "BORE" | "REAM" => CycleKind::Bore,
-        _ => CycleKind::Other,
-    };
-    let mut p = CycleParams {
-        kind,
-        depth: f64::NAN,
-        rapid_to: f64::NAN,
-        retract_to: None,
-        feed: None,
-        peck: None,
-        dwell: None,
-    };
-    let positional = cycle_keywords(args, line, &mut p, diags);
-    cycle_positional(&mut p, &positional);
-    let warn = |diags: &mut Vec<Diagnostic>, msg: String| {
-        diags.push(Diagnostic::new(Code::BadRecord, Severity::Warning, Some(line), msg).at(rest_col));
-    };
-    if p.depth.is_nan() {
-        warn(diags, format!("CYCLE/{first}: no depth given; holes are positioned only"));
-        p.depth = 0.0;
-    } else if p.depth < 0.0 {
-        // A depth is measured down the tool axis from the hole's point: a negative one would
-        // drill upward out of the hole, which no cycle means.
-        warn(
-            diags,
-            format!("CYCLE/{first}: depth {} is negative; holes are positioned only", p.depth),
-        );
-        p.depth = 0.0;
-    }
-    Some(Record::Cycle(p))
-}
-
-/// Sets the values a keyword names (the number after it) and returns the numbers no keyword
-/// names, in order.
-fn cycle_keywords(args: &[Arg], line: u32, p: &mut CycleParams, diags: &mut Vec<Diagnostic>) -> Vec<f64> {
-    let mut positional = Vec::new();
-    let mut i = 1;
-    while i < args.len() {
-        let k = args[i].word();
-        // The keyword's value: the argument after it, taken.
-        let mut next = || {
-            i += 1;
-            cycle_value(args, i, line, diags)
-        };
-        match k.as_str() {
-            "FEDTO" | "DEPTH" => p.depth = next().unwrap_or(f64::NAN),
-            "RAPTO" | "CLEAR" => p.rapid_to = next().unwrap_or(f64::NAN),
-            "RTRCTO" => p.retract_to = next(),
-            "1STPECK" | "STEP" => p.peck = next(),
-            "DWELL" => p.dwell = next(),
-            "MMPM" | "IPM" | "MMPR" | "IPR" => {
-                let unit = if k.ends_with("PR") {
-                    FeedUnit::PerRev
-                } else {
-                    FeedUnit::PerMinute
-                };
-                let units = if k.starts_with("MM") { Units::Mm } else { Units::Inch };
-                p.feed = next().map(|f| (f, unit, Some(units)));
-            }
-            _ => positional.extend(cycle_value(args, i, line, diags)),
-        }
-        i += 1;
-    }
-    positional
-}
-
-/// CAMWorks: DRILL,G98,depth,PECKING,a,b,MMPM,feed,clear,retract — positional around keywords:
-/// the first number is the depth, the last two the clearance and retract.
-fn cycle_positional(p: &mut CycleParams, positional: &[f64]) {
-    if p.depth.is_nan() && !positional.is_empty() {
-        p.depth = positional[0];
-    }
-    if p.rapid_to.is_nan() {
-        p.rapid_to = positional
-            .get(positional.len().wrapping_sub(2))
-            .copied()
-            .filter(|_| positional.len() >= 3)
-            .unwrap_or(0.0);
-        if p.retract_to.is_none() && positional.len() >= 3 {
-            p.retract_to = positional.last().copied();
-        }
-    }
-}
-
-/// The number of argument `i`. CAMWorks writes one value as "46.927686 46.927686": the first is
-/// taken, with a warning.
-fn cycle_value(args: &[Arg], i: usize, line: u32, diags: &mut Vec<Diagnostic>) -> Option<f64> {
-    let a = args.get(i)?;
-    let t = a.text.trim();
-    if let Some(x) = num(t) {
-        return Some(x);
-    }
-    let first = t.split_whitespace().next().and_then(num);
-    if first.is_some() {
-        let msg = format!("CYCLE: value {t:?} has extra text; used the first number");
-        diags.push(Diagnostic::new(Code::BadRecord, Severity::Warning, Some(line), msg).at(a.col));
-    }
-    first
-}
-
 fn split_args(rest: &str, start_col: u32) -> Vec<Arg<'_>> {
     if rest.trim().is_empty() {
         return Vec::new();
@@ -1017,6 +761,7 @@ pub(crate) fn num(s: impl AsRef<[u8]>) -> Option<f64> {
 
 #[cfg(test)]
 mod tests {
+    use super::super::fast::{digits_value, leading_digits};
     use super::*;
     use proptest::prelude::*;
 

@@ -1,0 +1,116 @@
+//! `CYCLE/` records: a drilling cycle's values by keyword (`FEDTO`, `RAPTO`, …) or, as CAMWorks
+//! writes them, by position around the keywords.
+
+use super::record::{Arg, CycleKind, CycleParams, FeedUnit, Record, num};
+use crate::diag::{Code, Diagnostic, Severity};
+use crate::kinematics::Units;
+
+/// `CYCLE/kind,…`: its values by keyword (`FEDTO`, `RAPTO`, …) or, as CAMWorks writes them,
+/// by position around the keywords.
+pub(super) fn parse_cycle(args: &[Arg], line: u32, rest_col: u32, diags: &mut Vec<Diagnostic>) -> Option<Record> {
+    let first = args.first().map(Arg::word).unwrap_or_default();
+    let kind = match first.as_str() {
+        "OFF" => return Some(Record::CycleOff),
+        "INIT" | "ON" | "" => return Some(Record::Ignored("CYCLE".into())),
+        "DRILL" | "FACE" | "CSINK" => CycleKind::Drill,
+        "DEEP" | "DEEP2" | "BRKCHP" | "PECK" => CycleKind::Deep,
+        "TAP" | "RGDTAP" => CycleKind::Tap,
+        "BORE" | "REAM" => CycleKind::Bore,
+        _ => CycleKind::Other,
+    };
+    let mut p = CycleParams {
+        kind,
+        depth: f64::NAN,
+        rapid_to: f64::NAN,
+        retract_to: None,
+        feed: None,
+        peck: None,
+        dwell: None,
+    };
+    let positional = cycle_keywords(args, line, &mut p, diags);
+    cycle_positional(&mut p, &positional);
+    let warn = |diags: &mut Vec<Diagnostic>, msg: String| {
+        diags.push(Diagnostic::new(Code::BadRecord, Severity::Warning, Some(line), msg).at(rest_col));
+    };
+    if p.depth.is_nan() {
+        warn(diags, format!("CYCLE/{first}: no depth given; holes are positioned only"));
+        p.depth = 0.0;
+    } else if p.depth < 0.0 {
+        // A depth is measured down the tool axis from the hole's point: a negative one would
+        // drill upward out of the hole, which no cycle means.
+        warn(
+            diags,
+            format!("CYCLE/{first}: depth {} is negative; holes are positioned only", p.depth),
+        );
+        p.depth = 0.0;
+    }
+    Some(Record::Cycle(p))
+}
+
+/// Sets the values a keyword names (the number after it) and returns the numbers no keyword
+/// names, in order.
+fn cycle_keywords(args: &[Arg], line: u32, p: &mut CycleParams, diags: &mut Vec<Diagnostic>) -> Vec<f64> {
+    let mut positional = Vec::new();
+    let mut i = 1;
+    while i < args.len() {
+        let k = args[i].word();
+        // The keyword's value: the argument after it, taken.
+        let mut next = || {
+            i += 1;
+            cycle_value(args, i, line, diags)
+        };
+        match k.as_str() {
+            "FEDTO" | "DEPTH" => p.depth = next().unwrap_or(f64::NAN),
+            "RAPTO" | "CLEAR" => p.rapid_to = next().unwrap_or(f64::NAN),
+            "RTRCTO" => p.retract_to = next(),
+            "1STPECK" | "STEP" => p.peck = next(),
+            "DWELL" => p.dwell = next(),
+            "MMPM" | "IPM" | "MMPR" | "IPR" => {
+                let unit = if k.ends_with("PR") {
+                    FeedUnit::PerRev
+                } else {
+                    FeedUnit::PerMinute
+                };
+                let units = if k.starts_with("MM") { Units::Mm } else { Units::Inch };
+                p.feed = next().map(|f| (f, unit, Some(units)));
+            }
+            _ => positional.extend(cycle_value(args, i, line, diags)),
+        }
+        i += 1;
+    }
+    positional
+}
+
+/// CAMWorks: DRILL,G98,depth,PECKING,a,b,MMPM,feed,clear,retract — positional around keywords:
+/// the first number is the depth, the last two the clearance and retract.
+fn cycle_positional(p: &mut CycleParams, positional: &[f64]) {
+    if p.depth.is_nan() && !positional.is_empty() {
+        p.depth = positional[0];
+    }
+    if p.rapid_to.is_nan() {
+        p.rapid_to = positional
+            .get(positional.len().wrapping_sub(2))
+            .copied()
+            .filter(|_| positional.len() >= 3)
+            .unwrap_or(0.0);
+        if p.retract_to.is_none() && positional.len() >= 3 {
+            p.retract_to = positional.last().copied();
+        }
+    }
+}
+
+/// The number of argument `i`. CAMWorks writes one value as "46.927686 46.927686": the first is
+/// taken, with a warning.
+fn cycle_value(args: &[Arg], i: usize, line: u32, diags: &mut Vec<Diagnostic>) -> Option<f64> {
+    let a = args.get(i)?;
+    let t = a.text.trim();
+    if let Some(x) = num(t) {
+        return Some(x);
+    }
+    let first = t.split_whitespace().next().and_then(num);
+    if first.is_some() {
+        let msg = format!("CYCLE: value {t:?} has extra text; used the first number");
+        diags.push(Diagnostic::new(Code::BadRecord, Severity::Warning, Some(line), msg).at(a.col));
+    }
+    first
+}
