@@ -42,6 +42,8 @@ pub enum Code {
     CoolantRestored,
     ToolLength,
     TableIndex,
+    /// A number beyond what the control's word takes (F, S, T, H, dwell).
+    WordRange,
 }
 
 impl Code {
@@ -70,6 +72,7 @@ impl Code {
             Code::CycleExpanded => "cycle_expanded",
             Code::SurfaceSpeed => "surface_speed",
             Code::SpindleSpeed => "spindle_speed",
+            Code::WordRange => "word_range",
             Code::SpindleStopped => "spindle_stopped",
             Code::CoolantRestored => "coolant_restored",
             Code::ToolLength => "tool_length",

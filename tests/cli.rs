@@ -191,8 +191,10 @@ fn post_verify_lint_and_generate_as_a_user_runs_them() {
         nc.to_str().unwrap(),
         cl.to_str().unwrap(),
     ]);
-    assert_eq!(code, 0, "{err}");
-    assert!(err.contains("60 CL points"), "{err}");
+    // The path was generated for no work offset: shifted, parts of it leave the travel, and a
+    // program written with errors exits 1.
+    assert_eq!(code, 1, "{err}");
+    assert!(err.contains("60 CL points") && err.contains("not fit to run"), "{err}");
     let text = std::fs::read_to_string(&nc).unwrap();
     assert!(
         text.starts_with("%\nO1000\n") && text.trim_end().ends_with("M30\n%"),
@@ -291,4 +293,47 @@ fn machines_validate_add_and_fit_offline() {
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     assert!(lib.join("htm50200-horizontal.toml").exists());
     std::fs::remove_dir_all(&dir).ok();
+}
+
+/// `post`'s exit status says what the program is: 0 clean, 1 written with error diagnostics (the
+/// NC is there, and says so), 2 refused (strict mode, unreadable input): nothing for a script to
+/// mistake for a good program.
+#[test]
+fn post_exits_0_clean_1_with_errors_2_refused() {
+    let dir = std::env::temp_dir().join(format!("kinepost-cli-exit-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let write = |name: &str, text: &str| {
+        let p = dir.join(name);
+        std::fs::write(&p, text).unwrap();
+        p.to_str().unwrap().to_string()
+    };
+    let good = write(
+        "good.cl",
+        "UNITS/MM\nLOADTL/1\nSPINDL/1000\nGOTO/10,20,30,0,0,1\nGOTO/10,25,30,0,0,1\nFINI\n",
+    );
+    let bad = write(
+        "bad.cl",
+        "UNITS/MM\nLOADTL/1\nSPINDL/1000\nGOTO/10,20,30,0,0,1\nGOTO/9000,20,30,0,0,1\nFINI\n",
+    );
+    let nc = dir.join("out.nc");
+    let post = |cl: &str, extra: &[&str]| {
+        let mut a = vec!["post", "--machine", "spinner-u5-620", cl, "-o", nc.to_str().unwrap()];
+        a.extend_from_slice(extra);
+        kinepost(&a)
+    };
+    let (code, _, err) = post(&good, &[]);
+    assert_eq!(code, 0, "{err}");
+    let (code, _, err) = post(&bad, &[]);
+    assert_eq!(code, 1, "{err}");
+    assert!(err.contains("not fit to run"), "{err}");
+    let text = std::fs::read_to_string(&nc).unwrap();
+    assert!(
+        text.contains("ERROR LIMIT_VIOLATION") && text.contains("KINEPOST: ERRORS 1,"),
+        "{text}"
+    );
+    let (code, _, err) = post(&bad, &["--strict"]);
+    assert_eq!(code, 2, "{err}");
+    let (code, _, err) = post(dir.join("missing.cl").to_str().unwrap(), &[]);
+    assert_eq!(code, 2, "{err}");
+    std::fs::remove_dir_all(&dir).unwrap();
 }

@@ -1230,3 +1230,48 @@ fn a_delay_is_each_controls_dwell() {
         s.counts
     );
 }
+
+/// The machinist runs the NC, not the diagnostics: in every dialect's comment syntax a block with
+/// an error says `ERROR` and its code, an error with no block (a point skipped) is a comment line
+/// where it happened, and the program closes with the count before its end.
+#[test]
+fn a_program_with_errors_says_so_in_its_own_text() {
+    let lib = Library::load_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap();
+    let m = &lib.get("vmc-3axis").unwrap().machine;
+    // Line 5 is far outside X travel; line 6 tilts the tool (no solution on three axes).
+    let bad = "UNITS/MM\nLOADTL/1\nSPINDL/1000\nGOTO/10,20,30,0,0,1\nGOTO/9000,20,30,0,0,1\nGOTO/10,20,30,0.5,0,0.866\nGOTO/10,25,30,0,0,1\nFINI\n";
+    let good = "UNITS/MM\nLOADTL/1\nSPINDL/1000\nGOTO/10,20,30,0,0,1\nGOTO/10,25,30,0,0,1\nFINI\n";
+    for d in ["fanuc", "haas", "linuxcnc", "siemens", "heidenhain"] {
+        let s = |cl: &str| {
+            let settings = post::Settings {
+                dialect: Some(d.into()),
+                ..Default::default()
+            };
+            nc_with(m, cl, settings).unwrap()
+        };
+        let nc = s(bad);
+        let lines: Vec<&str> = nc.lines().collect();
+        let flagged = lines
+            .iter()
+            .find(|l| l.contains("X9000.000") || l.contains("X+9000.000"))
+            .unwrap_or_else(|| panic!("{d}: no block for line 5:\n{nc}"));
+        assert!(flagged.contains("ERROR LIMIT_VIOLATION"), "{d}: {flagged}");
+        assert!(
+            lines.iter().any(|l| l.contains("ERROR UNREACHABLE CL LINE 6")),
+            "{d}: the skipped point is not in the text:\n{nc}"
+        );
+        let close = lines
+            .iter()
+            .position(|l| l.contains("KINEPOST: ERRORS 2,"))
+            .unwrap_or_else(|| panic!("{d}:\n{nc}"));
+        assert!(lines[close].contains("NOT FIT TO RUN AS IS"), "{d}: {}", lines[close]);
+        let end = lines
+            .iter()
+            .rposition(|l| l.contains("M30") || l.contains("M2") || l.contains("END PGM"))
+            .unwrap();
+        assert!(close < end, "{d}: the closing comment comes before the program end");
+        let nc = s(good);
+        assert!(!nc.contains("ERROR "), "{d}:\n{nc}");
+        assert!(nc.contains("KINEPOST: ERRORS 0, WARNINGS "), "{d}:\n{nc}");
+    }
+}

@@ -197,6 +197,24 @@ async fn a_spindle_speed_for_a_cl_without_one() {
     assert!(nc.contains("\nS7500 M3\n"), "{nc}");
 }
 
+/// Lenient text/plain answers 200 before the program is read: the outcome is in the text, the
+/// blocks with errors marked and a closing comment before the program end.
+#[tokio::test]
+async fn a_program_with_errors_says_so_in_the_streamed_text() {
+    let base = server(cfg()).await;
+    let c = reqwest::Client::new();
+    let cl = "UNITS/MM\nLOADTL/1\nSPINDL/1000\nGOTO/10,20,30,0,0,1\nGOTO/9000,20,30,0,0,1\nFINI\n";
+    let nc = c
+        .post(format!("{base}/v1/post?machine=vmc-3axis"))
+        .header("content-type", "text/plain")
+        .body(cl)
+        .text_ok()
+        .await;
+    assert!(nc.contains("X9000.000 (ERROR LIMIT_VIOLATION)"), "{nc}");
+    let close = nc.find("(KINEPOST: ERRORS 1,").expect("closing comment");
+    assert!(close < nc.find("M30").unwrap(), "{nc}");
+}
+
 #[tokio::test]
 async fn drilling_cycles_as_canned_cycles_on_request() {
     let base = server(cfg()).await;

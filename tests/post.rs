@@ -2229,3 +2229,129 @@ fn tcp_with_angle_error_puts_the_real_tip_on_the_cl_point() {
     let r = kinepost::post::verify::verify(cl.as_slice(), sink.nc.as_bytes(), &m, &verify_options(&m, &o)).unwrap();
     assert!(r.ok && r.max_nonlinear <= o.tolerance, "{r:?}");
 }
+
+/// A tolerance finer than the X Y Z words can hold made every block an FK-replay error: it is
+/// refused, naming the smallest that works.
+#[test]
+fn a_tolerance_below_the_words_resolution_is_refused() {
+    for (id, least) in [("spinner-u5-620", "0.002 mm"), ("haas-umc750", "0.0002 in")] {
+        let m = machine(id);
+        for t in [1e-300, 1e-6] {
+            let s = post::Settings {
+                tolerance: Some(t),
+                ..Default::default()
+            };
+            let e = s.options(&m).unwrap_err();
+            assert!(e.contains(&format!("smallest that works is {least}")), "{id} {t}: {e}");
+        }
+        let least: f64 = least.split(' ').next().unwrap().parse().unwrap();
+        let s = post::Settings {
+            tolerance: Some(least),
+            ..Default::default()
+        };
+        let o = s.options(&m).unwrap();
+        let mut cl = Vec::new();
+        kinepost::testgen::write_path(&m, 200, 4, m.default_tool_length, &mut cl).unwrap();
+        for mode in [Mode::Joint, Mode::Tcp] {
+            let o = Options { mode, ..o.clone() };
+            let (_, sum) = run(&m, &cl, &o);
+            assert_eq!(sum.errors, 0, "{id} {mode:?} at the least tolerance: {sum:?}");
+        }
+    }
+}
+
+/// Hostile numbers in every record that becomes a word: each is written within the control's
+/// range or is an error naming its line; none is written as 0 or wraps (FEDRAT/9e17 wrote F0.0,
+/// SPINDL/1e19 S9223372036854775807).
+#[test]
+fn hostile_numbers_are_written_within_range_or_told() {
+    let m = machine("spinner-u5-620");
+    let o = fanuc(&m, Mode::Joint);
+    let r = o.dialect.ranges;
+    let values = ["0", "0.0000001", "1e9", "1e18", "1e300", "NaN"];
+    // (record template with {v} at CL line 4, what it becomes)
+    let cases = [
+        ("FEDRAT/{v}", 'F'),
+        ("SPINDL/{v}", 'S'),
+        ("LOADTL/{v}", 'T'),
+        ("LOADTL/2,ADJUST,{v}", 'H'),
+        ("DELAY/{v}", 'P'),
+    ];
+    for (rec, word) in cases {
+        for v in values {
+            let cl = format!(
+                "UNITS/MM\nLOADTL/1\nSPINDL/1000\n{}\nGOTO/10,20,30,0,0,1\nGOTO/12,20,30,0.1,0,0.995\nGOTO/14,25,30,0,0,1\nFINI\n",
+                rec.replace("{v}", v)
+            );
+            let (sink, _) = run(&m, cl.as_bytes(), &o);
+            let told = sink
+                .diags
+                .iter()
+                .any(|d| d.severity >= Severity::Warning && d.line == Some(4));
+            for l in sink.nc.lines().filter(|l| !l.starts_with('(')) {
+                for w in l.split_whitespace().filter(|w| w.starts_with(word)) {
+                    let Ok(x) = w[1..].parse::<f64>() else { continue };
+                    let max = match (word, l.contains("G93")) {
+                        ('F', true) => r.inverse_time,
+                        ('F', false) => r.feed_mm,
+                        ('S', _) => post::MAX_SPINDLE_SPEED,
+                        ('T', _) => r.tool as f64,
+                        ('H', _) => r.register as f64,
+                        _ => r.dwell_s * 1000.0, // G4 P in ms
+                    };
+                    // T0 is a word every control takes (the empty spindle); H0 cancels the offset.
+                    assert!(x > 0.0 || word == 'T' || told, "{rec} {v}: {w} written as zero in {l:?}");
+                    assert!(x <= max || told, "{rec} {v}: {w} beyond {max} and not told: {l:?}");
+                }
+            }
+            // Out of range is an error naming line 4, never a silently different word.
+            let huge = ["1e9", "1e18", "1e300", "NaN"].contains(&v);
+            if huge {
+                let e = sink.diags.iter().find(|d| d.severity == Severity::Error && d.line == Some(4));
+                assert!(e.is_some(), "{rec} {v}: no error on line 4: {:?}\n{}", sink.diags, sink.nc);
+            }
+        }
+    }
+}
+
+/// A 0.5° swirl of the tool axis about the pole on spinner-u5-620 turns C a full turn within a
+/// millimetre of tip motion: at the programmed feed that was G93 F71942, C at 1.3 M°/min. Every
+/// block is slowed to the axes' velocities (the profile's max_feed), told as feed_clamped naming
+/// the axis, and no inverse-time F exceeds the dialect's.
+#[test]
+fn a_swirl_about_the_pole_is_slowed_to_the_rotaries_velocity() {
+    let m = machine("spinner-u5-620");
+    let o = fanuc(&m, Mode::Joint);
+    let mut cl = String::from("UNITS/MM\nLOADTL/1\nSPINDL/8000\nFEDRAT/2000\n");
+    let tilt = 0.5f64.to_radians();
+    for k in 0..=72 {
+        let az = (k as f64 * 5.0).to_radians();
+        let (i, j, kk) = (tilt.sin() * az.cos(), tilt.sin() * az.sin(), tilt.cos());
+        cl.push_str(&format!("GOTO/{:.4},20,30,{i:.7},{j:.7},{kk:.7}\n", 10.0 + k as f64 / 72.0));
+    }
+    cl.push_str("FINI\n");
+    let (sink, _) = run(&m, cl.as_bytes(), &o);
+    let d = sink.first(Code::FeedClamped);
+    assert!(d.message.contains("C would exceed its velocity"), "{d:?}");
+    let vmax = |name: char| m.rotaries[m.rotary_index(name).unwrap()].max_feed.unwrap().to_degrees();
+    let (mut b, mut c, mut g93, mut checked) = (0.0, 0.0, false, 0);
+    for l in sink.nc.lines() {
+        let w = |a: char| {
+            l.split_whitespace()
+                .find(|t| t.starts_with(a))
+                .and_then(|t| t[1..].parse::<f64>().ok())
+        };
+        g93 = (g93 || l.contains("G93")) && !l.contains("G94");
+        let (nb, nc) = (w('B').unwrap_or(b), w('C').unwrap_or(c));
+        if g93 && let Some(f) = w('F') {
+            assert!(f <= o.dialect.ranges.inverse_time, "{l}");
+            // F is 1/minutes: each axis's step times F is its speed in °/min (F rounded to 3 digits).
+            for (step, name) in [((nb - b).abs(), 'B'), ((nc - c).abs(), 'C')] {
+                assert!(step * f <= vmax(name) * 1.001 + 1e-6, "{name} at {} °/min in {l}", step * f);
+            }
+            checked += 1;
+        }
+        (b, c) = (nb, nc);
+    }
+    assert!(checked > 50, "{checked} inverse-time blocks checked:\n{}", sink.nc);
+}

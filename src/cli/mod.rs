@@ -459,11 +459,35 @@ impl SetupArgs {
     }
 }
 
+/// Why a command did not succeed, and so its exit status: 1 for output written that must not be
+/// trusted as it is (a program with error diagnostics, a verify check failed), 2 for nothing
+/// done (strict refusal, unreadable input, bad arguments).
+pub enum Failure {
+    Written(String),
+    Refused(String),
+}
+
+impl From<String> for Failure {
+    fn from(s: String) -> Self {
+        Failure::Refused(s)
+    }
+}
+
+impl From<&str> for Failure {
+    fn from(s: &str) -> Self {
+        Failure::Refused(s.to_string())
+    }
+}
+
 pub fn main() -> ExitCode {
     let cli = Cli::parse();
     match run(cli) {
         Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
+        Err(Failure::Written(e)) => {
+            eprintln!("kinepost: {e}");
+            ExitCode::from(1)
+        }
+        Err(Failure::Refused(e)) => {
             eprintln!("kinepost: {e}");
             ExitCode::from(2)
         }
@@ -570,12 +594,12 @@ fn serve(cli: &Cli, a: &ServeArgs) -> Result<(), String> {
     r
 }
 
-fn run(cli: Cli) -> Result<(), String> {
+fn run(cli: Cli) -> Result<(), Failure> {
     if let Command::Lint { input, verbose } = &cli.command {
-        return lint(input, *verbose);
+        return Ok(lint(input, *verbose)?);
     }
     if let Command::Serve(a) = &cli.command {
-        return serve(&cli, a);
+        return Ok(serve(&cli, a)?);
     }
     let lib = library(&cli)?;
     match cli.command {
@@ -597,7 +621,7 @@ fn run(cli: Cli) -> Result<(), String> {
                 &mut w,
             )
             .and_then(|_| std::io::Write::flush(&mut w))
-            .map_err(|e| e.to_string())
+            .map_err(|e| e.to_string().into())
         }
         Command::Verify {
             machine,
@@ -624,10 +648,10 @@ fn run(cli: Cli) -> Result<(), String> {
             if rep.ok {
                 Ok(())
             } else {
-                Err(format!(
+                Err(Failure::Written(format!(
                     "{} of {} CL points matched, {} blocks off their CL segment",
                     rep.matched, rep.cl_points, rep.off_segment_blocks
-                ))
+                )))
             }
         }
         Command::Post(a) => {
@@ -636,7 +660,7 @@ fn run(cli: Cli) -> Result<(), String> {
         }
         Command::Machines { action: Some(a), .. } => {
             let dir = cli.machines.clone().unwrap_or_else(machines::default_dir);
-            machines_cmd(&lib, &dir, &a)
+            Ok(machines_cmd(&lib, &dir, &a)?)
         }
         Command::Machines { json, action: None } => {
             for p in lib.iter() {
@@ -690,7 +714,7 @@ fn run(cli: Cli) -> Result<(), String> {
     }
 }
 
-fn post_cmd(p: &machines::Profile, a: &PostArgs) -> Result<(), String> {
+fn post_cmd(p: &machines::Profile, a: &PostArgs) -> Result<(), Failure> {
     let m = &p.machine;
     use kinepost::post::{self, Settings};
     use std::io::Write;
@@ -777,6 +801,12 @@ fn post_cmd(p: &machines::Profile, a: &PostArgs) -> Result<(), String> {
         s.warnings,
         s.cycle_time_s / 60.0
     );
+    if s.errors > 0 {
+        return Err(Failure::Written(format!(
+            "the program has {} error diagnostics: written, but not fit to run as it is",
+            s.errors
+        )));
+    }
     Ok(())
 }
 

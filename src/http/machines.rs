@@ -39,6 +39,8 @@ pub struct LinearDto {
     pub min: f64,
     pub max: f64,
     pub max_feed: Option<f64>,
+    /// Units/s².
+    pub max_accel: Option<f64>,
 }
 
 #[derive(Serialize, utoipa::ToSchema)]
@@ -52,6 +54,8 @@ pub struct RotaryDto {
     pub min: Option<f64>,
     pub max: Option<f64>,
     pub max_feed: Option<f64>,
+    /// °/s².
+    pub max_accel: Option<f64>,
     pub angle_error: Option<AngleErrorDto>,
     /// NC words that lock and unlock the axis around positioning, if it is clamped.
     pub clamp: Option<Vec<String>>,
@@ -84,6 +88,7 @@ impl From<&Current> for MachineDto {
                     min: l.min,
                     max: l.max,
                     max_feed: l.max_feed,
+                    max_accel: l.max_accel,
                 })
                 .collect(),
             rotary: d
@@ -97,6 +102,7 @@ impl From<&Current> for MachineDto {
                     min: r.min,
                     max: r.max,
                     max_feed: r.max_feed,
+                    max_accel: r.max_accel,
                     angle_error: r.angle_error.as_ref().map(|e| AngleErrorDto {
                         coefficients: e.coefficients.clone(),
                         range: e.range,

@@ -52,6 +52,8 @@ pub struct Linear {
     pub max: f64,
     /// Units per minute.
     pub max_feed: Option<f64>,
+    /// Units per second squared.
+    pub max_accel: Option<f64>,
 }
 
 /// A rotary joint: turns its body by +angle about `axis` through `pivot` (right-hand rule).
@@ -68,6 +70,8 @@ pub struct Rotary {
     pub limits: Option<(f64, f64)>,
     /// Radians per minute.
     pub max_feed: Option<f64>,
+    /// Radians per second squared.
+    pub max_accel: Option<f64>,
     pub angle_error: Option<AngleError>,
 }
 
@@ -222,10 +226,12 @@ impl Machine {
             if l.min >= l.max {
                 return bad(key, format!("min ({}) must be less than max ({})", l.min, l.max));
             }
-            if let Some(f) = l.max_feed
-                && !(f.is_finite() && f > 0.0)
-            {
-                return bad(format!("{key}.max_feed"), "must be a positive number".into());
+            for (what, v) in [("max_feed", l.max_feed), ("max_accel", l.max_accel)] {
+                if let Some(f) = v
+                    && !(f.is_finite() && f > 0.0)
+                {
+                    return bad(format!("{key}.{what}"), "must be a positive number".into());
+                }
             }
         }
         if spec.rotaries.len() > 3 {
@@ -258,10 +264,12 @@ impl Machine {
                     );
                 }
             }
-            if let Some(f) = r.max_feed
-                && !(f.is_finite() && f > 0.0)
-            {
-                return bad(format!("{key}.max_feed"), "must be a positive number".into());
+            for (what, v) in [("max_feed", r.max_feed), ("max_accel", r.max_accel)] {
+                if let Some(f) = v
+                    && !(f.is_finite() && f > 0.0)
+                {
+                    return bad(format!("{key}.{what}"), "must be a positive number".into());
+                }
             }
             if let Some(e) = &r.angle_error {
                 e.validate().map_err(|p| Error::Profile {
@@ -369,6 +377,7 @@ mod tests {
                 pivot: Vec3::zeros(),
                 limits: Some((lo, lo + span)),
                 max_feed: None,
+                max_accel: None,
                 angle_error: None,
             };
             let want: Vec<f64> = (-6..=6)
@@ -394,6 +403,7 @@ mod tests {
                 pivot: Vec3::zeros(),
                 limits: Some(limits),
                 max_feed: None,
+                max_accel: None,
                 angle_error: None,
             };
             assert!(r.windings(f64::NAN, 0.0).is_empty());

@@ -61,6 +61,9 @@ pub struct LinearDoc {
     pub max: f64,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub max_feed: Option<f64>,
+    /// Units/s² (rotaries: °/s²): the cycle-time estimate's trapezoids.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_accel: Option<f64>,
 }
 
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
@@ -76,6 +79,9 @@ pub struct RotaryDoc {
     pub max: Option<f64>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub max_feed: Option<f64>,
+    /// Units/s² (rotaries: °/s²): the cycle-time estimate's trapezoids.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_accel: Option<f64>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub angle_error: Option<AngleErrorDoc>,
     /// NC words that lock and unlock the axis (e.g. `["M10", "M11"]`): written around
@@ -155,6 +161,7 @@ pub fn parse_profile(text: &str, file: &str, stem: Option<&str>) -> Result<Profi
             min: l.min,
             max: l.max,
             max_feed: l.max_feed,
+            max_accel: l.max_accel,
         });
     }
     let mut rotaries = Vec::new();
@@ -196,6 +203,7 @@ pub fn parse_profile(text: &str, file: &str, stem: Option<&str>) -> Result<Profi
             pivot: Vec3::from(r.pivot),
             limits,
             max_feed: r.max_feed.map(f64::to_radians),
+            max_accel: r.max_accel.map(f64::to_radians),
             angle_error: r
                 .angle_error
                 .as_ref()

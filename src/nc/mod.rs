@@ -21,6 +21,22 @@ pub enum Style {
     Conversational,
 }
 
+/// What a control's words take. Beyond it a word is an error naming its CL line (and written at
+/// the bound where that is the safe side: a slower feed, a shorter dwell), never a number that
+/// rounds to zero or wraps.
+#[derive(Clone, Copy, Debug)]
+pub struct Ranges {
+    /// Largest programmed feed per minute, mm/min (an inch program's: this over 25.4).
+    pub feed_mm: f64,
+    /// Largest inverse-time F, 1/min (a block of 0.6 ms at 99 999.999).
+    pub inverse_time: f64,
+    /// Largest tool number (T) and offset register (H, D).
+    pub tool: u32,
+    pub register: u32,
+    /// Longest dwell, seconds.
+    pub dwell_s: f64,
+}
+
 /// A controller's words for the same things. Only data: adding a dialect is a value.
 /// Templates: `{n}` program number, `{n4}`/`{n5}` zero-padded, `{UNITS}` MM|INCH, `{t}` tool,
 /// `{s}` spindle speed.
@@ -46,6 +62,8 @@ pub struct Dialect {
     /// Inverse-time feed word (G93); `None`: the control has none, and a move with rotaries gets
     /// the combined machine-axis feed (units and degrees per minute) that gives the same time.
     pub inverse_time: Option<&'static str>,
+    /// The numbers its words take.
+    pub ranges: Ranges,
     pub tool_change: &'static [&'static str],
     pub length_comp: &'static str,
     pub tcp_on: &'static str,
@@ -164,6 +182,15 @@ pub const FANUC: Dialect = Dialect {
     feed: "G1",
     feed_per_min: "G94",
     inverse_time: Some("G93"),
+    // Fanuc 30i, IS-B: F 0.001-999000 mm/min; T up to 8 digits; offsets H/D up to 999; G4 P up
+    // to 99 999 999 ms.
+    ranges: Ranges {
+        feed_mm: 999_000.0,
+        inverse_time: 99_999.999,
+        tool: 99_999_999,
+        register: 999,
+        dwell_s: 99_999.999,
+    },
     tool_change: &["T{t} M6"],
     length_comp: "G43 H{t}",
     tcp_on: "G43.4 H{t}",
@@ -248,6 +275,15 @@ pub const HEIDENHAIN: Dialect = Dialect {
     feed: "",
     feed_per_min: "",
     inverse_time: None,
+    // TNC 640: tool numbers 0-32767 (the tool table's T); F up to 999 999 mm/min; dwell
+    // (cycle 9) up to 3 600 s.
+    ranges: Ranges {
+        feed_mm: 999_999.0,
+        inverse_time: 99_999.999,
+        tool: 32_767,
+        register: 32_767,
+        dwell_s: 3_600.0,
+    },
     tool_change: &["TOOL CALL {t} Z"],
     length_comp: "",
     tcp_on: "FUNCTION TCPM F TCP AXIS POS PATHCTRL AXIS",

@@ -44,6 +44,7 @@ pub enum Error {
 pub fn post<R: BufRead, S: Sink + ?Sized>(input: R, m: &Machine, o: &Options, sink: &mut S) -> Result<Summary, Error> {
     let mut src = Source::new(input, m.units, o.cl_units, o.strict)?;
     src.canned_cycles = o.canned_cycles;
+    src.feed_max = emit::feed_max(o.dialect, m.units, crate::nc::FeedMode::PerMinute);
     let setup = Setup::new(o.tool_length.unwrap_or(m.default_tool_length), o.work_offset);
     let mut e = Emitter::new(m, o, sink, setup, &src);
     e.program_start()?;

@@ -181,6 +181,14 @@ impl Settings {
             if !(t.is_finite() && t > 0.0 && t <= max) {
                 return Err(format!("tolerance must be a positive number up to {max} {unit}"));
             }
+            // Finer than the X Y Z words can say, every block's rounding alone would be an
+            // FK-replay error: two units of the word's last digit is the least that works.
+            let least = 2.0 / 10f64.powi(crate::nc::Formats::for_units(m.units).linear as i32);
+            if t < least * (1.0 - 1e-9) {
+                return Err(format!(
+                    "tolerance {t} {unit} is finer than the X Y Z words can hold; the smallest that works is {least} {unit}"
+                ));
+            }
             o.tolerance = t;
         }
         o.sequence_numbers = self.sequence_numbers.unwrap_or(false);

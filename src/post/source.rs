@@ -129,6 +129,8 @@ pub struct Source<R> {
     frame_pending: bool,
     /// Mark drilling holes for canned-cycle output (and approach them at the start level).
     pub canned_cycles: bool,
+    /// The largest feed per minute the control's F word takes, profile units.
+    pub feed_max: f64,
     ended: bool,
     pub strict_error: Option<Diagnostic>,
     strict: bool,
@@ -197,6 +199,7 @@ impl<R: BufRead> Source<R> {
             frame: None,
             frame_pending: false,
             canned_cycles: false,
+            feed_max: f64::INFINITY,
             ended: false,
             strict_error: None,
             strict,
@@ -304,6 +307,59 @@ impl<R: BufRead> Source<R> {
         true
     }
 
+    /// FEDRAT: in profile units, within the F word's range.
+    fn feedrate(&mut self, value: f64, unit: FeedUnit, units: Option<Units>, line: u32) {
+        let f = units.map_or(self.scale, |u| u.factor_to(self.profile_units));
+        let mut v = value * f;
+        // Beyond the F word's range (a typo, a unit mix-up): an error where the CL says
+        // it, and the control's largest F, the slower side (it overflowed to F0).
+        if unit == FeedUnit::PerMinute && !(v <= self.feed_max) {
+            self.diag(
+                Code::WordRange,
+                Severity::Error,
+                line,
+                format!(
+                    "feed {v:e} is beyond what the control's F word takes: written F{}",
+                    self.feed_max
+                ),
+            );
+            v = self.feed_max;
+        }
+        self.feed = Some((v, unit));
+    }
+
+    /// SPINDL: a speed that turns (not S0) and that a spindle can (not S9223372036854775807).
+    fn spindle(&mut self, c: SpindleCmd, line: u32) {
+        let c = self.spindle_rpm(c, line);
+        // A speed that rounds to S0 starts a spindle that does not turn, and the next feed
+        // drives a standing tool into the part (CATIA's tap demo: `SPINDL/0.3980,RPM`).
+        // A surface speed left unconverted is written as S too.
+        if let SpindleCmd::Rpm { speed, .. } | SpindleCmd::Surface { speed, .. } = c
+            && speed.round() < 1.0
+        {
+            self.diag(
+                Code::SpindleSpeed,
+                Severity::Error,
+                line,
+                format!("spindle speed {speed} rounds to S0: the spindle would not turn (it is stopped, no S0 written)"),
+            );
+        }
+        if let SpindleCmd::Rpm { speed, .. } | SpindleCmd::Surface { speed, .. } = c
+            && !(speed <= super::MAX_SPINDLE_SPEED)
+        {
+            self.diag(
+                Code::WordRange,
+                Severity::Error,
+                line,
+                format!(
+                    "spindle speed {speed:e} is beyond any spindle: written S{}",
+                    super::MAX_SPINDLE_SPEED
+                ),
+            );
+        }
+        self.out.push_back(Item::Event(ProgEvent::Spindle(c)));
+    }
+
     /// One record: a plain move comes back (to go after whatever the record queued), everything
     /// else is queued here.
     fn statement(&mut self, line: u32, rec: Record) -> Option<MotionPt> {
@@ -326,31 +382,12 @@ impl<R: BufRead> Source<R> {
                 return self.motion(line, base + Vec3::from(d));
             }
             Record::Rapid => self.rapid_next = true,
-            Record::Feedrate { value, unit, units } => {
-                let f = units.map_or(self.scale, |u| u.factor_to(self.profile_units));
-                self.feed = Some((value * f, unit));
-            }
+            Record::Feedrate { value, unit, units } => self.feedrate(value, unit, units, line),
             Record::Units(u) => {
                 self.cl_units = u;
                 self.scale = u.factor_to(self.profile_units);
             }
-            Record::Spindle(c) => {
-                let c = self.spindle_rpm(c, line);
-                // A speed that rounds to S0 starts a spindle that does not turn, and the next feed
-                // drives a standing tool into the part (CATIA's tap demo: `SPINDL/0.3980,RPM`).
-                // A surface speed left unconverted is written as S too.
-                if let SpindleCmd::Rpm { speed, .. } | SpindleCmd::Surface { speed, .. } = c
-                    && speed.round() < 1.0
-                {
-                    self.diag(
-                        Code::SpindleSpeed,
-                        Severity::Error,
-                        line,
-                        format!("spindle speed {speed} is written S0: the spindle would not turn"),
-                    );
-                }
-                self.out.push_back(Item::Event(ProgEvent::Spindle(c)))
-            }
+            Record::Spindle(c) => self.spindle(c, line),
             Record::Coolant(c) => self.out.push_back(Item::Event(ProgEvent::Coolant(c))),
             Record::LoadTool { number, length, adjust } => {
                 if let Some(l) = length {

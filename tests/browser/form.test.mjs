@@ -95,7 +95,7 @@ try {
   // The link opens the same result on another screen.
   const other = await browser.newPage();
   await other.goto(jobUrl);
-  await other.waitForSelector('#status.ok', { timeout: 30000 });
+  await other.waitForSelector('#status.ok, #status.warn', { timeout: 30000 });
   check((await other.textContent('#status')).includes('blocks from 348 CL points'), 'the job link shows the same result');
   check(await other.$eval('#machine', (s) => s.value) === 'haas-umc750', 'and the job\'s machine');
   await other.close();
@@ -103,6 +103,8 @@ try {
   // A machine the pose cannot be reached on: each unreachable pose listed with its CL line.
   await runJob(page, 'vmc-3axis', 'joint', 'nx_clsf_mech491_variable_axis_inch_5ax.cls');
   await page.waitForSelector('#warnings tbody tr');
+  const red = await page.$eval('#status', (s) => [s.className, s.textContent, getComputedStyle(s).color]);
+  check(red[0] === 'error' && /^[\d,]+ errors: .*not fit to run/.test(red[1]) && red[2] === 'rgb(176, 0, 32)', `a job with errors is failed-with-output, in red: ${red.join(' | ')}`);
   const rows = await page.locator('#warnings tbody tr').allTextContents();
   check(rows.some((r) => /line \d+unreachable/.test(r)), `unreachable poses listed with their CL lines (${rows.length} rows)`);
   await page.locator('#warnings tbody tr', { hasText: 'unreachable' }).first().click();

@@ -104,8 +104,18 @@ async function showJob(id) {
     a.download = name;
     a.textContent = `Download ${name}`;
     a.hidden = false;
-    $('status').className = 'ok';
-    $('status').textContent = `${s.blocks} blocks from ${s.cl_points} CL points`;
+    // Written is not good: a program with errors is failed-with-output, never a success.
+    const n = (x) => x.toLocaleString();
+    if (s.errors > 0) {
+      $('status').className = 'error';
+      $('status').textContent = `${n(s.errors)} errors: ${n(s.blocks)} blocks written, not fit to run as they are (see the blocks marked ERROR)`;
+    } else if (s.warnings > 0) {
+      $('status').className = 'warn';
+      $('status').textContent = `${n(s.blocks)} blocks from ${n(s.cl_points)} CL points, ${n(s.warnings)} warnings`;
+    } else {
+      $('status').className = 'ok';
+      $('status').textContent = `${n(s.blocks)} blocks from ${n(s.cl_points)} CL points`;
+    }
   } else {
     $('status').className = 'error';
     $('status').textContent = job.state === 'failed' ? `Stopped: ${job.error}` : 'Cancelled';

@@ -50,6 +50,20 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             self.count(d);
         }
         let comment = comment.or(pt.comment);
+        // A block with an error says so where the machinist reads the program.
+        let flagged;
+        let comment = match diags.iter().find(|d| d.severity == Severity::Error) {
+            Some(e) => {
+                flagged = format!(
+                    "{}ERROR {}",
+                    comment.map_or(String::new(), |c| format!("{c} ")),
+                    e.code.as_str()
+                )
+                .to_ascii_uppercase();
+                Some(flagged.as_str())
+            }
+            None => comment,
+        };
         self.unlock_moving(&to.joints)?;
         let arc = self.arc_words.take();
         let motion = match (&arc, rapid) {
@@ -80,6 +94,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             }
             None => {
                 for d in diags {
+                    self.flag(&d)?;
                     self.sink.diagnostic(&d)?;
                 }
             }

@@ -194,10 +194,12 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             .collect();
         for d in &diags {
             self.count(d);
+            self.flag(d)?;
         }
         // Rapid down to R, feed to the bottom, rapid back to the start level.
-        let rate = self.rapid_rate();
-        let time = (cb.z_start - cb.z_r) / rate + (cb.z_r - cb.z_bottom) / cb.feed + (cb.z_start - cb.z_bottom) / rate;
+        let time = self.z_rapid_time(cb.z_start - cb.z_r)
+            + (cb.z_r - cb.z_bottom) / cb.feed
+            + self.z_rapid_time(cb.z_start - cb.z_bottom);
         self.sum.cycle_time_s += time * 60.0;
         if let Some(st) = self.stats[2].as_mut() {
             st.min = st.min.min(axes[2].unwrap_or(cb.z_bottom));

@@ -4,8 +4,8 @@
 use super::{At, Emitter};
 use crate::cl::FeedUnit;
 use crate::diag::{Code, Diagnostic, Severity};
-use crate::kinematics::Units;
-use crate::nc::FeedMode;
+use crate::kinematics::{self, Units};
+use crate::nc::{Dialect, FeedMode};
 use crate::post::{Mode, MotionPt, Sink};
 
 impl<S: Sink + ?Sized> Emitter<'_, S> {
@@ -74,28 +74,14 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             {
                 t = t.max(machine_len(p) / f);
             }
-            // Axis feed limits.
-            let mut limited = false;
-            if let Some(p) = prev {
-                for (i, l) in m.linears.iter().enumerate() {
-                    if let Some(l) = l
-                        && let Some(mf) = l.max_feed
-                    {
-                        let need = (to.joints.linear[i] - p.joints.linear[i]).abs() / mf;
-                        if need > t * (1.0 + 1e-9) {
-                            (t, limited) = (need, true);
-                        }
-                    }
-                }
-                for (i, r) in m.rotaries.iter().enumerate() {
-                    if let Some(mf) = r.max_feed {
-                        let need = (to.joints.rotary[i] - p.joints.rotary[i]).abs() / mf;
-                        if need > t * (1.0 + 1e-9) {
-                            (t, limited) = (need, true);
-                        }
-                    }
-                }
+            // No axis faster than its velocity: the slowest axis sets the time.
+            let slowest = prev.and_then(|p| self.slowest_axis(p, to));
+            let limited = slowest.filter(|&(need, _)| need > t * (1.0 + 1e-9));
+            if let Some((need, _)) = limited {
+                t = need;
             }
+            let limited_axis = limited.map(|(_, a)| a);
+            let limited = limited.is_some();
             if rot_moves && !tcp {
                 if t <= 0.0 {
                     t = 1e-6;
@@ -110,12 +96,15 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                 let fz = if limited && t > 0.0 { len / t } else { f };
                 feed = Some((FeedMode::PerMinute, fz.max(0.0)));
             }
-            if limited {
+            if let Some(a) = limited_axis
+                && self.clamp_told != Some(pt.line)
+            {
+                self.clamp_told = Some(pt.line);
                 diags.push(Diagnostic::new(
                     Code::FeedClamped,
                     Severity::Warning,
                     Some(pt.line),
-                    "feed reduced to respect an axis feed limit",
+                    format!("feed reduced: {a} would exceed its velocity (the profile's max_feed) at the programmed feed"),
                 ));
             }
             // A feed the F word rounds to zero is an alarm on every control (a move of days in
@@ -134,38 +123,109 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                     }
                     *v = step;
                 }
+                // Beyond the word's range: the control's largest F, the slower side (it overflowed
+                // to F0). A FEDRAT beyond it was an error where the CL said it; a short move at a
+                // fast feed in inverse time is only slowed (told once a CL line).
+                let max = feed_max(self.o.dialect, self.m.units, *mode);
+                if !(*v <= max) {
+                    if self.range_told != Some(pt.line) {
+                        self.range_told = Some(pt.line);
+                        diags.push(Diagnostic::new(
+                            Code::FeedClamped,
+                            Severity::Warning,
+                            Some(pt.line),
+                            format!(
+                                "F{v:.6e} is beyond what the {} F word takes ({max}): written F{max}, a slower move",
+                                self.o.dialect.name
+                            ),
+                        ));
+                    }
+                    if v.is_finite() {
+                        t *= *v / max;
+                    }
+                    *v = max;
+                }
             }
             time = t;
         } else if let Some(p) = prev {
-            let len = (to
-                .joints
-                .linear
-                .iter()
-                .zip(p.joints.linear.iter())
-                .map(|(a, b)| (a - b) * (a - b))
-                .sum::<f64>())
-            .sqrt();
-            time = len / self.rapid_rate();
+            time = self.rapid_time(p, to);
         }
         (feed, time)
     }
 
-    /// Writes one motion block and accounts for it.
-    /// Rapid traverse for the time estimate: the slowest linear's feed limit, else a typical one.
-    pub(super) fn rapid_rate(&self) -> f64 {
-        let r = self
-            .m
-            .linears
-            .iter()
-            .flatten()
-            .filter_map(|l| l.max_feed)
-            .fold(f64::INFINITY, f64::min);
-        if r.is_finite() {
-            r
-        } else if self.m.units == Units::Mm {
-            10000.0
-        } else {
-            400.0
+    /// A rapid's time (minutes): each axis at its velocity and acceleration from rest to rest,
+    /// the slowest setting it; a linear the profile gives no velocity at a typical rapid.
+    pub(super) fn rapid_time(&self, p: &At, to: &At) -> f64 {
+        let m = self.m;
+        let mut t: f64 = 0.0;
+        for (i, l) in m.linears.iter().enumerate() {
+            if let Some(l) = l {
+                let d = (to.joints.linear[i] - p.joints.linear[i]).abs();
+                t = t.max(travel_time(d, l.max_feed.unwrap_or(self.typical_rapid()), l.max_accel));
+            }
+        }
+        for (i, r) in m.rotaries.iter().enumerate() {
+            if let Some(v) = r.max_feed {
+                t = t.max(travel_time((to.joints.rotary[i] - p.joints.rotary[i]).abs(), v, r.max_accel));
+            }
+        }
+        t
+    }
+
+    /// Z's rapid time (minutes) over `d`: a canned cycle's moves to R and back.
+    pub(super) fn z_rapid_time(&self, d: f64) -> f64 {
+        match &self.m.linears[2] {
+            Some(l) => travel_time(d.abs(), l.max_feed.unwrap_or(self.typical_rapid()), l.max_accel),
+            None => d.abs() / self.typical_rapid(),
         }
     }
+
+    /// A rapid traverse for a linear the profile gives no velocity.
+    fn typical_rapid(&self) -> f64 {
+        if self.m.units == Units::Mm { 10000.0 } else { 400.0 }
+    }
+
+    /// The time (minutes) the slowest axis needs from `p` to `to` at its velocity, and its name.
+    fn slowest_axis(&self, p: &At, to: &At) -> Option<(f64, char)> {
+        let m = self.m;
+        let mut worst: Option<(f64, char)> = None;
+        let mut take = |need: f64, name: char| {
+            if worst.is_none_or(|(w, _)| need > w) {
+                worst = Some((need, name));
+            }
+        };
+        for (i, l) in m.linears.iter().enumerate() {
+            if let Some(mf) = l.as_ref().and_then(|l| l.max_feed) {
+                take(
+                    (to.joints.linear[i] - p.joints.linear[i]).abs() / mf,
+                    kinematics::LINEAR_NAMES[i],
+                );
+            }
+        }
+        for (i, r) in m.rotaries.iter().enumerate() {
+            if let Some(mf) = r.max_feed {
+                take((to.joints.rotary[i] - p.joints.rotary[i]).abs() / mf, r.name);
+            }
+        }
+        worst
+    }
+}
+
+/// The largest F `d` takes in `mode`, in `units` per minute (inverse time: 1/min).
+pub(in crate::post) fn feed_max(d: &Dialect, units: Units, mode: FeedMode) -> f64 {
+    let r = d.ranges;
+    match (mode, units) {
+        (FeedMode::InverseTime, _) => r.inverse_time,
+        (FeedMode::PerMinute, Units::Mm) => r.feed_mm,
+        (FeedMode::PerMinute, Units::Inch) => (r.feed_mm / 25.4).floor(),
+    }
+}
+
+/// Minutes to travel `d` at velocity `v` (per minute) with acceleration `a` (per second²) from
+/// rest to rest: a trapezoid, or a triangle where the move is too short to reach `v`.
+fn travel_time(d: f64, v: f64, a: Option<f64>) -> f64 {
+    let Some(a) = a.map(|a| a * 3600.0) else {
+        return d / v;
+    };
+    if d >= v * v / a { d / v + v / a } else { 2.0 * (d / a).sqrt() }
 }

@@ -16,8 +16,10 @@
 mod arcs;
 mod block;
 mod cycles;
-mod feed;
+pub(super) mod feed;
 pub(super) mod linearize;
+
+pub(super) use feed::feed_max;
 mod planes;
 mod point;
 mod position;
@@ -133,6 +135,10 @@ pub(super) struct Emitter<'a, S: Sink + ?Sized> {
     /// neither a new largest miss nor an error (kept by `replayed`).
     pub(super) quiet_tip2: f64,
     pub(super) quiet_tan2: f64,
+    /// The CL line whose feed was last slowed to the F word's range (told once a line).
+    pub(super) range_told: Option<u32>,
+    /// The CL line whose feed an axis velocity last slowed (told once a line).
+    pub(super) clamp_told: Option<u32>,
 }
 
 impl<'a, S: Sink + ?Sized> Emitter<'a, S> {
@@ -204,6 +210,8 @@ impl<'a, S: Sink + ?Sized> Emitter<'a, S> {
             compensated: m.has_angle_error(),
             quiet_tip2: 0.0,
             quiet_tan2: 0.0,
+            range_told: None,
+            clamp_told: None,
         }
     }
 
@@ -236,13 +244,29 @@ impl<'a, S: Sink + ?Sized> Emitter<'a, S> {
 
     pub(in crate::post) fn note(&mut self, d: Diagnostic) -> std::io::Result<()> {
         self.count(&d);
+        self.flag(&d)?;
         self.sink.diagnostic(&d)
     }
 
     /// A diagnostic about a CL pose that got no block (unreachable): where it is, for a preview.
     pub(super) fn note_at(&mut self, d: Diagnostic, pose: &Pose) -> std::io::Result<()> {
         self.count(&d);
+        self.flag(&d)?;
         self.sink.diagnostic_at(&d, pose)
+    }
+
+    /// An error with no block of its own (a point skipped, a record refused) is a comment line
+    /// where it happened: the machinist runs the NC, not the diagnostics.
+    pub(super) fn flag(&mut self, d: &Diagnostic) -> std::io::Result<()> {
+        if d.severity != Severity::Error {
+            return Ok(());
+        }
+        let at = d.line.map_or(String::new(), |l| format!(" CL LINE {l}"));
+        let c = self
+            .f
+            .comment(&format!("ERROR {}{at}: {}", d.code.as_str(), d.message))
+            .to_string();
+        self.out(&c)
     }
 
     pub(super) fn count(&mut self, d: &Diagnostic) {

@@ -5,7 +5,7 @@ use super::Emitter;
 use crate::cl::{CoolantCmd, Dwell, SpindleCmd};
 use crate::diag::{Code, Diagnostic, Severity};
 use crate::kinematics::Vec3;
-use crate::post::{Error, Mode, ProgEvent, Sink};
+use crate::post::{Error, MAX_SPINDLE_SPEED, Mode, ProgEvent, Sink};
 
 impl<S: Sink + ?Sized> Emitter<'_, S> {
     pub(in crate::post) fn program_start(&mut self) -> std::io::Result<()> {
@@ -67,6 +67,8 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         // TCP: X Y Z are the tip, and the retract above went the clearance along the tool axis;
         // machine Z home takes the spindle clear of the part whatever comes next.
         let z_up = self.o.mode == Mode::Tcp && self.at.is_some();
+        let c = self.f.comment(&self.outcome()).to_string();
+        self.out(&c)?;
         for l in self.f.footer(z_up) {
             self.out(&l)?;
         }
@@ -116,6 +118,29 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
     /// A tool change: retract, compensation and coolant off, the dialect's change lines.
     fn tool_change(&mut self, number: u32, adjust: Option<u32>, line: u32) -> Result<(), Error> {
         let d = self.o.dialect;
+        // No safe side for a tool number: written as the CL says, and an error.
+        let (tmax, hmax) = (d.ranges.tool, d.ranges.register);
+        if adjust == Some(0) {
+            self.note(Diagnostic::new(
+                Code::WordRange,
+                Severity::Error,
+                Some(line),
+                "length offset register 0 cancels the length offset: the tool would cut uncompensated",
+            ))?;
+        }
+        for (what, v, max) in [
+            ("tool number", number, tmax),
+            ("offset register", adjust.unwrap_or(number), hmax),
+        ] {
+            if v > max {
+                self.note(Diagnostic::new(
+                    Code::WordRange,
+                    Severity::Error,
+                    Some(line),
+                    format!("{what} {v} is beyond what {} takes (at most {max})", d.name),
+                ))?;
+            }
+        }
         // The tool in the spindle loaded again (CATIA writes `LOADTL/1` then `LOADTL/1,1`):
         // a second change would only stop the spindle and retract.
         if self.tool == Some(number) {
@@ -192,6 +217,9 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             }
             SpindleCmd::Off => (None, true),
         };
+        // A speed that rounds to S0 turns nothing (an error where the CL said it): the spindle
+        // stops, and a cut after it is told as one with the spindle standing.
+        let speed = speed.filter(|v| v.round() >= 1.0);
         self.rpm = speed;
         self.spindle_restore = None;
         self.spindle_said_off = speed.is_none();
@@ -238,7 +266,28 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             Dwell::Seconds(t) => Ok(t),
             Dwell::Revolutions(n) => self.rpm.filter(|_| self.spindle_on).map(|rpm| n * 60.0 / rpm).ok_or(n),
         };
-        match secs {
+        let max = self.o.dialect.ranges.dwell_s;
+        if let Ok(t) = secs
+            && !(t <= max)
+        {
+            self.note(Diagnostic::new(
+                Code::WordRange,
+                Severity::Error,
+                Some(line),
+                format!(
+                    "a dwell of {t:e} s is beyond what {} takes ({max} s): written {max} s",
+                    self.o.dialect.name
+                ),
+            ))?;
+        }
+        match secs.map(|t| if t <= max { t } else { max }) {
+            // Shorter than a millisecond, the word says G4 P0: nothing to wait for.
+            Ok(t) if t < 0.0005 => self.note(Diagnostic::new(
+                Code::IgnoredRecord,
+                Severity::Info,
+                Some(line),
+                format!("a dwell of {t:e} s rounds to nothing: none written"),
+            ))?,
             Ok(t) => {
                 for l in self.f.dwell(t) {
                     self.out(&l)?;
@@ -258,6 +307,12 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
     /// S and M3/M4 (TNC: a speed-only TOOL CALL, then the direction alone).
     pub(super) fn spindle_start(&mut self, speed: f64, cw: bool) -> std::io::Result<()> {
         let d = self.o.dialect;
+        // Told where the CL said it (source.rs); never a number that wraps.
+        let speed = if speed <= MAX_SPINDLE_SPEED {
+            speed
+        } else {
+            MAX_SPINDLE_SPEED
+        };
         let (t, s) = (self.tool.unwrap_or(1), speed.round() as i64);
         let dir = if cw { d.spindle_cw } else { d.spindle_ccw };
         if d.style == crate::nc::Style::Conversational {
@@ -369,5 +424,16 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         }
         self.comp_on = true;
         Ok(())
+    }
+
+    /// The closing comment: how the run went, the last thing a client streaming the NC reads
+    /// before the program end (the HTTP status went out with the first line).
+    fn outcome(&self) -> String {
+        let (e, w) = (self.sum.errors, self.sum.warnings);
+        if e > 0 {
+            format!("KINEPOST: ERRORS {e}, WARNINGS {w}: NOT FIT TO RUN AS IS, SEE THE DIAGNOSTICS")
+        } else {
+            format!("KINEPOST: ERRORS 0, WARNINGS {w}")
+        }
     }
 }
