@@ -313,7 +313,7 @@ impl<R: BufRead> Source<R> {
         let mut v = value * f;
         // Beyond the F word's range (a typo, a unit mix-up): an error where the CL says
         // it, and the control's largest F, the slower side (it overflowed to F0).
-        if unit == FeedUnit::PerMinute && !(v <= self.feed_max) {
+        if unit == FeedUnit::PerMinute && (v.is_nan() || v > self.feed_max) {
             self.diag(
                 Code::WordRange,
                 Severity::Error,
@@ -345,7 +345,7 @@ impl<R: BufRead> Source<R> {
             );
         }
         if let SpindleCmd::Rpm { speed, .. } | SpindleCmd::Surface { speed, .. } = c
-            && !(speed <= super::MAX_SPINDLE_SPEED)
+            && (speed.is_nan() || speed > super::MAX_SPINDLE_SPEED)
         {
             self.diag(
                 Code::WordRange,

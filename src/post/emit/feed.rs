@@ -127,7 +127,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                 // to F0). A FEDRAT beyond it was an error where the CL said it; a short move at a
                 // fast feed in inverse time is only slowed (told once a CL line).
                 let max = feed_max(self.o.dialect, self.m.units, *mode);
-                if !(*v <= max) {
+                if v.is_nan() || *v > max {
                     if self.range_told != Some(pt.line) {
                         self.range_told = Some(pt.line);
                         diags.push(Diagnostic::new(

@@ -268,7 +268,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         };
         let max = self.o.dialect.ranges.dwell_s;
         if let Ok(t) = secs
-            && !(t <= max)
+            && (t.is_nan() || t > max)
         {
             self.note(Diagnostic::new(
                 Code::WordRange,
