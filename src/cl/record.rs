@@ -317,6 +317,12 @@ impl<'a> Stmt<'a> {
     fn bad(&self, diags: &mut Vec<Diagnostic>, col: u32, msg: String) {
         diags.push(Diagnostic::new(Code::BadRecord, Severity::Error, Some(self.line), msg).at(col));
     }
+
+    /// A word of the record that kinepost reads past: said, not an error.
+    fn unused(&self, diags: &mut Vec<Diagnostic>, a: &Arg, w: &str) {
+        let msg = format!("{}: {w} not used", self.major);
+        diags.push(Diagnostic::new(Code::IgnoredRecord, Severity::Info, Some(self.line), msg).at(a.col));
+    }
 }
 
 /// `GOTO`, `GODLTA`, `FROM`: a point, and the tool axis where six values give one. Bit for bit
@@ -450,17 +456,7 @@ fn spindle(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
             "CCLW" => cw = false,
             "OFF" => off = true,
             "ON" | "" | "RANGE" | "MAXRPM" => {}
-            _ => {
-                let Some(x) = num(a.text).filter(|x| x.is_finite() && *x >= 0.0) else {
-                    let msg = format!(
-                        "SPINDL: expected a speed, RPM, SFM, CLW, CCLW or OFF, found {:?}",
-                        a.text.trim()
-                    );
-                    st.bad(diags, a.col, msg);
-                    return None;
-                };
-                speed = speed.or(Some(x));
-            }
+            _ => speed = speed.or(Some(spindle_speed(st, a, diags)?)),
         }
     }
     Some(Record::Spindle(match (off, speed, surface) {
@@ -476,6 +472,19 @@ fn spindle(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
             return None;
         }
     }))
+}
+
+/// A number in a `SPINDL`, which must be a speed: anything else skips the record.
+fn spindle_speed(st: &Stmt, a: &Arg, diags: &mut Vec<Diagnostic>) -> Option<f64> {
+    let x = num(a.text).filter(|x| x.is_finite() && *x >= 0.0);
+    if x.is_none() {
+        let msg = format!(
+            "SPINDL: expected a speed, RPM, SFM, CLW, CCLW or OFF, found {:?}",
+            a.text.trim()
+        );
+        st.bad(diags, a.col, msg);
+    }
+    x
 }
 
 fn coolant(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
@@ -514,15 +523,7 @@ fn load_tool(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
                 Some(x) if number.is_none() => number = Some(tool_number(st, &args[i], x, diags)?),
                 Some(_) => {}
                 None if w.is_empty() || matches!(w.as_str(), "MILL" | "LATHE") => {}
-                None => diags.push(
-                    Diagnostic::new(
-                        Code::IgnoredRecord,
-                        Severity::Info,
-                        Some(st.line),
-                        format!("{}: {w} not used", st.major),
-                    )
-                    .at(args[i].col),
-                ),
+                None => st.unused(diags, &args[i], &w),
             },
         }
         i += 1;
