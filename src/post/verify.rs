@@ -3,7 +3,7 @@
 //! reproduced, in order, by a block; blocks between two matched feed points must lie on the CL
 //! segment.
 
-use super::source::{HolePart, Item, ProgEvent, Source};
+use super::source::{HolePart, Item, MotionPt, ProgEvent, Source};
 use super::{Mode, seg_dist};
 use crate::kinematics::{Joints, Machine, Setup, Units, Vec3, angle_between, fk};
 use crate::nc::read::{NcBlock, NcReader};
@@ -67,15 +67,21 @@ pub struct VerifyOptions {
     pub cl_tool_length: bool,
 }
 
-/// The pose a block reaches, in profile units: FK of its words (TCP: its X Y Z are the tip).
+/// The joints a block commands, for the motion between blocks.
 fn block_joints(m: &Machine, b: &NcBlock) -> Option<Joints> {
     if b.plane.is_some() {
         return None; // plane coordinates, not joints: the control moves straight in the plane
     }
+    joints_of(m, b, |i| m.linears[i].is_some())
+}
+
+/// A block's words as joints, profile units and radians: `None` while a linear that `needed`
+/// names has no value yet, 0 for the others.
+fn joints_of(m: &Machine, b: &NcBlock, needed: impl Fn(usize) -> bool) -> Option<Joints> {
     let s = b.units.factor_to(m.units);
     let mut j = Joints::default();
     for i in 0..3 {
-        j.linear[i] = match (b.axes[i], m.linears[i].is_some()) {
+        j.linear[i] = match (b.axes[i], needed(i)) {
             (Some(v), _) => v * s,
             (None, true) => return None,
             (None, false) => 0.0,
@@ -90,17 +96,7 @@ fn block_joints(m: &Machine, b: &NcBlock) -> Option<Joints> {
 /// Tip and tool axis of a block with the tool length in force (`setup`, not `o.setup`).
 fn block_pose(m: &Machine, b: &NcBlock, o: &VerifyOptions, setup: &Setup) -> Option<(Vec3, Vec3)> {
     let s = b.units.factor_to(m.units);
-    let mut j = Joints::default();
-    for i in 0..3 {
-        j.linear[i] = match (b.axes[i], m.linears[i].is_some() || o.mode == Mode::Tcp) {
-            (Some(v), _) => v * s,
-            (None, true) => return None,
-            (None, false) => 0.0,
-        };
-    }
-    for (i, r) in m.rotaries.iter().enumerate() {
-        j.rotary[i] = b.axes[r.slot()].unwrap_or(0.0).to_radians();
-    }
+    let j = joints_of(m, b, |i| m.linears[i].is_some() || o.mode == Mode::Tcp)?;
     let p = fk(m, &j, setup);
     if let Some(pl) = &b.plane {
         // A tilted plane: X Y Z in it, from its origin in the untilted program coordinates (the
@@ -122,160 +118,237 @@ fn block_pose(m: &Machine, b: &NcBlock, o: &VerifyOptions, setup: &Setup) -> Opt
 
 pub fn verify<C: BufRead, N: BufRead>(cl: C, nc: N, m: &Machine, o: &VerifyOptions) -> Result<Report, Error> {
     let mut src = Source::new(cl, m.units, o.cl_units, false)?;
-    let mut reader = NcReader::new(nc, m.units);
-    let mut ahead: VecDeque<(NcBlock, Option<(Vec3, Vec3)>)> = VecDeque::new();
-    let mut rep = Report {
-        machine: m.id.clone(),
-        mode: Some(o.mode),
-        tolerance: o.tolerance,
-        ..Default::default()
+    let mut replay = Replay {
+        m,
+        o,
+        reader: NcReader::new(nc, m.units),
+        ahead: VecDeque::new(),
+        nc_done: false,
+        setup: o.setup,
+        last: None,
+        last_block: None,
+        rep: Report {
+            machine: m.id.clone(),
+            mode: Some(o.mode),
+            tolerance: o.tolerance,
+            ..Default::default()
+        },
     };
-    let mut nc_done = false;
-    let mut last: Option<(Vec3, Vec3, bool)> = None; // previous CL tip and axis, and whether it was matched
-    let mut last_block: Option<NcBlock> = None; // the block that matched it
-    let mut setup = o.setup;
     while let Some(item) = src.next_item()? {
-        let pt = match item {
-            Item::Motion(pt) => pt,
-            // From here on the CL is cut with this length: so are the blocks not yet matched.
-            Item::Event(ProgEvent::ToolLength(l)) if o.cl_tool_length => {
-                setup.tool_length = l;
-                for (b, p) in ahead.iter_mut() {
-                    *p = block_pose(m, b, o, &setup);
-                }
-                continue;
-            }
-            Item::Event(_) => continue,
-        };
-        if pt.inserted {
-            continue; // arcs and cycles expanded by the reader are not CL points of the file
+        match item {
+            Item::Motion(pt) if !pt.inserted => replay.point(&pt)?,
+            // Arcs and cycles expanded by the reader are not CL points of the file.
+            Item::Motion(_) => {}
+            Item::Event(ProgEvent::ToolLength(l)) if o.cl_tool_length => replay.tool_length(l),
+            Item::Event(_) => {}
         }
-        rep.cl_points += 1;
-        let mut found = None;
-        let mut nearest: Option<(u32, f64, f64)> = None;
+    }
+    let mut rep = replay.rep;
+    rep.ok = rep.matched == rep.cl_points && rep.off_segment_blocks == 0 && rep.nonlinear_blocks == 0;
+    Ok(rep)
+}
+
+/// The replay of the NC against the CL, one CL point at a time.
+struct Replay<'a, N> {
+    m: &'a Machine,
+    o: &'a VerifyOptions,
+    reader: NcReader<N>,
+    /// Blocks read and not yet matched, with their poses.
+    ahead: VecDeque<(NcBlock, Option<(Vec3, Vec3)>)>,
+    nc_done: bool,
+    /// The tool length in force.
+    setup: Setup,
+    /// The previous CL tip and axis, and whether it was matched.
+    last: Option<(Vec3, Vec3, bool)>,
+    /// The block that matched it.
+    last_block: Option<NcBlock>,
+    rep: Report,
+}
+
+/// Looking ahead for one CL point.
+#[derive(Default)]
+struct Search {
+    /// The block (index into `ahead`) that reproduces it, with its tip and axis errors.
+    found: Option<(usize, f64, f64)>,
+    /// Else the nearest block seen (its NC line), with its errors.
+    nearest: Option<(u32, f64, f64)>,
+}
+
+impl Search {
+    /// Weighs block `i` (NC `line`) with these errors; false once a run of matching blocks ends.
+    fn weigh(&mut self, i: usize, line: u32, dp: f64, da: f64, o: &VerifyOptions) -> bool {
+        let score = |p: f64, a: f64| p / o.tolerance + a / o.angle_tolerance_deg;
+        let ok = dp <= o.tolerance && da <= o.angle_tolerance_deg;
+        match self.found {
+            // A run of blocks that all reproduce the point (near a singular direction the machine
+            // turns about a standing tip on its way there): the closest is the point, the others
+            // lead to it. Matching the first made the last ones part of the next segment, and off
+            // it.
+            Some(_) if !ok => return false,
+            Some((_, fp, fa)) if score(dp, da) < score(fp, fa) => self.found = Some((i, dp, da)),
+            Some(_) => {}
+            None if ok => self.found = Some((i, dp, da)),
+            None if self.nearest.is_none_or(|(_, p, a)| score(dp, da) < score(p, a)) => self.nearest = Some((line, dp, da)),
+            None => {}
+        }
+        true
+    }
+}
+
+impl<N: BufRead> Replay<'_, N> {
+    /// From here on the CL is cut with this length: so are the blocks not yet matched.
+    fn tool_length(&mut self, l: f64) {
+        self.setup.tool_length = l;
+        for (b, p) in self.ahead.iter_mut() {
+            *p = block_pose(self.m, b, self.o, &self.setup);
+        }
+    }
+
+    /// One CL point of the file: matched to a block, or a miss.
+    fn point(&mut self, pt: &MotionPt) -> Result<(), Error> {
+        self.rep.cl_points += 1;
+        let s = self.look_ahead(pt)?;
+        match s.found {
+            Some((i, dp, da)) => self.matched(pt, i, dp, da),
+            None => self.missed(pt, s.nearest),
+        }
+        Ok(())
+    }
+
+    fn look_ahead(&mut self, pt: &MotionPt) -> Result<Search, Error> {
+        let mut s = Search::default();
         let mut i = 0;
-        loop {
-            if i == ahead.len() {
-                if nc_done || ahead.len() >= LOOKAHEAD {
-                    break;
-                }
-                match reader.next_block()? {
-                    Some(b) => {
-                        rep.nc_blocks += 1;
-                        let p = block_pose(m, &b, o, &setup);
-                        ahead.push_back((b, p));
-                    }
-                    None => {
-                        nc_done = true;
-                        break;
-                    }
-                }
-            }
-            if let Some((tip, axis)) = ahead[i].1 {
-                let mut dp = (tip - pt.pose.tip).norm();
-                // A hole's top (its CL point) lies on a canned cycle's feed into the hole.
-                if pt.hole.as_deref() == Some(&HolePart::Top)
-                    && !ahead[i].0.rapid
-                    && let Some(Some((from, _))) = i.checked_sub(1).map(|k| ahead[k].1)
-                {
-                    dp = dp.min(seg_dist(&pt.pose.tip, &from, &tip));
-                }
-                let da = angle_between(&axis, &pt.pose.axis).to_degrees();
-                let score = |p: f64, a: f64| p / o.tolerance + a / o.angle_tolerance_deg;
-                let ok = dp <= o.tolerance && da <= o.angle_tolerance_deg;
-                if let Some((_, fp, fa)) = found {
-                    // A run of blocks that all reproduce the point (near a singular direction
-                    // the machine turns about a standing tip on its way there): the closest is
-                    // the point, the others lead to it. Matching the first made the last ones
-                    // part of the next segment, and off it.
-                    if !ok {
-                        break;
-                    }
-                    if score(dp, da) < score(fp, fa) {
-                        found = Some((i, dp, da));
-                    }
-                } else if ok {
-                    found = Some((i, dp, da));
-                } else if nearest.is_none_or(|(_, p, a)| score(dp, da) < score(p, a)) {
-                    nearest = Some((ahead[i].0.line, dp, da));
-                }
+        while self.fill(i)? {
+            if let Some((dp, da)) = self.errors(i, pt)
+                && !s.weigh(i, self.ahead[i].0.line, dp, da, self.o)
+            {
+                break;
             }
             i += 1;
         }
-        match found {
-            Some((i, dp, da)) => {
-                rep.matched += 1;
-                rep.max_tip_error = rep.max_tip_error.max(dp);
-                rep.max_axis_error_deg = rep.max_axis_error_deg.max(da);
-                // Blocks between two matched feed points must lie on the CL segment (a rapid
-                // among them makes it a reposition, exempt). The front block is the last point's
-                // match (kept: a repeated point matches it again), not between them: counted, its
-                // rapid exempted every cut's first segment.
-                let between = || ahead.iter().take(i).skip(1);
-                if let Some((prev_tip, prev_axis, true)) = last
-                    && !pt.rapid
-                    && pt.arc.is_none()
-                    && !between().any(|(b, _)| b.rapid)
-                {
-                    for (_, p) in between() {
-                        if let Some((tip, axis)) = p {
-                            let d = seg_dist(tip, &prev_tip, &pt.pose.tip);
-                            rep.max_off_segment = rep.max_off_segment.max(d);
-                            if d > o.tolerance {
-                                rep.off_segment_blocks += 1;
-                            }
-                            let da = angle_from_arc(axis, &prev_axis, &pt.pose.axis).to_degrees();
-                            rep.max_axis_off_arc_deg = rep.max_axis_off_arc_deg.max(da);
-                        }
-                    }
-                    // TCP with angle error: the control interpolates the words, the real tip bends.
-                    if (o.mode == Mode::Joint || m.has_angle_error())
-                        && let Some(first) = &last_block
-                    {
-                        let chain = std::iter::once(first).chain(ahead.iter().take(i + 1).map(|(b, _)| b));
-                        let joints: Vec<Option<Joints>> = chain.map(|b| block_joints(m, b)).collect();
-                        for w in joints.windows(2) {
-                            let (Some(ja), Some(jb)) = (w[0], w[1]) else { continue };
-                            for t in super::NONLINEAR_SAMPLES {
-                                let mut j = ja;
-                                for k in 0..3 {
-                                    j.linear[k] += t * (jb.linear[k] - ja.linear[k]);
-                                    j.rotary[k] += t * (jb.rotary[k] - ja.rotary[k]);
-                                }
-                                let tip = match o.mode {
-                                    Mode::Tcp => crate::kinematics::tcp_fk(m, &Vec3::from(j.linear), &j.rotary, &setup).tip,
-                                    Mode::Joint => fk(m, &j, &setup).tip,
-                                };
-                                let d = seg_dist(&tip, &prev_tip, &pt.pose.tip);
-                                rep.max_nonlinear = rep.max_nonlinear.max(d);
-                                if d > o.tolerance {
-                                    rep.nonlinear_blocks += 1;
-                                    break;
-                                }
-                            }
-                        }
-                    }
-                }
-                last_block = Some(ahead[i].0.clone());
-                ahead.drain(..i);
-                last = Some((pt.pose.tip, pt.pose.axis, true));
+        Ok(s)
+    }
+
+    /// Whether there is a block `i` ahead, reading it from the NC if need be (at most
+    /// [`LOOKAHEAD`] blocks ahead).
+    fn fill(&mut self, i: usize) -> Result<bool, Error> {
+        if i < self.ahead.len() {
+            return Ok(true);
+        }
+        if self.nc_done || self.ahead.len() >= LOOKAHEAD {
+            return Ok(false);
+        }
+        let Some(b) = self.reader.next_block()? else {
+            self.nc_done = true;
+            return Ok(false);
+        };
+        self.rep.nc_blocks += 1;
+        let p = block_pose(self.m, &b, self.o, &self.setup);
+        self.ahead.push_back((b, p));
+        Ok(true)
+    }
+
+    /// Tip error and axis error (degrees) of block `i` at `pt`; `None` for a block without a pose.
+    fn errors(&self, i: usize, pt: &MotionPt) -> Option<(f64, f64)> {
+        let (tip, axis) = self.ahead[i].1?;
+        let mut dp = (tip - pt.pose.tip).norm();
+        // A hole's top (its CL point) lies on a canned cycle's feed into the hole.
+        if pt.hole.as_deref() == Some(&HolePart::Top)
+            && !self.ahead[i].0.rapid
+            && let Some(Some((from, _))) = i.checked_sub(1).map(|k| self.ahead[k].1)
+        {
+            dp = dp.min(seg_dist(&pt.pose.tip, &from, &tip));
+        }
+        Some((dp, angle_between(&axis, &pt.pose.axis).to_degrees()))
+    }
+
+    fn matched(&mut self, pt: &MotionPt, i: usize, dp: f64, da: f64) {
+        let rep = &mut self.rep;
+        rep.matched += 1;
+        rep.max_tip_error = rep.max_tip_error.max(dp);
+        rep.max_axis_error_deg = rep.max_axis_error_deg.max(da);
+        // Blocks between two matched feed points must lie on the CL segment (a rapid among them
+        // makes it a reposition, exempt). The front block is the last point's match (kept: a
+        // repeated point matches it again), not between them: counted, its rapid exempted every
+        // cut's first segment.
+        if let Some((prev_tip, prev_axis, true)) = self.last
+            && !pt.rapid
+            && pt.arc.is_none()
+            && !self.ahead.iter().take(i).skip(1).any(|(b, _)| b.rapid)
+        {
+            self.check_between(i, &prev_tip, &prev_axis, pt);
+            // TCP with angle error: the control interpolates the words, the real tip bends.
+            if self.o.mode == Mode::Joint || self.m.has_angle_error() {
+                self.check_nonlinear(i, &prev_tip, pt);
             }
-            None => {
-                if rep.misses.len() < 20 {
-                    rep.misses.push(Miss {
-                        cl_line: pt.line,
-                        nearest_nc_line: nearest.map(|n| n.0),
-                        tip_error: nearest.map(|n| n.1),
-                        axis_error_deg: nearest.map(|n| n.2),
-                    });
-                }
-                last = Some((pt.pose.tip, pt.pose.axis, false));
-                last_block = None;
+        }
+        self.last_block = Some(self.ahead[i].0.clone());
+        self.ahead.drain(..i);
+        self.last = Some((pt.pose.tip, pt.pose.axis, true));
+    }
+
+    /// The blocks between the last match and block `i` against the CL segment, and their axes
+    /// against the arc between the two points' axes.
+    fn check_between(&mut self, i: usize, prev_tip: &Vec3, prev_axis: &Vec3, pt: &MotionPt) {
+        let rep = &mut self.rep;
+        for (tip, axis) in self.ahead.iter().take(i).skip(1).filter_map(|(_, p)| p.as_ref()) {
+            let d = seg_dist(tip, prev_tip, &pt.pose.tip);
+            rep.max_off_segment = rep.max_off_segment.max(d);
+            if d > self.o.tolerance {
+                rep.off_segment_blocks += 1;
+            }
+            let da = angle_from_arc(axis, prev_axis, &pt.pose.axis).to_degrees();
+            rep.max_axis_off_arc_deg = rep.max_axis_off_arc_deg.max(da);
+        }
+    }
+
+    /// The joint-space motion from the last match's block through block `i`, pair by pair,
+    /// against the CL segment.
+    fn check_nonlinear(&mut self, i: usize, prev_tip: &Vec3, pt: &MotionPt) {
+        let Some(first) = &self.last_block else { return };
+        let chain = std::iter::once(first).chain(self.ahead.iter().take(i + 1).map(|(b, _)| b));
+        let joints: Vec<Option<Joints>> = chain.map(|b| block_joints(self.m, b)).collect();
+        for w in joints.windows(2) {
+            if let (Some(ja), Some(jb)) = (w[0], w[1]) {
+                self.sample_pair(&ja, &jb, prev_tip, &pt.pose.tip);
             }
         }
     }
-    rep.ok = rep.matched == rep.cl_points && rep.off_segment_blocks == 0 && rep.nonlinear_blocks == 0;
-    Ok(rep)
+
+    /// The tip between two blocks, sampled as the engine does ([`super::NONLINEAR_SAMPLES`]): its
+    /// distance from the segment `a`–`b`; the first sample beyond the tolerance counts the pair.
+    fn sample_pair(&mut self, ja: &Joints, jb: &Joints, a: &Vec3, b: &Vec3) {
+        for t in super::NONLINEAR_SAMPLES {
+            let mut j = *ja;
+            for k in 0..3 {
+                j.linear[k] += t * (jb.linear[k] - ja.linear[k]);
+                j.rotary[k] += t * (jb.rotary[k] - ja.rotary[k]);
+            }
+            let tip = match self.o.mode {
+                Mode::Tcp => crate::kinematics::tcp_fk(self.m, &Vec3::from(j.linear), &j.rotary, &self.setup).tip,
+                Mode::Joint => fk(self.m, &j, &self.setup).tip,
+            };
+            let d = seg_dist(&tip, a, b);
+            self.rep.max_nonlinear = self.rep.max_nonlinear.max(d);
+            if d > self.o.tolerance {
+                self.rep.nonlinear_blocks += 1;
+                break;
+            }
+        }
+    }
+
+    fn missed(&mut self, pt: &MotionPt, nearest: Option<(u32, f64, f64)>) {
+        if self.rep.misses.len() < 20 {
+            self.rep.misses.push(Miss {
+                cl_line: pt.line,
+                nearest_nc_line: nearest.map(|n| n.0),
+                tip_error: nearest.map(|n| n.1),
+                axis_error_deg: nearest.map(|n| n.2),
+            });
+        }
+        self.last = Some((pt.pose.tip, pt.pose.axis, false));
+        self.last_block = None;
+    }
 }
 
 /// Angle (radians) from `a` to the shorter great-circle arc from `u1` to `u2`; 0 between
