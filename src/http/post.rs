@@ -11,6 +11,7 @@ use crate::diag::Diagnostic;
 use crate::output::{ErrorBody, Header, Record};
 use crate::post::{self, BlockInfo, Settings, Sink, Summary};
 use axum::body::Body;
+use axum::extract::multipart::Field;
 use axum::extract::{FromRequest, Multipart, Request, State};
 use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
 use axum::response::{IntoResponse, Response};
@@ -175,6 +176,22 @@ impl ChannelSink {
         r.write_to(&mut self.buf)?;
         self.send(false)
     }
+
+    /// The engine failed. Before anything was sent, the handler answers with the error's status;
+    /// once streaming, the output ends with an explicit error, never a silent truncation.
+    fn fail(&mut self, err: ApiError, body: ErrorBody) {
+        if !self.started {
+            let _ = self.tx.blocking_send(Msg::Fail(err));
+            return;
+        }
+        if self.ndjson {
+            let _ = self.record(&Record::Error { error: body });
+        } else {
+            self.buf
+                .extend_from_slice(format!("(ERROR: {})\n", err.to_string().replace(['(', ')'], " ")).as_bytes());
+        }
+        let _ = self.send(true);
+    }
 }
 
 impl Sink for ChannelSink {
@@ -262,7 +279,7 @@ pub async fn post_cl(
     metrics.streams.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
     tokio::task::spawn_blocking(move || {
         let mut sink = ChannelSink {
-            tx: tx.clone(),
+            tx,
             buf: Vec::with_capacity(PRELUDE + 4096),
             ndjson,
             started: false,
@@ -279,27 +296,14 @@ pub async fn post_cl(
         }
         let input = std::io::BufReader::with_capacity(64 * 1024, reader);
         let t0 = std::time::Instant::now();
-        let result = post::post(input, &profile.machine, &opts, &mut sink);
-        match result {
+        match post::post(input, &profile.machine, &opts, &mut sink) {
             Ok(s) => {
                 metrics.record_post(&s, t0.elapsed().as_secs_f64());
                 let _ = sink.send(true);
             }
             Err(e) => {
                 let body = ErrorBody::from_engine(&e);
-                let err = engine_error(e);
-                if sink.started {
-                    // Already streaming: end with an explicit error, never a silent truncation.
-                    if ndjson {
-                        let _ = sink.record(&Record::Error { error: body });
-                    } else {
-                        sink.buf
-                            .extend_from_slice(format!("(ERROR: {})\n", err.to_string().replace(['(', ')'], " ")).as_bytes());
-                    }
-                    let _ = sink.send(true);
-                } else {
-                    let _ = tx.blocking_send(Msg::Fail(err));
-                }
+                sink.fail(engine_error(e), body);
             }
         }
         metrics.streams.fetch_sub(1, std::sync::atomic::Ordering::Relaxed);
@@ -373,72 +377,66 @@ async fn multipart_body(
     query: PostParams,
     req: Request,
 ) -> Result<(PostParams, Option<String>, Body), ApiError> {
-    let mut mp = Multipart::from_request(req, st)
+    let mp = Multipart::from_request(req, st)
         .await
         .map_err(|e| ApiError::BadParameter(format!("multipart: {e}")))?;
-    let (ptx, prx) = oneshot::channel::<Result<(PostParams, Option<String>), ApiError>>();
+    let (ptx, prx) = oneshot::channel::<FormHead>();
     let (btx, brx) = mpsc::channel::<Result<Bytes, std::io::Error>>(8);
-    tokio::spawn(async move {
-        let mut params = query;
-        let mut ptx = Some(ptx);
-        loop {
-            match mp.next_field().await {
-                Ok(Some(mut field)) => {
-                    let name = field.name().unwrap_or("").to_string();
-                    if field.file_name().is_some() || name == "file" {
-                        let fname = field.file_name().map(str::to_string);
-                        if let Some(p) = ptx.take() {
-                            let _ = p.send(Ok((params.clone(), fname)));
-                        }
-                        loop {
-                            match field.chunk().await {
-                                Ok(Some(b)) => {
-                                    if btx.send(Ok(b)).await.is_err() {
-                                        return;
-                                    }
-                                }
-                                Ok(None) => return,
-                                Err(e) => {
-                                    let _ = btx.send(Err(std::io::Error::other(e.to_string()))).await;
-                                    return;
-                                }
-                            }
-                        }
-                    }
-                    let v = match field.text().await {
-                        Ok(v) => v,
-                        Err(e) => {
-                            if let Some(p) = ptx.take() {
-                                let _ = p.send(Err(ApiError::BadParameter(format!("multipart: {e}"))));
-                            }
-                            return;
-                        }
-                    };
-                    if let Err(e) = params.set(&name, v) {
-                        if let Some(p) = ptx.take() {
-                            let _ = p.send(Err(e));
-                        }
-                        return;
-                    }
-                }
-                Ok(None) => {
-                    if let Some(p) = ptx.take() {
-                        let _ = p.send(Err(ApiError::BadParameter(
-                            "multipart: no file part (name it \"file\")".into(),
-                        )));
-                    }
-                    return;
-                }
-                Err(e) => {
-                    if let Some(p) = ptx.take() {
-                        let _ = p.send(Err(ApiError::BadParameter(format!("multipart: {e}"))));
-                    }
-                    return;
-                }
-            }
-        }
-    });
+    tokio::spawn(read_form(mp, query, ptx, btx));
     let (params, fname) = prx.await.map_err(|_| ApiError::Internal("multipart reader ended".into()))??;
     let stream = futures_util::stream::unfold(brx, |mut rx| async move { rx.recv().await.map(|item| (item, rx)) });
     Ok((params, fname, Body::from_stream(stream)))
+}
+
+/// What a form says before its file: the parameters and the file's name, or why it is refused.
+type FormHead = Result<(PostParams, Option<String>), ApiError>;
+
+/// The form task: text fields into `params` until the file part, then `params` and the file's
+/// name to `ptx` and its bytes to `btx`. A form that fails before its file says so on `ptx`.
+async fn read_form(
+    mut mp: Multipart,
+    mut params: PostParams,
+    ptx: oneshot::Sender<FormHead>,
+    btx: mpsc::Sender<Result<Bytes, std::io::Error>>,
+) {
+    let failure = loop {
+        let field = match mp.next_field().await {
+            Ok(Some(field)) => field,
+            Ok(None) => break ApiError::BadParameter("multipart: no file part (name it \"file\")".into()),
+            Err(e) => break ApiError::BadParameter(format!("multipart: {e}")),
+        };
+        let name = field.name().unwrap_or("").to_string();
+        if field.file_name().is_some() || name == "file" {
+            let fname = field.file_name().map(str::to_string);
+            let _ = ptx.send(Ok((params, fname)));
+            return stream_file(field, btx).await;
+        }
+        let set = match field.text().await {
+            Ok(v) => params.set(&name, v),
+            Err(e) => Err(ApiError::BadParameter(format!("multipart: {e}"))),
+        };
+        if let Err(e) = set {
+            break e;
+        }
+    };
+    let _ = ptx.send(Err(failure));
+}
+
+/// The file part's bytes into the body channel until the part ends, the upload breaks (the
+/// error goes on to the engine) or the handler is gone.
+async fn stream_file(mut field: Field<'_>, btx: mpsc::Sender<Result<Bytes, std::io::Error>>) {
+    loop {
+        match field.chunk().await {
+            Ok(Some(b)) => {
+                if btx.send(Ok(b)).await.is_err() {
+                    return;
+                }
+            }
+            Ok(None) => return,
+            Err(e) => {
+                let _ = btx.send(Err(std::io::Error::other(e.to_string()))).await;
+                return;
+            }
+        }
+    }
 }
