@@ -1,12 +1,14 @@
 //! The machine model of `docs/machine-model.md` as validated Rust values.
 //!
-//! Built once per profile; everything the solver can precompute is precomputed here, so the
+//! Built once per profile; everything IK can precompute is precomputed here (`chain`), so the
 //! per-pose path (FK, IK) does no allocation and no validation.
 
 use super::angle_error::AngleError;
-use super::solver::Solver;
 use super::{Error, Vec3};
 use arrayvec::ArrayVec;
+
+mod chain;
+pub(crate) use chain::{Chain, Shape};
 
 /// Length units of a profile. Every length of a profile, and its NC output, is in these units.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -187,7 +189,8 @@ pub struct Machine {
     /// In chain order (file order): tables from the bed outward, heads from the ram outward.
     pub rotaries: ArrayVec<Rotary, 3>,
     pub default_tool_length: f64,
-    pub(crate) solver: Solver,
+    /// What IK reads of the chain, derived from the rotaries and linears above.
+    pub(crate) chain: Chain,
 }
 
 /// What a caller supplies to build a [`Machine`]; plain values, no file format attached.
@@ -206,7 +209,7 @@ pub struct MachineSpec {
 pub const LINEAR_NAMES: [char; 3] = ['X', 'Y', 'Z'];
 
 impl Machine {
-    /// Validates the spec and prepares the solver. Errors name the key that is wrong.
+    /// Validates the spec and derives the chain IK reads. Errors name the key that is wrong.
     pub fn new(spec: MachineSpec) -> Result<Machine, Error> {
         let bad = |key: String, problem: String| Err(Error::Profile { key, problem });
         if spec.id.is_empty()
@@ -282,7 +285,7 @@ impl Machine {
         if !(spec.default_tool_length.is_finite() && spec.default_tool_length >= 0.0) {
             return bad("tool.default_length".into(), "must be a finite, non-negative length".into());
         }
-        let solver = Solver::new(&spec.linears, &rotaries).map_err(|problem| Error::Profile {
+        let chain = Chain::new(&spec.linears, &rotaries).map_err(|problem| Error::Profile {
             key: "rotary".into(),
             problem,
         })?;
@@ -295,7 +298,7 @@ impl Machine {
             linears: spec.linears,
             rotaries,
             default_tool_length: spec.default_tool_length,
-            solver,
+            chain,
         })
     }
 

@@ -1,129 +1,17 @@
 //! Inverse kinematics: every joint solution of a tool pose, in closed form where the chain allows
-//! and by a bracketed 1-D root search where it does not (a missing linear axis).
-//!
-//! The tool axis seen from W is `Rot(s1, α1) · … · Rot(sn, αn) · z` over the "orientation
-//! sequence": table rotaries from the workpiece inward (axis negated, since W sees the table turn
-//! backwards), then head rotaries from the ram outward. Its first element is the outermost.
+//! and by a bracketed 1-D root search where it does not (a missing linear axis). It reads what the
+//! machine precomputed of its chain ([`Chain`]: the orientation sequence, the chain's shape).
 
 use super::fk::rotate;
-use super::model::{Linear, Machine, Mount, Rotary};
-use super::subproblem::{Cs, Pair, sp1};
+use super::model::{Chain, Machine, Shape};
+use super::subproblem::{Cs, FreeAngle, Pair, sp1};
 use super::{Error, Joints, Pose, Setup, Vec3, wrap};
 use arrayvec::ArrayVec;
-
-#[derive(Clone, Debug)]
-pub(crate) struct Solver {
-    /// Rotary index (chain order) of each element of the orientation sequence.
-    seq: ArrayVec<usize, 3>,
-    shape: Shape,
-    /// The rotaries in chain order, compact: what placing the linears reads per solution.
-    links: ArrayVec<Link, 3>,
-    has_linear: [bool; 3],
-}
-
-#[derive(Clone, Copy, Debug)]
-struct Link {
-    axis: [f64; 3],
-    pivot: [f64; 3],
-    head: bool,
-    /// Has angle-error compensation (words differ from actual angles).
-    compensated: bool,
-}
-
-#[derive(Clone, Debug)]
-enum Shape {
-    /// No rotary: the tool stays along z.
-    Fixed,
-    /// One rotary about `s`.
-    One { s: Vec3 },
-    /// Two rotaries: subproblem 2.
-    Two(Pair),
-    /// Three rotaries, one linear missing: the outer angle is found by a 1-D root search on the
-    /// missing linear's coordinate, the inner two by subproblem 2.
-    Three { s0: Vec3, pair: Pair, missing: usize },
-}
-
-impl Solver {
-    pub(crate) fn new(linears: &[Option<Linear>; 3], rotaries: &[Rotary]) -> Result<Solver, String> {
-        let mut seq: ArrayVec<usize, 3> = ArrayVec::new();
-        for i in (0..rotaries.len()).rev() {
-            if rotaries[i].mount == Mount::Table {
-                seq.push(i);
-            }
-        }
-        for (i, r) in rotaries.iter().enumerate() {
-            if r.mount == Mount::Head {
-                seq.push(i);
-            }
-        }
-        let s = |k: usize| {
-            let r = &rotaries[seq[k]];
-            if r.mount == Mount::Table { -r.axis } else { r.axis }
-        };
-        let nlin = linears.iter().filter(|l| l.is_some()).count();
-        let missing: Vec<usize> = (0..3).filter(|&i| linears[i].is_none()).collect();
-        let pair = |a: usize, b: usize| {
-            Pair::new(s(a), s(b)).ok_or_else(|| {
-                format!(
-                    "rotaries {} and {} are parallel: the pair cannot orient the tool",
-                    rotaries[seq[a]].name, rotaries[seq[b]].name
-                )
-            })
-        };
-        let inner_ok = |k: usize| {
-            if s(k).cross(&Vec3::z()).norm() < 1e-6 {
-                Err(format!(
-                    "rotary {} is the innermost of the orientation chain and lies along the tool (z): it cannot change the tool orientation",
-                    rotaries[seq[k]].name
-                ))
-            } else {
-                Ok(())
-            }
-        };
-        let shape = match (rotaries.len(), nlin) {
-            (0, 3) => Shape::Fixed,
-            (1, 3) => Shape::One { s: s(0) },
-            (2, 3) => {
-                inner_ok(1)?;
-                Shape::Two(pair(0, 1)?)
-            }
-            (3, 2) => {
-                inner_ok(2)?;
-                Shape::Three {
-                    s0: s(0),
-                    pair: pair(1, 2)?,
-                    missing: missing[0],
-                }
-            }
-            (3, 3) => return Err("three rotaries with three linears are redundant: not supported".into()),
-            (n, l) => {
-                return Err(format!(
-                    "{n} rotaries with {l} linears cannot place an arbitrary tool pose: supported chains are 3 linears with 0 to 2 rotaries, or 2 linears with 3 rotaries"
-                ));
-            }
-        };
-        let links = rotaries
-            .iter()
-            .map(|r| Link {
-                axis: r.axis.into(),
-                pivot: r.pivot.into(),
-                head: r.mount == Mount::Head,
-                compensated: r.angle_error.is_some(),
-            })
-            .collect();
-        Ok(Solver {
-            seq,
-            shape,
-            links,
-            has_linear: [linears[0].is_some(), linears[1].is_some(), linears[2].is_some()],
-        })
-    }
-}
 
 /// The tool-axis direction (in W) at which the outer rotary of a two-rotary chain turns freely:
 /// near it, exact orientation makes that rotary swing. `None` for other chains.
 pub fn singular_direction(m: &Machine) -> Option<Vec3> {
-    match &m.solver.shape {
+    match &m.chain.shape {
         Shape::Two(p) => Some(p.s1),
         _ => None,
     }
@@ -134,13 +22,13 @@ pub fn singular_direction(m: &Machine) -> Option<Vec3> {
 /// which its tool axis misses the pose's. What smoothing near a singular direction trades: a
 /// bounded orientation error for a still outer rotary. `None` for other chains.
 pub fn hold_outer(m: &Machine, pose: &Pose, setup: &Setup, outer: f64, branch: i8) -> Option<(Solution, f64)> {
-    let Shape::Two(pair) = &m.solver.shape else { return None };
+    let Shape::Two(pair) = &m.chain.shape else { return None };
     let u = pose.axis.normalize();
     let a1 = Cs::of(outer);
     let v = rotate(&pair.s1, a1.c, -a1.s, &u);
     let a2 = sp1(&pair.s2, &Vec3::z(), &v).unwrap_or(Cs::ZERO);
     let mut out = Solutions::new();
-    let seq = &m.solver.seq;
+    let seq = &m.chain.seq;
     push(m, &mut out, pose, setup, seq, [a1, a2, Cs::ZERO], None, branch, 0, None);
     let mut s = out.pop()?;
     s.actual[seq[0]] = outer;
@@ -152,16 +40,16 @@ pub fn hold_outer(m: &Machine, pose: &Pose, setup: &Setup, outer: f64, branch: i
 
 /// The rotary (chain index) that [`IkOptions::free_angle`] sets at a singular pose, on any chain.
 pub fn free_rotary(m: &Machine) -> Option<usize> {
-    match &m.solver.shape {
+    match &m.chain.shape {
         Shape::Fixed => None,
-        Shape::One { .. } | Shape::Two(_) => Some(m.solver.seq[0]),
-        Shape::Three { .. } => Some(m.solver.seq[1]),
+        Shape::One { .. } | Shape::Two(_) => Some(m.chain.seq[0]),
+        Shape::Three { .. } => Some(m.chain.seq[1]),
     }
 }
 
 /// The rotary (chain index) that turns freely at the singular direction of a two-rotary chain.
 pub fn outer_rotary(m: &Machine) -> Option<usize> {
-    matches!(m.solver.shape, Shape::Two(_)).then(|| m.solver.seq[0])
+    matches!(m.chain.shape, Shape::Two(_)).then(|| m.chain.seq[0])
 }
 
 /// One joint solution.
@@ -241,8 +129,8 @@ pub fn ik_into(m: &Machine, pose: &Pose, setup: &Setup, opt: &IkOptions, out: &m
         pose.axis * (1.0 / n2.sqrt())
     };
     let free = FreeAngle(opt.free_angle);
-    let sv = &m.solver;
-    match &sv.shape {
+    let ch = &m.chain;
+    match &ch.shape {
         Shape::Fixed => {
             let miss = u.z.clamp(-1.0, 1.0).acos();
             if miss > opt.orientation_tolerance {
@@ -258,9 +146,9 @@ pub fn ik_into(m: &Machine, pose: &Pose, setup: &Setup, opt: &IkOptions, out: &m
             }
             let (a, sing) = match sp1(s, &Vec3::z(), &u) {
                 Some(a) if (u - s * s.dot(&u)).norm_squared() > 1e-18 && s.cross(&Vec3::z()).norm_squared() > 1e-18 => (a, None),
-                _ => (free.cs(), Some((sv.seq[0], opt.free_angle))),
+                _ => (free.cs(), Some((ch.seq[0], opt.free_angle))),
             };
-            push(m, out, pose, setup, &sv.seq, [a, Cs::ZERO, Cs::ZERO], None, 0, 0, sing);
+            push(m, out, pose, setup, &ch.seq, [a, Cs::ZERO, Cs::ZERO], None, 0, 0, sing);
         }
         Shape::Two(pair) => {
             let meet = pair.meet(&u);
@@ -277,7 +165,7 @@ pub fn ik_into(m: &Machine, pose: &Pose, setup: &Setup, opt: &IkOptions, out: &m
                         out,
                         pose,
                         setup,
-                        &sv.seq,
+                        &ch.seq,
                         [a1, a2, Cs::ZERO],
                         Some([t1, t2, 0.0]),
                         sg,
@@ -287,24 +175,13 @@ pub fn ik_into(m: &Machine, pose: &Pose, setup: &Setup, opt: &IkOptions, out: &m
                 }
             } else {
                 let (a1, a2, sing) = pair.angles(&u, &meet, 0.0, free);
-                let sing = sing.then_some((sv.seq[0], opt.free_angle));
-                push(m, out, pose, setup, &sv.seq, [a1, a2, Cs::ZERO], None, 0, 0, sing);
+                let sing = sing.then_some((ch.seq[0], opt.free_angle));
+                push(m, out, pose, setup, &ch.seq, [a1, a2, Cs::ZERO], None, 0, 0, sing);
             }
         }
-        Shape::Three { s0, pair, missing } => three(m, sv, s0, pair, *missing, &u, pose, setup, opt, free, out)?,
+        Shape::Three { s0, pair, missing } => three(m, ch, s0, pair, *missing, &u, pose, setup, opt, free, out)?,
     }
     Ok(())
-}
-
-/// The caller's free angle, turned into (cos, sin) only at a singular pose.
-#[derive(Clone, Copy)]
-pub(crate) struct FreeAngle(pub f64);
-
-impl FreeAngle {
-    #[inline]
-    pub(crate) fn cs(self) -> Cs {
-        Cs::of(self.0)
-    }
 }
 
 /// Builds a solution from orientation angles (in sequence order) and places the linears.
@@ -339,9 +216,9 @@ fn push(
     let cp = controlled_point_cs(m, &rcs, &(pose.tip + setup.work_offset), setup.tool_length);
     let mut joints = Joints::default();
     for i in 0..3 {
-        joints.linear[i] = if m.solver.has_linear[i] { cp[i] } else { 0.0 };
+        joints.linear[i] = if m.chain.has_linear[i] { cp[i] } else { 0.0 };
     }
-    for (i, l) in m.solver.links.iter().enumerate() {
+    for (i, l) in m.chain.links.iter().enumerate() {
         joints.rotary[i] = if l.compensated {
             m.rotaries[i].word(actual[i])
         } else {
@@ -378,7 +255,7 @@ fn controlled_point_cs(m: &Machine, cs: &[Cs; 3], p_w: &Vec3, tool_length: f64) 
     }
     let mut v = [0.0; 3];
     let mut p = [p_w.x, p_w.y, p_w.z];
-    let links = &m.solver.links;
+    let links = &m.chain.links;
     for i in (0..links.len()).rev() {
         let (l, a) = (&links[i], cs[i]);
         if l.head {
@@ -540,7 +417,7 @@ fn swing(a: &Cs, b: &Cs) -> f64 {
 #[allow(clippy::too_many_arguments)]
 fn three(
     m: &Machine,
-    sv: &Solver,
+    ch: &Chain,
     s0: &Vec3,
     pair: &Pair,
     missing: usize,
@@ -574,7 +451,7 @@ fn three(
             let (a1, a2, sing) = pair.angles(&v, &meet, sg as f64, free);
             let cs = [a0, a1, a2];
             let mut rcs = [Cs::ZERO; 3];
-            for (k, &ri) in sv.seq.iter().enumerate() {
+            for (k, &ri) in ch.seq.iter().enumerate() {
                 rcs[ri] = cs[k];
             }
             Some((controlled_point_cs(m, &rcs, &p_w, setup.tool_length)[missing], cs, sing))
@@ -623,12 +500,12 @@ fn three(
         if branch == 0
             && out
                 .iter()
-                .any(|s| s.branch == 0 && wrap(s.actual[sv.seq[0]] - a).abs() < 1e-9)
+                .any(|s| s.branch == 0 && wrap(s.actual[ch.seq[0]] - a).abs() < 1e-9)
         {
             continue;
         }
-        let sing = sing.then_some((sv.seq[1], opt.free_angle));
-        push(m, out, pose, setup, &sv.seq, [Cs::of(a), a1, a2], None, branch, count, sing);
+        let sing = sing.then_some((ch.seq[1], opt.free_angle));
+        push(m, out, pose, setup, &ch.seq, [Cs::of(a), a1, a2], None, branch, count, sing);
         if let Some(s) = out.last_mut() {
             polish(m, pose, setup, s);
         }

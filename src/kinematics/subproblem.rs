@@ -2,7 +2,6 @@
 //! can rotate without evaluating trigonometric functions again.
 
 use super::Vec3;
-use super::solver::FreeAngle;
 
 /// Angle pair of a rotation.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -25,6 +24,17 @@ impl Cs {
     #[inline]
     pub fn angle(self) -> f64 {
         libm::atan2(self.s, self.c)
+    }
+}
+
+/// The caller's free angle, turned into (cos, sin) only at a singular pose.
+#[derive(Clone, Copy)]
+pub(crate) struct FreeAngle(pub f64);
+
+impl FreeAngle {
+    #[inline]
+    pub(crate) fn cs(self) -> Cs {
+        Cs::of(self.0)
     }
 }
 
