@@ -896,7 +896,7 @@ fn clamped_rotaries_unlock_before_they_turn_and_lock_after_positioning() {
     );
     let end = lines.iter().position(|l| l.starts_with("M30")).unwrap();
     assert!(
-        lines[..end].iter().rev().take(6).any(|l| l.starts_with("M12")) && lines[..end].iter().any(|l| l.starts_with("M10")),
+        lines[..end].iter().rev().take(7).any(|l| l.starts_with("M12")) && lines[..end].iter().any(|l| l.starts_with("M10")),
         "locked at the end"
     );
     // A 3-axis program on the same machine never unlocks.

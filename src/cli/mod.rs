@@ -451,11 +451,7 @@ impl SetupArgs {
             Some(s) => parse_triple(s)?,
             None => Vec3::zeros(),
         };
-        let l = self.tool_length.unwrap_or(m.default_tool_length);
-        if !l.is_finite() {
-            return Err("--tool-length must be finite".into());
-        }
-        Ok(Setup::new(l, wo))
+        Setup::checked(m, self.tool_length, wo)
     }
 }
 

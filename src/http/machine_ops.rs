@@ -140,15 +140,7 @@ async fn off_runtime<T: Send + 'static>(f: impl FnOnce() -> T + Send + 'static) 
 }
 
 fn setup(m: &Machine, tool_length: Option<f64>, wo: Option<[f64; 3]>) -> Result<Setup, ApiError> {
-    let l = tool_length.unwrap_or(m.default_tool_length);
-    let inside = |v: &f64| kinematics::coordinate_ok(*v);
-    if !inside(&l) || wo.is_some_and(|w| !w.iter().all(inside)) {
-        return Err(ApiError::BadParameter(format!(
-            "tool_length and work_offset must be finite and within ±{:e}",
-            kinematics::MAX_COORD
-        )));
-    }
-    Ok(Setup::new(l, Vec3::from(wo.unwrap_or_default())))
+    Setup::checked(m, tool_length, Vec3::from(wo.unwrap_or_default())).map_err(ApiError::BadParameter)
 }
 
 fn joints(m: &Machine, words: &Words) -> Result<Joints, ApiError> {

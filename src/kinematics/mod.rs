@@ -56,6 +56,18 @@ impl Setup {
             work_offset,
         }
     }
+
+    /// The one rule every edge checks a setup by: finite and within ±[`MAX_COORD`]. The tool
+    /// length defaults to the profile's.
+    pub fn checked(m: &Machine, tool_length: Option<f64>, work_offset: Vec3) -> Result<Setup, String> {
+        let l = tool_length.unwrap_or(m.default_tool_length);
+        if !coordinate_ok(l) || !work_offset.iter().all(|v| coordinate_ok(*v)) {
+            return Err(format!(
+                "tool_length and work_offset must be finite and within ±{MAX_COORD:e}"
+            ));
+        }
+        Ok(Setup::new(l, work_offset))
+    }
 }
 
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]

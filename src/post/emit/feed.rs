@@ -96,17 +96,19 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                 let fz = if limited && t > 0.0 { len / t } else { f };
                 feed = Some((FeedMode::PerMinute, fz.max(0.0)));
             }
+            // Told at the first block of each run of slowed blocks: a dense path slowed
+            // throughout is one warning, not one a block.
             if let Some(a) = limited_axis
-                && self.clamp_told != Some(pt.line)
+                && !std::mem::replace(&mut self.clamp_run, true)
             {
-                self.clamp_told = Some(pt.line);
                 diags.push(Diagnostic::new(
                     Code::FeedClamped,
                     Severity::Warning,
                     Some(pt.line),
-                    format!("feed reduced: {a} would exceed its velocity (the profile's max_feed) at the programmed feed"),
+                    format!("feed reduced from here on while {a} would exceed its velocity (the profile's max_feed) at the programmed feed"),
                 ));
             }
+            self.clamp_run &= limited_axis.is_some();
             // A feed the F word rounds to zero is an alarm on every control (a move of days in
             // inverse time, or a feed per minute below the word's last digit): the smallest F.
             if let Some((mode, v)) = &mut feed {
@@ -125,17 +127,17 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                 }
                 // Beyond the word's range: the control's largest F, the slower side (it overflowed
                 // to F0). A FEDRAT beyond it was an error where the CL said it; a short move at a
-                // fast feed in inverse time is only slowed (told once a CL line).
+                // fast feed in inverse time is only slowed (told once a run of such blocks).
                 let max = feed_max(self.o.dialect, self.m.units, *mode);
-                if v.is_nan() || *v > max {
-                    if self.range_told != Some(pt.line) {
-                        self.range_told = Some(pt.line);
+                let beyond = v.is_nan() || *v > max;
+                if beyond {
+                    if !std::mem::replace(&mut self.range_run, true) {
                         diags.push(Diagnostic::new(
                             Code::FeedClamped,
                             Severity::Warning,
                             Some(pt.line),
                             format!(
-                                "F{v:.6e} is beyond what the {} F word takes ({max}): written F{max}, a slower move",
+                                "F{v:.6e} is beyond what the {} F word takes ({max}): written F{max} from here on while it is, a slower move",
                                 self.o.dialect.name
                             ),
                         ));
@@ -145,6 +147,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                     }
                     *v = max;
                 }
+                self.range_run &= beyond;
             }
             time = t;
         } else if let Some(p) = prev {

@@ -135,10 +135,10 @@ pub(super) struct Emitter<'a, S: Sink + ?Sized> {
     /// neither a new largest miss nor an error (kept by `replayed`).
     pub(super) quiet_tip2: f64,
     pub(super) quiet_tan2: f64,
-    /// The CL line whose feed was last slowed to the F word's range (told once a line).
-    pub(super) range_told: Option<u32>,
-    /// The CL line whose feed an axis velocity last slowed (told once a line).
-    pub(super) clamp_told: Option<u32>,
+    /// In a run of blocks slowed to the F word's range, or to an axis's velocity (each run
+    /// told at its first block).
+    pub(super) range_run: bool,
+    pub(super) clamp_run: bool,
 }
 
 impl<'a, S: Sink + ?Sized> Emitter<'a, S> {
@@ -210,8 +210,8 @@ impl<'a, S: Sink + ?Sized> Emitter<'a, S> {
             compensated: m.has_angle_error(),
             quiet_tip2: 0.0,
             quiet_tan2: 0.0,
-            range_told: None,
-            clamp_told: None,
+            range_run: false,
+            clamp_run: false,
         }
     }
 
