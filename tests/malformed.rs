@@ -148,3 +148,24 @@ async fn unreachable_poses_and_limits_name_line_and_axis() {
         assert!(p["detail"].as_str().unwrap().contains(needle), "{p}");
     }
 }
+
+/// Non-ASCII where the NC reader looked at the first bytes of a word (`CYCLE800(`, `MCALL`,
+/// `BEGIN PGM`, an axis letter) is an error or nothing, never a panic on a char boundary.
+#[test]
+fn the_nc_reader_takes_non_ascii_words_without_panicking() {
+    use kinepost::nc::read::NcReader;
+    let programs = [
+        "%\nO1000\nABCDEFGHé X1\nMCALé\nCYCLE80é(1)\nG1 Xé Y1\n%\n",
+        "BEGIN PGM 1 MM\nL é\nL Xé Y+1\nL Ié\nBEGIN PGé\nEND PGM 1 MM\n",
+        "é\nééééééééé\n",
+    ];
+    for nc in programs {
+        let mut r = NcReader::new(nc.as_bytes(), kinepost::kinematics::Units::Mm);
+        for _ in 0..64 {
+            match r.next_block() {
+                Ok(Some(_)) | Err(_) => {}
+                Ok(None) => break,
+            }
+        }
+    }
+}

@@ -289,11 +289,11 @@ impl<R: std::io::BufRead> NcReader<R> {
             match *w {
                 "FMAX" => rapid = true,
                 "M99" => call = true,
-                _ if w.len() > 1 && w.starts_with('I') && "XYZABC".contains(&w[1..2]) => {
+                _ if w.starts_with('I') && w.get(1..2).is_some_and(|c| "XYZABC".contains(c)) => {
                     return Err(self.unsupported(format!("{w}: incremental positions are not supported")));
                 }
                 _ => {
-                    if let Some(k) = "XYZABC".find(&w[..1])
+                    if let Some(k) = w.get(..1).and_then(|c| "XYZABC".find(c))
                         && w.len() > 1
                         && (w.as_bytes()[1] == b'+' || w.as_bytes()[1] == b'-' || w.as_bytes()[1].is_ascii_digit())
                     {
@@ -356,7 +356,7 @@ impl<R: std::io::BufRead> NcReader<R> {
             }
             _ => bare,
         };
-        if bare.len() >= 9 && bare[..9].eq_ignore_ascii_case("CYCLE800(") {
+        if bare.get(..9).is_some_and(|h| h.eq_ignore_ascii_case("CYCLE800(")) {
             let args = bare[9..].split(';').next().unwrap_or("").trim_end();
             self.content = true;
             return Some(self.cycle800(args.strip_suffix(')').unwrap_or(args)).map(|_| None));
@@ -364,14 +364,14 @@ impl<R: std::io::BufRead> NcReader<R> {
         // Heidenhain's conversational language is no word address (its `L X+… C+…` read as
         // words failed at "C without a value"): its own reader from `BEGIN PGM` on.
         let unnumbered = bare.trim_start_matches(|c: char| c.is_ascii_digit()).trim_start();
-        if !self.content && unnumbered.len() >= 9 && unnumbered[..9].eq_ignore_ascii_case("BEGIN PGM") {
+        if !self.content && unnumbered.get(..9).is_some_and(|h| h.eq_ignore_ascii_case("BEGIN PGM")) {
             self.conversational = true;
         }
         if self.conversational {
             self.content = true;
             return Some(self.conversational_line(unnumbered));
         }
-        if bare.len() >= 5 && bare[..5].eq_ignore_ascii_case("MCALL") {
+        if bare.get(..5).is_some_and(|h| h.eq_ignore_ascii_case("MCALL")) {
             let call = bare[5..].split(';').next().unwrap_or("").trim();
             self.content = true;
             return Some(self.mcall(call).map(|_| None));
