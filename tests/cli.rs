@@ -337,3 +337,16 @@ fn post_exits_0_clean_1_with_errors_2_refused() {
     assert_eq!(code, 2, "{err}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// A whitespace-only admin token would be a token anyone can guess: the service refuses to start.
+#[test]
+fn a_blank_admin_token_is_refused_at_start() {
+    let out = Command::new(env!("CARGO_BIN_EXE_kinepost"))
+        .args(["serve", "--bind", "127.0.0.1:0"])
+        .env("KINEPOST_ADMIN_TOKEN", "   ")
+        .env("KINEPOST_MACHINES", concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("only whitespace"));
+}

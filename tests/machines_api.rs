@@ -78,6 +78,16 @@ async fn profiles_are_versioned_guarded_and_jobs_keep_their_version() {
         .unwrap();
     assert_eq!(r.status(), 401);
     assert_eq!(c.get(format!("{base}/v1/machines/shop-spinner")).status_ok().await, 404);
+    // The scheme is case-insensitive: `bearer` writes as `Bearer` does.
+    let r = c
+        .post(format!("{base}/v1/machines"))
+        .header("authorization", format!("bearer {TOKEN}"))
+        .header("content-type", "application/toml")
+        .body(spinner_as("shop-spinner-lower"))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 201, "{:?}", r.text().await);
 
     // Create; the same id again is a conflict.
     let r = toml_post(format!("{base}/v1/machines"), spinner_as("shop-spinner"))

@@ -552,6 +552,9 @@ fn seconds(flag: &str, v: f64, min: f64, max: f64, unit: f64) -> Result<std::tim
 }
 
 fn serve(cli: &Cli, a: &ServeArgs) -> Result<(), String> {
+    if a.admin_token.as_deref().is_some_and(|t| !t.is_empty() && t.trim().is_empty()) {
+        return Err("KINEPOST_ADMIN_TOKEN is only whitespace: give a real token, or none to keep profile writes off".into());
+    }
     let filter =
         tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
     let builder = tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr);

@@ -186,8 +186,10 @@ fn authorize(st: &AppState, h: &HeaderMap) -> Result<(), ApiError> {
     let got = h
         .get(header::AUTHORIZATION)
         .and_then(|v| v.to_str().ok())
-        .and_then(|v| v.strip_prefix("Bearer "))
-        .map(str::trim);
+        .and_then(|v| v.trim().split_once(' '))
+        // The scheme is case-insensitive (RFC 9110 §11.1): `bearer` is `Bearer`.
+        .filter(|(scheme, _)| scheme.eq_ignore_ascii_case("bearer"))
+        .map(|(_, t)| t.trim());
     match got {
         Some(t) if constant_time_eq(t.as_bytes(), want.as_bytes()) => Ok(()),
         Some(_) => Err(ApiError::Unauthorized("the bearer token is not the admin token".into())),
