@@ -178,3 +178,33 @@ fn shipped_profiles_load_and_an_unknown_id_is_named() {
     assert_eq!(lib.len(), 10);
     assert!(lib.get("no-such").unwrap_err().to_string().contains("no-such"));
 }
+
+/// A controller kinepost has no dialect for posted Fanuc without a word; a clamp "word" with a
+/// space (`M10 M30`) put a program end at every clamp. Both are refused, naming the key; a
+/// speed or acceleration must be positive.
+#[test]
+fn unknown_controllers_multi_word_clamps_and_bad_speeds_are_rejected() {
+    says(
+        &err("controller = \"fanuc\"", "controller = \"fanucc\""),
+        &["controller", "fanucc"],
+    );
+    let clamp = |words: &str| {
+        err(
+            "min = -90.0\nmax = 90.0\n",
+            &format!("min = -90.0\nmax = 90.0\nclamp = {words}\n"),
+        )
+    };
+    says(&clamp(r#"["M10 M30", "M11"]"#), &["rotary[0].clamp", "one word each"]);
+    says(&clamp(r#"["M10", ""]"#), &["rotary[0].clamp"]);
+    says(&clamp(r#"["M10", "(M11)"]"#), &["rotary[0].clamp"]);
+    let ok = GOOD.replacen(
+        "min = -90.0\nmax = 90.0\n",
+        "min = -90.0\nmax = 90.0\nclamp = [\"M10\", \"M11\"]\n",
+        1,
+    );
+    assert!(parse_profile(&ok, "machines/t.toml", Some("t")).is_ok());
+    says(
+        &err("min = -90.0\nmax = 90.0\n", "min = -90.0\nmax = 90.0\nmax_accel = -1.0\n"),
+        &["max_accel"],
+    );
+}

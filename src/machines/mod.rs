@@ -178,12 +178,12 @@ pub fn parse_profile(text: &str, file: &str, stem: Option<&str>) -> Result<Profi
             other => return Err(invalid(&key("on"), format!("{other:?} must be \"table\" or \"head\""))),
         };
         if let Some(c) = &r.clamp
-            && c.iter()
-                .any(|w| w.is_empty() || !w.chars().all(|ch| ch.is_ascii_alphanumeric() || ch == ' ' || ch == '.'))
+            && c.iter().any(|w| !is_one_word(w))
         {
+            // One word each: `M10 M30` put a program end at every clamp.
             return Err(invalid(
                 &key("clamp"),
-                "give two NC words, lock then unlock, e.g. [\"M10\", \"M11\"]".into(),
+                "give two NC words, lock then unlock, one word each, e.g. [\"M10\", \"M11\"]".into(),
             ));
         }
         let limits = match (r.min, r.max) {
@@ -209,6 +209,15 @@ pub fn parse_profile(text: &str, file: &str, stem: Option<&str>) -> Result<Profi
                 .as_ref()
                 .map(|e| AngleError::new(e.coefficients.clone(), (e.range[0], e.range[1]))),
         });
+    }
+    if let Some(c) = &doc.controller
+        && crate::nc::dialect(c).is_none()
+    {
+        // An unknown controller posted Fanuc without a word.
+        return Err(invalid(
+            "controller",
+            format!("{c:?} is not a dialect kinepost writes: one of {:?}", crate::nc::DIALECTS),
+        ));
     }
     let spec = MachineSpec {
         id: doc.id.clone(),
@@ -302,4 +311,13 @@ pub fn default_dir() -> PathBuf {
         return cwd;
     }
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("machines")
+}
+
+/// One NC word: an address letter and a number (`M10`, `M82.1`), nothing else on the line.
+fn is_one_word(w: &str) -> bool {
+    let mut c = w.chars();
+    c.next().is_some_and(|a| a.is_ascii_alphabetic())
+        && w.len() <= 16
+        && c.clone().next().is_some()
+        && c.all(|ch| ch.is_ascii_digit() || ch == '.')
 }
