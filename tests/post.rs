@@ -2355,3 +2355,18 @@ fn a_swirl_about_the_pole_is_slowed_to_the_rotaries_velocity() {
     }
     assert!(checked > 50, "{checked} inverse-time blocks checked:\n{}", sink.nc);
 }
+
+/// A GOTO with values after i,j,k (a contact normal for 3D compensation) had them dropped
+/// unread: they are told, naming the line.
+#[test]
+fn goto_values_after_the_tool_axis_are_told() {
+    let m = machine("spinner-u5-620");
+    let cl = "UNITS/MM\nLOADTL/1\nSPINDL/1000\nGOTO/10,20,30,0,0,1,0,0.7071,0.7071\nGOTO/10,25,30,0,0,1\nFINI\n";
+    let (sink, s) = run(&m, cl.as_bytes(), &fanuc(&m, Mode::Joint));
+    let d = sink.first(Code::IgnoredRecord);
+    assert!(
+        d.line == Some(4) && d.severity == Severity::Warning && d.message.contains("3 values"),
+        "{d:?}"
+    );
+    assert_eq!(s.cl_points, 2, "the point itself is still posted");
+}

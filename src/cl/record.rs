@@ -352,6 +352,14 @@ fn motion(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
         };
         v[k] = x;
     }
+    if n > 6 {
+        // A contact normal or cutter data after i,j,k (3D compensation's input): read past, said.
+        let msg = format!(
+            "{major}: {} values after x,y,z,i,j,k are not used (no 3D cutter compensation written)",
+            n - 6
+        );
+        diags.push(Diagnostic::new(Code::IgnoredRecord, Severity::Warning, Some(st.line), msg).at(st.args[6].col));
+    }
     let p = [v[0], v[1], v[2]];
     let axis = (n >= 6).then_some([v[3], v[4], v[5]]);
     if let Some(a) = axis
