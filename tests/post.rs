@@ -2370,3 +2370,15 @@ fn goto_values_after_the_tool_axis_are_told() {
     );
     assert_eq!(s.cl_points, 2, "the point itself is still posted");
 }
+
+/// A negative tool length from the CL was used (every point then misplaced by twice it along the
+/// tool axis): an error naming the line, and the length in force stays.
+#[test]
+fn a_negative_tool_length_from_the_cl_is_refused() {
+    let m = machine("spinner-u5-620");
+    let cl = "UNITS/MM\nLOADTL/1,LENGTH,-120\nSPINDL/1000\nGOTO/10,20,30,0,0,1\nGOTO/10,25,30,0,0,1\nFINI\n";
+    let (sink, s) = run(&m, cl.as_bytes(), &fanuc(&m, Mode::Joint));
+    let d = sink.first(Code::ToolLength);
+    assert!(d.severity == Severity::Error && d.line == Some(2), "{d:?}");
+    assert_eq!(s.tool_length, m.default_tool_length);
+}

@@ -307,6 +307,21 @@ impl<R: BufRead> Source<R> {
         true
     }
 
+    /// A tool length the CL gives: a negative one (the tip above the gauge line) is a typo or a
+    /// sign convention kinepost does not share, an error, and the length in force stays.
+    fn tool_length(&mut self, length: Option<f64>, line: u32) {
+        match length {
+            Some(l) if l < 0.0 => self.diag(
+                Code::ToolLength,
+                Severity::Error,
+                line,
+                format!("tool length {l} is negative: not used (the length in force stays)"),
+            ),
+            Some(l) => self.out.push_back(Item::Event(ProgEvent::ToolLength(l * self.scale))),
+            None => {}
+        }
+    }
+
     /// FEDRAT: in profile units, within the F word's range.
     fn feedrate(&mut self, value: f64, unit: FeedUnit, units: Option<Units>, line: u32) {
         let f = units.map_or(self.scale, |u| u.factor_to(self.profile_units));
@@ -390,9 +405,7 @@ impl<R: BufRead> Source<R> {
             Record::Spindle(c) => self.spindle(c, line),
             Record::Coolant(c) => self.out.push_back(Item::Event(ProgEvent::Coolant(c))),
             Record::LoadTool { number, length, adjust } => {
-                if let Some(l) = length {
-                    self.out.push_back(Item::Event(ProgEvent::ToolLength(l * self.scale)));
-                }
+                self.tool_length(length, line);
                 self.out.push_back(Item::Event(ProgEvent::Tool { number, adjust, line }));
             }
             Record::ToolData {
@@ -406,9 +419,7 @@ impl<R: BufRead> Source<R> {
                 if let Some(d) = diameter.filter(|d| d.is_finite() && *d > 0.0) {
                     self.diameter_mm = Some(d * self.cl_units.factor_to(Units::Mm));
                 }
-                if let Some(l) = length {
-                    self.out.push_back(Item::Event(ProgEvent::ToolLength(l * self.scale)));
-                }
+                self.tool_length(length, line);
             }
             Record::Multax(on) => {
                 if !on {
