@@ -350,3 +350,11 @@ fn a_blank_admin_token_is_refused_at_start() {
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("only whitespace"));
 }
+
+/// A profile file is read only so far: `machines validate /dev/zero` grew to 9.6 GB.
+#[test]
+fn machines_validate_reads_a_bounded_file() {
+    let (code, out, err) = kinepost(&["machines", "validate", "/dev/zero"]);
+    assert_eq!(code, 2, "{out}{err}");
+    assert!(out.contains("larger than 1048576 bytes"), "{out}{err}");
+}

@@ -126,7 +126,7 @@ fn id_must_equal_the_file_stem_and_be_well_formed() {
     let bad = GOOD.replacen("id = \"t\"", "id = \"Bad_Id\"", 1);
     says(
         &parse_profile(&bad, "x.toml", None).unwrap_err().to_string(),
-        &["id", "[a-z0-9-]+"],
+        &["id", "[a-z0-9-]{1,64}"],
     );
 }
 
@@ -187,6 +187,13 @@ fn unknown_controllers_multi_word_clamps_and_bad_speeds_are_rejected() {
     says(
         &err("controller = \"fanuc\"", "controller = \"fanucc\""),
         &["controller", "fanucc"],
+    );
+    // An id is a name, not a payload (a 1 MB one was accepted).
+    let long = "x".repeat(65);
+    let text = GOOD.replacen("id = \"t\"", &format!("id = \"{long}\""), 1);
+    says(
+        &parse_profile(&text, "machines/x.toml", None).unwrap_err().to_string(),
+        &["id", "{1,64}"],
     );
     let clamp = |words: &str| {
         err(

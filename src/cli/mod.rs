@@ -188,7 +188,7 @@ fn machines_cmd(lib: &Library, dir: &std::path::Path, a: &MachinesCmd) -> Result
             }
         }
         MachinesCmd::Add { file, force } => {
-            let text = std::fs::read_to_string(file).map_err(|e| format!("{}: {e}", file.display()))?;
+            let text = machines::read_text(file).map_err(|e| format!("{}: {e}", file.display()))?;
             let p = machines::parse_profile(&text, &file.display().to_string(), None).map_err(|e| e.to_string())?;
             let dest = dir.join(format!("{}.toml", p.machine.id));
             if dest.exists() && !force {

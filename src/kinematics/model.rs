@@ -213,12 +213,19 @@ impl Machine {
     pub fn new(spec: MachineSpec) -> Result<Machine, Error> {
         let bad = |key: String, problem: String| Err(Error::Profile { key, problem });
         if spec.id.is_empty()
+            || spec.id.len() > 64
             || !spec
                 .id
                 .bytes()
                 .all(|b| b.is_ascii_lowercase() || b.is_ascii_digit() || b == b'-')
         {
-            return bad("id".into(), format!("{:?} must match [a-z0-9-]+", spec.id));
+            return bad(
+                "id".into(),
+                format!(
+                    "{:?} must match [a-z0-9-]{{1,64}}",
+                    spec.id.chars().take(80).collect::<String>()
+                ),
+            );
         }
         for (i, l) in spec.linears.iter().enumerate() {
             let Some(l) = l else { continue };

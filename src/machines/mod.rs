@@ -241,10 +241,30 @@ fn one_line(e: &toml::de::Error) -> String {
     e.to_string().split_whitespace().collect::<Vec<_>>().join(" ")
 }
 
+/// The largest profile file read: a profile is a few kilobytes (`machines validate /dev/zero`
+/// grew to 9.6 GB).
+pub const MAX_PROFILE_BYTES: u64 = 1 << 20;
+
+/// A profile file's text, at most [`MAX_PROFILE_BYTES`].
+pub fn read_text(path: &Path) -> std::io::Result<String> {
+    use std::io::Read;
+    let mut text = String::new();
+    std::fs::File::open(path)?
+        .take(MAX_PROFILE_BYTES + 1)
+        .read_to_string(&mut text)?;
+    if text.len() as u64 > MAX_PROFILE_BYTES {
+        return Err(std::io::Error::new(
+            std::io::ErrorKind::InvalidData,
+            format!("larger than {MAX_PROFILE_BYTES} bytes: not a machine profile"),
+        ));
+    }
+    Ok(text)
+}
+
 /// Reads one profile file; its id must equal the file stem.
 pub fn load_file(path: &Path) -> Result<Profile, Error> {
     let file = path.display().to_string();
-    let text = std::fs::read_to_string(path).map_err(|source| Error::Io {
+    let text = read_text(path).map_err(|source| Error::Io {
         path: file.clone(),
         source,
     })?;
