@@ -329,6 +329,10 @@ async fn errors_before_the_first_byte_have_their_status() {
         .await
         .unwrap();
     assert_eq!(r.status(), 413);
+    // It names the limit it hit, never "a limit of 0 bytes".
+    let p: Value = r.json().await.unwrap();
+    let detail = p["detail"].as_str().unwrap();
+    assert!(detail.contains("limit of") && !detail.contains(" 0 bytes"), "{p}");
 }
 
 #[tokio::test]

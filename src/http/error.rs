@@ -22,8 +22,9 @@ pub enum ApiError {
         column: Option<u32>,
         code: &'static str,
     },
-    #[error("upload larger than the limit of {0} bytes")]
-    TooLarge(u64),
+    /// The limit in bytes where the handler knows it (else the service's `--max-upload`).
+    #[error("upload larger than {}", .0.map_or("the service's limit (--max-upload)".to_string(), |n| format!("the limit of {n} bytes")))]
+    TooLarge(Option<u64>),
     #[error("{0}")]
     NotFound(String),
     #[error("{0}")]

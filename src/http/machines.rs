@@ -244,7 +244,7 @@ async fn profile_text(req: Request) -> Result<String, ApiError> {
     }
     let bytes = axum::body::to_bytes(req.into_body(), 1 << 20)
         .await
-        .map_err(|_| ApiError::TooLarge(1 << 20))?;
+        .map_err(|_| ApiError::TooLarge(Some(1 << 20)))?;
     let text = String::from_utf8(bytes.to_vec()).map_err(|_| ApiError::BadProfile {
         message: "the profile is not UTF-8".into(),
         key: None,

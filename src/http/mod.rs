@@ -292,6 +292,7 @@ impl MakeRequestId for Counter {
 pub fn app(state: Arc<AppState>) -> axum::Router {
     let x_request_id = HeaderName::from_static("x-request-id");
     let streams = tower::ServiceBuilder::new()
+        .layer(middleware::map_response_with_state(state.clone(), too_large_problem))
         .layer(axum::extract::DefaultBodyLimit::disable())
         .layer(tower_http::limit::RequestBodyLimitLayer::new(
             state.config.max_upload.min(usize::MAX as u64) as usize,
@@ -425,6 +426,23 @@ fn not_modified(headers: &axum::http::HeaderMap, etag: &str) -> Option<Response>
 }
 
 /// Requests by route and status, for `/metrics`.
+/// The body limit layer answers a declared length over `--max-upload` in text/plain: as every
+/// error, a problem document naming the limit.
+async fn too_large_problem<B>(State(st): State<Arc<AppState>>, resp: axum::http::Response<B>) -> Response
+where
+    B: axum::body::HttpBody<Data = bytes::Bytes> + Send + 'static,
+    B::Error: Into<axum::BoxError>,
+{
+    let is_problem = resp
+        .headers()
+        .get(header::CONTENT_TYPE)
+        .is_some_and(|v| v.as_bytes().starts_with(b"application/problem+json"));
+    if resp.status() == StatusCode::PAYLOAD_TOO_LARGE && !is_problem {
+        return error::ApiError::TooLarge(Some(st.config.max_upload)).into_response();
+    }
+    resp.map(axum::body::Body::new)
+}
+
 async fn count_requests(State(st): State<Arc<AppState>>, req: Request, next: Next) -> Response {
     let route = req
         .extensions()

@@ -235,7 +235,7 @@ fn engine_error(e: post::Error) -> ApiError {
 /// A failed read of the request body: over the body limit (413), else a broken upload (400).
 pub(super) fn upload_error(text: String) -> ApiError {
     if text.contains("length limit") || text.contains("too large") {
-        ApiError::TooLarge(0)
+        ApiError::TooLarge(None)
     } else {
         ApiError::BadParameter(format!("reading the upload: {text}"))
     }
