@@ -506,6 +506,16 @@ async fn busy_cors_gzip_and_the_web_page() {
 async fn fk_ik_reachability_and_fits_over_http() {
     let base = server(cfg()).await;
     let c = reqwest::Client::new();
+    // A JSON body over the limit is too large (413), not a bad parameter (it was 400).
+    let huge = format!("{{\"joints\": {{\"X\": 1}}, \"pad\": \"{}\"}}", "x".repeat(3 << 20));
+    let r = c
+        .post(format!("{base}/v1/machines/spinner-u5-620/fk"))
+        .header("content-type", "application/json")
+        .body(huge)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 413);
     let post = |path: String, body: Value| c.post(format!("{base}{path}")).json(&body).send();
     // FK then IK: the words come back among the solutions.
     let pose: Value = post(

@@ -161,6 +161,8 @@ impl<T: serde::de::DeserializeOwned, S: Send + Sync> axum::extract::FromRequest<
             Err(JsonRejection::MissingJsonContentType(_)) => {
                 Err(ApiError::UnsupportedMediaType("expected application/json".into()))
             }
+            // Over axum's body limit for JSON (2 MiB): too large, not malformed.
+            Err(e) if e.status() == StatusCode::PAYLOAD_TOO_LARGE => Err(ApiError::TooLarge(Some(2 << 20))),
             Err(e) => Err(ApiError::BadParameter(e.body_text())),
         }
     }
