@@ -358,3 +358,28 @@ fn machines_validate_reads_a_bounded_file() {
     assert_eq!(code, 2, "{out}{err}");
     assert!(out.contains("larger than 1048576 bytes"), "{out}{err}");
 }
+
+/// A reader that goes away (`kinepost machines validate … | head`) ends the output; it panicked
+/// (exit 101) on the closed pipe.
+#[test]
+fn a_closed_pipe_ends_the_output_without_a_panic() {
+    let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/machines");
+    let files: Vec<String> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().path().display().to_string())
+        .collect();
+    let mut args = vec!["machines".to_string(), "validate".to_string()];
+    // Enough lines that they outlast the pipe's buffer once the reader is gone.
+    for _ in 0..2000 {
+        args.extend(files.iter().cloned());
+    }
+    let mut child = Command::new(env!("CARGO_BIN_EXE_kinepost"))
+        .args(&args)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    drop(child.stdout.take());
+    let out = child.wait_with_output().unwrap();
+    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+}

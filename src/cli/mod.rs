@@ -1,5 +1,20 @@
 //! The command line: a thin edge over the library. Degrees and JSON live here.
 
+/// `println!` that stops quietly where the reader went away (`kinepost machines validate … | head`):
+/// a closed pipe ends the output, it is not a panic (exit 101).
+macro_rules! say {
+    ($($t:tt)*) => {{
+        use std::io::Write as _;
+        if let Err(e) = writeln!(std::io::stdout().lock(), $($t)*) {
+            if e.kind() == std::io::ErrorKind::BrokenPipe {
+                std::process::exit(0);
+            }
+            eprintln!("kinepost: writing to standard output: {e}");
+            std::process::exit(2);
+        }
+    }};
+}
+
 use clap::{Parser, Subcommand};
 use kinepost::kinematics::{self, IkOptions, Joints, Pose, Setup, Units, Vec3};
 use kinepost::machines::{self, Library};
@@ -174,10 +189,10 @@ fn machines_cmd(lib: &Library, dir: &std::path::Path, a: &MachinesCmd) -> Result
             let mut bad = 0;
             for f in files {
                 match machines::load_file(f) {
-                    Ok(p) => println!("ok   {} ({}, {})", f.display(), p.machine.id, p.machine.kinematics_kind()),
+                    Ok(p) => say!("ok   {} ({}, {})", f.display(), p.machine.id, p.machine.kinematics_kind()),
                     Err(e) => {
                         bad += 1;
-                        println!("FAIL {e}");
+                        say!("FAIL {e}");
                     }
                 }
             }
@@ -195,7 +210,7 @@ fn machines_cmd(lib: &Library, dir: &std::path::Path, a: &MachinesCmd) -> Result
                 return Err(format!("{} exists: use --force to replace it", dest.display()));
             }
             std::fs::write(&dest, text).map_err(|e| format!("{}: {e}", dest.display()))?;
-            println!("added {} as {}", p.machine.id, dest.display());
+            say!("added {} as {}", p.machine.id, dest.display());
             Ok(())
         }
         MachinesCmd::FitAngleError {
@@ -530,7 +545,7 @@ fn lint(input: &str, verbose: bool) -> Result<(), String> {
             }
         }
     }
-    println!(
+    say!(
         "{}",
         json!({"records": records, "errors": errors, "warnings": warnings, "by_record": counts})
     );
@@ -643,7 +658,7 @@ fn run(cli: Cli) -> Result<(), Failure> {
                 cl_tool_length: setup.tool_length.is_none(),
             };
             let rep = verify::verify(open_input(&cl)?, open_input(&nc)?, m, &o).map_err(|e| e.to_string())?;
-            println!("{}", serde_json::to_string_pretty(&rep).map_err(|e| e.to_string())?);
+            say!("{}", serde_json::to_string_pretty(&rep).map_err(|e| e.to_string())?);
             if rep.ok {
                 Ok(())
             } else {
@@ -667,9 +682,9 @@ fn run(cli: Cli) -> Result<(), Failure> {
                 if json {
                     let v = json!({"id": m.id, "name": m.name, "kinematics": m.kinematics_kind(),
                         "controller": m.controller, "units": m.units.as_str()});
-                    println!("{v}");
+                    say!("{v}");
                 } else {
-                    println!(
+                    say!(
                         "{:<22} {:<14} {:<11} {:<5} {}",
                         m.id,
                         m.kinematics_kind(),
@@ -687,7 +702,7 @@ fn run(cli: Cli) -> Result<(), Failure> {
             let setup = setup.setup(m)?;
             let joints = parse_words(m, &words)?;
             let pose = kinematics::fk(m, &joints, &setup);
-            println!("{}", json!({"tip": pose.tip.as_slice(), "axis": pose.axis.as_slice()}));
+            say!("{}", json!({"tip": pose.tip.as_slice(), "axis": pose.axis.as_slice()}));
             Ok(())
         }
         Command::Ik {
@@ -707,7 +722,7 @@ fn run(cli: Cli) -> Result<(), Failure> {
             let sols = kinematics::ik(m, &pose, &setup, &IkOptions::default())
                 .map_err(|e| format!("{machine}: pose unreachable: {e}"))?;
             let list: Vec<Value> = sols.iter().map(|s| solution_json(m, s)).collect();
-            println!("{}", json!({ "solutions": list }));
+            say!("{}", json!({ "solutions": list }));
             Ok(())
         }
     }
