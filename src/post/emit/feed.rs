@@ -75,13 +75,13 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                 t = t.max(machine_len(p) / f);
             }
             // No axis faster than its velocity: the slowest axis sets the time.
-            let slowest = prev.and_then(|p| self.slowest_axis(p, to));
-            let limited = slowest.filter(|&(need, _)| need > t * (1.0 + 1e-9));
-            if let Some((need, _)) = limited {
-                t = need;
-            }
-            let limited_axis = limited.map(|(_, a)| a);
-            let limited = limited.is_some();
+            let limited_axis = match prev.and_then(|p| self.slowest_axis(p, to)) {
+                Some((need, a)) if need > t * (1.0 + 1e-9) => {
+                    t = need;
+                    Some(a)
+                }
+                _ => None,
+            };
             if rot_moves && !tcp {
                 if t <= 0.0 {
                     t = 1e-6;
@@ -93,7 +93,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                     (None, Some(p)) => (FeedMode::PerMinute, machine_len(p) / t),
                 });
             } else {
-                let fz = if limited && t > 0.0 { len / t } else { f };
+                let fz = if limited_axis.is_some() && t > 0.0 { len / t } else { f };
                 feed = Some((FeedMode::PerMinute, fz.max(0.0)));
             }
             // Told at the first block of each run of slowed blocks: a dense path slowed
@@ -109,51 +109,57 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                 ));
             }
             self.clamp_run &= limited_axis.is_some();
-            // A feed the F word rounds to zero is an alarm on every control (a move of days in
-            // inverse time, or a feed per minute below the word's last digit): the smallest F.
-            if let Some((mode, v)) = &mut feed {
-                let step = self.f.fmt.feed_step(*mode);
-                if *v < 0.5 * step {
-                    diags.push(Diagnostic::new(
-                        Code::FeedClamped,
-                        Severity::Warning,
-                        Some(pt.line),
-                        format!("F{v:.2e} rounds to zero: the smallest F the word carries written (a faster move)"),
-                    ));
-                    if *v > 0.0 {
-                        t *= *v / step;
-                    }
-                    *v = step;
-                }
-                // Beyond the word's range: the control's largest F, the slower side (it overflowed
-                // to F0). A FEDRAT beyond it was an error where the CL said it; a short move at a
-                // fast feed in inverse time is only slowed (told once a run of such blocks).
-                let max = feed_max(self.o.dialect, self.m.units, *mode);
-                let beyond = v.is_nan() || *v > max;
-                if beyond {
-                    if !std::mem::replace(&mut self.range_run, true) {
-                        diags.push(Diagnostic::new(
-                            Code::FeedClamped,
-                            Severity::Warning,
-                            Some(pt.line),
-                            format!(
-                                "F{v:.6e} is beyond what the {} F word takes ({max}): written F{max} from here on while it is, a slower move",
-                                self.o.dialect.name
-                            ),
-                        ));
-                    }
-                    if v.is_finite() {
-                        t *= *v / max;
-                    }
-                    *v = max;
-                }
-                self.range_run &= beyond;
+            if let Some(fw) = &mut feed {
+                self.within_word(fw, &mut t, pt.line, diags);
             }
             time = t;
         } else if let Some(p) = prev {
             time = self.rapid_time(p, to);
         }
         (feed, time)
+    }
+
+    /// F within what the word carries: one that rounds to zero is the smallest (an alarm on every
+    /// control), one beyond the word's range the largest; `t` (minutes) follows the F written.
+    fn within_word(&mut self, (mode, v): &mut (FeedMode, f64), t: &mut f64, line: u32, diags: &mut Vec<Diagnostic>) {
+        // A feed the F word rounds to zero is an alarm on every control (a move of days in
+        // inverse time, or a feed per minute below the word's last digit): the smallest F.
+        let step = self.f.fmt.feed_step(*mode);
+        if *v < 0.5 * step {
+            diags.push(Diagnostic::new(
+                Code::FeedClamped,
+                Severity::Warning,
+                Some(line),
+                format!("F{v:.2e} rounds to zero: the smallest F the word carries written (a faster move)"),
+            ));
+            if *v > 0.0 {
+                *t *= *v / step;
+            }
+            *v = step;
+        }
+        // Beyond the word's range: the control's largest F, the slower side (it overflowed
+        // to F0). A FEDRAT beyond it was an error where the CL said it; a short move at a
+        // fast feed in inverse time is only slowed (told once a run of such blocks).
+        let max = feed_max(self.o.dialect, self.m.units, *mode);
+        let beyond = v.is_nan() || *v > max;
+        if beyond {
+            if !std::mem::replace(&mut self.range_run, true) {
+                diags.push(Diagnostic::new(
+                    Code::FeedClamped,
+                    Severity::Warning,
+                    Some(line),
+                    format!(
+                        "F{v:.6e} is beyond what the {} F word takes ({max}): written F{max} from here on while it is, a slower move",
+                        self.o.dialect.name
+                    ),
+                ));
+            }
+            if v.is_finite() {
+                *t *= *v / max;
+            }
+            *v = max;
+        }
+        self.range_run &= beyond;
     }
 
     /// A rapid's time (minutes): each axis at its velocity and acceleration from rest to rest,
