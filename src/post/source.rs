@@ -345,32 +345,32 @@ impl<R: BufRead> Source<R> {
 
     /// SPINDL: a speed that turns (not S0) and that a spindle can (not S9223372036854775807).
     fn spindle(&mut self, c: SpindleCmd, line: u32) {
-        let c = self.spindle_rpm(c, line);
-        // A speed that rounds to S0 starts a spindle that does not turn, and the next feed
-        // drives a standing tool into the part (CATIA's tap demo: `SPINDL/0.3980,RPM`).
-        // A surface speed left unconverted is written as S too.
-        if let SpindleCmd::Rpm { speed, .. } | SpindleCmd::Surface { speed, .. } = c
-            && speed.round() < 1.0
-        {
-            self.diag(
-                Code::SpindleSpeed,
-                Severity::Error,
-                line,
-                format!("spindle speed {speed} rounds to S0: the spindle would not turn (it is stopped, no S0 written)"),
-            );
-        }
-        if let SpindleCmd::Rpm { speed, .. } | SpindleCmd::Surface { speed, .. } = c
-            && (speed.is_nan() || speed > super::MAX_SPINDLE_SPEED)
-        {
-            self.diag(
-                Code::WordRange,
-                Severity::Error,
-                line,
-                format!(
-                    "spindle speed {speed:e} is beyond any spindle: written S{}",
-                    super::MAX_SPINDLE_SPEED
-                ),
-            );
+        let mut c = self.spindle_rpm(c, line);
+        if let SpindleCmd::Rpm { speed, .. } | SpindleCmd::Surface { speed, .. } = &mut c {
+            if speed.is_nan() || speed.round() < 1.0 {
+                // S0 starts a spindle that does not turn, and the next feed drives a standing tool
+                // into the part (CATIA's tap demo: `SPINDL/0.3980,RPM`): an error, and the
+                // spindle stops (a cut after it is told as one with the spindle standing).
+                self.diag(
+                    Code::SpindleSpeed,
+                    Severity::Error,
+                    line,
+                    format!("spindle speed {speed} rounds to S0: the spindle would not turn (it is stopped, no S0 written)"),
+                );
+                c = SpindleCmd::Off;
+            } else if *speed > super::MAX_SPINDLE_SPEED {
+                // Bounded where it is told: the S written and any feed per revolution take it.
+                self.diag(
+                    Code::WordRange,
+                    Severity::Error,
+                    line,
+                    format!(
+                        "spindle speed {speed:e} is beyond any spindle: written S{}",
+                        super::MAX_SPINDLE_SPEED
+                    ),
+                );
+                *speed = super::MAX_SPINDLE_SPEED;
+            }
         }
         self.out.push_back(Item::Event(ProgEvent::Spindle(c)));
     }

@@ -5,7 +5,7 @@ use super::Emitter;
 use crate::cl::{CoolantCmd, Dwell, SpindleCmd};
 use crate::diag::{Code, Diagnostic, Severity};
 use crate::kinematics::Vec3;
-use crate::post::{Error, MAX_SPINDLE_SPEED, Mode, ProgEvent, Sink};
+use crate::post::{Error, Mode, ProgEvent, Sink};
 
 impl<S: Sink + ?Sized> Emitter<'_, S> {
     pub(in crate::post) fn program_start(&mut self) -> std::io::Result<()> {
@@ -217,9 +217,6 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             }
             SpindleCmd::Off => (None, true),
         };
-        // A speed that rounds to S0 turns nothing (an error where the CL said it): the spindle
-        // stops, and a cut after it is told as one with the spindle standing.
-        let speed = speed.filter(|v| v.round() >= 1.0);
         self.rpm = speed;
         self.spindle_restore = None;
         self.spindle_said_off = speed.is_none();
@@ -307,12 +304,6 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
     /// S and M3/M4 (TNC: a speed-only TOOL CALL, then the direction alone).
     pub(super) fn spindle_start(&mut self, speed: f64, cw: bool) -> std::io::Result<()> {
         let d = self.o.dialect;
-        // Told where the CL said it (source.rs); never a number that wraps.
-        let speed = if speed <= MAX_SPINDLE_SPEED {
-            speed
-        } else {
-            MAX_SPINDLE_SPEED
-        };
         let (t, s) = (self.tool.unwrap_or(1), speed.round() as i64);
         let dir = if cw { d.spindle_cw } else { d.spindle_ccw };
         if d.style == crate::nc::Style::Conversational {
