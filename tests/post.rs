@@ -613,6 +613,39 @@ fn a_bounded_rotary_unwinds_with_a_marked_retract() {
     assert!(c.min >= -360.0 - 1e-9 && c.max <= 360.0 + 1e-9, "C within travel: {c:?}");
 }
 
+/// A table with far more turns of travel than the planner lists windings (LinuxCNC's ±99 999°)
+/// winds on from where it stands: it once started at the lower limit (C−99 653°) and unwound
+/// back there after eight turns.
+#[test]
+fn a_long_travel_table_winds_on_from_where_it_stands() {
+    let text = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/machines/spinner-u5-620.toml"))
+        .unwrap()
+        .replace("max_feed = 18000.0", "min = -99999.0\nmax = 99999.0\nmax_feed = 18000.0");
+    let m = kinepost::machines::parse_profile(&text, "spinner-u5-620.toml", None)
+        .unwrap()
+        .machine;
+    let c = m.rotary_index('C').unwrap();
+    assert!(m.rotaries[c].limits.is_some());
+    let mut cl = String::from("UNITS/MM\nSPINDL/8000,CLW\nFEDRAT/1000,MMPM\n");
+    for k in 0..=20 * 72 {
+        let (a, t) = ((k as f64 * 5.0).to_radians(), 30f64.to_radians());
+        cl += &format!(
+            "GOTO/{:.4},{:.4},{:.4},{:.6},{:.6},{:.6}\n",
+            50.0 * a.cos(),
+            50.0 * a.sin(),
+            10.0 + k as f64 * 0.01,
+            t.sin() * a.cos(),
+            t.sin() * a.sin(),
+            t.cos()
+        );
+    }
+    let (sink, s) = run(&m, cl.as_bytes(), &Options::new(&m));
+    assert_eq!((s.errors, s.warnings), (0, 0), "{:?}", sink.diags);
+    let travel = s.axes.get(&'C').unwrap();
+    assert!(travel.max - travel.min < 7200.0 + 360.0, "twenty turns, no unwind: {travel:?}");
+    assert!(travel.min.abs().min(travel.max.abs()) < 360.0, "starts near 0: {travel:?}");
+}
+
 #[test]
 fn verify_replays_any_program_and_names_the_cl_lines_it_misses() {
     use kinepost::post::verify::{VerifyOptions, verify};

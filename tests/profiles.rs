@@ -110,6 +110,11 @@ fn limits_must_be_ordered_and_paired() {
         &["linear.X", "less than"],
     );
     says(&err("min = -90.0\nmax = 90.0", "min = -90.0"), &["rotary[0].min/max", "both"]);
+    // ±1e12° made IK list windings for minutes.
+    says(
+        &err("min = -90.0\nmax = 90.0", "min = -1e12\nmax = 1e12"),
+        &["rotary[0] (B).min/max", "99999.999"],
+    );
 }
 
 #[test]

@@ -12,7 +12,7 @@ mod subproblem;
 
 pub use angle_error::AngleError;
 pub use fk::{controlled_point, fk, fk_actual, machine_frame, tcp_fk, tcp_point, tool_axis};
-pub use model::{LINEAR_NAMES, Linear, Machine, MachineSpec, Mount, Rotary, Units};
+pub use model::{LINEAR_NAMES, Linear, Machine, MachineSpec, Mount, Rotary, Units, WINDINGS};
 pub use solver::{IkOptions, Solution, Solutions, free_rotary, hold_outer, ik, ik_into, outer_rotary, singular_direction};
 
 pub type Vec3 = nalgebra::Vector3<f64>;

@@ -128,52 +128,55 @@ impl Rotary {
         )
     }
 
-    /// Every commanded word within travel that makes the axis stand at `actual` modulo a full
-    /// turn, in increasing order. Unbounded axes get the one nearest `near`.
-    pub fn windings(&self, actual: f64, near: f64) -> ArrayVec<f64, 8> {
+    /// The commanded words within travel that make the axis stand at `actual` modulo a full
+    /// turn, in increasing order: every one for travel up to [`WINDINGS`] turns, else the
+    /// [`WINDINGS`] nearest `near` (the word the axis stands at), so that a long-travel table
+    /// winds on from where it is instead of from its lower limit. Unbounded axes get the one
+    /// nearest `near`.
+    pub fn windings(&self, actual: f64, near: f64) -> ArrayVec<f64, WINDINGS> {
         use std::f64::consts::TAU;
         let mut out = ArrayVec::new();
         if let Some(one) = self.one_winding(actual) {
             out.extend(one);
             return out;
         }
-        match self.limits {
-            None => {
-                let k = ((near - actual) / TAU).round();
-                out.push(self.word(actual + k * TAU));
-            }
-            Some((lo, hi)) if self.angle_error.is_none() => {
-                // The word is the angle: from a turn below the first in range upward until past
-                // the last (increasing with k), without floor/ceil (libm calls on baseline
-                // x86-64); a bounded count, so a NaN ends too. The same words as the loop below.
-                let start = (((lo - actual) / TAU) as i64).saturating_sub(2);
-                let turns = (((hi - lo) / TAU) as i64).saturating_add(5);
-                for k in start..=start.saturating_add(turns) {
-                    let w = actual + k as f64 * TAU;
-                    if w > hi + 1e-9 {
-                        break;
-                    }
-                    if self.within(w, 1e-9) && !out.is_full() {
-                        out.push(w.clamp(lo, hi));
-                    }
-                }
-            }
-            Some((lo, hi)) => {
-                // Windings of the actual angle, then mapped to words; angle error is bounded, so a
-                // margin of one extra turn each side is enough to catch every word in range.
-                let k0 = ((lo - actual) / TAU).floor() as i64 - 1;
-                let k1 = ((hi - actual) / TAU).ceil() as i64 + 1;
-                for k in k0..=k1 {
-                    let w = self.word(actual + k as f64 * TAU);
-                    if self.within(w, 1e-9) && !out.is_full() {
-                        out.push(w.clamp(lo, hi));
-                    }
+        let Some((lo, hi)) = self.limits else {
+            let k = ((near - actual) / TAU).round();
+            out.push(self.word(actual + k * TAU));
+            return out;
+        };
+        // Turns k from a turn below the first word in range to a turn past the last (angle
+        // error is bounded, so a turn of margin catches every word); truncation, not floor/ceil
+        // (libm calls on baseline x86-64).
+        if !actual.is_finite() {
+            return out;
+        }
+        let near = if near.is_finite() { near } else { actual };
+        let k_lo = ((lo - actual) / TAU) as i64 - 2;
+        let k_hi = ((hi - actual) / TAU) as i64 + 2;
+        let x = (near - actual) / TAU;
+        let k_near = if x >= 0.0 { (x + 0.5) as i64 } else { (x - 0.5) as i64 };
+        let span = WINDINGS as i64 + 4;
+        let first = (k_near - span / 2).min(k_hi - span).max(k_lo);
+        for k in first..=first.saturating_add(span).min(k_hi) {
+            let w = self.word(actual + k as f64 * TAU);
+            if self.within(w, 1e-9) {
+                out.push(w.clamp(lo, hi));
+                if out.is_full() {
+                    break;
                 }
             }
         }
         out
     }
 }
+
+/// The largest rotary travel a profile may state (degrees): the largest word a control carries.
+pub const MAX_ROTARY_WORD: f64 = 99_999.999;
+
+/// Words [`Rotary::windings`] lists at most: a table with more turns of travel than this gets
+/// the ones nearest where it stands.
+pub const WINDINGS: usize = 8;
 
 /// A validated machine. Construct with [`Machine::new`].
 #[derive(Clone, Debug)]
@@ -271,6 +274,14 @@ impl Machine {
                     return bad(
                         format!("{key}.min/max"),
                         format!("min ({}) must be less than max ({})", lo.to_degrees(), hi.to_degrees()),
+                    );
+                }
+                if lo.abs().max(hi.abs()) > MAX_ROTARY_WORD.to_radians() {
+                    return bad(
+                        format!("{key}.min/max"),
+                        format!(
+                            "beyond ±{MAX_ROTARY_WORD}°, the largest word a control carries: an axis that turns without end has neither"
+                        ),
                     );
                 }
             }
@@ -399,6 +410,33 @@ mod tests {
             // The planner asks for the single word first, and takes it as the whole answer.
             if let Some(one) = r.one_winding(actual) {
                 prop_assert_eq!(one.into_iter().collect::<Vec<_>>(), want);
+            }
+        }
+    }
+
+    proptest! {
+        /// On a table with hundreds of turns of travel, the words listed are consecutive turns
+        /// around the one nearest `near`.
+        #[test]
+        fn long_travel_lists_the_windings_around_near(near in -1700.0f64..1700.0, actual in -3.2f64..3.2) {
+            let span = 1745.0; // ±99 999°, in radians
+            let r = Rotary {
+                name: 'C',
+                mount: Mount::Table,
+                axis: Vec3::z(),
+                pivot: Vec3::zeros(),
+                limits: Some((-span, span)),
+                max_feed: None,
+                max_accel: None,
+                angle_error: None,
+            };
+            let ws = r.windings(actual, near);
+            prop_assert_eq!(ws.len(), WINDINGS);
+            let nearest = actual + ((near - actual) / TAU).round() * TAU;
+            prop_assert!(ws.iter().any(|w| (w - nearest).abs() < 1e-6), "{ws:?} lacks {nearest}");
+            prop_assert!(ws.iter().any(|w| *w < nearest - 1.0) && ws.iter().any(|w| *w > nearest + 1.0));
+            for p in ws.windows(2) {
+                prop_assert!((p[1] - p[0] - TAU).abs() < 1e-6);
             }
         }
     }

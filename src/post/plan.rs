@@ -9,7 +9,7 @@
 
 use super::source::{MotionPt, ProgEvent};
 pub use crate::kinematics::wrap;
-use crate::kinematics::{IkOptions, Machine, Setup, Solution, Solutions, Vec3, ik_into, tool_axis};
+use crate::kinematics::{IkOptions, Machine, Setup, Solution, Solutions, Vec3, WINDINGS, ik_into, tool_axis};
 use arrayvec::ArrayVec;
 use std::collections::VecDeque;
 
@@ -397,13 +397,15 @@ fn relax(
 }
 
 /// Candidates of one pose, into `out`: every IK solution, and for bounded rotaries every winding
-/// within travel (unbounded ones stay in (−π, π]: the emitter winds them).
+/// within travel, or on a long-travel table those nearest `near`, the words the best path so far
+/// stands at (unbounded ones stay in (−π, π]: the emitter winds them).
 fn candidates(
     m: &Machine,
     setup: &Setup,
     opt: &IkOptions,
     buf: &mut Solutions,
     pt: &MotionPt,
+    near: [Option<f64>; 3],
     out: &mut ArrayVec<Cand, MAX_CANDS>,
 ) -> Result<(), crate::kinematics::Error> {
     ik_into(m, &pt.pose, setup, opt, buf)?;
@@ -420,7 +422,7 @@ fn candidates(
         // multiply the candidates.
         let mut v = *s;
         let mut rot_ok = true;
-        let mut ws: [ArrayVec<f64, 8>; 3] = Default::default();
+        let mut ws: [ArrayVec<f64, WINDINGS>; 3] = Default::default();
         let mut listed = [false; 3];
         let mut combos = 1usize;
         for (i, r) in m.rotaries.iter().enumerate() {
@@ -431,7 +433,7 @@ fn candidates(
                 Some(Some(w)) => v.joints.rotary[i] = w,
                 Some(None) => rot_ok = false, // out of travel: kept, marked infeasible
                 None => {
-                    ws[i] = r.windings(s.actual[i], s.actual[i]);
+                    ws[i] = r.windings(s.actual[i], near[i].unwrap_or(s.actual[i]));
                     combos *= ws[i].len().max(1);
                     listed[i] = true;
                 }
@@ -473,6 +475,20 @@ fn candidates(
 }
 
 /// Column `k` (if any) to read and column `i` (another) to write.
+/// The rotary words of the cheapest candidate of `prev`, or of the committed root.
+fn best_words(prev: Option<&Column>, root: Option<&Cand>) -> [Option<f64>; 3] {
+    let best = match prev {
+        Some(p) => p
+            .cands
+            .iter()
+            .zip(&p.cost)
+            .min_by(|a, b| a.1.total_cmp(b.1))
+            .map(|(c, _)| c),
+        None => root,
+    };
+    best.map_or([None; 3], |c| c.sol.joints.rotary.map(Some))
+}
+
 fn two(v: &mut [Column], k: Option<usize>, i: usize) -> (Option<&Column>, &mut Column) {
     match k {
         None => (None, &mut v[i]),
@@ -542,7 +558,8 @@ impl<'m> Planner<'m> {
         self.pushed += 1;
         self.points += 1;
         let (prev, col) = two(&mut self.cols, prev, i);
-        match candidates(self.m, &self.setup, &self.opt, &mut self.buf, &col.pt, &mut col.cands) {
+        let near = best_words(prev, self.root.as_ref().map(|(c, _)| c));
+        match candidates(self.m, &self.setup, &self.opt, &mut self.buf, &col.pt, near, &mut col.cands) {
             Ok(()) if col.cands.is_empty() => {
                 col.error = Some(Box::new(crate::kinematics::Error::NoSolution {
                     reason: "no solution".into(),
