@@ -333,6 +333,17 @@ fn post_exits_0_clean_1_with_errors_2_refused() {
     );
     let (code, _, err) = post(&bad, &["--strict"]);
     assert_eq!(code, 2, "{err}");
+    let text = std::fs::read_to_string(&nc).unwrap();
+    let last = text.lines().last().unwrap();
+    assert!(last.starts_with("(KINEPOST: NOT FIT TO RUN, CUT SHORT: ERROR[LIMIT_VIOLATION] LINE 5"), "{text}");
+    // Over its time bound: refused, and the file cut short says so.
+    let (code, _, err) = post(&good, &["--max-post-seconds", "0.000001"]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("time bound"), "{err}");
+    let text = std::fs::read_to_string(&nc).unwrap();
+    assert!(text.contains("(KINEPOST: NOT FIT TO RUN, CUT SHORT: TIME BOUND"), "{text}");
+    let (code, _, err) = post(&good, &["--max-post-seconds", "-1"]);
+    assert_eq!(code, 2, "{err}");
     let (code, _, err) = post(dir.join("missing.cl").to_str().unwrap(), &[]);
     assert_eq!(code, 2, "{err}");
     std::fs::remove_dir_all(&dir).unwrap();

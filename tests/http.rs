@@ -407,7 +407,7 @@ async fn an_error_after_streaming_began_ends_the_program_explicitly() {
     assert_eq!(r.status(), 200, "streaming had begun");
     let text = r.text().await.unwrap();
     let last = text.trim_end().lines().last().unwrap();
-    assert!(last.starts_with("(ERROR:") && last.contains("line 3003"), "{last}");
+    assert!(last.starts_with("(ERROR:") && last.contains("LINE 3003"), "{last}");
     assert!(!text.contains("M30"), "a failed program never ends as if complete");
     let r = reqwest::Client::new()
         .post(format!("{base}/v1/post?machine=vmc-3axis&strict=true"))
@@ -623,4 +623,46 @@ async fn fk_ik_reachability_and_fits_over_http() {
         cal["offsets"]
     );
     assert!(cal["proposed_profile"].as_str().unwrap().contains("0.002"));
+}
+
+/// A post over the server's budget (blocks per CL byte beyond a floor) ends where the bound
+/// falls, saying so in each form: the NDJSON stream's error record, the text's error comment
+/// without a program end, and a job that fails with the reason.
+#[tokio::test]
+async fn a_post_over_the_servers_budget_ends_saying_so() {
+    let budget = kinepost::post::Budget {
+        floor_blocks: 300,
+        blocks_per_byte: 0,
+        seconds: f64::INFINITY,
+    };
+    let base = server(Config { post_budget: budget, ..cfg() }).await;
+    let c = reqwest::Client::new();
+    let cl = common::generated("spinner-u5-620", 2000, 3);
+    let post = |accept: &'static str| {
+        c.post(format!("{base}/v1/post?machine=spinner-u5-620"))
+            .header("content-type", "text/plain")
+            .header("accept", accept)
+            .body(cl.clone())
+            .send()
+    };
+    let nd = post("application/x-ndjson").await.unwrap().text().await.unwrap();
+    let last: serde_json::Value = serde_json::from_str(nd.lines().last().unwrap()).unwrap();
+    assert_eq!(last["error"]["code"], "over_budget", "{last}");
+    assert!(last["error"]["detail"].as_str().unwrap().contains("output bound"), "{last}");
+    assert!(nd.lines().count() < 700, "stopped near the bound: {} records", nd.lines().count());
+    let text = post("text/plain").await.unwrap().text().await.unwrap();
+    assert!(text.trim_end().ends_with(')') && text.contains("(ERROR: OUTPUT BOUND"), "{text}");
+    assert!(!text.contains("M30"), "no program end after the bound");
+    let r = c
+        .post(format!("{base}/v1/jobs?machine=spinner-u5-620"))
+        .header("content-type", "text/plain")
+        .body(cl.clone())
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 202);
+    let id = r.json::<serde_json::Value>().await.unwrap()["id"].as_str().unwrap().to_string();
+    let j = common::wait_finished(&c, &base, &id, std::time::Duration::from_secs(60)).await;
+    assert_eq!(j["state"], "failed", "{j}");
+    assert!(j["error"].as_str().unwrap().contains("output bound"), "{j}");
 }

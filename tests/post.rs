@@ -613,6 +613,59 @@ fn a_bounded_rotary_unwinds_with_a_marked_retract() {
     assert!(c.min >= -360.0 - 1e-9 && c.max <= 360.0 + 1e-9, "C within travel: {c:?}");
 }
 
+/// `turns` of a 30°-tilted tool axis swept about Z around a rising circle: every GOTO turns C by
+/// 5°, so the table winds on and each segment is subdivided.
+fn spiral(turns: usize) -> String {
+    let mut cl = String::from("UNITS/MM\nSPINDL/8000,CLW\nFEDRAT/1000,MMPM\n");
+    for k in 0..=turns * 72 {
+        let (a, t) = ((k as f64 * 5.0).to_radians(), 30f64.to_radians());
+        cl += &format!(
+            "GOTO/{:.4},{:.4},{:.4},{:.6},{:.6},{:.6}\n",
+            50.0 * a.cos(),
+            50.0 * a.sin(),
+            10.0 + k as f64 * 0.01,
+            t.sin() * a.cos(),
+            t.sin() * a.sin(),
+            t.cos()
+        );
+    }
+    cl
+}
+
+/// A post stops at its budget (blocks per CL byte read beyond a floor, seconds) with an error
+/// saying which, and writes nothing more; within it, nothing changes.
+#[test]
+fn a_post_stops_at_its_output_and_time_budget() {
+    use kinepost::post::Budget;
+    let m = machine("spinner-u5-620");
+    let cl = spiral(4);
+    let mut o = Options::new(&m);
+    let (_, whole) = run(&m, cl.as_bytes(), &o);
+    assert!(whole.blocks > 1000, "{}", whole.blocks);
+    let post_with = |b: Budget| {
+        let mut o = o.clone();
+        o.budget = b;
+        let mut sink = Collect::default();
+        (post::post(cl.as_bytes(), &m, &o, &mut sink), sink)
+    };
+    let tight = Budget { floor_blocks: 500, blocks_per_byte: 0, seconds: f64::INFINITY };
+    let (r, sink) = post_with(tight);
+    let Err(post::Error::Budget(why)) = r else { panic!("{r:?}") };
+    assert!(why.contains("output bound") && why.contains("500"), "{why}");
+    let written = sink.nc.lines().filter(|l| l.starts_with('X') || l.starts_with("G")).count();
+    assert!((500..520).contains(&written), "stops at the bound: {written} lines");
+    // One block a byte is far more than this path needs (about one block in ten bytes).
+    let per_byte = Budget { floor_blocks: 500, blocks_per_byte: 1, seconds: f64::INFINITY };
+    let (r, _) = post_with(per_byte);
+    assert_eq!(r.unwrap().blocks, whole.blocks);
+    let (r, _) = post_with(Budget { seconds: 0.0, ..Budget::default() });
+    let Err(post::Error::Budget(why)) = r else { panic!("{r:?}") };
+    assert!(why.contains("time bound"), "{why}");
+    o.budget = Budget::new(0, 0.0).unwrap();
+    assert_eq!(run(&m, cl.as_bytes(), &o).1.blocks, whole.blocks, "0: no bound");
+    assert!(Budget::new(8, f64::NAN).is_err() && Budget::new(8, -1.0).is_err());
+}
+
 /// A table with far more turns of travel than the planner lists windings (LinuxCNC's ±99 999°)
 /// winds on from where it stands: it once started at the lower limit (C−99 653°) and unwound
 /// back there after eight turns.
@@ -626,20 +679,7 @@ fn a_long_travel_table_winds_on_from_where_it_stands() {
         .machine;
     let c = m.rotary_index('C').unwrap();
     assert!(m.rotaries[c].limits.is_some());
-    let mut cl = String::from("UNITS/MM\nSPINDL/8000,CLW\nFEDRAT/1000,MMPM\n");
-    for k in 0..=20 * 72 {
-        let (a, t) = ((k as f64 * 5.0).to_radians(), 30f64.to_radians());
-        cl += &format!(
-            "GOTO/{:.4},{:.4},{:.4},{:.6},{:.6},{:.6}\n",
-            50.0 * a.cos(),
-            50.0 * a.sin(),
-            10.0 + k as f64 * 0.01,
-            t.sin() * a.cos(),
-            t.sin() * a.sin(),
-            t.cos()
-        );
-    }
-    let (sink, s) = run(&m, cl.as_bytes(), &Options::new(&m));
+    let (sink, s) = run(&m, spiral(20).as_bytes(), &Options::new(&m));
     assert_eq!((s.errors, s.warnings), (0, 0), "{:?}", sink.diags);
     let travel = s.axes.get(&'C').unwrap();
     assert!(travel.max - travel.min < 7200.0 + 360.0, "twenty turns, no unwind: {travel:?}");

@@ -356,6 +356,26 @@ pub struct ServeArgs {
     /// running then resume on the next start).
     #[arg(long, env = "KINEPOST_SHUTDOWN_GRACE", default_value_t = 60.0, allow_hyphen_values = true)]
     pub shutdown_grace: f64,
+    #[command(flatten)]
+    pub budget: BudgetArgs,
+}
+
+/// What one post may cost (the server's streams and jobs, the CLI's run).
+#[derive(clap::Args, Debug, Clone)]
+pub struct BudgetArgs {
+    /// Blocks a post may write per CL byte read, beyond the 100 000 any program gets (0: no
+    /// bound): a few bytes of helix at a fine tolerance cannot write gigabytes.
+    #[arg(long, env = "KINEPOST_MAX_BLOCKS_PER_BYTE", default_value_t = 8)]
+    pub max_blocks_per_byte: u64,
+    /// Seconds a post may run (0: no bound).
+    #[arg(long, env = "KINEPOST_MAX_POST_SECONDS", default_value_t = 3600.0, allow_hyphen_values = true)]
+    pub max_post_seconds: f64,
+}
+
+impl BudgetArgs {
+    fn budget(&self) -> Result<kinepost::post::Budget, String> {
+        kinepost::post::Budget::new(self.max_blocks_per_byte, self.max_post_seconds)
+    }
 }
 
 /// `--mode`: joint or tcp.
@@ -418,6 +438,8 @@ pub struct PostArgs {
     /// Stop at the first error (bad record, unreachable pose, limit) with a non-zero exit.
     #[arg(long)]
     pub strict: bool,
+    #[command(flatten)]
+    pub budget: BudgetArgs,
     /// Orientation tolerance in degrees near a singular direction: the free rotary is held
     /// while the tool axis stays within it of the CL orientation (e.g. 0.5 for ball-end tools).
     /// Default 0: exact.
@@ -593,6 +615,7 @@ fn serve(cli: &Cli, a: &ServeArgs) -> Result<(), String> {
         spool_dir: a.spool_dir.clone(),
         job_lease: seconds("job-lease-secs", a.job_lease_secs, 1.0, 86400.0, 1.0)?,
         shutdown_grace: seconds("shutdown-grace", a.shutdown_grace, 0.0, 86400.0, 1.0)?,
+        post_budget: a.budget.budget()?,
     };
     let rt = tokio::runtime::Runtime::new().map_err(|e| e.to_string())?;
     let r = rt.block_on(kinepost::http::serve(cfg));
@@ -724,7 +747,7 @@ fn run(cli: Cli) -> Result<(), Failure> {
 
 fn post_cmd(p: &machines::Profile, a: &PostArgs) -> Result<(), Failure> {
     let m = &p.machine;
-    use kinepost::post::{self, Settings};
+    use kinepost::post::{self, Settings, Sink};
     use std::io::Write;
     let settings = Settings {
         machine: Some(a.machine.clone()),
@@ -747,6 +770,7 @@ fn post_cmd(p: &machines::Profile, a: &PostArgs) -> Result<(), Failure> {
         spindle_speed: a.spindle_speed,
     };
     let mut o = settings.profile_options(p)?;
+    o.budget = a.budget.budget()?;
     o.header.push(format!("DATE {} UTC", utc_now()));
     o.header.push(format!(
         "SOURCE {}",
@@ -769,6 +793,10 @@ fn post_cmd(p: &machines::Profile, a: &PostArgs) -> Result<(), Failure> {
     let mut sink = kinepost::output::FileSink::new(out, diag);
     sink.echo_warnings = true;
     let res = post::post(input, m, &o, &mut sink);
+    if let Err(e) = &res {
+        // Cut short: the file says so where the machinist reads it.
+        let _ = sink.line(&o.dialect.comment_line(&format!("KINEPOST: NOT FIT TO RUN, CUT SHORT: {e}")), None);
+    }
     sink.flush().map_err(|e| e.to_string())?;
     let s = res.map_err(|e| e.to_string())?;
     let rot: Vec<String> = m

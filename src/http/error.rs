@@ -49,6 +49,9 @@ pub enum ApiError {
     /// The server's disk is full: the request was not accepted (retry later or elsewhere).
     #[error("{0}")]
     InsufficientStorage(String),
+    /// The post went over the server's bound on output per CL byte or on time.
+    #[error("{0}")]
+    OverBudget(String),
 }
 
 /// The problem document (RFC 9457) with kinepost's extensions.
@@ -102,6 +105,7 @@ impl ApiError {
                 "insufficient-storage",
                 "Insufficient storage",
             ),
+            ApiError::OverBudget(_) => (StatusCode::UNPROCESSABLE_ENTITY, "over-budget", "Post over its bound"),
         };
         let (line, column, code) = match self {
             ApiError::BadRecord { line, column, code, .. } => (*line, *column, Some(code.to_string())),

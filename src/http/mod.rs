@@ -64,6 +64,8 @@ pub struct Config {
     /// After SIGTERM, how long requests in flight may take before the server stops anyway (a
     /// client trickling an upload must not keep it up for ever; accepted jobs resume on restart).
     pub shutdown_grace: Duration,
+    /// What one post (stream or job) may cost: output per CL byte read, and seconds.
+    pub post_budget: crate::post::Budget,
 }
 
 impl Config {
@@ -78,6 +80,7 @@ impl Config {
             database_url: self.database_url.clone(),
             spool_dir: self.spool_dir.clone(),
             lease: self.job_lease,
+            budget: self.post_budget,
         }
     }
 }
@@ -102,6 +105,7 @@ impl Default for Config {
             spool_dir: None,
             job_lease: Duration::from_secs(30),
             shutdown_grace: Duration::from_secs(60),
+            post_budget: crate::post::Budget::default(),
         }
     }
 }

@@ -157,6 +157,8 @@ struct ChannelSink {
     buf: Vec<u8>,
     ndjson: bool,
     started: bool,
+    /// Whose comment syntax the text stream's closing error is written in.
+    dialect: &'static crate::nc::Dialect,
 }
 
 impl ChannelSink {
@@ -187,8 +189,9 @@ impl ChannelSink {
         if self.ndjson {
             let _ = self.record(&Record::Error { error: body });
         } else {
-            self.buf
-                .extend_from_slice(format!("(ERROR: {})\n", err.to_string().replace(['(', ')'], " ")).as_bytes());
+            let line = self.dialect.comment_line(&format!("ERROR: {err}"));
+            self.buf.extend_from_slice(line.as_bytes());
+            self.buf.push(b'\n');
         }
         let _ = self.send(true);
     }
@@ -229,6 +232,7 @@ fn engine_error(e: post::Error) -> ApiError {
         },
         post::Error::Read(e) => upload_error(e.to_string()),
         post::Error::Io(e) => ApiError::Internal(e.to_string()),
+        post::Error::Budget(why) => ApiError::OverBudget(why),
     }
 }
 
@@ -253,7 +257,7 @@ pub(super) fn upload_error(text: String) -> ApiError {
         (status = 404, description = "Unknown machine", body = super::error::Problem, content_type = "application/problem+json"),
         (status = 413, description = "Upload too large", body = super::error::Problem, content_type = "application/problem+json"),
         (status = 415, description = "Unsupported media type", body = super::error::Problem, content_type = "application/problem+json"),
-        (status = 422, description = "Bad CL record (strict mode) with line and column", body = super::error::Problem, content_type = "application/problem+json"),
+        (status = 422, description = "Bad CL record (strict mode) with line and column, or over the server's bound on output or time before the first byte (`over-budget`)", body = super::error::Problem, content_type = "application/problem+json"),
     ),
     tag = "post"
 )]
@@ -266,6 +270,7 @@ pub async fn post_cl(
     let (params, filename, body) = upload(&st, query, req).await?;
     let profile = params.profile(&st)?.profile;
     let mut opts = params.settings().profile_options(&profile).map_err(ApiError::BadParameter)?;
+    opts.budget = st.config.post_budget;
     opts.header.push(format!("DATE {} UTC", crate::output::utc_now()));
     if let Some(f) = &filename {
         opts.header.push(format!("SOURCE {f}"));
@@ -283,6 +288,7 @@ pub async fn post_cl(
             buf: Vec::with_capacity(PRELUDE + 4096),
             ndjson,
             started: false,
+            dialect: opts.dialect,
         };
         if with_header {
             let h = Header {

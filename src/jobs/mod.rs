@@ -69,6 +69,8 @@ pub struct Config {
     pub spool_dir: Option<PathBuf>,
     /// A running job whose node has not reported for this long is taken over by another.
     pub lease: Duration,
+    /// What one job's post may cost (output per CL byte, seconds).
+    pub budget: crate::post::Budget,
 }
 
 /// The store plus the workers' shared state: which jobs run here, and their cancel flags.
@@ -226,7 +228,8 @@ impl Queue {
         let task = {
             let (job, cancel, progress) = (job.clone(), cancel.clone(), progress.clone());
             let spool = self.store.spool().to_path_buf();
-            tokio::task::spawn_blocking(move || execute(profile?, &spool, &job, &cancel, &progress))
+            let budget = self.config.budget;
+            tokio::task::spawn_blocking(move || execute(profile?, &spool, &job, budget, &cancel, &progress))
         };
         tokio::pin!(task);
         let result = loop {
@@ -339,11 +342,13 @@ fn execute(
     profile: Arc<Profile>,
     spool: &std::path::Path,
     job: &Job,
+    budget: post::Budget,
     cancel: &AtomicBool,
     progress: &Arc<Progress>,
 ) -> Result<Summary, String> {
     let paths = store::Paths::new(spool, &job.id, job.attempts);
     let mut opts = job.settings.profile_options(&profile)?;
+    opts.budget = budget;
     opts.header.push(format!("JOB {}", job.id));
     if let Some(f) = &job.filename {
         opts.header.push(format!("SOURCE {f}"));

@@ -425,6 +425,29 @@ pub const AXIS_LETTERS: [char; 6] = {
     letters
 };
 
+/// `text` as one comment in `d`'s syntax, appended to `buf`: nothing in it can end the comment
+/// early or open another (parentheses, `;`, control characters), at most 120 characters.
+fn push_comment(buf: &mut String, d: &Dialect, text: &str) {
+    buf.push_str(d.comment.0);
+    for c in text.chars().take(120) {
+        buf.push(if c == ')' || c == '(' || c == ';' || c.is_control() {
+            ' '
+        } else {
+            c.to_ascii_uppercase()
+        });
+    }
+    buf.push_str(d.comment.1);
+}
+
+impl Dialect {
+    /// A comment line outside any program's numbering: the last line of a program cut short.
+    pub fn comment_line(&self, text: &str) -> String {
+        let mut s = String::new();
+        push_comment(&mut s, self, text);
+        s
+    }
+}
+
 impl Formatter {
     pub fn new(d: &'static Dialect, fmt: Formats, sequence_numbers: bool) -> Formatter {
         let numbered = d.style == Style::Conversational || (sequence_numbers && d.block_numbers);
@@ -484,18 +507,7 @@ impl Formatter {
         } else {
             self.buf.clear();
         }
-        self.buf.push_str(self.d.comment.0);
-        let close = self.d.comment.1.chars().next();
-        for c in text.chars().take(120) {
-            // Nothing that could end the comment early or open another: parentheses and `;`.
-            let _ = close;
-            self.buf.push(if c == ')' || c == '(' || c == ';' || c.is_control() {
-                ' '
-            } else {
-                c.to_ascii_uppercase()
-            });
-        }
-        self.buf.push_str(self.d.comment.1);
+        push_comment(&mut self.buf, self.d, text);
         &self.buf
     }
 

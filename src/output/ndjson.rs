@@ -165,6 +165,10 @@ impl ErrorBody {
                 column: d.column,
                 code: Some(d.code.as_str()),
             },
+            crate::post::Error::Budget(why) => ErrorBody {
+                code: Some("over_budget"),
+                ..ErrorBody::new(why.clone())
+            },
             e => ErrorBody::new(e.to_string()),
         }
     }

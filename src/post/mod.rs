@@ -8,6 +8,7 @@
 //! through FK from the words as written (rounded) and compared with the pose it was meant to
 //! reach: the summary carries the largest deviation, and a block over tolerance is an error.
 
+mod budget;
 mod emit;
 mod lookahead;
 mod plan;
@@ -17,7 +18,7 @@ mod source;
 pub mod verify;
 
 pub use emit::linearize::{NONLINEAR_SAMPLES, seg_dist};
-pub use settings::{MAX_SPINDLE_SPEED, Mode, Options, Settings, parse_triple};
+pub use settings::{Budget, MAX_SPINDLE_SPEED, Mode, Options, Settings, parse_triple};
 pub use sink::{AxisStats, AxisWords, BlockInfo, Sink, Summary, TextSink};
 pub use source::{ArcSpec, Hole, HolePart, Item, MotionPt, ProgEvent, Source};
 
@@ -38,10 +39,23 @@ pub enum Error {
     /// Strict mode: the first error diagnostic ends the run.
     #[error("{0}")]
     Strict(Diagnostic),
+    /// The run went over its [`Budget`]: what it wrote before is all it writes.
+    #[error("{0}")]
+    Budget(String),
 }
 
 /// Post-processes CL from `input` for machine `m` into `sink`.
 pub fn post<R: BufRead, S: Sink + ?Sized>(input: R, m: &Machine, o: &Options, sink: &mut S) -> Result<Summary, Error> {
+    let read = std::rc::Rc::new(std::cell::Cell::new(0));
+    let mut sink = budget::Metered::new(sink, o.budget, read.clone());
+    let r = run(budget::Counted(input, read), m, o, &mut sink);
+    match (r, sink.tripped) {
+        (Err(_), Some(why)) => Err(Error::Budget(why)),
+        (r, _) => r,
+    }
+}
+
+fn run<R: BufRead, S: Sink + ?Sized>(input: R, m: &Machine, o: &Options, sink: &mut S) -> Result<Summary, Error> {
     let mut src = Source::new(input, m.units, o.cl_units, o.strict)?;
     src.canned_cycles = o.canned_cycles;
     src.feed_max = emit::feed_max(o.dialect, m.units, crate::nc::FeedMode::PerMinute);

@@ -57,6 +57,60 @@ pub struct Options {
     /// CLSF listings carry no SPINDL: its post takes the speed from the operation). `None`: the
     /// CL's own, and a cut with none is a `spindle_stopped` warning.
     pub spindle_speed: Option<f64>,
+    /// What the run may cost: set by whoever runs the engine for others (the server, the CLI's
+    /// flags), never by a request.
+    pub budget: Budget,
+}
+
+/// What one post may cost, whatever its input: blocks written per CL byte read beyond a floor
+/// every program gets, and seconds. A few bytes of helix at a fine tolerance once streamed
+/// 460 MB of NC, and 170 bytes on a three-rotary machine took three minutes of CPU.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Budget {
+    /// Blocks any program may write, however short its CL.
+    pub floor_blocks: u64,
+    /// Blocks more per CL byte read; `u64::MAX`: no bound.
+    pub blocks_per_byte: u64,
+    /// Seconds a run may take; infinite: no bound.
+    pub seconds: f64,
+}
+
+impl Default for Budget {
+    fn default() -> Self {
+        // A dense 5-axis CL writes about 0.1 block a byte; one arc record of a few dozen bytes
+        // linearized at the finest tolerance, a few thousand blocks: the floor covers that.
+        Budget {
+            floor_blocks: 100_000,
+            blocks_per_byte: 8,
+            seconds: 3600.0,
+        }
+    }
+}
+
+impl Budget {
+    /// From flags; 0 for either means no bound.
+    pub fn new(blocks_per_byte: u64, seconds: f64) -> Result<Budget, String> {
+        if !(seconds.is_finite() && seconds >= 0.0) {
+            return Err(format!("a post's time bound must be a number of seconds, 0 for none, not {seconds}"));
+        }
+        Ok(Budget {
+            blocks_per_byte: if blocks_per_byte == 0 { u64::MAX } else { blocks_per_byte },
+            seconds: if seconds == 0.0 { f64::INFINITY } else { seconds },
+            ..Budget::default()
+        })
+    }
+
+    /// Why a run that wrote `blocks` from `bytes` of CL in `secs` must stop, if it must.
+    pub fn exceeded(&self, blocks: u64, bytes: u64, secs: f64) -> Option<String> {
+        let most = self.floor_blocks.saturating_add(self.blocks_per_byte.saturating_mul(bytes));
+        if blocks > most {
+            return Some(format!(
+                "output bound: {blocks} blocks from {bytes} bytes of CL, beyond {} and {} a byte; a coarser tolerance writes fewer",
+                self.floor_blocks, self.blocks_per_byte
+            ));
+        }
+        (secs > self.seconds).then(|| format!("time bound: the post ran over {} s", self.seconds))
+    }
 }
 
 impl Options {
@@ -82,6 +136,7 @@ impl Options {
             tilted_planes: false,
             work_coordinates: None,
             spindle_speed: None,
+            budget: Budget::default(),
         }
     }
 
