@@ -48,6 +48,8 @@ pub struct Reader<R> {
     done: bool,
     /// The byte order mark was looked for (once, before the first line).
     started: bool,
+    /// Bytes of input consumed: what a post's output budget is counted against.
+    consumed: u64,
 }
 
 impl<R: BufRead> Reader<R> {
@@ -63,11 +65,16 @@ impl<R: BufRead> Reader<R> {
             queue: Default::default(),
             done: false,
             started: false,
+            consumed: 0,
         }
     }
 
     pub fn line(&self) -> u32 {
         self.line_no
+    }
+
+    pub fn bytes_read(&self) -> u64 {
+        self.consumed
     }
 
     /// Reads one physical line into `raw` without letting a huge line grow memory: past
@@ -93,6 +100,7 @@ impl<R: BufRead> Reader<R> {
                 self.raw.extend_from_slice(&buf[..take]);
             }
             self.input.consume(take);
+            self.consumed += take as u64;
             if end {
                 return Ok((true, overflow));
             }
@@ -190,6 +198,7 @@ impl<R: BufRead> Reader<R> {
                 break;
             }
             self.input.consume(k);
+            self.consumed += k as u64;
             matched += k;
             if matched == 3 {
                 return Ok(());
@@ -220,6 +229,7 @@ impl<R: BufRead> Reader<R> {
         // A `$` anywhere (continuation, comment) is outside fast_goto's grammar: it declines.
         let record = fast::fast_goto(buf[..end].trim_ascii())?;
         self.input.consume(end + 1);
+        self.consumed += (end + 1) as u64;
         self.line_no += 1;
         Some(Statement {
             line: self.line_no,

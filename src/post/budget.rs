@@ -1,41 +1,17 @@
-//! What one post may cost, enforced where input is read and output written: the reader counts
-//! the CL bytes consumed, and the sink the engine writes through stops the run at the
-//! [`Budget`]'s bound (output records per byte read, seconds).
+//! What one post may cost, enforced where output is written: the sink the engine writes through
+//! stops the run at the [`Budget`]'s bound (output records per CL byte read, seconds).
 
 use super::{BlockInfo, Budget, Sink, Summary};
 use crate::diag::Diagnostic;
 use crate::kinematics::Pose;
-use std::cell::Cell;
-use std::io::{BufRead, Read};
-use std::rc::Rc;
 use std::time::Instant;
-
-/// The input, counting the bytes consumed.
-pub(super) struct Counted<R>(pub R, pub Rc<Cell<u64>>);
-
-impl<R: Read> Read for Counted<R> {
-    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
-        let n = self.0.read(buf)?;
-        self.1.set(self.1.get() + n as u64);
-        Ok(n)
-    }
-}
-
-impl<R: BufRead> BufRead for Counted<R> {
-    fn fill_buf(&mut self) -> std::io::Result<&[u8]> {
-        self.0.fill_buf()
-    }
-    fn consume(&mut self, n: usize) {
-        self.1.set(self.1.get() + n as u64);
-        self.0.consume(n);
-    }
-}
 
 /// The caller's sink, behind the budget: past it, every write fails and `tripped` says why.
 pub(super) struct Metered<'a, S: Sink + ?Sized> {
     inner: &'a mut S,
     budget: Budget,
-    read: Rc<Cell<u64>>,
+    /// CL bytes read so far, as the driver last said.
+    pub read: u64,
     started: Instant,
     /// Lines and diagnostics written, and the count at which the bound is next worked out.
     written: u64,
@@ -44,11 +20,11 @@ pub(super) struct Metered<'a, S: Sink + ?Sized> {
 }
 
 impl<'a, S: Sink + ?Sized> Metered<'a, S> {
-    pub fn new(inner: &'a mut S, budget: Budget, read: Rc<Cell<u64>>) -> Self {
+    pub fn new(inner: &'a mut S, budget: Budget) -> Self {
         Metered {
             inner,
             budget,
-            read,
+            read: 0,
             started: Instant::now(),
             written: 0,
             next_check: 0,
@@ -68,7 +44,7 @@ impl<'a, S: Sink + ?Sized> Metered<'a, S> {
         }
         self.next_check = self.written + 256;
         let secs = self.started.elapsed().as_secs_f64();
-        match self.budget.exceeded(self.written, self.read.get(), secs) {
+        match self.budget.exceeded(self.written, self.read, secs) {
             Some(why) => {
                 self.tripped = Some(why.clone());
                 Err(std::io::Error::other(why))

@@ -46,16 +46,20 @@ pub enum Error {
 
 /// Post-processes CL from `input` for machine `m` into `sink`.
 pub fn post<R: BufRead, S: Sink + ?Sized>(input: R, m: &Machine, o: &Options, sink: &mut S) -> Result<Summary, Error> {
-    let read = std::rc::Rc::new(std::cell::Cell::new(0));
-    let mut sink = budget::Metered::new(sink, o.budget, read.clone());
-    let r = run(budget::Counted(input, read), m, o, &mut sink);
+    let mut sink = budget::Metered::new(sink, o.budget);
+    let r = run(input, m, o, &mut sink);
     match (r, sink.tripped) {
         (Err(_), Some(why)) => Err(Error::Budget(why)),
         (r, _) => r,
     }
 }
 
-fn run<R: BufRead, S: Sink + ?Sized>(input: R, m: &Machine, o: &Options, sink: &mut S) -> Result<Summary, Error> {
+fn run<R: BufRead, S: Sink + ?Sized>(
+    input: R,
+    m: &Machine,
+    o: &Options,
+    sink: &mut budget::Metered<'_, S>,
+) -> Result<Summary, Error> {
     let mut src = Source::new(input, m.units, o.cl_units, o.strict)?;
     src.canned_cycles = o.canned_cycles;
     src.feed_max = emit::feed_max(o.dialect, m.units, crate::nc::FeedMode::PerMinute);
@@ -67,6 +71,7 @@ fn run<R: BufRead, S: Sink + ?Sized>(input: R, m: &Machine, o: &Options, sink: &
     let mut failed: Option<Error> = None;
     loop {
         let item = src.next_item()?;
+        e.sink.read = src.bytes_read();
         let Some(item) = item else { break };
         match item {
             Item::Motion(pt) => planner.push_point(pt, &mut |x| deliver(&mut e, &mut pending, &mut failed, x)),

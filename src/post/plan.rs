@@ -405,7 +405,7 @@ fn candidates(
     opt: &IkOptions,
     buf: &mut Solutions,
     pt: &MotionPt,
-    near: [Option<f64>; 3],
+    mut near: impl FnMut() -> [Option<f64>; 3],
     out: &mut ArrayVec<Cand, MAX_CANDS>,
 ) -> Result<(), crate::kinematics::Error> {
     ik_into(m, &pt.pose, setup, opt, buf)?;
@@ -433,7 +433,7 @@ fn candidates(
                 Some(Some(w)) => v.joints.rotary[i] = w,
                 Some(None) => rot_ok = false, // out of travel: kept, marked infeasible
                 None => {
-                    ws[i] = r.windings(s.actual[i], near[i].unwrap_or(s.actual[i]));
+                    ws[i] = r.windings(s.actual[i], near()[i].unwrap_or(s.actual[i]));
                     combos *= ws[i].len().max(1);
                     listed[i] = true;
                 }
@@ -558,7 +558,9 @@ impl<'m> Planner<'m> {
         self.pushed += 1;
         self.points += 1;
         let (prev, col) = two(&mut self.cols, prev, i);
-        let near = best_words(prev, self.root.as_ref().map(|(c, _)| c));
+        let mut known = None;
+        let root = self.root.as_ref().map(|(c, _)| c);
+        let near = || *known.get_or_insert_with(|| best_words(prev, root));
         match candidates(self.m, &self.setup, &self.opt, &mut self.buf, &col.pt, near, &mut col.cands) {
             Ok(()) if col.cands.is_empty() => {
                 col.error = Some(Box::new(crate::kinematics::Error::NoSolution {

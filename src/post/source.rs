@@ -206,6 +206,11 @@ impl<R: BufRead> Source<R> {
         })
     }
 
+    /// CL bytes consumed so far.
+    pub fn bytes_read(&self) -> u64 {
+        self.reader.bytes_read()
+    }
+
     pub fn next_item(&mut self) -> Result<Option<Item>, Error> {
         loop {
             if let Some(i) = self.out.pop_front() {
