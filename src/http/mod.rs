@@ -5,6 +5,7 @@
 
 mod error;
 mod jobs;
+mod limits;
 mod machine_ops;
 mod machines;
 mod post;
@@ -303,7 +304,7 @@ pub fn app(state: Arc<AppState>) -> axum::Router {
             "/v1/post",
             post_route(post::post_cl)
                 .layer(streams.clone())
-                .layer(middleware::from_fn_with_state(state.clone(), admit_stream)),
+                .layer(middleware::from_fn_with_state(state.clone(), limits::admit_stream)),
         )
         .route(
             "/v1/jobs",
@@ -451,14 +452,6 @@ async fn count_requests(State(st): State<Arc<AppState>>, req: Request, next: Nex
     let resp = next.run(req).await;
     st.metrics.record_request(&route, resp.status().as_u16());
     resp
-}
-
-/// Streams beyond the limit are refused at once (503 + Retry-After), never queued into memory.
-async fn admit_stream(State(st): State<Arc<AppState>>, req: Request, next: Next) -> Response {
-    if st.metrics.streams.load(Ordering::Relaxed) as usize >= st.config.max_streams {
-        return ApiError::Busy(format!("{} post streams running", st.config.max_streams)).into_response();
-    }
-    next.run(req).await
 }
 
 /// A controller dialect and its words for the things that differ between controls.

@@ -5,8 +5,8 @@
 //! memory stays bounded and a client that goes away stops the work. Output is held back until
 //! 16 KiB are ready (or the program ends): an error before that still gets its HTTP status.
 
-use super::AppState;
 use super::error::{ApiError, ApiQuery};
+use super::{AppState, limits};
 use crate::diag::Diagnostic;
 use crate::output::{ErrorBody, Header, Record};
 use crate::post::{self, BlockInfo, Settings, Sink, Summary};
@@ -260,9 +260,10 @@ pub(super) fn upload_error(text: String) -> ApiError {
 pub async fn post_cl(
     State(st): State<Arc<AppState>>,
     ApiQuery(query): ApiQuery<PostParams>,
-    req: Request,
+    mut req: Request,
 ) -> Result<Response, ApiError> {
     let ndjson = wants_ndjson(req.headers())?;
+    let slot = req.extensions_mut().remove::<Arc<limits::StreamSlot>>();
     let (params, filename, body) = upload(&st, query, req).await?;
     let profile = params.profile(&st)?.profile;
     let mut opts = params.settings().profile_options(&profile).map_err(ApiError::BadParameter)?;
@@ -276,8 +277,8 @@ pub async fn post_cl(
     ));
     let with_header = ndjson;
     let metrics = st.metrics.clone();
-    metrics.streams.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
     tokio::task::spawn_blocking(move || {
+        let _slot = slot;
         let mut sink = ChannelSink {
             tx,
             buf: Vec::with_capacity(PRELUDE + 4096),
@@ -306,7 +307,6 @@ pub async fn post_cl(
                 sink.fail(engine_error(e), body);
             }
         }
-        metrics.streams.fetch_sub(1, std::sync::atomic::Ordering::Relaxed);
     });
     let first = match rx.recv().await {
         Some(Msg::Fail(e)) => return Err(e),

@@ -142,3 +142,33 @@ impl Fetch for reqwest::RequestBuilder {
         self.send().await.unwrap().json().await.unwrap()
     }
 }
+
+/// A request written by hand on its own connection, for what a client library will not do
+/// (send half a header, stop mid-body): the socket, after `bytes` are written.
+pub async fn raw(base: &str, bytes: &[u8]) -> tokio::net::TcpStream {
+    use tokio::io::AsyncWriteExt;
+    let mut s = tokio::net::TcpStream::connect(base.trim_start_matches("http://"))
+        .await
+        .unwrap();
+    s.write_all(bytes).await.unwrap();
+    s
+}
+
+/// What the server sends on `s` within `limit`, up to its closing the connection: `None` if it
+/// neither closed nor sent a complete response head in that time.
+pub async fn read_response(s: &mut tokio::net::TcpStream, limit: std::time::Duration) -> Option<String> {
+    use tokio::io::AsyncReadExt;
+    let deadline = tokio::time::Instant::now() + limit;
+    let mut got = Vec::new();
+    let mut buf = [0u8; 8192];
+    loop {
+        match tokio::time::timeout_at(deadline, s.read(&mut buf)).await {
+            Ok(Ok(0)) | Ok(Err(_)) => return Some(String::from_utf8_lossy(&got).into_owned()),
+            Ok(Ok(n)) => got.extend_from_slice(&buf[..n]),
+            Err(_) => {
+                let head_done = got.windows(4).any(|w| w == b"\r\n\r\n");
+                return head_done.then(|| String::from_utf8_lossy(&got).into_owned());
+            }
+        }
+    }
+}
