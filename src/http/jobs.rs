@@ -147,7 +147,7 @@ fn job_id(id: &str) -> Result<&str, ApiError> {
     if id.len() == 32 && id.bytes().all(|b| b.is_ascii_hexdigit()) {
         Ok(id)
     } else {
-        Err(ApiError::NotFound(format!("no job {id}")))
+        Err(ApiError::NotFound(format!("no job {}", crate::text::quote(id))))
     }
 }
 
@@ -223,7 +223,8 @@ pub async fn list_jobs(State(st): State<Arc<AppState>>, ApiQuery(p): ApiQuery<Li
         None | Some("") => None,
         Some(s) => Some(JobState::parse(s).ok_or_else(|| {
             ApiError::BadParameter(format!(
-                "state: expected queued, running, succeeded, failed or cancelled, got {s:?}"
+                "state: expected queued, running, succeeded, failed or cancelled, got {}",
+                crate::text::quote(s)
             ))
         })?),
     };

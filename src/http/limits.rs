@@ -1,8 +1,9 @@
 //! What one client may hold of the service: a post stream's slot, taken before anything is read
-//! and given back when the stream ends.
+//! and given back when the stream ends; a form field's size.
 
 use super::error::ApiError;
 use super::{AppState, Metrics};
+use axum::extract::multipart::Field;
 use axum::extract::{Request, State};
 use axum::middleware::Next;
 use axum::response::{IntoResponse, Response};
@@ -30,4 +31,30 @@ pub(super) async fn admit_stream(State(st): State<Arc<AppState>>, mut req: Reque
     }
     req.extensions_mut().insert(slot);
     next.run(req).await
+}
+
+/// The most a form's text field may hold: parameters are short, and a field is read whole.
+pub(super) const MAX_FIELD: usize = 64 * 1024;
+
+/// A text field, read a chunk at a time and refused (413) once it is longer than [`MAX_FIELD`].
+pub(super) async fn read_field(name: &str, mut field: Field<'_>) -> Result<String, ApiError> {
+    let mut buf = Vec::new();
+    while let Some(chunk) = field.chunk().await.map_err(multipart_error)? {
+        if buf.len() + chunk.len() > MAX_FIELD {
+            return Err(ApiError::FieldTooLarge {
+                field: name.to_string(),
+                limit: MAX_FIELD,
+            });
+        }
+        buf.extend_from_slice(&chunk);
+    }
+    String::from_utf8(buf).map_err(|_| ApiError::BadParameter(format!("{}: not UTF-8 text", crate::text::quote(name))))
+}
+
+/// A failed multipart read: over the body limit (413), else malformed (400).
+pub(super) fn multipart_error(e: axum::extract::multipart::MultipartError) -> ApiError {
+    if e.status() == axum::http::StatusCode::PAYLOAD_TOO_LARGE {
+        return ApiError::TooLarge(None);
+    }
+    ApiError::BadParameter(format!("multipart: {}", e.body_text()))
 }

@@ -7,6 +7,7 @@ use super::error::{ApiError, ApiJson};
 use crate::calib::{self, Measurement};
 use crate::kinematics::{self, IkOptions, Joints, Machine, Pose, Setup, Units, Vec3};
 use crate::machines::Profile;
+use crate::text::quote;
 use axum::Json;
 use axum::extract::{Path, State};
 use serde::{Deserialize, Serialize};
@@ -148,7 +149,8 @@ fn joints(m: &Machine, words: &Words) -> Result<Joints, ApiError> {
     for (k, v) in words {
         if !kinematics::coordinate_ok(*v) {
             return Err(ApiError::BadParameter(format!(
-                "joints.{k} must be finite and within ±{:e}",
+                "joints.{} must be finite and within ±{:e}",
+                quote(k),
                 kinematics::MAX_COORD
             )));
         }
@@ -162,7 +164,7 @@ fn joints(m: &Machine, words: &Words) -> Result<Joints, ApiError> {
             }
             _ => {
                 let i = k.chars().next().filter(|_| k.len() == 1).and_then(|c| m.rotary_index(c));
-                let i = i.ok_or_else(|| ApiError::BadParameter(format!("{} has no axis {k:?}", m.id)))?;
+                let i = i.ok_or_else(|| ApiError::BadParameter(format!("{} has no axis {}", m.id, quote(k))))?;
                 j.rotary[i] = v.to_radians();
             }
         }
@@ -175,7 +177,7 @@ fn pose(m: &Machine, r: &PoseRequest) -> Result<Pose, ApiError> {
         None => 1.0,
         Some("mm") => Units::Mm.factor_to(m.units),
         Some("inch") => Units::Inch.factor_to(m.units),
-        Some(u) => return Err(ApiError::BadParameter(format!("units {u:?}: expected mm or inch"))),
+        Some(u) => return Err(ApiError::BadParameter(format!("units {}: expected mm or inch", quote(u)))),
     };
     Ok(Pose {
         tip: Vec3::from(r.tip) * f,
@@ -284,7 +286,7 @@ pub async fn angle_error_fit(
         .rotary
         .iter()
         .position(|x| x.name == r.axis)
-        .ok_or_else(|| ApiError::BadParameter(format!("{id} has no rotary {:?}", r.axis)))?;
+        .ok_or_else(|| ApiError::BadParameter(format!("{id} has no rotary {}", quote(&r.axis))))?;
     let mut samples: Vec<(f64, f64)> = r.samples.iter().map(|s| (s[0], s[1])).collect();
     if !r.vertical.is_empty() {
         let l = r

@@ -125,7 +125,12 @@ impl PostParams {
             "planes" => self.planes = Some(v).filter(|s| !s.is_empty()),
             "work_coordinates" => self.work_coordinates = Some(v).filter(|s| !s.is_empty()),
             "spindle_speed" => self.spindle_speed = if v.trim().is_empty() { None } else { Some(num(&v)?) },
-            other => return Err(ApiError::BadParameter(format!("unknown form field {other:?}"))),
+            other => {
+                return Err(ApiError::BadParameter(format!(
+                    "unknown form field {}",
+                    crate::text::quote(other)
+                )));
+            }
         }
         Ok(())
     }
@@ -234,7 +239,7 @@ fn engine_error(e: post::Error) -> ApiError {
 
 /// A failed read of the request body: over the body limit (413), else a broken upload (400).
 pub(super) fn upload_error(text: String) -> ApiError {
-    if text.contains("length limit") || text.contains("too large") {
+    if text.contains("length limit") || text.contains("too large") || text.contains("upload larger than") {
         ApiError::TooLarge(None)
     } else {
         ApiError::BadParameter(format!("reading the upload: {text}"))
@@ -403,7 +408,7 @@ async fn read_form(
         let field = match mp.next_field().await {
             Ok(Some(field)) => field,
             Ok(None) => break ApiError::BadParameter("multipart: no file part (name it \"file\")".into()),
-            Err(e) => break ApiError::BadParameter(format!("multipart: {e}")),
+            Err(e) => break limits::multipart_error(e),
         };
         let name = field.name().unwrap_or("").to_string();
         if field.file_name().is_some() || name == "file" {
@@ -411,10 +416,7 @@ async fn read_form(
             let _ = ptx.send(Ok((params, fname)));
             return stream_file(field, btx).await;
         }
-        let set = match field.text().await {
-            Ok(v) => params.set(&name, v),
-            Err(e) => Err(ApiError::BadParameter(format!("multipart: {e}"))),
-        };
+        let set = limits::read_field(&name, field).await.and_then(|v| params.set(&name, v));
         if let Err(e) = set {
             break e;
         }
@@ -434,7 +436,8 @@ async fn stream_file(mut field: Field<'_>, btx: mpsc::Sender<Result<Bytes, std::
             }
             Ok(None) => return,
             Err(e) => {
-                let _ = btx.send(Err(std::io::Error::other(e.to_string()))).await;
+                let text = limits::multipart_error(e).to_string();
+                let _ = btx.send(Err(std::io::Error::other(text))).await;
                 return;
             }
         }
