@@ -1,5 +1,5 @@
-//! What an attack on the service found (issue 30), each answered: more streams than allowed at once
-//! and huge form fields.
+//! What an attack on the service found (issue 30), each answered: more streams than allowed at
+//! once, huge form fields and CORS for a browser plug-in's profile writes.
 
 mod common;
 
@@ -146,5 +146,44 @@ async fn a_huge_form_field_is_refused_early_and_no_value_is_echoed_whole() {
         assert_eq!(r.status(), 400);
         let text = r.text().await.unwrap();
         assert!(text.len() < 1000, "{text}");
+    }
+}
+
+#[tokio::test]
+async fn cors_preflight_allows_the_headers_a_plugin_sends() {
+    let base = common::server(Config {
+        cors_origins: vec!["https://cam.example".into()],
+        ..common::cfg()
+    })
+    .await;
+    let c = reqwest::Client::new();
+    let r = c
+        .request(reqwest::Method::OPTIONS, format!("{base}/v1/machines/my-mill"))
+        .header("origin", "https://cam.example")
+        .header("access-control-request-method", "PUT")
+        .header("access-control-request-headers", "authorization, content-type, if-match")
+        .send()
+        .await
+        .unwrap();
+    assert!(r.status().is_success(), "{}", r.status());
+    let h = r.headers();
+    assert_eq!(h["access-control-allow-origin"], "https://cam.example");
+    let allowed = h["access-control-allow-headers"].to_str().unwrap().to_ascii_lowercase();
+    for want in ["authorization", "content-type", "if-match"] {
+        assert!(allowed.split(',').any(|a| a.trim() == want), "{want} not in {allowed}");
+    }
+    assert!(h["access-control-allow-methods"].to_str().unwrap().contains("PUT"));
+    let r = c
+        .get(format!("{base}/v1/machines/vmc-3axis"))
+        .header("origin", "https://cam.example")
+        .send()
+        .await
+        .unwrap();
+    let exposed = r.headers()["access-control-expose-headers"]
+        .to_str()
+        .unwrap()
+        .to_ascii_lowercase();
+    for want in ["etag", "location", "retry-after", "x-request-id", "content-range"] {
+        assert!(exposed.contains(want), "{want} not in {exposed}");
     }
 }

@@ -16,7 +16,7 @@ pub use post::PostParams;
 use crate::machines::Library;
 use axum::Json;
 use axum::extract::{MatchedPath, Path, Request, State};
-use axum::http::{HeaderName, HeaderValue, StatusCode, header};
+use axum::http::{HeaderName, HeaderValue, Method, StatusCode, header};
 use axum::middleware::{self, Next};
 use axum::response::{IntoResponse, Response};
 use axum::routing::{get, post as post_route};
@@ -353,10 +353,14 @@ pub fn app(state: Arc<AppState>) -> axum::Router {
             .iter()
             .filter_map(|o| HeaderValue::from_str(o).ok())
             .collect();
+        // Listed, not `*`: a wildcard does not cover Authorization (Fetch standard), and a
+        // browser would keep a plug-in's profile writes from being sent.
         CorsLayer::new()
             .allow_origin(AllowOrigin::list(origins))
-            .allow_methods(tower_http::cors::Any)
-            .allow_headers(tower_http::cors::Any)
+            .allow_methods([Method::GET, Method::HEAD, Method::POST, Method::PUT, Method::DELETE])
+            .allow_headers(CORS_REQUEST_HEADERS.map(HeaderName::from_static))
+            .expose_headers(CORS_EXPOSED_HEADERS.map(HeaderName::from_static))
+            .max_age(Duration::from_secs(600))
     };
     let api = api
         .merge(utoipa_swagger_ui::SwaggerUi::new("/docs"))
@@ -377,6 +381,31 @@ pub fn app(state: Arc<AppState>) -> axum::Router {
         .layer(SetRequestIdLayer::new(x_request_id, Counter::default()))
         .with_state(state)
 }
+
+/// Request headers the API reads, which a browser may send cross-origin.
+const CORS_REQUEST_HEADERS: [&str; 9] = [
+    "authorization",
+    "content-type",
+    "if-match",
+    "if-none-match",
+    "if-range",
+    "range",
+    "idempotency-key",
+    "x-request-id",
+    "accept",
+];
+
+/// Response headers a cross-origin script may read (beyond the CORS-safelisted ones).
+const CORS_EXPOSED_HEADERS: [&str; 8] = [
+    "etag",
+    "location",
+    "retry-after",
+    "x-request-id",
+    "content-range",
+    "content-disposition",
+    "accept-ranges",
+    "www-authenticate",
+];
 
 /// The web form's files, compiled into the binary: nothing to deploy, nothing fetched.
 fn static_file(name: &str) -> Response {
