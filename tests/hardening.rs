@@ -1,5 +1,5 @@
 //! What an attack on the service found (issue 30), each answered: more streams than allowed at
-//! once, huge form fields and CORS for a browser plug-in's profile writes.
+//! once, huge form fields, CORS for a browser plug-in's profile writes and If-Range.
 
 mod common;
 
@@ -185,5 +185,43 @@ async fn cors_preflight_allows_the_headers_a_plugin_sends() {
         .to_ascii_lowercase();
     for want in ["etag", "location", "retry-after", "x-request-id", "content-range"] {
         assert!(exposed.contains(want), "{want} not in {exposed}");
+    }
+}
+
+#[tokio::test]
+async fn if_range_gets_the_part_only_of_the_same_output() {
+    let base = common::server(common::cfg()).await;
+    let c = reqwest::Client::new();
+    let job = c
+        .post(format!("{base}/v1/jobs?machine=vmc-3axis"))
+        .body("UNITS/MM\nFEDRAT/500,MMPM\nGOTO/1,2,3\nGOTO/4,5,6\n")
+        .json_ok()
+        .await;
+    let id = job["id"].as_str().unwrap();
+    common::wait_job(&c, &base, id, "succeeded", Duration::from_secs(30)).await;
+    for out in ["nc", "diagnostics"] {
+        let url = format!("{base}/v1/jobs/{id}/{out}");
+        let whole = c.get(&url).send().await.unwrap();
+        let etag = whole.headers()["etag"].to_str().unwrap().to_string();
+        let modified = whole.headers()["last-modified"].to_str().unwrap().to_string();
+        let len = whole.bytes().await.unwrap().len();
+        for (if_range, want) in [
+            (etag.clone(), 206),
+            (modified.clone(), 206),
+            ("\"another-output\"".to_string(), 200),
+            (format!("W/{etag}"), 200),
+            ("Sat, 01 Jan 2000 00:00:00 GMT".to_string(), 200),
+        ] {
+            let r = c
+                .get(&url)
+                .header("range", "bytes=0-9")
+                .header("if-range", &if_range)
+                .send()
+                .await
+                .unwrap();
+            assert_eq!(r.status(), want, "{out} If-Range {if_range}");
+            let body = r.bytes().await.unwrap();
+            assert_eq!(body.len(), if want == 206 { 10 } else { len }, "{out} If-Range {if_range}");
+        }
     }
 }

@@ -326,8 +326,8 @@ async fn output(State(st): State<Arc<AppState>>, id: String, what: Output, req: 
         )));
     }
     let path = q.store.output_path(&job.id, what);
-    let len = match tokio::fs::metadata(&path).await {
-        Ok(m) => m.len(),
+    let (len, modified) = match tokio::fs::metadata(&path).await {
+        Ok(m) => (m.len(), m.modified().ok()),
         Err(e) if e.kind() == std::io::ErrorKind::NotFound && what == Output::Preview => {
             return Err(ApiError::NotFound(format!(
                 "job {} has no preview (it finished before previews were made)",
@@ -341,6 +341,7 @@ async fn output(State(st): State<Arc<AppState>>, id: String, what: Output, req: 
     if let Some(r) = super::not_modified(req.headers(), &etag) {
         return Ok(r);
     }
+    let req = if_range(req, &etag, modified);
     let mut resp = tower_http::services::ServeFile::new(&path)
         .oneshot(req)
         .await
@@ -353,4 +354,24 @@ async fn output(State(st): State<Arc<AppState>>, id: String, what: Output, req: 
         h.insert(header::CONTENT_DISPOSITION, nc_attachment(job.filename.as_deref(), &job.id));
     }
     Ok(resp)
+}
+
+/// RFC 9110 §13.1.5: a Range sent with an If-Range that does not name this output (its strong
+/// ETag, or the Last-Modified date served with it) is ignored, so that a client resuming a
+/// download of something else gets the whole output (200), never a part spliced onto another.
+fn if_range(mut req: Request, etag: &str, modified: Option<std::time::SystemTime>) -> Request {
+    let Some(v) = req.headers().get(header::IF_RANGE) else {
+        return req;
+    };
+    let v = v.to_str().unwrap_or_default().trim();
+    // A weak ETag (`W/"…"`) never matches: a range needs byte-for-byte identity.
+    let same = if v.starts_with('"') {
+        v == etag
+    } else {
+        modified.is_some_and(|m| v.parse::<httpdate::HttpDate>().ok() == Some(httpdate::HttpDate::from(m)))
+    };
+    if !same {
+        req.headers_mut().remove(header::RANGE);
+    }
+    req
 }
