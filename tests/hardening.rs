@@ -1,5 +1,6 @@
 //! What an attack on the service found (issue 30), each answered: more streams than allowed at
-//! once, huge form fields, CORS for a browser plug-in's profile writes and If-Range.
+//! once, huge form fields, CORS for a browser plug-in's profile writes, If-Range and IK stalling
+//! the runtime.
 
 mod common;
 
@@ -224,4 +225,62 @@ async fn if_range_gets_the_part_only_of_the_same_output() {
             assert_eq!(body.len(), if want == 206 { 10 } else { len }, "{out} If-Range {if_range}");
         }
     }
+}
+
+/// IK runs on the blocking pool: however long it takes, the runtime answers health checks. Slow
+/// IK needs a rotary with a long travel and angle error (its windings listed turn by turn); where
+/// the loader refuses such travel, the longest it takes stands in.
+#[tokio::test(flavor = "multi_thread", worker_threads = 1)]
+async fn healthz_answers_while_ik_computes() {
+    const TOKEN: &str = "hardening-admin";
+    let base = common::server(Config {
+        admin_token: Some(TOKEN.into()),
+        ..common::cfg()
+    })
+    .await;
+    let c = reqwest::Client::new();
+    let haas = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/machines/haas-umc750.toml")).unwrap();
+    let mut created = false;
+    for travel in ["1e9", "99999.999"] {
+        let profile = haas.replace("id = \"haas-umc750\"", "id = \"long-c\"").replace(
+            "max_accel = 600.0  # deg/s2",
+            &format!(
+                "max_accel = 600.0\nmin = -{travel}\nmax = {travel}\n[rotary.angle_error]\ncoefficients = [0.0, 0.001, 0.0]\nrange = [-180.0, 180.0]"
+            ),
+        );
+        let r = c
+            .post(format!("{base}/v1/machines"))
+            .header("authorization", format!("Bearer {TOKEN}"))
+            .header("content-type", "application/toml")
+            .body(profile)
+            .send()
+            .await
+            .unwrap();
+        if r.status() == 201 {
+            created = true;
+            break;
+        }
+        assert_eq!(r.status(), 422, "{}", r.text().await.unwrap());
+    }
+    assert!(created);
+    let pose = serde_json::json!({ "tip": [1.0, 2.0, 3.0], "axis": [0.3, 0.2, 0.9] });
+    // Timed from before the calls: on a runtime thread busy with IK, the test's own timer would
+    // fire late too.
+    let t0 = Instant::now();
+    let calls: Vec<_> = (0..3)
+        .map(|_| {
+            let req = c.post(format!("{base}/v1/machines/long-c/ik")).json(&pose);
+            tokio::spawn(async move { req.send().await.unwrap().status() })
+        })
+        .collect();
+    tokio::time::sleep(Duration::from_millis(200)).await;
+    assert_eq!(c.get(format!("{base}/healthz")).status_ok().await, 200);
+    let took = t0.elapsed();
+    for call in calls {
+        assert_eq!(call.await.unwrap(), 200);
+    }
+    assert!(
+        took < Duration::from_millis(2200),
+        "healthz answered {took:?} after the IK calls went out"
+    );
 }

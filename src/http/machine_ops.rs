@@ -132,12 +132,13 @@ fn profile(st: &AppState, id: &str) -> Result<Arc<Profile>, ApiError> {
         .map_err(|_| ApiError::UnknownMachine(id.into()))
 }
 
-/// Fits take milliseconds to seconds with a full request body: they run on the blocking pool, so
-/// one big fit cannot stall the connections sharing its runtime thread.
+/// Every computation here runs on the blocking pool: a fit takes up to seconds with a full
+/// request body, and IK on a profile it handles badly can take as long; on the runtime either
+/// would stall the connections sharing its thread (health checks among them).
 async fn off_runtime<T: Send + 'static>(f: impl FnOnce() -> T + Send + 'static) -> Result<T, ApiError> {
     tokio::task::spawn_blocking(f)
         .await
-        .map_err(|e| ApiError::Internal(format!("fit task: {e}")))
+        .map_err(|e| ApiError::Internal(format!("computation: {e}")))
 }
 
 fn setup(m: &Machine, tool_length: Option<f64>, wo: Option<[f64; 3]>) -> Result<Setup, ApiError> {
@@ -194,12 +195,15 @@ pub async fn fk_route(
     ApiJson(r): ApiJson<FkRequest>,
 ) -> Result<Json<PoseDto>, ApiError> {
     let p = profile(&st, &id)?;
-    let m = &p.machine;
-    let p = kinematics::fk(m, &joints(m, &r.joints)?, &setup(m, r.tool_length, r.work_offset)?);
-    Ok(Json(PoseDto {
-        tip: p.tip.into(),
-        axis: p.axis.into(),
-    }))
+    off_runtime(move || {
+        let m = &p.machine;
+        let p = kinematics::fk(m, &joints(m, &r.joints)?, &setup(m, r.tool_length, r.work_offset)?);
+        Ok(Json(PoseDto {
+            tip: p.tip.into(),
+            axis: p.axis.into(),
+        }))
+    })
+    .await?
 }
 
 /// Inverse kinematics: every joint solution of a pose, in limits or not.
@@ -211,21 +215,24 @@ pub async fn ik_route(
     ApiJson(r): ApiJson<PoseRequest>,
 ) -> Result<Json<Value>, ApiError> {
     let p = profile(&st, &id)?;
-    let m = &p.machine;
-    let sols = kinematics::ik(
-        m,
-        &pose(m, &r)?,
-        &setup(m, r.tool_length, r.work_offset)?,
-        &IkOptions::default(),
-    )
-    .map_err(|e| ApiError::BadRecord {
-        message: format!("pose unreachable on {id}: {e}"),
-        line: None,
-        column: None,
-        code: "unreachable",
-    })?;
-    let list: Vec<Value> = sols.iter().map(|s| crate::output::solution_json(m, s)).collect();
-    Ok(Json(serde_json::json!({ "solutions": list })))
+    off_runtime(move || {
+        let m = &p.machine;
+        let sols = kinematics::ik(
+            m,
+            &pose(m, &r)?,
+            &setup(m, r.tool_length, r.work_offset)?,
+            &IkOptions::default(),
+        )
+        .map_err(|e| ApiError::BadRecord {
+            message: format!("pose unreachable on {id}: {e}"),
+            line: None,
+            column: None,
+            code: "unreachable",
+        })?;
+        let list: Vec<Value> = sols.iter().map(|s| crate::output::solution_json(m, s)).collect();
+        Ok(Json(serde_json::json!({ "solutions": list })))
+    })
+    .await?
 }
 
 /// Whether a pose can be reached, and within travel: a check before posting.
@@ -237,11 +244,15 @@ pub async fn validate_pose(
     ApiJson(r): ApiJson<PoseRequest>,
 ) -> Result<Json<ReachDto>, ApiError> {
     let p = profile(&st, &id)?;
-    let m = &p.machine;
-    Ok(Json(
+    off_runtime(move || reach(&p.machine, &r).map(Json)).await?
+}
+
+/// Whether `r`'s pose can be reached on `m`, and within travel.
+fn reach(m: &Machine, r: &PoseRequest) -> Result<ReachDto, ApiError> {
+    Ok(
         match kinematics::ik(
             m,
-            &pose(m, &r)?,
+            &pose(m, r)?,
             &setup(m, r.tool_length, r.work_offset)?,
             &IkOptions::default(),
         ) {
@@ -269,7 +280,7 @@ pub async fn validate_pose(
                 }
             }
         },
-    ))
+    )
 }
 
 /// Fits a rotary's angle-error polynomial (degrees 2–5) from measurements.
