@@ -29,6 +29,9 @@ pub enum ApiError {
     /// A form's text field longer than the service reads for one.
     #[error("form field {} is longer than the limit of {limit} bytes", quote(.field))]
     FieldTooLarge { field: String, limit: usize },
+    /// The client sent its upload slower than `--min-upload-rate`.
+    #[error("{0}")]
+    UploadTooSlow(String),
     #[error("{0}")]
     NotFound(String),
     #[error("{0}")]
@@ -93,6 +96,7 @@ impl ApiError {
             ApiError::BadRecord { .. } => (StatusCode::UNPROCESSABLE_ENTITY, "bad-record", "Bad CL record"),
             ApiError::TooLarge(_) => (StatusCode::PAYLOAD_TOO_LARGE, "too-large", "Upload too large"),
             ApiError::FieldTooLarge { .. } => (StatusCode::PAYLOAD_TOO_LARGE, "field-too-large", "Form field too large"),
+            ApiError::UploadTooSlow(_) => (StatusCode::REQUEST_TIMEOUT, "upload-too-slow", "Upload too slow"),
             ApiError::NotFound(_) => (StatusCode::NOT_FOUND, "not-found", "Not found"),
             ApiError::Conflict(_) => (StatusCode::CONFLICT, "conflict", "Conflict"),
             ApiError::Busy(_) => (StatusCode::SERVICE_UNAVAILABLE, "busy", "Server busy"),

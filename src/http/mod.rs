@@ -9,9 +9,11 @@ mod limits;
 mod machine_ops;
 mod machines;
 mod post;
+mod server;
 
 pub use error::{ApiError, ApiJson, Problem};
 pub use post::PostParams;
+pub use server::{connection_budget, run};
 
 use crate::machines::Library;
 use axum::Json;
@@ -43,6 +45,16 @@ pub struct Config {
     pub request_timeout: Duration,
     /// Post streams running at once; more are answered 503 with Retry-After.
     pub max_streams: usize,
+    /// A new connection must have sent its first request's headers within this.
+    pub header_timeout: Duration,
+    /// A connection with no request in flight is closed after this (keep-alive).
+    pub idle_timeout: Duration,
+    /// Connections open at once; at the limit the one idle longest is closed for a new one.
+    pub max_connections: usize,
+    /// Bytes a second an upload must average over `upload_rate_window` (0: no minimum); a slower
+    /// one fails (408, or an error at the end of a stream already started).
+    pub min_upload_rate: u64,
+    pub upload_rate_window: Duration,
     /// Origins allowed by CORS (CAM plugins' web views); empty: no CORS headers.
     pub cors_origins: Vec<String>,
     pub log_json: bool,
@@ -92,6 +104,11 @@ impl Default for Config {
             max_upload: 4 << 30,
             request_timeout: Duration::from_secs(30),
             max_streams: 64,
+            header_timeout: Duration::from_secs(30),
+            idle_timeout: Duration::from_secs(60),
+            max_connections: 4096,
+            min_upload_rate: 1024,
+            upload_rate_window: Duration::from_secs(30),
             cors_origins: Vec::new(),
             log_json: false,
             workers: std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1),
@@ -292,8 +309,11 @@ impl MakeRequestId for Counter {
 /// The whole service as a router: every route, every layer.
 pub fn app(state: Arc<AppState>) -> axum::Router {
     let x_request_id = HeaderName::from_static("x-request-id");
+    // The pace is metered inside the length limit, so that the limit's error reaches the
+    // multipart reader as its own type (413, not 400).
     let streams = tower::ServiceBuilder::new()
         .layer(middleware::map_response_with_state(state.clone(), too_large_problem))
+        .layer(middleware::from_fn_with_state(state.clone(), limits::min_upload_rate))
         .layer(axum::extract::DefaultBodyLimit::disable())
         .layer(tower_http::limit::RequestBodyLimitLayer::new(
             state.config.max_upload.min(usize::MAX as u64) as usize,
@@ -578,9 +598,17 @@ async fn metrics_route(State(st): State<Arc<AppState>>) -> impl IntoResponse {
 }
 
 /// Loads the library and binds; runs until SIGINT/SIGTERM, then lets streams in flight finish.
-pub async fn serve(cfg: Config) -> Result<(), String> {
+pub async fn serve(mut cfg: Config) -> Result<(), String> {
     let library = Library::load_dir(&cfg.machines).map_err(|e| e.to_string())?;
     std::fs::create_dir_all(&cfg.data_dir).map_err(|e| format!("{}: {e}", cfg.data_dir.display()))?;
+    let fit = connection_budget(cfg.max_connections);
+    if fit < cfg.max_connections {
+        tracing::warn!(
+            max_connections = fit,
+            "fewer connections than --max-connections fit the open-file limit (ulimit -n)"
+        );
+        cfg.max_connections = fit;
+    }
     let listener = tokio::net::TcpListener::bind(&cfg.bind)
         .await
         .map_err(|e| format!("bind {}: {e}", cfg.bind))?;
@@ -596,16 +624,12 @@ pub async fn serve(cfg: Config) -> Result<(), String> {
     let grace = cfg.shutdown_grace;
     let state = Arc::new(AppState {
         machines,
-        config: cfg,
+        config: cfg.clone(),
         metrics,
         jobs: Some(queue),
     });
     let (stopping, mut stop) = tokio::sync::watch::channel(false);
-    let server = axum::serve(
-        listener,
-        app(state).into_make_service_with_connect_info::<std::net::SocketAddr>(),
-    )
-    .with_graceful_shutdown(async move {
+    let server = run(listener, app(state), &cfg, async move {
         shutdown_signal().await;
         let _ = stopping.send(true);
     });
@@ -618,8 +642,8 @@ pub async fn serve(cfg: Config) -> Result<(), String> {
         }
     };
     tokio::select! {
-        r = server => r.map_err(|e| e.to_string()),
-        _ = deadline => Ok(()),
+        () = server => Ok(()),
+        () = deadline => Ok(()),
     }
 }
 

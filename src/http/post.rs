@@ -237,9 +237,12 @@ fn engine_error(e: post::Error) -> ApiError {
     }
 }
 
-/// A failed read of the request body: over the body limit (413), else a broken upload (400).
+/// A failed read of the request body: too slow (408), over the body limit (413), else a broken
+/// upload (400).
 pub(super) fn upload_error(text: String) -> ApiError {
-    if text.contains("length limit") || text.contains("too large") || text.contains("upload larger than") {
+    if let Some(slow) = limits::too_slow(&text) {
+        ApiError::UploadTooSlow(slow.to_string())
+    } else if text.contains("length limit") || text.contains("too large") || text.contains("upload larger than") {
         ApiError::TooLarge(None)
     } else {
         ApiError::BadParameter(format!("reading the upload: {text}"))

@@ -19,14 +19,7 @@ pub async fn server(cfg: Config) -> String {
     });
     let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
     let addr = listener.local_addr().unwrap();
-    tokio::spawn(async move {
-        axum::serve(
-            listener,
-            app(state).into_make_service_with_connect_info::<std::net::SocketAddr>(),
-        )
-        .await
-        .unwrap()
-    });
+    tokio::spawn(async move { kinepost::http::run(listener, app(state), &cfg, std::future::pending()).await });
     format!("http://{addr}")
 }
 
@@ -48,8 +41,23 @@ pub fn cfg() -> Config {
 /// The real binary serving `data` on an ephemeral loopback port: the child and its base URL,
 /// its log drained in the background.
 pub fn spawn_binary(data: &std::path::Path, extra: &[&str]) -> (std::process::Child, String) {
+    spawn_serving(std::process::Command::new(env!("CARGO_BIN_EXE_kinepost")), data, extra)
+}
+
+/// [`spawn_binary`] with at most `nofile` open files (`ulimit -n`, soft and hard).
+pub fn spawn_binary_with_nofile(data: &std::path::Path, extra: &[&str], nofile: u32) -> (std::process::Child, String) {
+    let mut sh = std::process::Command::new("sh");
+    sh.args([
+        "-c",
+        &format!("ulimit -n {nofile} && exec \"$0\" \"$@\""),
+        env!("CARGO_BIN_EXE_kinepost"),
+    ]);
+    spawn_serving(sh, data, extra)
+}
+
+fn spawn_serving(mut cmd: std::process::Command, data: &std::path::Path, extra: &[&str]) -> (std::process::Child, String) {
     use std::io::{BufRead, BufReader};
-    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_kinepost"))
+    let mut child = cmd
         .args(["serve", "--bind", "127.0.0.1:0", "--data-dir", data.to_str().unwrap()])
         .args(extra)
         .env("KINEPOST_MACHINES", concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))
