@@ -259,9 +259,11 @@ pub(super) fn upload_error(text: String) -> ApiError {
         (status = 200, description = "The NC program (text/plain), or one JSON object per line (application/x-ndjson): header, block…, summary, and error on failure", content_type = "text/plain"),
         (status = 400, description = "Bad parameter", body = super::error::Problem, content_type = "application/problem+json"),
         (status = 404, description = "Unknown machine", body = super::error::Problem, content_type = "application/problem+json"),
-        (status = 413, description = "Upload too large", body = super::error::Problem, content_type = "application/problem+json"),
+        (status = 408, description = "Upload slower than --min-upload-rate (once the program has begun, it ends with the error instead)", body = super::error::Problem, content_type = "application/problem+json"),
+        (status = 413, description = "Upload too large, or a form field over 64 KiB", body = super::error::Problem, content_type = "application/problem+json"),
         (status = 415, description = "Unsupported media type", body = super::error::Problem, content_type = "application/problem+json"),
         (status = 422, description = "Bad CL record (strict mode) with line and column", body = super::error::Problem, content_type = "application/problem+json"),
+        (status = 503, description = "--max-streams post streams running (Retry-After)", body = super::error::Problem, content_type = "application/problem+json"),
     ),
     tag = "post"
 )]
