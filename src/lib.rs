@@ -11,3 +11,4 @@ pub mod nc;
 pub mod output;
 pub mod post;
 pub mod testgen;
+pub mod text;

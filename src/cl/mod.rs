@@ -123,7 +123,7 @@ impl<R: BufRead> Reader<R> {
             }
             if !self.in_comment
                 && self.pending.is_empty()
-                && let Some(s) = self.whole_goto()
+                && let Some(s) = self.whole_goto()?
             {
                 return Ok(Some(Event::Statement(s)));
             }
@@ -223,18 +223,24 @@ impl<R: BufRead> Reader<R> {
     /// buffer, without the copy, UTF-8 check, comment scan and statement assembly every other line
     /// goes through. Only a line the general path would read the same way is taken (ASCII, no
     /// `$`, complete within the buffer, six or three short decimals); anything else is left for it.
-    fn whole_goto(&mut self) -> Option<Statement> {
-        let buf = self.input.fill_buf().ok()?;
-        let end = memchr(b'\n', buf)?;
+    fn whole_goto(&mut self) -> Result<Option<Statement>, Error> {
+        // A failed read is the input's error, not a decline: the reader behind may answer the
+        // next read with its end (a broken upload), which the general path would take for EOF.
+        let buf = fill(&mut self.input)?;
+        let Some(end) = memchr(b'\n', buf) else {
+            return Ok(None);
+        };
         // A `$` anywhere (continuation, comment) is outside fast_goto's grammar: it declines.
-        let record = fast::fast_goto(buf[..end].trim_ascii())?;
+        let Some(record) = fast::fast_goto(buf[..end].trim_ascii()) else {
+            return Ok(None);
+        };
         self.input.consume(end + 1);
         self.consumed += (end + 1) as u64;
         self.line_no += 1;
-        Some(Statement {
+        Ok(Some(Statement {
             line: self.line_no,
             record,
-        })
+        }))
     }
 
     /// Adds one physical line to the statement being assembled.
@@ -412,5 +418,25 @@ mod tests {
         let broken = events(b"\xEF\xBBGOTO/1,2,3\n", 1);
         assert!(matches!(&broken[0], Event::Diagnostic(d) if d.code == Code::InvalidUtf8 && d.severity == Severity::Warning));
         assert_eq!(broken[1..], events(b"GOTO/1,2,3\n", 1)[..]);
+    }
+
+    /// A read that fails is an error wherever it happens, the in-place GOTO path included: the
+    /// reader behind may then say it has ended (a broken upload does), and that is no end of
+    /// input. Here it fails after the first GOTO, where the in-place path reads next.
+    #[test]
+    fn a_failed_read_is_an_error_not_the_end() {
+        struct FailsThenEnds(u8);
+        impl std::io::Read for FailsThenEnds {
+            fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+                self.0 += 1;
+                match self.0 {
+                    1 => (&b"UNITS/MM\nGOTO/1,2,3\n"[..]).read(buf),
+                    2 => Err(std::io::Error::other("connection reset")),
+                    _ => Ok(0),
+                }
+            }
+        }
+        let got: Vec<_> = Reader::new(std::io::BufReader::new(FailsThenEnds(0))).collect();
+        assert!(got.iter().any(|e| e.is_err()), "{got:?}");
     }
 }

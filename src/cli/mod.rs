@@ -315,6 +315,28 @@ pub struct ServeArgs {
     /// Post streams at once; more are answered 503 with Retry-After.
     #[arg(long, env = "KINEPOST_MAX_STREAMS", default_value_t = 64)]
     pub max_streams: usize,
+    /// Seconds a new connection has to send its first request's headers; then it is closed.
+    #[arg(long, env = "KINEPOST_HEADER_TIMEOUT", default_value_t = 30.0, allow_hyphen_values = true)]
+    pub header_timeout: f64,
+    /// Seconds a connection may stay open with no request in flight (keep-alive).
+    #[arg(long, env = "KINEPOST_IDLE_TIMEOUT", default_value_t = 60.0, allow_hyphen_values = true)]
+    pub idle_timeout: f64,
+    /// Connections open at once (fewer if the open-file limit holds fewer); at the limit the one
+    /// idle longest is closed to let a new one in.
+    #[arg(long, env = "KINEPOST_MAX_CONNECTIONS", default_value_t = 4096)]
+    pub max_connections: usize,
+    /// Bytes a second an upload must average over --upload-rate-window; a slower one is cut off
+    /// (408). 0: no minimum.
+    #[arg(long, env = "KINEPOST_MIN_UPLOAD_RATE", default_value_t = 1024)]
+    pub min_upload_rate: u64,
+    /// Seconds over which --min-upload-rate is averaged.
+    #[arg(
+        long,
+        env = "KINEPOST_UPLOAD_RATE_WINDOW",
+        default_value_t = 30.0,
+        allow_hyphen_values = true
+    )]
+    pub upload_rate_window: f64,
     /// Origins allowed by CORS, comma-separated (e.g. a CAM plugin's web view).
     #[arg(long, env = "KINEPOST_CORS_ORIGINS", value_delimiter = ',')]
     pub cors_origins: Vec<String>,
@@ -601,6 +623,11 @@ fn serve(cli: &Cli, a: &ServeArgs) -> Result<(), String> {
         max_upload: a.max_upload,
         request_timeout: std::time::Duration::from_secs(a.request_timeout),
         max_streams: a.max_streams.max(1),
+        header_timeout: seconds("header-timeout", a.header_timeout, 0.1, 3600.0, 1.0)?,
+        idle_timeout: seconds("idle-timeout", a.idle_timeout, 0.1, 86400.0, 1.0)?,
+        max_connections: a.max_connections.max(1),
+        min_upload_rate: a.min_upload_rate,
+        upload_rate_window: seconds("upload-rate-window", a.upload_rate_window, 0.1, 3600.0, 1.0)?,
         cors_origins: a.cors_origins.clone(),
         log_json: a.log_format == "json",
         workers: a

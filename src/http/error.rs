@@ -1,18 +1,19 @@
 //! One error enum for the HTTP edge, mapped to RFC 9457 problem+json in one `match`.
 
+use crate::text::quote;
 use axum::http::{HeaderValue, StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use serde::Serialize;
 
 #[derive(Debug, thiserror::Error)]
 pub enum ApiError {
-    #[error("no machine profile {0:?}")]
+    #[error("no machine profile {}", quote(.0))]
     UnknownMachine(String),
     #[error("{0}")]
     BadParameter(String),
-    #[error("unsupported content type {0:?}: send text/plain, application/octet-stream or multipart/form-data")]
+    #[error("unsupported content type {}: send text/plain, application/octet-stream or multipart/form-data", quote(.0))]
     UnsupportedMediaType(String),
-    #[error("not acceptable: {0:?}; this route produces text/plain or application/x-ndjson")]
+    #[error("not acceptable: {}; this route produces text/plain or application/x-ndjson", quote(.0))]
     NotAcceptable(String),
     /// Strict mode, or a failure before the first byte was sent: the CL line and column.
     #[error("{message}")]
@@ -25,6 +26,12 @@ pub enum ApiError {
     /// The limit in bytes where the handler knows it (else the service's `--max-upload`).
     #[error("upload larger than {}", .0.map_or("the service's limit (--max-upload)".to_string(), |n| format!("the limit of {n} bytes")))]
     TooLarge(Option<u64>),
+    /// A form's text field longer than the service reads for one.
+    #[error("form field {} is longer than the limit of {limit} bytes", quote(.field))]
+    FieldTooLarge { field: String, limit: usize },
+    /// The client sent its upload slower than `--min-upload-rate`.
+    #[error("{0}")]
+    UploadTooSlow(String),
     #[error("{0}")]
     NotFound(String),
     #[error("{0}")]
@@ -91,6 +98,8 @@ impl ApiError {
             ApiError::NotAcceptable(_) => (StatusCode::NOT_ACCEPTABLE, "not-acceptable", "Not acceptable"),
             ApiError::BadRecord { .. } => (StatusCode::UNPROCESSABLE_ENTITY, "bad-record", "Bad CL record"),
             ApiError::TooLarge(_) => (StatusCode::PAYLOAD_TOO_LARGE, "too-large", "Upload too large"),
+            ApiError::FieldTooLarge { .. } => (StatusCode::PAYLOAD_TOO_LARGE, "field-too-large", "Form field too large"),
+            ApiError::UploadTooSlow(_) => (StatusCode::REQUEST_TIMEOUT, "upload-too-slow", "Upload too slow"),
             ApiError::NotFound(_) => (StatusCode::NOT_FOUND, "not-found", "Not found"),
             ApiError::Conflict(_) => (StatusCode::CONFLICT, "conflict", "Conflict"),
             ApiError::Busy(_) => (StatusCode::SERVICE_UNAVAILABLE, "busy", "Server busy"),
@@ -167,9 +176,55 @@ impl<T: serde::de::DeserializeOwned, S: Send + Sync> axum::extract::FromRequest<
             }
             // Over axum's body limit for JSON (2 MiB): too large, not malformed.
             Err(e) if e.status() == StatusCode::PAYLOAD_TOO_LARGE => Err(ApiError::TooLarge(Some(2 << 20))),
-            Err(e) => Err(ApiError::BadParameter(e.body_text())),
+            Err(e) => Err(ApiError::BadParameter(clip_quoted(&e.body_text()))),
         }
     }
+}
+
+/// A parser's message (serde's) with each value it quotes, and each word longer than a value is
+/// quoted (a map key or an unknown parameter in a path), cut as [`quote`] cuts it, and at most
+/// `LIMIT` characters in all: serde echoes what it met whole, and that comes from the client.
+fn clip_quoted(msg: &str) -> String {
+    const LIMIT: usize = 600;
+    let keep = crate::text::QUOTED;
+    let mut out = String::new();
+    let mut open: Option<char> = None;
+    // Characters of the current quoted value or word, and whether the last one was a backslash.
+    let (mut run, mut escaped) = (0, false);
+    let mut written = 0;
+    for c in msg.chars() {
+        if written == LIMIT {
+            out.push('…');
+            return out;
+        }
+        let ends = match open {
+            Some(q) => c == q && !escaped,
+            None => c.is_whitespace() || c == '"' || c == '`',
+        };
+        escaped = open.is_some() && c == '\\' && !escaped;
+        if ends {
+            if run > keep {
+                out.push('…');
+            }
+            out.push(c);
+            written += 1;
+            run = 0;
+            open = match open {
+                Some(_) => None,
+                None => (c == '"' || c == '`').then_some(c),
+            };
+        } else {
+            if run < keep {
+                out.push(c);
+                written += 1;
+            }
+            run += 1;
+        }
+    }
+    if run > keep {
+        out.push('…');
+    }
+    out
 }
 
 /// `Query<T>` whose rejections are problem documents (400) naming the parameter.
@@ -181,7 +236,7 @@ impl<T: serde::de::DeserializeOwned, S: Send + Sync> axum::extract::FromRequestP
     async fn from_request_parts(parts: &mut axum::http::request::Parts, state: &S) -> Result<Self, Self::Rejection> {
         match axum::extract::Query::<T>::from_request_parts(parts, state).await {
             Ok(axum::extract::Query(v)) => Ok(ApiQuery(v)),
-            Err(e) => Err(ApiError::BadParameter(e.body_text())),
+            Err(e) => Err(ApiError::BadParameter(clip_quoted(&e.body_text()))),
         }
     }
 }
@@ -204,5 +259,23 @@ impl From<crate::machines::Error> for ApiError {
             E::ReadOnly => ApiError::Forbidden(e.to_string()),
             E::Io { .. } | E::Store(_) => ApiError::Internal(e.to_string()),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::clip_quoted;
+
+    #[test]
+    fn quoted_values_in_parser_messages_are_cut() {
+        let long = "x".repeat(10_000);
+        let m = clip_quoted(&format!("unknown field `{long}`, expected one of `machine`"));
+        assert_eq!(m, format!("unknown field `{}…`, expected one of `machine`", "x".repeat(80)));
+        let m = clip_quoted(&format!(
+            "invalid type: string \"a\\\"{long}\", expected f64 at line 1 column 9"
+        ));
+        assert!(m.len() < 200 && m.ends_with("expected f64 at line 1 column 9"), "{m}");
+        let m = clip_quoted(&format!("query string: joints.{long}: invalid"));
+        assert_eq!(m, format!("query string: joints.{}… invalid", "x".repeat(73)));
     }
 }

@@ -147,7 +147,7 @@ fn job_id(id: &str) -> Result<&str, ApiError> {
     if id.len() == 32 && id.bytes().all(|b| b.is_ascii_hexdigit()) {
         Ok(id)
     } else {
-        Err(ApiError::NotFound(format!("no job {id}")))
+        Err(ApiError::NotFound(format!("no job {}", crate::text::quote(id))))
     }
 }
 
@@ -161,7 +161,8 @@ fn job_id(id: &str) -> Result<&str, ApiError> {
         (status = 202, description = "Accepted: on disk, queued", body = JobView),
         (status = 400, description = "Bad parameter", body = super::error::Problem, content_type = "application/problem+json"),
         (status = 404, description = "Unknown machine", body = super::error::Problem, content_type = "application/problem+json"),
-        (status = 413, description = "Upload too large", body = super::error::Problem, content_type = "application/problem+json"),
+        (status = 408, description = "Upload slower than --min-upload-rate: not accepted", body = super::error::Problem, content_type = "application/problem+json"),
+        (status = 413, description = "Upload too large, or a form field over 64 KiB", body = super::error::Problem, content_type = "application/problem+json"),
         (status = 415, description = "Unsupported media type", body = super::error::Problem, content_type = "application/problem+json"),
         (status = 429, description = "This client has its limit of jobs queued or running (Retry-After)", body = super::error::Problem, content_type = "application/problem+json"),
         (status = 507, description = "The spool's disk is full: not accepted (Retry-After)", body = super::error::Problem, content_type = "application/problem+json"),
@@ -223,7 +224,8 @@ pub async fn list_jobs(State(st): State<Arc<AppState>>, ApiQuery(p): ApiQuery<Li
         None | Some("") => None,
         Some(s) => Some(JobState::parse(s).ok_or_else(|| {
             ApiError::BadParameter(format!(
-                "state: expected queued, running, succeeded, failed or cancelled, got {s:?}"
+                "state: expected queued, running, succeeded, failed or cancelled, got {}",
+                crate::text::quote(s)
             ))
         })?),
     };
@@ -325,8 +327,8 @@ async fn output(State(st): State<Arc<AppState>>, id: String, what: Output, req: 
         )));
     }
     let path = q.store.output_path(&job.id, what);
-    let len = match tokio::fs::metadata(&path).await {
-        Ok(m) => m.len(),
+    let (len, modified) = match tokio::fs::metadata(&path).await {
+        Ok(m) => (m.len(), m.modified().ok()),
         Err(e) if e.kind() == std::io::ErrorKind::NotFound && what == Output::Preview => {
             return Err(ApiError::NotFound(format!(
                 "job {} has no preview (it finished before previews were made)",
@@ -340,6 +342,7 @@ async fn output(State(st): State<Arc<AppState>>, id: String, what: Output, req: 
     if let Some(r) = super::not_modified(req.headers(), &etag) {
         return Ok(r);
     }
+    let req = if_range(req, &etag, modified);
     let mut resp = tower_http::services::ServeFile::new(&path)
         .oneshot(req)
         .await
@@ -352,4 +355,24 @@ async fn output(State(st): State<Arc<AppState>>, id: String, what: Output, req: 
         h.insert(header::CONTENT_DISPOSITION, nc_attachment(job.filename.as_deref(), &job.id));
     }
     Ok(resp)
+}
+
+/// RFC 9110 §13.1.5: a Range sent with an If-Range that does not name this output (its strong
+/// ETag, or the Last-Modified date served with it) is ignored, so that a client resuming a
+/// download of something else gets the whole output (200), never a part spliced onto another.
+fn if_range(mut req: Request, etag: &str, modified: Option<std::time::SystemTime>) -> Request {
+    let Some(v) = req.headers().get(header::IF_RANGE) else {
+        return req;
+    };
+    let v = v.to_str().unwrap_or_default().trim();
+    // A weak ETag (`W/"…"`) never matches: a range needs byte-for-byte identity.
+    let same = if v.starts_with('"') {
+        v == etag
+    } else {
+        modified.is_some_and(|m| v.parse::<httpdate::HttpDate>().ok() == Some(httpdate::HttpDate::from(m)))
+    };
+    if !same {
+        req.headers_mut().remove(header::RANGE);
+    }
+    req
 }

@@ -7,6 +7,7 @@ use super::error::{ApiError, ApiJson};
 use crate::calib::{self, Measurement};
 use crate::kinematics::{self, IkOptions, Joints, Machine, Pose, Setup, Units, Vec3};
 use crate::machines::Profile;
+use crate::text::quote;
 use axum::Json;
 use axum::extract::{Path, State};
 use serde::{Deserialize, Serialize};
@@ -131,12 +132,13 @@ fn profile(st: &AppState, id: &str) -> Result<Arc<Profile>, ApiError> {
         .map_err(|_| ApiError::UnknownMachine(id.into()))
 }
 
-/// Fits take milliseconds to seconds with a full request body: they run on the blocking pool, so
-/// one big fit cannot stall the connections sharing its runtime thread.
+/// Every computation here runs on the blocking pool: a fit takes up to seconds with a full
+/// request body, and IK on a profile it handles badly can take as long; on the runtime either
+/// would stall the connections sharing its thread (health checks among them).
 async fn off_runtime<T: Send + 'static>(f: impl FnOnce() -> T + Send + 'static) -> Result<T, ApiError> {
     tokio::task::spawn_blocking(f)
         .await
-        .map_err(|e| ApiError::Internal(format!("fit task: {e}")))
+        .map_err(|e| ApiError::Internal(format!("computation: {e}")))
 }
 
 fn setup(m: &Machine, tool_length: Option<f64>, wo: Option<[f64; 3]>) -> Result<Setup, ApiError> {
@@ -148,7 +150,8 @@ fn joints(m: &Machine, words: &Words) -> Result<Joints, ApiError> {
     for (k, v) in words {
         if !kinematics::coordinate_ok(*v) {
             return Err(ApiError::BadParameter(format!(
-                "joints.{k} must be finite and within ±{:e}",
+                "joints.{} must be finite and within ±{:e}",
+                quote(k),
                 kinematics::MAX_COORD
             )));
         }
@@ -162,7 +165,7 @@ fn joints(m: &Machine, words: &Words) -> Result<Joints, ApiError> {
             }
             _ => {
                 let i = k.chars().next().filter(|_| k.len() == 1).and_then(|c| m.rotary_index(c));
-                let i = i.ok_or_else(|| ApiError::BadParameter(format!("{} has no axis {k:?}", m.id)))?;
+                let i = i.ok_or_else(|| ApiError::BadParameter(format!("{} has no axis {}", m.id, quote(k))))?;
                 j.rotary[i] = v.to_radians();
             }
         }
@@ -175,7 +178,7 @@ fn pose(m: &Machine, r: &PoseRequest) -> Result<Pose, ApiError> {
         None => 1.0,
         Some("mm") => Units::Mm.factor_to(m.units),
         Some("inch") => Units::Inch.factor_to(m.units),
-        Some(u) => return Err(ApiError::BadParameter(format!("units {u:?}: expected mm or inch"))),
+        Some(u) => return Err(ApiError::BadParameter(format!("units {}: expected mm or inch", quote(u)))),
     };
     Ok(Pose {
         tip: Vec3::from(r.tip) * f,
@@ -192,12 +195,15 @@ pub async fn fk_route(
     ApiJson(r): ApiJson<FkRequest>,
 ) -> Result<Json<PoseDto>, ApiError> {
     let p = profile(&st, &id)?;
-    let m = &p.machine;
-    let p = kinematics::fk(m, &joints(m, &r.joints)?, &setup(m, r.tool_length, r.work_offset)?);
-    Ok(Json(PoseDto {
-        tip: p.tip.into(),
-        axis: p.axis.into(),
-    }))
+    off_runtime(move || {
+        let m = &p.machine;
+        let p = kinematics::fk(m, &joints(m, &r.joints)?, &setup(m, r.tool_length, r.work_offset)?);
+        Ok(Json(PoseDto {
+            tip: p.tip.into(),
+            axis: p.axis.into(),
+        }))
+    })
+    .await?
 }
 
 /// Inverse kinematics: every joint solution of a pose, in limits or not.
@@ -209,21 +215,24 @@ pub async fn ik_route(
     ApiJson(r): ApiJson<PoseRequest>,
 ) -> Result<Json<Value>, ApiError> {
     let p = profile(&st, &id)?;
-    let m = &p.machine;
-    let sols = kinematics::ik(
-        m,
-        &pose(m, &r)?,
-        &setup(m, r.tool_length, r.work_offset)?,
-        &IkOptions::default(),
-    )
-    .map_err(|e| ApiError::BadRecord {
-        message: format!("pose unreachable on {id}: {e}"),
-        line: None,
-        column: None,
-        code: "unreachable",
-    })?;
-    let list: Vec<Value> = sols.iter().map(|s| crate::output::solution_json(m, s)).collect();
-    Ok(Json(serde_json::json!({ "solutions": list })))
+    off_runtime(move || {
+        let m = &p.machine;
+        let sols = kinematics::ik(
+            m,
+            &pose(m, &r)?,
+            &setup(m, r.tool_length, r.work_offset)?,
+            &IkOptions::default(),
+        )
+        .map_err(|e| ApiError::BadRecord {
+            message: format!("pose unreachable on {id}: {e}"),
+            line: None,
+            column: None,
+            code: "unreachable",
+        })?;
+        let list: Vec<Value> = sols.iter().map(|s| crate::output::solution_json(m, s)).collect();
+        Ok(Json(serde_json::json!({ "solutions": list })))
+    })
+    .await?
 }
 
 /// Whether a pose can be reached, and within travel: a check before posting.
@@ -235,11 +244,15 @@ pub async fn validate_pose(
     ApiJson(r): ApiJson<PoseRequest>,
 ) -> Result<Json<ReachDto>, ApiError> {
     let p = profile(&st, &id)?;
-    let m = &p.machine;
-    Ok(Json(
+    off_runtime(move || reach(&p.machine, &r).map(Json)).await?
+}
+
+/// Whether `r`'s pose can be reached on `m`, and within travel.
+fn reach(m: &Machine, r: &PoseRequest) -> Result<ReachDto, ApiError> {
+    Ok(
         match kinematics::ik(
             m,
-            &pose(m, &r)?,
+            &pose(m, r)?,
             &setup(m, r.tool_length, r.work_offset)?,
             &IkOptions::default(),
         ) {
@@ -267,7 +280,7 @@ pub async fn validate_pose(
                 }
             }
         },
-    ))
+    )
 }
 
 /// Fits a rotary's angle-error polynomial (degrees 2–5) from measurements.
@@ -284,7 +297,7 @@ pub async fn angle_error_fit(
         .rotary
         .iter()
         .position(|x| x.name == r.axis)
-        .ok_or_else(|| ApiError::BadParameter(format!("{id} has no rotary {:?}", r.axis)))?;
+        .ok_or_else(|| ApiError::BadParameter(format!("{id} has no rotary {}", quote(&r.axis))))?;
     let mut samples: Vec<(f64, f64)> = r.samples.iter().map(|s| (s[0], s[1])).collect();
     if !r.vertical.is_empty() {
         let l = r

@@ -5,6 +5,7 @@
 use super::AppState;
 use super::error::{ApiError, Problem};
 use crate::machines::{Current, Expect, Profile, ProfileDoc};
+use crate::text::quote;
 use axum::Json;
 use axum::extract::{Path, Request, State};
 use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
@@ -224,7 +225,7 @@ fn expectation(h: &HeaderMap, id: &str) -> Result<Expect, ApiError> {
         .strip_prefix(&format!("\"{id}-v"))
         .and_then(|r| r.strip_suffix('"'))
         .and_then(|n| n.parse::<i64>().ok())
-        .ok_or_else(|| ApiError::PreconditionFailed(format!("If-Match {v}: not an ETag of machine {id:?}")))?;
+        .ok_or_else(|| ApiError::PreconditionFailed(format!("If-Match {}: not an ETag of machine {}", quote(v), quote(id))))?;
     Ok(Expect::Version(version))
 }
 
@@ -400,7 +401,7 @@ pub(super) async fn get_version(
 ) -> Result<Response, ApiError> {
     let v: i64 = version
         .parse()
-        .map_err(|_| ApiError::NotFound(format!("no version {version:?} of {id:?}")))?;
+        .map_err(|_| ApiError::NotFound(format!("no version {} of {}", quote(&version), quote(&id))))?;
     match st.machines.text(&id, v).await {
         Ok(t) => Ok(toml_response(StatusCode::OK, t)),
         Err(crate::machines::Error::ReadOnly) => Err(ApiError::NotFound("no version store in this process".into())),

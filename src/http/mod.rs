@@ -5,17 +5,20 @@
 
 mod error;
 mod jobs;
+mod limits;
 mod machine_ops;
 mod machines;
 mod post;
+mod server;
 
 pub use error::{ApiError, ApiJson, Problem};
 pub use post::PostParams;
+pub use server::{connection_budget, run};
 
 use crate::machines::Library;
 use axum::Json;
 use axum::extract::{MatchedPath, Path, Request, State};
-use axum::http::{HeaderName, HeaderValue, StatusCode, header};
+use axum::http::{HeaderName, HeaderValue, Method, StatusCode, header};
 use axum::middleware::{self, Next};
 use axum::response::{IntoResponse, Response};
 use axum::routing::{get, post as post_route};
@@ -42,6 +45,16 @@ pub struct Config {
     pub request_timeout: Duration,
     /// Post streams running at once; more are answered 503 with Retry-After.
     pub max_streams: usize,
+    /// A new connection must have sent its first request's headers within this.
+    pub header_timeout: Duration,
+    /// A connection with no request in flight is closed after this (keep-alive).
+    pub idle_timeout: Duration,
+    /// Connections open at once; at the limit the one idle longest is closed for a new one.
+    pub max_connections: usize,
+    /// Bytes a second an upload must average over `upload_rate_window` (0: no minimum); a slower
+    /// one fails (408, or an error at the end of a stream already started).
+    pub min_upload_rate: u64,
+    pub upload_rate_window: Duration,
     /// Origins allowed by CORS (CAM plugins' web views); empty: no CORS headers.
     pub cors_origins: Vec<String>,
     pub log_json: bool,
@@ -94,6 +107,11 @@ impl Default for Config {
             max_upload: 4 << 30,
             request_timeout: Duration::from_secs(30),
             max_streams: 64,
+            header_timeout: Duration::from_secs(30),
+            idle_timeout: Duration::from_secs(60),
+            max_connections: 4096,
+            min_upload_rate: 1024,
+            upload_rate_window: Duration::from_secs(30),
             cors_origins: Vec::new(),
             log_json: false,
             workers: std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1),
@@ -295,8 +313,11 @@ impl MakeRequestId for Counter {
 /// The whole service as a router: every route, every layer.
 pub fn app(state: Arc<AppState>) -> axum::Router {
     let x_request_id = HeaderName::from_static("x-request-id");
+    // The pace is metered inside the length limit, so that the limit's error reaches the
+    // multipart reader as its own type (413, not 400).
     let streams = tower::ServiceBuilder::new()
         .layer(middleware::map_response_with_state(state.clone(), too_large_problem))
+        .layer(middleware::from_fn_with_state(state.clone(), limits::min_upload_rate))
         .layer(axum::extract::DefaultBodyLimit::disable())
         .layer(tower_http::limit::RequestBodyLimitLayer::new(
             state.config.max_upload.min(usize::MAX as u64) as usize,
@@ -307,7 +328,7 @@ pub fn app(state: Arc<AppState>) -> axum::Router {
             "/v1/post",
             post_route(post::post_cl)
                 .layer(streams.clone())
-                .layer(middleware::from_fn_with_state(state.clone(), admit_stream)),
+                .layer(middleware::from_fn_with_state(state.clone(), limits::admit_stream)),
         )
         .route(
             "/v1/jobs",
@@ -356,10 +377,14 @@ pub fn app(state: Arc<AppState>) -> axum::Router {
             .iter()
             .filter_map(|o| HeaderValue::from_str(o).ok())
             .collect();
+        // Listed, not `*`: a wildcard does not cover Authorization (Fetch standard), and a
+        // browser would keep a plug-in's profile writes from being sent.
         CorsLayer::new()
             .allow_origin(AllowOrigin::list(origins))
-            .allow_methods(tower_http::cors::Any)
-            .allow_headers(tower_http::cors::Any)
+            .allow_methods([Method::GET, Method::HEAD, Method::POST, Method::PUT, Method::DELETE])
+            .allow_headers(CORS_REQUEST_HEADERS.map(HeaderName::from_static))
+            .expose_headers(CORS_EXPOSED_HEADERS.map(HeaderName::from_static))
+            .max_age(Duration::from_secs(600))
     };
     let api = api
         .merge(utoipa_swagger_ui::SwaggerUi::new("/docs"))
@@ -380,6 +405,31 @@ pub fn app(state: Arc<AppState>) -> axum::Router {
         .layer(SetRequestIdLayer::new(x_request_id, Counter::default()))
         .with_state(state)
 }
+
+/// Request headers the API reads, which a browser may send cross-origin.
+const CORS_REQUEST_HEADERS: [&str; 9] = [
+    "authorization",
+    "content-type",
+    "if-match",
+    "if-none-match",
+    "if-range",
+    "range",
+    "idempotency-key",
+    "x-request-id",
+    "accept",
+];
+
+/// Response headers a cross-origin script may read (beyond the CORS-safelisted ones).
+const CORS_EXPOSED_HEADERS: [&str; 8] = [
+    "etag",
+    "location",
+    "retry-after",
+    "x-request-id",
+    "content-range",
+    "content-disposition",
+    "accept-ranges",
+    "www-authenticate",
+];
 
 /// The web form's files, compiled into the binary: nothing to deploy, nothing fetched.
 fn static_file(name: &str) -> Response {
@@ -455,14 +505,6 @@ async fn count_requests(State(st): State<Arc<AppState>>, req: Request, next: Nex
     let resp = next.run(req).await;
     st.metrics.record_request(&route, resp.status().as_u16());
     resp
-}
-
-/// Streams beyond the limit are refused at once (503 + Retry-After), never queued into memory.
-async fn admit_stream(State(st): State<Arc<AppState>>, req: Request, next: Next) -> Response {
-    if st.metrics.streams.load(Ordering::Relaxed) as usize >= st.config.max_streams {
-        return ApiError::Busy(format!("{} post streams running", st.config.max_streams)).into_response();
-    }
-    next.run(req).await
 }
 
 /// A controller dialect and its words for the things that differ between controls.
@@ -560,9 +602,17 @@ async fn metrics_route(State(st): State<Arc<AppState>>) -> impl IntoResponse {
 }
 
 /// Loads the library and binds; runs until SIGINT/SIGTERM, then lets streams in flight finish.
-pub async fn serve(cfg: Config) -> Result<(), String> {
+pub async fn serve(mut cfg: Config) -> Result<(), String> {
     let library = Library::load_dir(&cfg.machines).map_err(|e| e.to_string())?;
     std::fs::create_dir_all(&cfg.data_dir).map_err(|e| format!("{}: {e}", cfg.data_dir.display()))?;
+    let fit = connection_budget(cfg.max_connections);
+    if fit < cfg.max_connections {
+        tracing::warn!(
+            max_connections = fit,
+            "fewer connections than --max-connections fit the open-file limit (ulimit -n)"
+        );
+        cfg.max_connections = fit;
+    }
     let listener = tokio::net::TcpListener::bind(&cfg.bind)
         .await
         .map_err(|e| format!("bind {}: {e}", cfg.bind))?;
@@ -578,16 +628,12 @@ pub async fn serve(cfg: Config) -> Result<(), String> {
     let grace = cfg.shutdown_grace;
     let state = Arc::new(AppState {
         machines,
-        config: cfg,
+        config: cfg.clone(),
         metrics,
         jobs: Some(queue),
     });
     let (stopping, mut stop) = tokio::sync::watch::channel(false);
-    let server = axum::serve(
-        listener,
-        app(state).into_make_service_with_connect_info::<std::net::SocketAddr>(),
-    )
-    .with_graceful_shutdown(async move {
+    let server = run(listener, app(state), &cfg, async move {
         shutdown_signal().await;
         let _ = stopping.send(true);
     });
@@ -600,8 +646,8 @@ pub async fn serve(cfg: Config) -> Result<(), String> {
         }
     };
     tokio::select! {
-        r = server => r.map_err(|e| e.to_string()),
-        _ = deadline => Ok(()),
+        () = server => Ok(()),
+        () = deadline => Ok(()),
     }
 }
 

@@ -5,8 +5,8 @@
 //! memory stays bounded and a client that goes away stops the work. Output is held back until
 //! 16 KiB are ready (or the program ends): an error before that still gets its HTTP status.
 
-use super::AppState;
 use super::error::{ApiError, ApiQuery};
+use super::{AppState, limits};
 use crate::diag::Diagnostic;
 use crate::output::{ErrorBody, Header, Record};
 use crate::post::{self, BlockInfo, Settings, Sink, Summary};
@@ -125,7 +125,12 @@ impl PostParams {
             "planes" => self.planes = Some(v).filter(|s| !s.is_empty()),
             "work_coordinates" => self.work_coordinates = Some(v).filter(|s| !s.is_empty()),
             "spindle_speed" => self.spindle_speed = if v.trim().is_empty() { None } else { Some(num(&v)?) },
-            other => return Err(ApiError::BadParameter(format!("unknown form field {other:?}"))),
+            other => {
+                return Err(ApiError::BadParameter(format!(
+                    "unknown form field {}",
+                    crate::text::quote(other)
+                )));
+            }
         }
         Ok(())
     }
@@ -236,9 +241,12 @@ fn engine_error(e: post::Error) -> ApiError {
     }
 }
 
-/// A failed read of the request body: over the body limit (413), else a broken upload (400).
+/// A failed read of the request body: too slow (408), over the body limit (413), else a broken
+/// upload (400).
 pub(super) fn upload_error(text: String) -> ApiError {
-    if text.contains("length limit") || text.contains("too large") {
+    if let Some(slow) = limits::too_slow(&text) {
+        ApiError::UploadTooSlow(slow.to_string())
+    } else if text.contains("length limit") || text.contains("too large") || text.contains("upload larger than") {
         ApiError::TooLarge(None)
     } else {
         ApiError::BadParameter(format!("reading the upload: {text}"))
@@ -255,18 +263,21 @@ pub(super) fn upload_error(text: String) -> ApiError {
         (status = 200, description = "The NC program (text/plain), or one JSON object per line (application/x-ndjson): header, block…, summary, and error on failure", content_type = "text/plain"),
         (status = 400, description = "Bad parameter", body = super::error::Problem, content_type = "application/problem+json"),
         (status = 404, description = "Unknown machine", body = super::error::Problem, content_type = "application/problem+json"),
-        (status = 413, description = "Upload too large", body = super::error::Problem, content_type = "application/problem+json"),
+        (status = 408, description = "Upload slower than --min-upload-rate (once the program has begun, it ends with the error instead)", body = super::error::Problem, content_type = "application/problem+json"),
+        (status = 413, description = "Upload too large, or a form field over 64 KiB", body = super::error::Problem, content_type = "application/problem+json"),
         (status = 415, description = "Unsupported media type", body = super::error::Problem, content_type = "application/problem+json"),
         (status = 422, description = "Bad CL record (strict mode) with line and column, or over the server's bound on output or time before the first byte (`over-budget`)", body = super::error::Problem, content_type = "application/problem+json"),
+        (status = 503, description = "--max-streams post streams running (Retry-After)", body = super::error::Problem, content_type = "application/problem+json"),
     ),
     tag = "post"
 )]
 pub async fn post_cl(
     State(st): State<Arc<AppState>>,
     ApiQuery(query): ApiQuery<PostParams>,
-    req: Request,
+    mut req: Request,
 ) -> Result<Response, ApiError> {
     let ndjson = wants_ndjson(req.headers())?;
+    let slot = req.extensions_mut().remove::<Arc<limits::StreamSlot>>();
     let (params, filename, body) = upload(&st, query, req).await?;
     let profile = params.profile(&st)?.profile;
     let mut opts = params.settings().profile_options(&profile).map_err(ApiError::BadParameter)?;
@@ -281,8 +292,8 @@ pub async fn post_cl(
     ));
     let with_header = ndjson;
     let metrics = st.metrics.clone();
-    metrics.streams.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
     tokio::task::spawn_blocking(move || {
+        let _slot = slot;
         let mut sink = ChannelSink {
             tx,
             buf: Vec::with_capacity(PRELUDE + 4096),
@@ -312,7 +323,6 @@ pub async fn post_cl(
                 sink.fail(engine_error(e), body);
             }
         }
-        metrics.streams.fetch_sub(1, std::sync::atomic::Ordering::Relaxed);
     });
     let first = match rx.recv().await {
         Some(Msg::Fail(e)) => return Err(e),
@@ -409,7 +419,7 @@ async fn read_form(
         let field = match mp.next_field().await {
             Ok(Some(field)) => field,
             Ok(None) => break ApiError::BadParameter("multipart: no file part (name it \"file\")".into()),
-            Err(e) => break ApiError::BadParameter(format!("multipart: {e}")),
+            Err(e) => break limits::multipart_error(e),
         };
         let name = field.name().unwrap_or("").to_string();
         if field.file_name().is_some() || name == "file" {
@@ -417,10 +427,7 @@ async fn read_form(
             let _ = ptx.send(Ok((params, fname)));
             return stream_file(field, btx).await;
         }
-        let set = match field.text().await {
-            Ok(v) => params.set(&name, v),
-            Err(e) => Err(ApiError::BadParameter(format!("multipart: {e}"))),
-        };
+        let set = limits::read_field(&name, field).await.and_then(|v| params.set(&name, v));
         if let Err(e) = set {
             break e;
         }
@@ -440,7 +447,8 @@ async fn stream_file(mut field: Field<'_>, btx: mpsc::Sender<Result<Bytes, std::
             }
             Ok(None) => return,
             Err(e) => {
-                let _ = btx.send(Err(std::io::Error::other(e.to_string()))).await;
+                let text = limits::multipart_error(e).to_string();
+                let _ = btx.send(Err(std::io::Error::other(text))).await;
                 return;
             }
         }

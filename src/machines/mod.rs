@@ -4,6 +4,7 @@
 //! file, the key and the problem, so a shop editing a profile knows what to fix.
 
 use crate::kinematics::{self, AngleError, Linear, Machine, MachineSpec, Mount, Rotary, Units, Vec3};
+use crate::text::quote;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -20,12 +21,12 @@ pub enum Error {
     Invalid { file: String, key: String, problem: String },
     #[error("{path}: {source}")]
     Io { path: String, source: std::io::Error },
-    #[error("no machine profile {0:?}")]
+    #[error("no machine profile {}", crate::text::quote(.0))]
     NotFound(String),
-    #[error("machine {id:?} exists (version {version}): replace it with PUT")]
+    #[error("machine {} exists (version {version}): replace it with PUT", crate::text::quote(.id))]
     Exists { id: String, version: i64 },
     /// `If-Match` named another version than the current one (or the profile is gone).
-    #[error("machine {id:?} is at {}: the write was based on another", current.map_or("no version (deleted or never created)".to_string(), |v| format!("version {v}")))]
+    #[error("machine {} is at {}: the write was based on another", crate::text::quote(.id), current.map_or("no version (deleted or never created)".to_string(), |v| format!("version {v}")))]
     Precondition { id: String, current: Option<i64> },
     #[error("machine profiles are read-only in this process (no store)")]
     ReadOnly,
@@ -136,12 +137,15 @@ pub fn parse_profile(text: &str, file: &str, stem: Option<&str>) -> Result<Profi
     if let Some(stem) = stem
         && doc.id != stem
     {
-        return Err(invalid("id", format!("{:?} differs from the file name {:?}", doc.id, stem)));
+        return Err(invalid(
+            "id",
+            format!("{} differs from the file name {}", quote(&doc.id), quote(stem)),
+        ));
     }
     let units = match doc.units.as_str() {
         "mm" => Units::Mm,
         "inch" => Units::Inch,
-        other => return Err(invalid("units", format!("{other:?} must be \"mm\" or \"inch\""))),
+        other => return Err(invalid("units", format!("{} must be \"mm\" or \"inch\"", quote(other)))),
     };
     let mut linears: [Option<Linear>; 3] = [None, None, None];
     for (i, l) in doc.linear.iter().enumerate() {
@@ -149,7 +153,12 @@ pub fn parse_profile(text: &str, file: &str, stem: Option<&str>) -> Result<Profi
             "X" => 0,
             "Y" => 1,
             "Z" => 2,
-            other => return Err(invalid(&format!("linear[{i}].name"), format!("{other:?} must be X, Y or Z"))),
+            other => {
+                return Err(invalid(
+                    &format!("linear[{i}].name"),
+                    format!("{} must be X, Y or Z", quote(other)),
+                ));
+            }
         };
         if linears[idx].is_some() {
             return Err(invalid(
@@ -170,12 +179,12 @@ pub fn parse_profile(text: &str, file: &str, stem: Option<&str>) -> Result<Profi
         let mut chars = r.name.chars();
         let name = match (chars.next(), chars.next()) {
             (Some(c @ ('A' | 'B' | 'C')), None) => c,
-            _ => return Err(invalid(&key("name"), format!("{:?} must be A, B or C", r.name))),
+            _ => return Err(invalid(&key("name"), format!("{} must be A, B or C", quote(&r.name)))),
         };
         let mount = match r.on.as_str() {
             "table" => Mount::Table,
             "head" => Mount::Head,
-            other => return Err(invalid(&key("on"), format!("{other:?} must be \"table\" or \"head\""))),
+            other => return Err(invalid(&key("on"), format!("{} must be \"table\" or \"head\"", quote(other)))),
         };
         if let Some(c) = &r.clamp
             && c.iter().any(|w| !is_one_word(w))
@@ -216,7 +225,11 @@ pub fn parse_profile(text: &str, file: &str, stem: Option<&str>) -> Result<Profi
         // An unknown controller posted Fanuc without a word.
         return Err(invalid(
             "controller",
-            format!("{c:?} is not a dialect kinepost writes: one of {:?}", crate::nc::DIALECTS),
+            format!(
+                "{} is not a dialect kinepost writes: one of {:?}",
+                quote(c),
+                crate::nc::DIALECTS
+            ),
         ));
     }
     let spec = MachineSpec {

@@ -3,6 +3,7 @@
 
 use crate::kinematics::{Machine, Units, Vec3};
 use crate::nc::Dialect;
+use crate::text::quote;
 use serde::Serialize;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
@@ -210,13 +211,13 @@ impl Settings {
     pub fn options(&self, m: &Machine) -> Result<Options, String> {
         let mut o = Options::new(m);
         if let Some(d) = &self.dialect {
-            o.dialect =
-                crate::nc::dialect(d).ok_or_else(|| format!("dialect {d:?}: known dialects are {:?}", crate::nc::DIALECTS))?;
+            o.dialect = crate::nc::dialect(d)
+                .ok_or_else(|| format!("dialect {}: known dialects are {:?}", quote(d), crate::nc::DIALECTS))?;
         }
         o.mode = match self.mode.as_deref() {
             None | Some("joint") => Mode::Joint,
             Some("tcp") => Mode::Tcp,
-            Some(x) => return Err(format!("mode {x:?}: expected joint or tcp")),
+            Some(x) => return Err(format!("mode {}: expected joint or tcp", quote(x))),
         };
         if let Some(l) = self.tool_length {
             if !(l >= 0.0 && crate::kinematics::coordinate_ok(l)) {
@@ -269,17 +270,17 @@ impl Settings {
             None => None,
             Some("mm") => Some(Units::Mm),
             Some("inch") => Some(Units::Inch),
-            Some(u) => return Err(format!("cl_units {u:?}: expected mm or inch")),
+            Some(u) => return Err(format!("cl_units {}: expected mm or inch", quote(u))),
         };
         o.canned_cycles = match self.cycles.as_deref() {
             None | Some("expand") => false,
             Some("canned") => true,
-            Some(x) => return Err(format!("cycles {x:?}: expected expand or canned")),
+            Some(x) => return Err(format!("cycles {}: expected expand or canned", quote(x))),
         };
         o.tilted_planes = match self.planes.as_deref() {
             None | Some("positioning") => false,
             Some("tilted") => true,
-            Some(x) => return Err(format!("planes {x:?}: expected positioning or tilted")),
+            Some(x) => return Err(format!("planes {}: expected positioning or tilted", quote(x))),
         };
         if let Some(w) = self.work_coordinates.as_deref().map(str::trim).filter(|w| !w.is_empty()) {
             let known = o.dialect.work_coordinates;
@@ -290,12 +291,14 @@ impl Settings {
                 o.work_coordinates = Some(w);
             } else if known.is_empty() {
                 return Err(format!(
-                    "work_coordinates {w:?}: {} selects none (its datum is the control's preset); expected none",
+                    "work_coordinates {}: {} selects none (its datum is the control's preset); expected none",
+                    quote(&w),
                     o.dialect.name
                 ));
             } else {
                 return Err(format!(
-                    "work_coordinates {w:?}: {} takes {} or none",
+                    "work_coordinates {}: {} takes {} or none",
+                    quote(&w),
                     o.dialect.name,
                     known.join(", ")
                 ));
@@ -318,13 +321,14 @@ pub const MAX_SPINDLE_SPEED: f64 = 200_000.0;
 pub fn parse_triple(s: &str) -> Result<Vec3, String> {
     let v: Vec<f64> = s
         .split(',')
-        .map(|p| p.trim().parse::<f64>().map_err(|_| format!("{p:?} is not a number")))
+        .map(|p| p.trim().parse::<f64>().map_err(|_| format!("{} is not a number", quote(p))))
         .collect::<Result<_, _>>()?;
     match v.as_slice() {
         [x, y, z] if v.iter().all(|c| crate::kinematics::coordinate_ok(*c)) => Ok(Vec3::new(*x, *y, *z)),
         _ => Err(format!(
-            "expected three numbers x,y,z within ±{:e}, got {s:?}",
-            crate::kinematics::MAX_COORD
+            "expected three numbers x,y,z within ±{:e}, got {}",
+            crate::kinematics::MAX_COORD,
+            quote(s)
         )),
     }
 }

@@ -19,14 +19,7 @@ pub async fn server(cfg: Config) -> String {
     });
     let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
     let addr = listener.local_addr().unwrap();
-    tokio::spawn(async move {
-        axum::serve(
-            listener,
-            app(state).into_make_service_with_connect_info::<std::net::SocketAddr>(),
-        )
-        .await
-        .unwrap()
-    });
+    tokio::spawn(async move { kinepost::http::run(listener, app(state), &cfg, std::future::pending()).await });
     format!("http://{addr}")
 }
 
@@ -48,8 +41,23 @@ pub fn cfg() -> Config {
 /// The real binary serving `data` on an ephemeral loopback port: the child and its base URL,
 /// its log drained in the background.
 pub fn spawn_binary(data: &std::path::Path, extra: &[&str]) -> (std::process::Child, String) {
+    spawn_serving(std::process::Command::new(env!("CARGO_BIN_EXE_kinepost")), data, extra)
+}
+
+/// [`spawn_binary`] with at most `nofile` open files (`ulimit -n`, soft and hard).
+pub fn spawn_binary_with_nofile(data: &std::path::Path, extra: &[&str], nofile: u32) -> (std::process::Child, String) {
+    let mut sh = std::process::Command::new("sh");
+    sh.args([
+        "-c",
+        &format!("ulimit -n {nofile} && exec \"$0\" \"$@\""),
+        env!("CARGO_BIN_EXE_kinepost"),
+    ]);
+    spawn_serving(sh, data, extra)
+}
+
+fn spawn_serving(mut cmd: std::process::Command, data: &std::path::Path, extra: &[&str]) -> (std::process::Child, String) {
     use std::io::{BufRead, BufReader};
-    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_kinepost"))
+    let mut child = cmd
         .args(["serve", "--bind", "127.0.0.1:0", "--data-dir", data.to_str().unwrap()])
         .args(extra)
         .env("KINEPOST_MACHINES", concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))
@@ -140,5 +148,35 @@ impl Fetch for reqwest::RequestBuilder {
     }
     async fn json_ok(self) -> serde_json::Value {
         self.send().await.unwrap().json().await.unwrap()
+    }
+}
+
+/// A request written by hand on its own connection, for what a client library will not do
+/// (send half a header, stop mid-body): the socket, after `bytes` are written.
+pub async fn raw(base: &str, bytes: &[u8]) -> tokio::net::TcpStream {
+    use tokio::io::AsyncWriteExt;
+    let mut s = tokio::net::TcpStream::connect(base.trim_start_matches("http://"))
+        .await
+        .unwrap();
+    s.write_all(bytes).await.unwrap();
+    s
+}
+
+/// What the server sends on `s` within `limit`, up to its closing the connection: `None` if it
+/// neither closed nor sent a complete response head in that time.
+pub async fn read_response(s: &mut tokio::net::TcpStream, limit: std::time::Duration) -> Option<String> {
+    use tokio::io::AsyncReadExt;
+    let deadline = tokio::time::Instant::now() + limit;
+    let mut got = Vec::new();
+    let mut buf = [0u8; 8192];
+    loop {
+        match tokio::time::timeout_at(deadline, s.read(&mut buf)).await {
+            Ok(Ok(0)) | Ok(Err(_)) => return Some(String::from_utf8_lossy(&got).into_owned()),
+            Ok(Ok(n)) => got.extend_from_slice(&buf[..n]),
+            Err(_) => {
+                let head_done = got.windows(4).any(|w| w == b"\r\n\r\n");
+                return head_done.then(|| String::from_utf8_lossy(&got).into_owned());
+            }
+        }
     }
 }
