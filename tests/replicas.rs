@@ -37,10 +37,12 @@ impl TestDb {
                 return None;
             }
         };
+        // One database per test: tests of this file run at once in one process.
+        static NEXT: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
         let name = format!(
             "kinepost_test_{}_{}",
             std::process::id(),
-            Instant::now().elapsed().as_nanos() % 1000
+            NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed)
         );
         let mut c = sqlx::PgConnection::connect(&admin)
             .await
