@@ -133,6 +133,7 @@ impl From<jobs::Error> for ApiError {
         match e {
             jobs::Error::NotFound(id) => ApiError::NotFound(format!("no job {id}")),
             jobs::Error::Full(n) => ApiError::Busy(format!("the job queue is full ({n} jobs waiting)")),
+            e @ jobs::Error::Unconfirmed(_) => ApiError::Busy(e.to_string()),
             e @ jobs::Error::ClientLimit { .. } => ApiError::TooManyRequests(e.to_string()),
             jobs::Error::WrongState { id, state } => ApiError::Conflict(format!("job {id} is {state}")),
             jobs::Error::Upload(m) => upload_error(m),

@@ -11,7 +11,7 @@
 
 mod store;
 
-pub use store::{Job, Output, State, Store};
+pub use store::{Job, Output, State, Store, Submission};
 
 use crate::machines::{Catalog, Library, Profile};
 use crate::output::preview::{Caps, PreviewBuilder};
@@ -38,6 +38,10 @@ pub enum Error {
     /// A row the store cannot read back (written by another version, or damaged).
     #[error("job store: {0}")]
     Corrupt(String),
+    /// The store did not confirm a job's row (its answers were lost): not acknowledged. A row
+    /// that did land keeps its input, so a retry with the same idempotency key finds the job.
+    #[error("the job store did not confirm the job ({0}); submit it again, with the same Idempotency-Key")]
+    Unconfirmed(String),
     #[error("no job {0}")]
     NotFound(String),
     #[error("the queue is full ({0} jobs waiting)")]
@@ -161,10 +165,14 @@ impl Queue {
                 });
             }
         }
-        let r = self
-            .store
-            .insert(settings, machine_version, client, filename, idempotency_key, input)
-            .await?;
+        let submission = Submission {
+            settings,
+            machine_version,
+            client,
+            filename,
+            key: idempotency_key,
+        };
+        let r = self.store.insert(submission, input).await?;
         self.wake.notify_one();
         Ok(r)
     }

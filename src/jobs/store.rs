@@ -4,6 +4,10 @@
 //! SQL is the same except where the backends differ in kind: claiming (`FOR UPDATE SKIP LOCKED`)
 //! and start-up recovery (one node may requeue every running job; replicas go by leases).
 
+mod accept;
+
+pub use accept::Submission;
+
 use super::Error;
 use crate::post::{Settings, Summary};
 use serde::{Deserialize, Serialize};
@@ -12,7 +16,6 @@ use sqlx::Row;
 use sqlx::any::{AnyPoolOptions, AnyRow};
 use std::path::{Path, PathBuf};
 use std::time::Duration;
-use tokio::io::AsyncWriteExt;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
@@ -403,69 +406,6 @@ impl Store {
             .fetch_one(&self.pool)
             .await?;
         Ok(n.max(0) as u64)
-    }
-
-    pub(super) async fn insert(
-        &self,
-        settings: Settings,
-        machine_version: i64,
-        client: Option<String>,
-        filename: Option<String>,
-        key: Option<String>,
-        mut input: impl tokio::io::AsyncRead + Unpin,
-    ) -> Result<(Job, bool), Error> {
-        let id = uuid::Uuid::new_v4().simple().to_string();
-        let p = Paths::new(&self.spool, &id, 0);
-        let tmp = self.spool.join(format!("{id}.cl.tmp"));
-        let copied = async {
-            let mut f = tokio::fs::File::create(&tmp).await?;
-            let n = tokio::io::copy(&mut input, &mut f).await?;
-            f.flush().await?;
-            f.sync_all().await?;
-            Ok::<u64, std::io::Error>(n)
-        }
-        .await;
-        let n = match copied {
-            Ok(n) => n,
-            Err(e) => {
-                let _ = tokio::fs::remove_file(&tmp).await;
-                if e.kind() == std::io::ErrorKind::StorageFull || e.kind() == std::io::ErrorKind::QuotaExceeded {
-                    return Err(Error::NoSpace(e.to_string()));
-                }
-                return Err(Error::Upload(e.to_string()));
-            }
-        };
-        tokio::fs::rename(&tmp, &p.input).await?;
-        sync_dir(&self.spool)?;
-        let machine = settings.machine.clone().unwrap_or_default();
-        let res = sqlx::query(
-            "INSERT INTO jobs (id, state, machine, machine_version, settings, filename, idempotency_key, input_bytes, created_ms, client)
-             VALUES ($1, 'queued', $2, $3, $4, $5, $6, $7, $8, $9)",
-        )
-        .bind(&id)
-        .bind(&machine)
-        .bind(machine_version)
-        .bind(serde_json::to_string(&settings).unwrap_or_default())
-        .bind(&filename)
-        .bind(&key)
-        .bind(n.min(i64::MAX as u64) as i64)
-        .bind(now_ms())
-        .bind(&client)
-        .execute(&self.pool)
-        .await;
-        match res {
-            Ok(_) => Ok((self.get(&id).await?, true)),
-            Err(e) => {
-                let _ = tokio::fs::remove_file(&p.input).await;
-                // Two submissions with one key raced: the first one's job is the answer.
-                if let Some(k) = &key
-                    && let Some(j) = self.by_key(k).await?
-                {
-                    return Ok((j, false));
-                }
-                Err(e.into())
-            }
-        }
     }
 
     /// Takes the oldest queued job, or a running one whose owner stopped reporting (a replica
