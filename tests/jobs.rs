@@ -420,3 +420,17 @@ async fn one_client_cannot_fill_the_queue() {
     assert_eq!(c.delete(format!("{base}/v1/jobs/{id}")).status_ok().await, 200);
     assert_eq!(submit(100).await.unwrap().status(), 202);
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn limits_hold_under_concurrent_submissions() {
+    // Nothing drains (no workers): the limits alone decide.
+    let mut cfg = common::cfg();
+    (cfg.workers, cfg.max_queued) = (0, 5);
+    let base = common::server(cfg.clone()).await;
+    common::limit_holds(&[base], &[cfg.data_dir.join("spool")], 5, 503).await;
+
+    let mut cfg = common::cfg();
+    (cfg.workers, cfg.max_jobs_per_client) = (0, 3);
+    let base = common::server(cfg.clone()).await;
+    common::limit_holds(&[base], &[cfg.data_dir.join("spool")], 3, 429).await;
+}

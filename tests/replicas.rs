@@ -505,3 +505,21 @@ async fn a_connection_cut_at_commit_loses_no_accepted_job() {
     assert_eq!(inputs, want, "spool files of refused jobs");
     let _ = std::fs::remove_dir_all(&cfg.data_dir);
 }
+
+/// Two replicas on one queue: the queue's and a client's limits hold for submissions racing on
+/// both.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn limits_hold_across_replicas_under_concurrent_submissions() {
+    for (max_queued, per_client, allowed, status) in [(5, 0, 5, 503), (1000, 3, 3, 429)] {
+        let Some(db) = TestDb::create().await else { return };
+        let (mut bases, mut spools) = (Vec::new(), Vec::new());
+        for _ in 0..2 {
+            let mut cfg = common::cfg();
+            cfg.database_url = Some(db.url.clone());
+            (cfg.workers, cfg.max_queued, cfg.max_jobs_per_client) = (0, max_queued, per_client);
+            bases.push(common::server(cfg.clone()).await);
+            spools.push(cfg.data_dir.join("spool"));
+        }
+        common::limit_holds(&bases, &spools, allowed, status).await;
+    }
+}

@@ -59,7 +59,7 @@ pub enum Error {
 #[derive(Clone, Debug)]
 pub struct Config {
     pub data_dir: PathBuf,
-    /// Jobs run at once (default: one per core).
+    /// Jobs run at once (default: one per core); 0: none on this node (another replica runs them).
     pub workers: usize,
     /// Jobs waiting at most; more are refused (the service answers 503).
     pub max_queued: u64,
@@ -127,14 +127,15 @@ impl Queue {
             wake: tokio::sync::Notify::new(),
             observer: std::sync::OnceLock::new(),
         });
-        for _ in 0..q.config.workers.max(1) {
+        for _ in 0..q.config.workers {
             tokio::spawn(q.clone().worker());
         }
         tokio::spawn(q.clone().cleaner());
         Ok((q, machines))
     }
 
-    /// Accepts a job: the input is streamed to the spool and fsynced before the row commits.
+    /// Accepts a job: the input is streamed to the spool and fsynced before the row commits, the
+    /// limits counted as the row is inserted (the counts before spooling only refuse early).
     /// With an idempotency key already seen, returns that job (and `false`).
     pub async fn submit(
         &self,
@@ -171,6 +172,8 @@ impl Queue {
             client,
             filename,
             key: idempotency_key,
+            max_queued: self.config.max_queued,
+            max_per_client: self.config.max_per_client,
         };
         let r = self.store.insert(submission, input).await?;
         self.wake.notify_one();

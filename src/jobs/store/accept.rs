@@ -1,5 +1,5 @@
-//! Accepting a job: its input made durable in the spool, then its row committed. A job is
-//! acknowledged only once both exist. When the
+//! Accepting a job: its input made durable in the spool, then its row committed, the queue's
+//! limits counted in the same step. A job is acknowledged only once both exist. When the
 //! database's answer is lost (the connection cut at commit), the insert, idempotent on the job id,
 //! is asked again; the input is removed only once it is known that no row owns it.
 
@@ -9,8 +9,9 @@ use crate::post::Settings;
 use std::time::Duration;
 use tokio::io::AsyncWriteExt;
 
-/// PostgreSQL: job inserts hold this transaction lock, so that an insert cut off at commit has
-/// ended, one way or the other, before the next attempt asks whether its row is there.
+/// PostgreSQL: job inserts hold this transaction lock, so that the limits are counted and the
+/// row inserted as one step across replicas, and so that an insert cut off at commit has ended,
+/// one way or the other, before the next attempt asks whether its row is there.
 const INSERT_LOCK: i64 = 7_311_000_002;
 
 /// Pauses (ms) before each attempt at the insert, then before each read-only check.
@@ -20,13 +21,17 @@ const CHECKS: [u64; 4] = [0, 200, 500, 1000];
 /// One attempt may wait this long (a lock held by a cut-off attempt, a pool without connections).
 const ATTEMPT: Duration = Duration::from_secs(5);
 
-/// Who submits what.
+/// Who submits what, and the limits the insert keeps.
 pub struct Submission {
     pub settings: Settings,
     pub machine_version: i64,
     pub client: Option<String>,
     pub filename: Option<String>,
     pub key: Option<String>,
+    /// Jobs queued at most (the new one not counted).
+    pub max_queued: u64,
+    /// Jobs queued or running for one client at most; 0: no limit.
+    pub max_per_client: u64,
 }
 
 /// Why an insert came back without an answer.
@@ -53,11 +58,13 @@ fn outcome_unknown(e: &sqlx::Error) -> bool {
     }
 }
 
-/// The job row; nothing is inserted when the id exists (an earlier attempt's row) or the
-/// idempotency key is taken.
+/// The job row, limits checked in its `WHERE`: no row is inserted when the queue or the client is
+/// at its limit, or the idempotency key is taken, or the id exists (an earlier attempt's row).
 const INSERT: &str =
     "INSERT INTO jobs (id, state, machine, machine_version, settings, filename, idempotency_key, input_bytes, created_ms, client)
-    VALUES ($1, 'queued', $2, $3, $4, $5, $6, $7, $8, $9)
+    SELECT $1, 'queued', $2, $3, $4, $5, $6, $7, $8, $9
+    WHERE (SELECT COUNT(*) FROM jobs WHERE state = 'queued') < $10
+      AND (SELECT COUNT(*) FROM jobs WHERE client = $9 AND state IN ('queued', 'running')) < $11
     ON CONFLICT DO NOTHING";
 
 impl Store {
@@ -112,7 +119,7 @@ impl Store {
                 {
                     return Ok((j, false));
                 }
-                Err(Error::Unconfirmed(format!("the job with key {:?} is gone", s.key)))
+                Err(self.refusal(&s).await?)
             }
             Err(Failure::Refused(e)) => {
                 let _ = tokio::fs::remove_file(&p.input).await;
@@ -156,7 +163,7 @@ impl Store {
 
     /// Inserts the row, asking again where an answer was lost: `true` when the row is there
     /// (inserted now or by an attempt whose answer was lost), `false` when it was not inserted
-    /// (the key taken).
+    /// (a limit, or the key taken).
     async fn commit_row(&self, job: &Job, s: &Submission) -> Result<bool, Failure> {
         let mut why = String::new();
         for pause in INSERTS {
@@ -178,9 +185,13 @@ impl Store {
         Err(Failure::Unknown(why))
     }
 
-    /// One attempt: the insert and, when it inserted nothing, whether the id is there
-    /// (PostgreSQL: both under the insert lock, in one transaction).
+    /// One attempt: the conditional insert and, when it inserted nothing, whether the id is
+    /// there (PostgreSQL: both under the insert lock, in one transaction).
     async fn insert_once(&self, job: &Job, s: &Submission) -> Result<bool, sqlx::Error> {
+        let per_client = match (&s.client, s.max_per_client) {
+            (Some(_), n) if n > 0 => n.min(i64::MAX as u64) as i64,
+            _ => i64::MAX,
+        };
         let insert = sqlx::query(INSERT)
             .bind(&job.id)
             .bind(&job.machine)
@@ -190,10 +201,13 @@ impl Store {
             .bind(&job.idempotency_key)
             .bind(job.input_bytes.min(i64::MAX as u64) as i64)
             .bind(job.created_ms)
-            .bind(&s.client);
+            .bind(&s.client)
+            .bind(s.max_queued.min(i64::MAX as u64) as i64)
+            .bind(per_client);
         let exists = sqlx::query_scalar::<_, i64>("SELECT COUNT(*) FROM jobs WHERE id = $1").bind(&job.id);
         match self.backend {
             Backend::Sqlite => {
+                // One statement: SQLite runs one writer at a time, counts included.
                 if insert.execute(&self.pool).await?.rows_affected() == 1 {
                     return Ok(true);
                 }
@@ -210,6 +224,24 @@ impl Store {
                 Ok(there)
             }
         }
+    }
+
+    /// Why a row was not inserted (its key was not taken): the full queue or the client's limit.
+    async fn refusal(&self, s: &Submission) -> Result<Error, Error> {
+        let waiting = self.count(State::Queued).await?;
+        if let Some(c) = &s.client
+            && s.max_per_client > 0
+            && waiting < s.max_queued
+        {
+            let active = self.active_for(c).await?;
+            if active >= s.max_per_client {
+                return Ok(Error::ClientLimit {
+                    client: c.clone(),
+                    active,
+                });
+            }
+        }
+        Ok(Error::Full(waiting.max(s.max_queued)))
     }
 }
 
