@@ -434,3 +434,55 @@ async fn limits_hold_under_concurrent_submissions() {
     let base = common::server(cfg.clone()).await;
     common::limit_holds(&[base], &[cfg.data_dir.join("spool")], 3, 429).await;
 }
+
+#[tokio::test]
+async fn start_up_sweeps_the_spool_of_what_no_job_owns() {
+    let data = std::env::temp_dir().join(format!("kinepost-jobs-sweep-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&data);
+    let (server, base) = start(&data);
+    let c = reqwest::Client::new();
+    let j: Value = c
+        .post(format!("{base}/v1/jobs?machine=dmg-dmc75v"))
+        .body(common::generated("dmg-dmc75v", 200, 7))
+        .json_ok()
+        .await;
+    let id = j["id"].as_str().unwrap().to_string();
+    common::wait_job(&c, &base, &id, "succeeded", Duration::from_secs(60)).await;
+    let own = common::node_of(&c, &base).await;
+    drop(server); // kill -9
+
+    // What killed processes leave: uploads (this node's, another's, an old version's), a run's
+    // temporaries, an input whose row never committed, outputs whose row was deleted; fresh and
+    // old. One node on its own spool removes all of it at start-up.
+    let spool = data.join("spool");
+    let (fresh, old) = (Duration::ZERO, Duration::from_secs(7200));
+    let (a, b) = ("a".repeat(32), "b".repeat(32));
+    let planted = [
+        (format!("{a}.{own}.cl.tmp"), fresh),
+        (format!("{a}.replica-x-12345678.cl.tmp"), fresh),
+        (format!("{b}.replica-x-12345678.cl.tmp"), old),
+        (format!("{b}.cl.tmp"), fresh),
+        (format!("{a}.cl"), fresh),
+        (format!("{b}.cl"), old),
+        (format!("{a}.nc"), fresh),
+        (format!("{a}.ndjson"), fresh),
+        (format!("{a}.preview.json"), fresh),
+        (format!("{a}.nc.1.tmp"), fresh),
+        (format!("{id}.ndjson.3.tmp"), fresh),
+    ];
+    for (name, age) in &planted {
+        common::plant(&spool, name, *age);
+    }
+    common::plant(&spool, "notes.txt", fresh);
+    let (_server, base) = start(&data);
+    // Answering at all means start-up (recovery, the sweep) is done.
+    assert_eq!(c.get(format!("{base}/v1/jobs/{id}/nc")).status_ok().await, 200);
+    let mut kept: Vec<String> = ["cl", "nc", "ndjson", "preview.json"]
+        .iter()
+        .map(|x| format!("{id}.{x}"))
+        .chain(["notes.txt".to_string()])
+        .collect();
+    kept.sort();
+    assert_eq!(common::spool_names(&spool), kept);
+    let _ = std::fs::remove_dir_all(&data);
+}

@@ -523,3 +523,87 @@ async fn limits_hold_across_replicas_under_concurrent_submissions() {
         common::limit_holds(&bases, &spools, allowed, status).await;
     }
 }
+
+/// A replica restarting on a shared spool removes what its previous process left and what no
+/// row owns and is an hour old, and keeps what another replica may still be writing.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_restarting_replica_sweeps_only_its_own_and_expired_spool_files() {
+    let Some(db) = TestDb::create().await else { return };
+    let spool = std::env::temp_dir().join(format!("kinepost-sweep-spool-{}", std::process::id()));
+    let data = std::env::temp_dir().join(format!("kinepost-sweep-replica-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&spool);
+    let _ = std::fs::remove_dir_all(&data);
+    let args = [
+        "--database-url",
+        &db.url,
+        "--spool-dir",
+        spool.to_str().unwrap(),
+        "--workers",
+        "1",
+    ];
+    let (child, base) = common::spawn_binary(&data, &args);
+    let mut first = Replica { child, base };
+    let c = reqwest::Client::new();
+    let j: Value = c
+        .post(format!("{}/v1/jobs?machine=dmg-dmc75v", first.base))
+        .body(common::generated("dmg-dmc75v", 200, 7))
+        .json_ok()
+        .await;
+    let id = j["id"].as_str().unwrap().to_string();
+    common::wait_job(&c, &first.base, &id, "succeeded", Duration::from_secs(60)).await;
+    let own = common::node_of(&c, &first.base).await;
+    first.child.kill().unwrap();
+    first.child.wait().unwrap();
+
+    // Rows running on another, live replica (and on this node before its restart).
+    let (r, mine) = ("c".repeat(32), "d".repeat(32));
+    let mut pg = sqlx::PgConnection::connect(&db.url).await.unwrap();
+    for (job, node) in [(&r, "replica-x-12345678"), (&mine, own.as_str())] {
+        sqlx::query(
+            "INSERT INTO jobs (id, state, machine, settings, input_bytes, created_ms, attempts, owner, heartbeat_ms)
+             VALUES ($1, 'running', 'dmg-dmc75v', '{}', 0, 0, 1, $2, $3)",
+        )
+        .bind(job)
+        .bind(node)
+        .bind(i64::MAX / 2)
+        .execute(&mut pg)
+        .await
+        .unwrap();
+    }
+    let (fresh, old) = (Duration::ZERO, Duration::from_secs(7200));
+    let (a, b) = ("a".repeat(32), "b".repeat(32));
+    let other = "replica-x-12345678";
+    let kept = [
+        (format!("{a}.{other}.cl.tmp"), fresh),
+        (format!("{a}.cl"), fresh),
+        (format!("{b}.cl.tmp"), fresh),
+        (format!("{r}.nc.1.tmp"), fresh),
+        (format!("{r}.cl"), old),
+        ("notes.txt".to_string(), old),
+    ];
+    let removed = [
+        (format!("{a}.{own}.cl.tmp"), fresh),
+        (format!("{b}.{other}.cl.tmp"), old),
+        (format!("{b}.cl"), old),
+        (format!("{b}.nc"), fresh),
+        (format!("{b}.ndjson"), fresh),
+        (format!("{b}.preview.json"), fresh),
+        (format!("{r}.nc.2.tmp"), fresh),
+        (format!("{mine}.nc.1.tmp"), fresh),
+        (format!("{id}.preview.json.1.tmp"), fresh),
+        (format!("{a}.ndjson.1.tmp"), old),
+    ];
+    for (name, age) in kept.iter().chain(&removed) {
+        common::plant(&spool, name, *age);
+    }
+    let (child, base) = common::spawn_binary(&data, &args);
+    let second = Replica { child, base };
+    // Answering at all means start-up (and its sweep) is done.
+    assert_eq!(c.get(format!("{}/v1/jobs/{id}/nc", second.base)).status_ok().await, 200);
+    let mut want: Vec<String> = kept.iter().map(|(n, _)| n.clone()).collect();
+    want.extend(["cl", "nc", "ndjson", "preview.json"].iter().map(|x| format!("{id}.{x}")));
+    want.sort();
+    assert_eq!(common::spool_names(&spool), want);
+    let _ = std::fs::remove_dir_all(&spool);
+    let _ = std::fs::remove_dir_all(&data);
+}

@@ -115,9 +115,13 @@ impl Queue {
             });
         }
         let requeued = store.recover().await?;
+        let (files, bytes) = store.sweep(true).await?;
         store.started().await;
         if requeued > 0 {
             tracing::warn!(requeued, "jobs cut off by a restart run again from the start");
+        }
+        if files > 0 {
+            tracing::warn!(files, bytes, "removed spool files no job owns (left by a process cut off)");
         }
         let q = Arc::new(Queue {
             store,
@@ -209,12 +213,23 @@ impl Queue {
         }
     }
 
+    /// Expires finished jobs, and now and then sweeps the spool of what no job owns (another
+    /// replica's leftovers, once they are an hour old).
     async fn cleaner(self: Arc<Self>) {
+        let mut swept = std::time::Instant::now();
         loop {
             match self.store.expire(self.config.retention).await {
                 Ok(n) if n > 0 => tracing::info!(removed = n, "expired finished jobs"),
                 Ok(_) => {}
                 Err(e) => tracing::error!(error = %e, "expiring jobs"),
+            }
+            if swept.elapsed() >= Duration::from_secs(600) {
+                swept = std::time::Instant::now();
+                match self.store.sweep(false).await {
+                    Ok((files, bytes)) if files > 0 => tracing::info!(files, bytes, "removed spool files no job owns"),
+                    Ok(_) => {}
+                    Err(e) => tracing::error!(error = %e, "sweeping the spool"),
+                }
             }
             tokio::time::sleep(Duration::from_secs(60).min(self.config.retention.max(Duration::from_secs(1)))).await;
         }

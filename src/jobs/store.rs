@@ -5,6 +5,7 @@
 //! and start-up recovery (one node may requeue every running job; replicas go by leases).
 
 mod accept;
+mod sweep;
 
 pub use accept::Submission;
 
@@ -210,6 +211,33 @@ fn row_job(r: &AnyRow) -> Result<Job, Error> {
     })
 }
 
+/// This node's name as the owner of its runs and uploads: kept in the data directory, so that a
+/// restarted process knows what its predecessor left in a shared spool. One process per data
+/// directory.
+fn node_name(data_dir: &Path) -> std::io::Result<String> {
+    let path = data_dir.join("node");
+    let ok = |s: &str| !s.is_empty() && s.len() <= 80 && s.bytes().all(|b| b.is_ascii_alphanumeric() || b"-_.".contains(&b));
+    if let Ok(s) = std::fs::read_to_string(&path)
+        && ok(s.trim())
+    {
+        return Ok(s.trim().to_string());
+    }
+    let host: String = std::env::var("HOSTNAME")
+        .unwrap_or_default()
+        .chars()
+        .filter(|c| c.is_ascii_alphanumeric() || "-_.".contains(*c))
+        .take(60)
+        .collect();
+    let host = if host.is_empty() { "node".to_string() } else { host };
+    let node = format!("{host}-{}", &uuid::Uuid::new_v4().simple().to_string()[..8]);
+    let tmp = data_dir.join("node.tmp");
+    std::fs::write(&tmp, &node)?;
+    std::fs::File::open(&tmp)?.sync_all()?;
+    std::fs::rename(&tmp, &path)?;
+    sync_dir(data_dir)?;
+    Ok(node)
+}
+
 /// Makes a rename or a new file durable: the directory entry itself is fsynced.
 fn sync_dir(dir: &Path) -> std::io::Result<()> {
     #[cfg(unix)]
@@ -230,6 +258,8 @@ impl Store {
         sqlx::any::install_default_drivers();
         let spool = spool.map_or_else(|| data_dir.join("spool"), Path::to_path_buf);
         tokio::fs::create_dir_all(&spool).await?;
+        tokio::fs::create_dir_all(data_dir).await?;
+        let node = node_name(data_dir)?;
         let (pool, backend) = match database_url {
             Some(url) if url.starts_with("postgres:") || url.starts_with("postgresql:") => {
                 let pool = AnyPoolOptions::new()
@@ -241,7 +271,6 @@ impl Store {
             }
             Some(url) => return Err(Error::Corrupt(format!("database URL {url:?}: expected postgres://…"))),
             None => {
-                tokio::fs::create_dir_all(data_dir).await?;
                 let url = format!("sqlite://{}?mode=rwc", data_dir.join("jobs.sqlite").display());
                 // Durable before fast: WAL, fsync on every commit; writers wait rather than fail.
                 let pool = AnyPoolOptions::new()
@@ -301,11 +330,7 @@ impl Store {
             pool,
             backend,
             spool,
-            node: format!(
-                "{}-{}",
-                std::env::var("HOSTNAME").unwrap_or_else(|_| "node".into()),
-                &uuid::Uuid::new_v4().simple().to_string()[..8]
-            ),
+            node,
             lease,
             startup: tokio::sync::Mutex::new(startup),
         })
@@ -337,8 +362,8 @@ impl Store {
     }
 
     /// One node: every job found running was cut off by this node's end; they go back to the
-    /// queue and stale temporaries go. Replicas share the store: nothing is taken from a live
-    /// peer here; a dead peer's jobs are taken over by lease in `claim`.
+    /// queue (their temporaries go with the start-up sweep). Replicas share the store: nothing is
+    /// taken from a live peer here; a dead peer's jobs are taken over by lease in `claim`.
     pub async fn recover(&self) -> Result<u64, Error> {
         if self.backend != Backend::Sqlite {
             return Ok(0);
@@ -349,12 +374,6 @@ impl Store {
         .execute(&self.pool)
         .await?
         .rows_affected();
-        let mut dir = tokio::fs::read_dir(&self.spool).await?;
-        while let Some(e) = dir.next_entry().await? {
-            if e.file_name().to_string_lossy().ends_with(".tmp") {
-                let _ = tokio::fs::remove_file(e.path()).await;
-            }
-        }
         Ok(n)
     }
 

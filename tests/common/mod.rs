@@ -181,3 +181,28 @@ pub async fn limit_holds(bases: &[String], spools: &[std::path::PathBuf], allowe
         .sum();
     assert_eq!(inputs, allowed, "spool inputs");
 }
+
+/// Writes a spool file last modified `age` ago.
+pub fn plant(spool: &std::path::Path, name: &str, age: std::time::Duration) {
+    let path = spool.join(name);
+    std::fs::write(&path, b"left behind").unwrap();
+    let f = std::fs::File::options().write(true).open(&path).unwrap();
+    f.set_modified(std::time::SystemTime::now() - age).unwrap();
+}
+
+/// The names in a spool, sorted.
+pub fn spool_names(spool: &std::path::Path) -> Vec<String> {
+    let mut v: Vec<String> = std::fs::read_dir(spool)
+        .unwrap()
+        .flatten()
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .collect();
+    v.sort();
+    v
+}
+
+/// The node a server names in `/readyz` (its jobs' owner).
+pub async fn node_of(c: &reqwest::Client, base: &str) -> String {
+    let t = c.get(format!("{base}/readyz")).send().await.unwrap().text().await.unwrap();
+    t.rsplit_once("node ").unwrap().1.trim().to_string()
+}

@@ -134,10 +134,10 @@ impl Store {
         }
     }
 
-    /// The upload, under a temporary name, fsynced and renamed to the job's input. A full disk
-    /// is `NoSpace`: nothing accepted.
+    /// The upload, under a temporary name carrying this node (so that a sweep knows whose it
+    /// is), fsynced and renamed to the job's input. A full disk is `NoSpace`: nothing accepted.
     async fn spool_input(&self, id: &str, p: &Paths, mut input: impl tokio::io::AsyncRead + Unpin) -> Result<u64, Error> {
-        let tmp = self.spool.join(format!("{id}.cl.tmp"));
+        let tmp = self.spool.join(super::sweep::upload_name(id, &self.node));
         let copied = async {
             let mut f = tokio::fs::File::create(&tmp).await?;
             let n = tokio::io::copy(&mut input, &mut f).await?;
