@@ -278,3 +278,56 @@ async fn a_full_disk_refuses_uploads_fails_jobs_cleanly_and_recovers() {
     let id = r.json::<Value>().await.unwrap()["id"].as_str().unwrap().to_string();
     common::wait_job(&c, &base, &id, "succeeded", Duration::from_secs(60)).await;
 }
+
+/// A job store SQLite cannot read (not a database; a database with damaged pages) stops the
+/// start within seconds, naming its file, before the port is taken.
+#[tokio::test]
+async fn a_damaged_job_store_stops_the_start_naming_its_file() {
+    use sqlx::{ConnectOptions, Connection};
+    for (k, damage) in ["not a database", "damaged pages"].into_iter().enumerate() {
+        let data = std::env::temp_dir().join(format!("kinepost-faults-damaged-{}-{k}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&data);
+        std::fs::create_dir_all(&data).unwrap();
+        let db = data.join("jobs.sqlite");
+        if k == 0 {
+            std::fs::write(&db, vec![0x5a; 64 << 10]).unwrap();
+        } else {
+            let mut c = sqlx::sqlite::SqliteConnectOptions::new()
+                .filename(&db)
+                .create_if_missing(true)
+                .connect()
+                .await
+                .unwrap();
+            sqlx::raw_sql("CREATE TABLE t (x TEXT); WITH RECURSIVE n(i) AS (SELECT 1 UNION ALL SELECT i + 1 FROM n WHERE i < 300) INSERT INTO t SELECT printf('%.500c', 'x') FROM n")
+                .execute(&mut c)
+                .await
+                .unwrap();
+            c.close().await.unwrap();
+            let mut bytes = std::fs::read(&db).unwrap();
+            bytes[4096 * 3..4096 * 5].fill(0xa5);
+            std::fs::write(&db, bytes).unwrap();
+        }
+        let mut child = Killed(
+            std::process::Command::new(env!("CARGO_BIN_EXE_kinepost"))
+                .args(["serve", "--bind", "127.0.0.1:0", "--data-dir", data.to_str().unwrap()])
+                .env("KINEPOST_MACHINES", concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))
+                .stderr(std::process::Stdio::piped())
+                .spawn()
+                .unwrap(),
+        );
+        let t0 = Instant::now();
+        let status = loop {
+            if let Some(s) = child.0.try_wait().unwrap() {
+                break s;
+            }
+            assert!(t0.elapsed() < Duration::from_secs(10), "{damage}: still running after 10 s");
+            tokio::time::sleep(Duration::from_millis(50)).await;
+        };
+        let mut err = String::new();
+        std::io::Read::read_to_string(&mut child.0.stderr.take().unwrap(), &mut err).unwrap();
+        assert!(!status.success(), "{damage}: {err}");
+        assert!(err.contains(db.to_str().unwrap()), "{damage}: the file is named: {err}");
+        assert!(!err.contains("listening"), "{damage}: {err}");
+        let _ = std::fs::remove_dir_all(&data);
+    }
+}

@@ -139,7 +139,9 @@ impl From<jobs::Error> for ApiError {
             jobs::Error::Upload(m) => upload_error(m),
             e @ jobs::Error::NoSpace(_) => ApiError::InsufficientStorage(e.to_string()),
             jobs::Error::Machines(m) => m.into(),
-            e @ (jobs::Error::Db(_) | jobs::Error::Io(_) | jobs::Error::Corrupt(_)) => ApiError::Internal(e.to_string()),
+            e @ (jobs::Error::Db(_) | jobs::Error::Io(_) | jobs::Error::Corrupt(_) | jobs::Error::Open { .. }) => {
+                ApiError::Internal(e.to_string())
+            }
         }
     }
 }

@@ -559,15 +559,16 @@ async fn metrics_route(State(st): State<Arc<AppState>>) -> impl IntoResponse {
 pub async fn serve(cfg: Config) -> Result<(), String> {
     let library = Library::load_dir(&cfg.machines).map_err(|e| e.to_string())?;
     std::fs::create_dir_all(&cfg.data_dir).map_err(|e| format!("{}: {e}", cfg.data_dir.display()))?;
+    // The store is opened and checked before the port: a damaged store stops the start.
+    let (queue, machines) = crate::jobs::Queue::start(cfg.jobs(), &library)
+        .await
+        .map_err(|e| format!("job queue in {}: {e}", cfg.data_dir.display()))?;
     let listener = tokio::net::TcpListener::bind(&cfg.bind)
         .await
         .map_err(|e| format!("bind {}: {e}", cfg.bind))?;
     let addr = listener.local_addr().map_err(|e| e.to_string())?;
     tracing::info!(%addr, machines = library.len(), "kinepost listening");
     eprintln!("kinepost: listening on http://{addr} ({} machines)", library.len());
-    let (queue, machines) = crate::jobs::Queue::start(cfg.jobs(), &library)
-        .await
-        .map_err(|e| format!("job queue in {}: {e}", cfg.data_dir.display()))?;
     let metrics = Arc::new(Metrics::default());
     let m = metrics.clone();
     queue.observe(Box::new(move |outcome, secs| m.record_job(outcome, secs)));

@@ -38,6 +38,9 @@ pub enum Error {
     /// A row the store cannot read back (written by another version, or damaged).
     #[error("job store: {0}")]
     Corrupt(String),
+    /// The store could not be opened or failed its check: the service does not start.
+    #[error("job store {store}: {error}")]
+    Open { store: String, error: String },
     /// The store did not confirm a job's row (its answers were lost): not acknowledged. A row
     /// that did land keeps its input, so a retry with the same idempotency key finds the job.
     #[error("the job store did not confirm the job ({0}); submit it again, with the same Idempotency-Key")]

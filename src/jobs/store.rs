@@ -211,6 +211,112 @@ fn row_job(r: &AnyRow) -> Result<Job, Error> {
     })
 }
 
+/// The store's name in errors: a PostgreSQL URL without its password.
+fn redacted(url: &str) -> String {
+    match (url.split_once("://"), url.rfind('@')) {
+        (Some((scheme, rest)), Some(at)) => {
+            let user = rest[..at - scheme.len() - 3].split(':').next().unwrap_or("");
+            format!("{scheme}://{user}@{}", &url[at + 1..])
+        }
+        _ => url.to_string(),
+    }
+}
+
+fn open_error(named: &str) -> impl Fn(sqlx::Error) -> Error + '_ {
+    move |e| Error::Open {
+        store: named.to_string(),
+        error: e.to_string(),
+    }
+}
+
+async fn connect_postgres(url: &str) -> Result<AnyPool, sqlx::Error> {
+    AnyPoolOptions::new()
+        .max_connections(8)
+        .acquire_timeout(Duration::from_secs(10))
+        // A client gone mid-transaction (a partition, not a closed socket) must not hold the job
+        // insert lock for as long as TCP takes to notice.
+        .after_connect(|conn, _| {
+            Box::pin(async move {
+                use sqlx::Executor;
+                conn.execute("SET idle_in_transaction_session_timeout = 10000").await?;
+                Ok(())
+            })
+        })
+        .connect(url)
+        .await
+}
+
+/// SQLite in `path`: checked before use (a damaged file is refused at start-up, naming it, not
+/// found by a request), then WAL and fsync on every commit; writers wait rather than fail.
+async fn connect_sqlite(path: &Path) -> Result<AnyPool, Error> {
+    use sqlx::Connection;
+    let named = |e: String| Error::Open {
+        store: path.display().to_string(),
+        error: e,
+    };
+    let url = format!("sqlite://{}?mode=rwc", path.display());
+    if path.exists() {
+        let check = async {
+            let mut c = sqlx::AnyConnection::connect(&url).await?;
+            let rows: Vec<String> = sqlx::query_scalar("PRAGMA quick_check").fetch_all(&mut c).await?;
+            c.close().await?;
+            Ok::<_, sqlx::Error>(rows)
+        };
+        match tokio::time::timeout(Duration::from_secs(10), check).await {
+            Ok(Ok(rows)) if rows == ["ok"] => {}
+            Ok(Ok(rows)) => return Err(named(format!("damaged: {}", rows.join("; ")))),
+            Ok(Err(e)) => return Err(named(e.to_string())),
+            Err(_) => return Err(named("no answer to a check in 10 s".into())),
+        }
+    }
+    AnyPoolOptions::new()
+        .max_connections(4)
+        .acquire_timeout(Duration::from_secs(10))
+        .after_connect(|conn, _| {
+            Box::pin(async move {
+                use sqlx::Executor;
+                conn.execute("PRAGMA journal_mode = WAL").await?;
+                conn.execute("PRAGMA synchronous = FULL").await?;
+                conn.execute("PRAGMA busy_timeout = 10000").await?;
+                Ok(())
+            })
+        })
+        .connect(&url)
+        .await
+        .map_err(|e| named(e.to_string()))
+}
+
+/// The job table, and the columns added since its first release.
+async fn migrate(pool: &AnyPool, backend: Backend) -> Result<(), sqlx::Error> {
+    for stmt in SCHEMA.split(';') {
+        sqlx::query(stmt).execute(pool).await?;
+    }
+    for (col, ty) in ADDED {
+        let has: i64 = match backend {
+            Backend::Sqlite => {
+                sqlx::query_scalar("SELECT COUNT(*) FROM pragma_table_info('jobs') WHERE name = $1")
+                    .bind(col)
+                    .fetch_one(pool)
+                    .await?
+            }
+            Backend::Postgres => {
+                sqlx::query_scalar(
+                    "SELECT COUNT(*) FROM information_schema.columns WHERE table_name = 'jobs' AND column_name = $1",
+                )
+                .bind(col)
+                .fetch_one(pool)
+                .await?
+            }
+        };
+        if has == 0 {
+            sqlx::query(sqlx::AssertSqlSafe(format!("ALTER TABLE jobs ADD COLUMN {col} {ty}")))
+                .execute(pool)
+                .await?;
+        }
+    }
+    Ok(())
+}
+
 /// This node's name as the owner of its runs and uploads: kept in the data directory, so that a
 /// restarted process knows what its predecessor left in a shared spool. One process per data
 /// directory.
@@ -260,33 +366,20 @@ impl Store {
         tokio::fs::create_dir_all(&spool).await?;
         tokio::fs::create_dir_all(data_dir).await?;
         let node = node_name(data_dir)?;
-        let (pool, backend) = match database_url {
+        let (pool, backend, named) = match database_url {
             Some(url) if url.starts_with("postgres:") || url.starts_with("postgresql:") => {
-                let pool = AnyPoolOptions::new()
-                    .max_connections(8)
-                    .acquire_timeout(Duration::from_secs(10))
-                    .connect(url)
-                    .await?;
-                (pool, Backend::Postgres)
+                let named = redacted(url);
+                (
+                    connect_postgres(url).await.map_err(open_error(&named))?,
+                    Backend::Postgres,
+                    named,
+                )
             }
             Some(url) => return Err(Error::Corrupt(format!("database URL {url:?}: expected postgres://…"))),
             None => {
-                let url = format!("sqlite://{}?mode=rwc", data_dir.join("jobs.sqlite").display());
-                // Durable before fast: WAL, fsync on every commit; writers wait rather than fail.
-                let pool = AnyPoolOptions::new()
-                    .max_connections(4)
-                    .after_connect(|conn, _| {
-                        Box::pin(async move {
-                            use sqlx::Executor;
-                            conn.execute("PRAGMA journal_mode = WAL").await?;
-                            conn.execute("PRAGMA synchronous = FULL").await?;
-                            conn.execute("PRAGMA busy_timeout = 10000").await?;
-                            Ok(())
-                        })
-                    })
-                    .connect(&url)
-                    .await?;
-                (pool, Backend::Sqlite)
+                let path = data_dir.join("jobs.sqlite");
+                let named = path.display().to_string();
+                (connect_sqlite(&path).await?, Backend::Sqlite, named)
             }
         };
         // Replicas starting together would race on CREATE TABLE (PostgreSQL's catalog is not
@@ -300,40 +393,25 @@ impl Store {
             }
             Backend::Sqlite => None,
         };
-        for stmt in SCHEMA.split(';') {
-            sqlx::query(stmt).execute(&pool).await?;
-        }
-        for (col, ty) in ADDED {
-            let has: i64 = match backend {
-                Backend::Sqlite => {
-                    sqlx::query_scalar("SELECT COUNT(*) FROM pragma_table_info('jobs') WHERE name = $1")
-                        .bind(col)
-                        .fetch_one(&pool)
-                        .await?
-                }
-                Backend::Postgres => {
-                    sqlx::query_scalar(
-                        "SELECT COUNT(*) FROM information_schema.columns WHERE table_name = 'jobs' AND column_name = $1",
-                    )
-                    .bind(col)
-                    .fetch_one(&pool)
-                    .await?
-                }
-            };
-            if has == 0 {
-                sqlx::query(sqlx::AssertSqlSafe(format!("ALTER TABLE jobs ADD COLUMN {col} {ty}")))
-                    .execute(&pool)
-                    .await?;
-            }
-        }
-        Ok(Store {
+        migrate(&pool, backend).await.map_err(open_error(&named))?;
+        let store = Store {
             pool,
             backend,
             spool,
             node,
             lease,
             startup: tokio::sync::Mutex::new(startup),
-        })
+        };
+        store.check().await.map_err(|e| Error::Open {
+            store: named,
+            error: e.to_string(),
+        })?;
+        Ok(store)
+    }
+
+    /// A cheap read of the job table: the store answers (readiness, start-up).
+    pub async fn check(&self) -> Result<u64, Error> {
+        self.count(State::Queued).await
     }
 
     /// Start-up is over (schema, recovery, catalog seeding): the next replica may start.
