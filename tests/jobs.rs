@@ -486,3 +486,62 @@ async fn start_up_sweeps_the_spool_of_what_no_job_owns() {
     assert_eq!(common::spool_names(&spool), kept);
     let _ = std::fs::remove_dir_all(&data);
 }
+
+/// A row the store cannot read (damaged, or from another version) is listed as a failed job
+/// naming why, never a 500 for every page; a queued one does not stop the workers.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_damaged_row_is_a_failed_job_not_a_broken_listing() {
+    use sqlx::{ConnectOptions, Connection};
+    let mut cfg = common::cfg();
+    cfg.workers = 1;
+    let base = common::server(cfg.clone()).await;
+    let c = reqwest::Client::new();
+    let submit = || async {
+        let j: Value = c
+            .post(format!("{base}/v1/jobs?machine=dmg-dmc75v"))
+            .body(common::generated("dmg-dmc75v", 100, 7))
+            .json_ok()
+            .await;
+        j["id"].as_str().unwrap().to_string()
+    };
+    let (a, b) = (submit().await, submit().await);
+    common::wait_job(&c, &base, &b, "succeeded", Duration::from_secs(60)).await;
+
+    let mut db = sqlx::sqlite::SqliteConnectOptions::new()
+        .filename(cfg.data_dir.join("jobs.sqlite"))
+        .connect()
+        .await
+        .unwrap();
+    let d = "d".repeat(32);
+    for sql in [
+        format!("UPDATE jobs SET settings = '{{broken' WHERE id = '{a}'"),
+        format!("UPDATE jobs SET created_ms = 'yesterday' WHERE id = '{b}'"),
+        format!(
+            "INSERT INTO jobs (id, state, machine, settings, input_bytes, created_ms) VALUES ('{d}', 'queued', 'dmg-dmc75v', 'not json', 1, 0)"
+        ),
+    ] {
+        sqlx::raw_sql(sqlx::AssertSqlSafe(sql)).execute(&mut db).await.unwrap();
+    }
+    db.close().await.unwrap();
+    // The damaged queued row is failed by the worker that takes it; the next job still runs.
+    let e = submit().await;
+    common::wait_job(&c, &base, &e, "succeeded", Duration::from_secs(60)).await;
+
+    let r = c.get(format!("{base}/v1/jobs")).send().await.unwrap();
+    assert_eq!(r.status(), 200);
+    let list: Value = r.json().await.unwrap();
+    let jobs = list["jobs"].as_array().unwrap();
+    assert_eq!(jobs.len(), 4, "{list}");
+    for id in [&a, &d] {
+        let j = jobs.iter().find(|j| j["id"] == id.as_str()).unwrap();
+        assert_eq!(j["state"], "failed", "{j}");
+        assert!(j["error"].as_str().unwrap().contains("cannot be read"), "{j}");
+        let one = c.get(format!("{base}/v1/jobs/{id}")).send().await.unwrap();
+        assert_eq!(one.status(), 200);
+        assert_eq!(one.json::<Value>().await.unwrap()["state"], "failed");
+    }
+    assert!(jobs.iter().any(|j| j["id"] == b.as_str()));
+    // A damaged job can be removed.
+    assert_eq!(c.delete(format!("{base}/v1/jobs/{a}")).status_ok().await, 204);
+    assert_eq!(c.get(format!("{base}/v1/jobs/{a}")).status_ok().await, 404);
+}

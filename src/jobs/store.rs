@@ -344,6 +344,37 @@ fn node_name(data_dir: &Path) -> std::io::Result<String> {
     Ok(node)
 }
 
+/// A row read for display: one that cannot be decoded (damaged, or written by another version)
+/// is shown as a failed job with its id and the reason, never an error for a whole listing.
+fn row_shown(r: &AnyRow) -> Job {
+    row_job(r).unwrap_or_else(|e| {
+        let id: String = r.try_get("id").unwrap_or_default();
+        tracing::warn!(job = %id, error = %e, "a job's stored row cannot be read");
+        Job {
+            error: Some(format!(
+                "this job's stored row cannot be read ({e}); DELETE /v1/jobs/{id} removes it"
+            )),
+            id,
+            state: State::Failed,
+            machine: r.try_get("machine").unwrap_or_default(),
+            machine_version: None,
+            settings: Settings::default(),
+            filename: None,
+            idempotency_key: r.try_get("idempotency_key").unwrap_or_default(),
+            input_bytes: 0,
+            created_ms: r.try_get("created_ms").unwrap_or_default(),
+            started_ms: None,
+            finished_ms: None,
+            bytes_read: 0,
+            blocks: 0,
+            attempts: 0,
+            owner: None,
+            summary: None,
+            nc_bytes: None,
+        }
+    })
+}
+
 /// Makes a rename or a new file durable: the directory entry itself is fsynced.
 fn sync_dir(dir: &Path) -> std::io::Result<()> {
     #[cfg(unix)]
@@ -460,7 +491,7 @@ impl Store {
             .bind(key)
             .fetch_optional(&self.pool)
             .await?;
-        r.as_ref().map(row_job).transpose()
+        Ok(r.as_ref().map(row_shown))
     }
 
     pub async fn get(&self, id: &str) -> Result<Job, Error> {
@@ -469,7 +500,7 @@ impl Store {
             .fetch_optional(&self.pool)
             .await?;
         match r {
-            Some(r) => row_job(&r),
+            Some(r) => Ok(row_shown(&r)),
             None => Err(Error::NotFound(id.to_string())),
         }
     }
@@ -494,7 +525,7 @@ impl Store {
                     .await?
             }
         };
-        rows.iter().map(row_job).collect()
+        Ok(rows.iter().map(row_shown).collect())
     }
 
     pub async fn count(&self, state: State) -> Result<u64, Error> {
@@ -507,8 +538,28 @@ impl Store {
 
     /// Takes the oldest queued job, or a running one whose owner stopped reporting (a replica
     /// that died). SQLite serializes writers; PostgreSQL skips rows another replica is claiming,
-    /// so two workers never get one job.
+    /// so two workers never get one job. A row that cannot be read is failed, naming why, and
+    /// the next one taken: it would otherwise be claimed again and again.
     pub(super) async fn claim(&self) -> Result<Option<Job>, Error> {
+        loop {
+            let Some(r) = self.claim_row().await? else { return Ok(None) };
+            match row_job(&r) {
+                Ok(j) => return Ok(Some(j)),
+                Err(e) => {
+                    let id: String = r.try_get("id")?;
+                    tracing::error!(job = %id, error = %e, "a claimed job's row cannot be read: failed");
+                    sqlx::query("UPDATE jobs SET state = 'failed', finished_ms = $1, error = $2 WHERE id = $3")
+                        .bind(now_ms())
+                        .bind(format!("this job's stored row cannot be read ({e})"))
+                        .bind(&id)
+                        .execute(&self.pool)
+                        .await?;
+                }
+            }
+        }
+    }
+
+    async fn claim_row(&self) -> Result<Option<AnyRow>, Error> {
         let lock = match self.backend {
             Backend::Sqlite => "",
             Backend::Postgres => "FOR UPDATE SKIP LOCKED",
@@ -529,7 +580,7 @@ impl Store {
             .bind(stale)
             .fetch_optional(&self.pool)
             .await?;
-        r.as_ref().map(row_job).transpose()
+        Ok(r)
     }
 
     /// Records progress and renews this node's lease; `false` when the job is no longer this
