@@ -331,3 +331,33 @@ async fn a_damaged_job_store_stops_the_start_naming_its_file() {
         let _ = std::fs::remove_dir_all(&data);
     }
 }
+
+/// Readiness asks the job store: a database gone bad mid-run (here its schema made unreadable,
+/// what SQLite answers every statement of a malformed file) is 503, not ready.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn readyz_is_503_when_the_job_store_fails() {
+    use sqlx::{ConnectOptions, Connection};
+    let cfg = common::cfg();
+    let base = common::server(cfg.clone()).await;
+    let c = reqwest::Client::new();
+    assert_eq!(c.get(format!("{base}/readyz")).status_ok().await, 200);
+    let mut db = sqlx::sqlite::SqliteConnectOptions::new()
+        .filename(cfg.data_dir.join("jobs.sqlite"))
+        .connect()
+        .await
+        .unwrap();
+    let v: i64 = sqlx::query_scalar("PRAGMA schema_version").fetch_one(&mut db).await.unwrap();
+    sqlx::raw_sql(sqlx::AssertSqlSafe(format!(
+        "PRAGMA writable_schema = ON; UPDATE sqlite_master SET sql = 'CREATE TABLE jobs (' WHERE name = 'jobs'; PRAGMA schema_version = {}",
+        v + 1
+    )))
+    .execute(&mut db)
+    .await
+    .unwrap();
+    db.close().await.unwrap();
+    let r = c.get(format!("{base}/readyz")).send().await.unwrap();
+    assert_eq!(r.status(), 503);
+    assert_eq!(r.headers()["retry-after"], "5");
+    let p: Value = r.json().await.unwrap();
+    assert!(p["detail"].as_str().unwrap().contains("malformed"), "{p}");
+}
