@@ -189,8 +189,8 @@ async fn a_client_that_goes_away_stops_the_work() {
 struct Tmpfs(std::path::PathBuf);
 
 impl Tmpfs {
-    fn mount() -> Option<Tmpfs> {
-        let dir = std::env::temp_dir().join(format!("kinepost-full-{}", std::process::id()));
+    fn mount(tag: &str) -> Option<Tmpfs> {
+        let dir = std::env::temp_dir().join(format!("kinepost-full-{}-{tag}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let ok = std::process::Command::new("mount")
             .args(["-t", "tmpfs", "-o", "size=4m", "tmpfs"])
@@ -219,7 +219,7 @@ impl Drop for Tmpfs {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_full_disk_refuses_uploads_fails_jobs_cleanly_and_recovers() {
-    let Some(fs) = Tmpfs::mount() else { return };
+    let Some(fs) = Tmpfs::mount("jobs") else { return };
     let mut cfg = common::cfg();
     cfg.data_dir = fs.0.join("data");
     let base = common::server(cfg.clone()).await;
@@ -360,4 +360,55 @@ async fn readyz_is_503_when_the_job_store_fails() {
     assert_eq!(r.headers()["retry-after"], "5");
     let p: Value = r.json().await.unwrap();
     assert!(p["detail"].as_str().unwrap().contains("malformed"), "{p}");
+}
+
+/// Fills a file system: a file of zeros written until there is no room (removed with `Drop`).
+struct Filler(std::path::PathBuf);
+
+impl Filler {
+    fn fill(dir: &std::path::Path) -> Filler {
+        use std::io::Write;
+        let path = dir.join("filler");
+        let mut f = std::fs::File::create(&path).unwrap();
+        let chunk = vec![0u8; 4096];
+        while f.write_all(&chunk).is_ok() {}
+        let _ = f.sync_all();
+        Filler(path)
+    }
+}
+
+impl Drop for Filler {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_file(&self.0);
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_full_disk_refuses_profile_writes_with_507_and_recovers() {
+    let Some(fs) = Tmpfs::mount("machines") else { return };
+    let mut cfg = common::cfg();
+    cfg.data_dir = fs.0.join("data");
+    cfg.admin_token = Some("full-disk".into());
+    let base = common::server(cfg.clone()).await;
+    let c = reqwest::Client::new();
+    let toml = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/machines/dmg-dmc75v.toml"))
+        .unwrap()
+        .replace("id = \"dmg-dmc75v\"", "id = \"shop-dmg\"");
+    let put = || {
+        c.put(format!("{base}/v1/machines/shop-dmg"))
+            .header("authorization", "Bearer full-disk")
+            .header("content-type", "application/toml")
+            .body(toml.clone())
+            .send()
+    };
+    let filler = Filler::fill(&fs.0);
+    let r = put().await.unwrap();
+    assert_eq!(r.status(), 507);
+    assert_eq!(r.headers()["retry-after"], "5");
+    let p: Value = r.json().await.unwrap();
+    assert!(p["detail"].as_str().unwrap().contains("full"), "{p}");
+    assert_eq!(c.get(format!("{base}/v1/machines/shop-dmg")).status_ok().await, 404);
+    drop(filler);
+    assert_eq!(put().await.unwrap().status(), 201);
+    assert_eq!(c.get(format!("{base}/v1/machines/shop-dmg")).status_ok().await, 200);
 }

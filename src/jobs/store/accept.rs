@@ -123,7 +123,11 @@ impl Store {
             }
             Err(Failure::Refused(e)) => {
                 let _ = tokio::fs::remove_file(&p.input).await;
-                Err(e.into())
+                Err(if crate::machines::catalog::disk_full(&e) {
+                    Error::NoSpace(e.to_string())
+                } else {
+                    e.into()
+                })
             }
             Err(Failure::Unknown(why)) => {
                 tracing::warn!(job = %job.id, error = %why, "the job store did not answer; the input stays until it is known whether the row is there");
