@@ -260,6 +260,16 @@ async fn a_full_disk_refuses_uploads_fails_jobs_cleanly_and_recovers() {
     let j = common::wait_job(&c, &base, &id, "failed", Duration::from_secs(60)).await;
     assert!(j["error"].as_str().unwrap().contains("No space left"), "{j}");
     assert_eq!(c.get(format!("{base}/v1/jobs/{id}/nc")).status_ok().await, 409);
+    // Its diagnostics, cut short by the full disk, end with the error record: on disk (written
+    // at the failure, once the partial program went) and as served.
+    let on_disk = std::fs::read_to_string(cfg.data_dir.join("spool").join(format!("{id}.ndjson"))).unwrap();
+    let served = c.get(format!("{base}/v1/jobs/{id}/diagnostics")).text_ok().await;
+    for text in [&on_disk, &served] {
+        let last: Value = serde_json::from_str(text.lines().last().unwrap()).unwrap();
+        assert_eq!(last["type"], "error", "{last}");
+        assert!(last["error"]["detail"].as_str().unwrap().contains("No space left"), "{last}");
+        assert!(text.lines().all(|l| serde_json::from_str::<Value>(l).is_ok()));
+    }
     assert!(
         !spool_files(&cfg.data_dir)
             .iter()

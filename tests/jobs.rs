@@ -545,3 +545,59 @@ async fn a_damaged_row_is_a_failed_job_not_a_broken_listing() {
     assert_eq!(c.delete(format!("{base}/v1/jobs/{a}")).status_ok().await, 204);
     assert_eq!(c.get(format!("{base}/v1/jobs/{a}")).status_ok().await, 404);
 }
+
+/// Every line of an NDJSON body, parsed (a line cut short fails the test).
+fn ndjson(text: &str) -> Vec<Value> {
+    text.lines()
+        .map(|l| serde_json::from_str(l).unwrap_or_else(|e| panic!("{e}: {l:.80}")))
+        .collect()
+}
+
+/// A failed job's diagnostics always end with its error record: as the engine wrote it, and
+/// when the file was cut short or lost, with the record after its last whole line.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_failed_jobs_diagnostics_end_with_its_error_even_when_cut_short() {
+    let cfg = common::cfg();
+    let base = common::server(cfg.clone()).await;
+    let c = reqwest::Client::new();
+    let mut cl = String::from("FEDRAT/1000\n");
+    for i in 0..3000 {
+        cl.push_str(&format!(
+            "GOTO/{:.4},{:.4},-5\n",
+            (i as f64 * 0.01).sin() * 50.0,
+            i as f64 * 0.01
+        ));
+    }
+    cl.push_str("GOTO/1,oops,3\nGOTO/1,2,3\n");
+    let j: Value = c
+        .post(format!("{base}/v1/jobs?machine=vmc-3axis&strict=true"))
+        .body(cl)
+        .json_ok()
+        .await;
+    let id = j["id"].as_str().unwrap().to_string();
+    let failed = common::wait_job(&c, &base, &id, "failed", Duration::from_secs(60)).await;
+    let url = format!("{base}/v1/jobs/{id}/diagnostics");
+    let whole = c.get(&url).text_ok().await;
+    let records = ndjson(&whole);
+    assert_eq!(records.last().unwrap()["type"], "error");
+    assert_eq!(records.last().unwrap()["error"]["line"], 3002);
+
+    // Cut mid-record, the error and half a block gone (a crash, a full disk): served with the
+    // job's error after the last whole line.
+    let file = cfg.data_dir.join("spool").join(format!("{id}.ndjson"));
+    let cut = whole.len() - whole.lines().last().unwrap().len() - 40;
+    std::fs::write(&file, &whole.as_bytes()[..cut]).unwrap();
+    let r = c.get(&url).send().await.unwrap();
+    assert_eq!(r.status(), 200);
+    let mended = ndjson(&r.text().await.unwrap());
+    assert_eq!(mended.len(), records.len() - 1, "the cut block is dropped, the error added");
+    assert_eq!(mended.last().unwrap()["type"], "error");
+    assert_eq!(mended.last().unwrap()["error"]["detail"], failed["error"]);
+    // Lost altogether: the error record alone.
+    std::fs::remove_file(&file).unwrap();
+    let r = c.get(&url).send().await.unwrap();
+    assert_eq!(r.status(), 200);
+    let alone = ndjson(&r.text().await.unwrap());
+    assert_eq!(alone.len(), 1);
+    assert_eq!(alone[0]["type"], "error");
+}

@@ -328,6 +328,11 @@ async fn output(State(st): State<Arc<AppState>>, id: String, what: Output, req: 
         )));
     }
     let path = q.store.output_path(&job.id, what);
+    if what == Output::Diagnostics && job.state == JobState::Failed {
+        if let jobs::Diagnostics::Mended { keep, tail } = q.store.diagnostics(&job).await? {
+            return mended(&path, keep, tail).await;
+        }
+    }
     let len = match tokio::fs::metadata(&path).await {
         Ok(m) => m.len(),
         Err(e) if e.kind() == std::io::ErrorKind::NotFound && what == Output::Preview => {
@@ -355,4 +360,21 @@ async fn output(State(st): State<Arc<AppState>>, id: String, what: Output, req: 
         h.insert(header::CONTENT_DISPOSITION, nc_attachment(job.filename.as_deref(), &job.id));
     }
     Ok(resp)
+}
+
+/// A failed job's diagnostics whose file does not end with the error record: its complete lines,
+/// then the record, whole (no ranges: this body is made, not a file).
+async fn mended(path: &std::path::Path, keep: u64, tail: Vec<u8>) -> Result<Response, ApiError> {
+    use tokio::io::AsyncReadExt;
+    let body = if keep == 0 {
+        Body::from(tail)
+    } else {
+        let f = tokio::fs::File::open(path)
+            .await
+            .map_err(|e| ApiError::Internal(format!("job output: {e}")))?;
+        Body::from_stream(tokio_util::io::ReaderStream::new(
+            f.take(keep).chain(std::io::Cursor::new(tail)),
+        ))
+    };
+    Ok(([(header::CONTENT_TYPE, "application/x-ndjson")], body).into_response())
 }

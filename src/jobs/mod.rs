@@ -9,8 +9,10 @@
 //!
 //! Knows nothing of HTTP: the service edge maps [`Error`] to statuses and [`Job`] to its DTO.
 
+mod diagnostics;
 mod store;
 
+pub use diagnostics::Diagnostics;
 pub use store::{Job, Output, State, Store, Submission};
 
 use crate::machines::{Catalog, Library, Profile};

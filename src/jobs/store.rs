@@ -644,6 +644,13 @@ impl Store {
         let _ = tokio::fs::remove_file(&p.nc_tmp).await;
         let _ = tokio::fs::rename(&p.diag_tmp, &p.diag).await;
         let _ = tokio::fs::rename(&p.preview_tmp, &p.preview).await;
+        // Before the row says failed, so that its diagnostics are never read unclosed.
+        let (diag, message) = (p.diag.clone(), msg.to_string());
+        match tokio::task::spawn_blocking(move || super::diagnostics::close(&diag, &message)).await {
+            Ok(Ok(())) => {}
+            Ok(Err(e)) => tracing::warn!(job = %id, error = %e, "closing a failed job's diagnostics (served mended)"),
+            Err(e) => tracing::warn!(job = %id, error = %e, "closing a failed job's diagnostics (served mended)"),
+        }
         sqlx::query(
             "UPDATE jobs SET state = 'failed', finished_ms = $1, error = $2 WHERE id = $3 AND state = 'running' AND owner = $4",
         )
