@@ -437,6 +437,7 @@ async fn limits_hold_under_concurrent_submissions() {
 
 #[tokio::test]
 async fn start_up_sweeps_the_spool_of_what_no_job_owns() {
+    use sqlx::{ConnectOptions, Connection};
     let data = std::env::temp_dir().join(format!("kinepost-jobs-sweep-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&data);
     let (server, base) = start(&data);
@@ -474,13 +475,28 @@ async fn start_up_sweeps_the_spool_of_what_no_job_owns() {
         common::plant(&spool, name, *age);
     }
     common::plant(&spool, "notes.txt", fresh);
+    // A damaged row still owns its input.
+    let e = "e".repeat(32);
+    let mut db = sqlx::sqlite::SqliteConnectOptions::new()
+        .filename(data.join("jobs.sqlite"))
+        .connect()
+        .await
+        .unwrap();
+    sqlx::raw_sql(sqlx::AssertSqlSafe(format!(
+        "INSERT INTO jobs (id, state, machine, settings, input_bytes, created_ms, attempts) VALUES ('{e}', 'failed', 'x', '{{}}', 1, 0, 'x')"
+    )))
+    .execute(&mut db)
+    .await
+    .unwrap();
+    db.close().await.unwrap();
+    common::plant(&spool, &format!("{e}.cl"), fresh);
     let (_server, base) = start(&data);
     // Answering at all means start-up (recovery, the sweep) is done.
     assert_eq!(c.get(format!("{base}/v1/jobs/{id}/nc")).status_ok().await, 200);
     let mut kept: Vec<String> = ["cl", "nc", "ndjson", "preview.json"]
         .iter()
         .map(|x| format!("{id}.{x}"))
-        .chain(["notes.txt".to_string()])
+        .chain(["notes.txt".to_string(), format!("{e}.cl")])
         .collect();
     kept.sort();
     assert_eq!(common::spool_names(&spool), kept);

@@ -98,13 +98,14 @@ impl Store {
             .await?;
         let mut owners = HashMap::with_capacity(rows.len());
         for r in rows {
-            let state: String = r.try_get(1)?;
+            // A damaged row still owns its files (its run temporaries are dead either way).
+            let Ok(id) = r.try_get::<String, _>(0) else { continue };
             owners.insert(
-                r.try_get::<String, _>(0)?,
+                id,
                 Owner {
-                    running: state == "running",
-                    attempts: r.try_get(2)?,
-                    node: r.try_get(3)?,
+                    running: r.try_get::<String, _>(1).is_ok_and(|s| s == "running"),
+                    attempts: r.try_get(2).unwrap_or(-1),
+                    node: r.try_get(3).unwrap_or_default(),
                 },
             );
         }
