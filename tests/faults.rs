@@ -189,8 +189,8 @@ async fn a_client_that_goes_away_stops_the_work() {
 struct Tmpfs(std::path::PathBuf);
 
 impl Tmpfs {
-    fn mount() -> Option<Tmpfs> {
-        let dir = std::env::temp_dir().join(format!("kinepost-full-{}", std::process::id()));
+    fn mount(tag: &str) -> Option<Tmpfs> {
+        let dir = std::env::temp_dir().join(format!("kinepost-full-{}-{tag}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let ok = std::process::Command::new("mount")
             .args(["-t", "tmpfs", "-o", "size=4m", "tmpfs"])
@@ -219,7 +219,7 @@ impl Drop for Tmpfs {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_full_disk_refuses_uploads_fails_jobs_cleanly_and_recovers() {
-    let Some(fs) = Tmpfs::mount() else { return };
+    let Some(fs) = Tmpfs::mount("jobs") else { return };
     let mut cfg = common::cfg();
     cfg.data_dir = fs.0.join("data");
     let base = common::server(cfg.clone()).await;
@@ -260,6 +260,16 @@ async fn a_full_disk_refuses_uploads_fails_jobs_cleanly_and_recovers() {
     let j = common::wait_job(&c, &base, &id, "failed", Duration::from_secs(60)).await;
     assert!(j["error"].as_str().unwrap().contains("No space left"), "{j}");
     assert_eq!(c.get(format!("{base}/v1/jobs/{id}/nc")).status_ok().await, 409);
+    // Its diagnostics, cut short by the full disk, end with the error record: on disk (written
+    // at the failure, once the partial program went) and as served.
+    let on_disk = std::fs::read_to_string(cfg.data_dir.join("spool").join(format!("{id}.ndjson"))).unwrap();
+    let served = c.get(format!("{base}/v1/jobs/{id}/diagnostics")).text_ok().await;
+    for text in [&on_disk, &served] {
+        let last: Value = serde_json::from_str(text.lines().last().unwrap()).unwrap();
+        assert_eq!(last["type"], "error", "{last}");
+        assert!(last["error"]["detail"].as_str().unwrap().contains("No space left"), "{last}");
+        assert!(text.lines().all(|l| serde_json::from_str::<Value>(l).is_ok()));
+    }
     assert!(
         !spool_files(&cfg.data_dir)
             .iter()
@@ -277,4 +287,138 @@ async fn a_full_disk_refuses_uploads_fails_jobs_cleanly_and_recovers() {
     assert_eq!(r.status(), 202);
     let id = r.json::<Value>().await.unwrap()["id"].as_str().unwrap().to_string();
     common::wait_job(&c, &base, &id, "succeeded", Duration::from_secs(60)).await;
+}
+
+/// A job store SQLite cannot read (not a database; a database with damaged pages) stops the
+/// start within seconds, naming its file, before the port is taken.
+#[tokio::test]
+async fn a_damaged_job_store_stops_the_start_naming_its_file() {
+    use sqlx::{ConnectOptions, Connection};
+    for (k, damage) in ["not a database", "damaged pages"].into_iter().enumerate() {
+        let data = std::env::temp_dir().join(format!("kinepost-faults-damaged-{}-{k}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&data);
+        std::fs::create_dir_all(&data).unwrap();
+        let db = data.join("jobs.sqlite");
+        if k == 0 {
+            std::fs::write(&db, vec![0x5a; 64 << 10]).unwrap();
+        } else {
+            let mut c = sqlx::sqlite::SqliteConnectOptions::new()
+                .filename(&db)
+                .create_if_missing(true)
+                .connect()
+                .await
+                .unwrap();
+            sqlx::raw_sql("CREATE TABLE t (x TEXT); WITH RECURSIVE n(i) AS (SELECT 1 UNION ALL SELECT i + 1 FROM n WHERE i < 300) INSERT INTO t SELECT printf('%.500c', 'x') FROM n")
+                .execute(&mut c)
+                .await
+                .unwrap();
+            c.close().await.unwrap();
+            let mut bytes = std::fs::read(&db).unwrap();
+            bytes[4096 * 3..4096 * 5].fill(0xa5);
+            std::fs::write(&db, bytes).unwrap();
+        }
+        let mut child = Killed(
+            std::process::Command::new(env!("CARGO_BIN_EXE_kinepost"))
+                .args(["serve", "--bind", "127.0.0.1:0", "--data-dir", data.to_str().unwrap()])
+                .env("KINEPOST_MACHINES", concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))
+                .stderr(std::process::Stdio::piped())
+                .spawn()
+                .unwrap(),
+        );
+        let t0 = Instant::now();
+        let status = loop {
+            if let Some(s) = child.0.try_wait().unwrap() {
+                break s;
+            }
+            assert!(t0.elapsed() < Duration::from_secs(10), "{damage}: still running after 10 s");
+            tokio::time::sleep(Duration::from_millis(50)).await;
+        };
+        let mut err = String::new();
+        std::io::Read::read_to_string(&mut child.0.stderr.take().unwrap(), &mut err).unwrap();
+        assert!(!status.success(), "{damage}: {err}");
+        assert!(err.contains(db.to_str().unwrap()), "{damage}: the file is named: {err}");
+        assert!(!err.contains("listening"), "{damage}: {err}");
+        let _ = std::fs::remove_dir_all(&data);
+    }
+}
+
+/// Readiness asks the job store: a database gone bad mid-run (here its schema made unreadable,
+/// what SQLite answers every statement of a malformed file) is 503, not ready.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn readyz_is_503_when_the_job_store_fails() {
+    use sqlx::{ConnectOptions, Connection};
+    let cfg = common::cfg();
+    let base = common::server(cfg.clone()).await;
+    let c = reqwest::Client::new();
+    assert_eq!(c.get(format!("{base}/readyz")).status_ok().await, 200);
+    let mut db = sqlx::sqlite::SqliteConnectOptions::new()
+        .filename(cfg.data_dir.join("jobs.sqlite"))
+        .connect()
+        .await
+        .unwrap();
+    let v: i64 = sqlx::query_scalar("PRAGMA schema_version").fetch_one(&mut db).await.unwrap();
+    sqlx::raw_sql(sqlx::AssertSqlSafe(format!(
+        "PRAGMA writable_schema = ON; UPDATE sqlite_master SET sql = 'CREATE TABLE jobs (' WHERE name = 'jobs'; PRAGMA schema_version = {}",
+        v + 1
+    )))
+    .execute(&mut db)
+    .await
+    .unwrap();
+    db.close().await.unwrap();
+    let r = c.get(format!("{base}/readyz")).send().await.unwrap();
+    assert_eq!(r.status(), 503);
+    assert_eq!(r.headers()["retry-after"], "5");
+    let p: Value = r.json().await.unwrap();
+    assert!(p["detail"].as_str().unwrap().contains("malformed"), "{p}");
+}
+
+/// Fills a file system: a file of zeros written until there is no room (removed with `Drop`).
+struct Filler(std::path::PathBuf);
+
+impl Filler {
+    fn fill(dir: &std::path::Path) -> Filler {
+        use std::io::Write;
+        let path = dir.join("filler");
+        let mut f = std::fs::File::create(&path).unwrap();
+        let chunk = vec![0u8; 4096];
+        while f.write_all(&chunk).is_ok() {}
+        let _ = f.sync_all();
+        Filler(path)
+    }
+}
+
+impl Drop for Filler {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_file(&self.0);
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_full_disk_refuses_profile_writes_with_507_and_recovers() {
+    let Some(fs) = Tmpfs::mount("machines") else { return };
+    let mut cfg = common::cfg();
+    cfg.data_dir = fs.0.join("data");
+    cfg.admin_token = Some("full-disk".into());
+    let base = common::server(cfg.clone()).await;
+    let c = reqwest::Client::new();
+    let toml = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/machines/dmg-dmc75v.toml"))
+        .unwrap()
+        .replace("id = \"dmg-dmc75v\"", "id = \"shop-dmg\"");
+    let put = || {
+        c.put(format!("{base}/v1/machines/shop-dmg"))
+            .header("authorization", "Bearer full-disk")
+            .header("content-type", "application/toml")
+            .body(toml.clone())
+            .send()
+    };
+    let filler = Filler::fill(&fs.0);
+    let r = put().await.unwrap();
+    assert_eq!(r.status(), 507);
+    assert_eq!(r.headers()["retry-after"], "5");
+    let p: Value = r.json().await.unwrap();
+    assert!(p["detail"].as_str().unwrap().contains("full"), "{p}");
+    assert_eq!(c.get(format!("{base}/v1/machines/shop-dmg")).status_ok().await, 404);
+    drop(filler);
+    assert_eq!(put().await.unwrap().status(), 201);
+    assert_eq!(c.get(format!("{base}/v1/machines/shop-dmg")).status_ok().await, 200);
 }

@@ -420,3 +420,200 @@ async fn one_client_cannot_fill_the_queue() {
     assert_eq!(c.delete(format!("{base}/v1/jobs/{id}")).status_ok().await, 200);
     assert_eq!(submit(100).await.unwrap().status(), 202);
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn limits_hold_under_concurrent_submissions() {
+    // Nothing drains (no workers): the limits alone decide.
+    let mut cfg = common::cfg();
+    (cfg.workers, cfg.max_queued) = (0, 5);
+    let base = common::server(cfg.clone()).await;
+    common::limit_holds(&[base], &[cfg.data_dir.join("spool")], 5, 503).await;
+
+    let mut cfg = common::cfg();
+    (cfg.workers, cfg.max_jobs_per_client) = (0, 3);
+    let base = common::server(cfg.clone()).await;
+    common::limit_holds(&[base], &[cfg.data_dir.join("spool")], 3, 429).await;
+}
+
+#[tokio::test]
+async fn start_up_sweeps_the_spool_of_what_no_job_owns() {
+    use sqlx::{ConnectOptions, Connection};
+    let data = std::env::temp_dir().join(format!("kinepost-jobs-sweep-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&data);
+    let (server, base) = start(&data);
+    let c = reqwest::Client::new();
+    let j: Value = c
+        .post(format!("{base}/v1/jobs?machine=dmg-dmc75v"))
+        .body(common::generated("dmg-dmc75v", 200, 7))
+        .json_ok()
+        .await;
+    let id = j["id"].as_str().unwrap().to_string();
+    common::wait_job(&c, &base, &id, "succeeded", Duration::from_secs(60)).await;
+    let own = common::node_of(&c, &base).await;
+    drop(server); // kill -9
+
+    // What killed processes leave: uploads (this node's, another's, an old version's), a run's
+    // temporaries, an input whose row never committed, outputs whose row was deleted; fresh and
+    // old. One node on its own spool removes all of it at start-up.
+    let spool = data.join("spool");
+    let (fresh, old) = (Duration::ZERO, Duration::from_secs(7200));
+    let (a, b) = ("a".repeat(32), "b".repeat(32));
+    let planted = [
+        (format!("{a}.{own}.cl.tmp"), fresh),
+        (format!("{a}.replica-x-12345678.cl.tmp"), fresh),
+        (format!("{b}.replica-x-12345678.cl.tmp"), old),
+        (format!("{b}.cl.tmp"), fresh),
+        (format!("{a}.cl"), fresh),
+        (format!("{b}.cl"), old),
+        (format!("{a}.nc"), fresh),
+        (format!("{a}.ndjson"), fresh),
+        (format!("{a}.preview.json"), fresh),
+        (format!("{a}.nc.1.tmp"), fresh),
+        (format!("{id}.ndjson.3.tmp"), fresh),
+    ];
+    for (name, age) in &planted {
+        common::plant(&spool, name, *age);
+    }
+    common::plant(&spool, "notes.txt", fresh);
+    // A damaged row still owns its input.
+    let e = "e".repeat(32);
+    let mut db = sqlx::sqlite::SqliteConnectOptions::new()
+        .filename(data.join("jobs.sqlite"))
+        .connect()
+        .await
+        .unwrap();
+    sqlx::raw_sql(sqlx::AssertSqlSafe(format!(
+        "INSERT INTO jobs (id, state, machine, settings, input_bytes, created_ms, attempts) VALUES ('{e}', 'failed', 'x', '{{}}', 1, 0, 'x')"
+    )))
+    .execute(&mut db)
+    .await
+    .unwrap();
+    db.close().await.unwrap();
+    common::plant(&spool, &format!("{e}.cl"), fresh);
+    let (_server, base) = start(&data);
+    // Answering at all means start-up (recovery, the sweep) is done.
+    assert_eq!(c.get(format!("{base}/v1/jobs/{id}/nc")).status_ok().await, 200);
+    let mut kept: Vec<String> = ["cl", "nc", "ndjson", "preview.json"]
+        .iter()
+        .map(|x| format!("{id}.{x}"))
+        .chain(["notes.txt".to_string(), format!("{e}.cl")])
+        .collect();
+    kept.sort();
+    assert_eq!(common::spool_names(&spool), kept);
+    let _ = std::fs::remove_dir_all(&data);
+}
+
+/// A row the store cannot read (damaged, or from another version) is listed as a failed job
+/// naming why, never a 500 for every page; a queued one does not stop the workers.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_damaged_row_is_a_failed_job_not_a_broken_listing() {
+    use sqlx::{ConnectOptions, Connection};
+    let mut cfg = common::cfg();
+    cfg.workers = 1;
+    let base = common::server(cfg.clone()).await;
+    let c = reqwest::Client::new();
+    let submit = || async {
+        let j: Value = c
+            .post(format!("{base}/v1/jobs?machine=dmg-dmc75v"))
+            .body(common::generated("dmg-dmc75v", 100, 7))
+            .json_ok()
+            .await;
+        j["id"].as_str().unwrap().to_string()
+    };
+    let (a, b) = (submit().await, submit().await);
+    common::wait_job(&c, &base, &b, "succeeded", Duration::from_secs(60)).await;
+
+    let mut db = sqlx::sqlite::SqliteConnectOptions::new()
+        .filename(cfg.data_dir.join("jobs.sqlite"))
+        .connect()
+        .await
+        .unwrap();
+    let d = "d".repeat(32);
+    for sql in [
+        format!("UPDATE jobs SET settings = '{{broken' WHERE id = '{a}'"),
+        format!("UPDATE jobs SET created_ms = 'yesterday' WHERE id = '{b}'"),
+        format!(
+            "INSERT INTO jobs (id, state, machine, settings, input_bytes, created_ms) VALUES ('{d}', 'queued', 'dmg-dmc75v', 'not json', 1, 0)"
+        ),
+    ] {
+        sqlx::raw_sql(sqlx::AssertSqlSafe(sql)).execute(&mut db).await.unwrap();
+    }
+    db.close().await.unwrap();
+    // The damaged queued row is failed by the worker that takes it; the next job still runs.
+    let e = submit().await;
+    common::wait_job(&c, &base, &e, "succeeded", Duration::from_secs(60)).await;
+
+    let r = c.get(format!("{base}/v1/jobs")).send().await.unwrap();
+    assert_eq!(r.status(), 200);
+    let list: Value = r.json().await.unwrap();
+    let jobs = list["jobs"].as_array().unwrap();
+    assert_eq!(jobs.len(), 4, "{list}");
+    for id in [&a, &d] {
+        let j = jobs.iter().find(|j| j["id"] == id.as_str()).unwrap();
+        assert_eq!(j["state"], "failed", "{j}");
+        assert!(j["error"].as_str().unwrap().contains("cannot be read"), "{j}");
+        let one = c.get(format!("{base}/v1/jobs/{id}")).send().await.unwrap();
+        assert_eq!(one.status(), 200);
+        assert_eq!(one.json::<Value>().await.unwrap()["state"], "failed");
+    }
+    assert!(jobs.iter().any(|j| j["id"] == b.as_str()));
+    // A damaged job can be removed.
+    assert_eq!(c.delete(format!("{base}/v1/jobs/{a}")).status_ok().await, 204);
+    assert_eq!(c.get(format!("{base}/v1/jobs/{a}")).status_ok().await, 404);
+}
+
+/// Every line of an NDJSON body, parsed (a line cut short fails the test).
+fn ndjson(text: &str) -> Vec<Value> {
+    text.lines()
+        .map(|l| serde_json::from_str(l).unwrap_or_else(|e| panic!("{e}: {l:.80}")))
+        .collect()
+}
+
+/// A failed job's diagnostics always end with its error record: as the engine wrote it, and
+/// when the file was cut short or lost, with the record after its last whole line.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_failed_jobs_diagnostics_end_with_its_error_even_when_cut_short() {
+    let cfg = common::cfg();
+    let base = common::server(cfg.clone()).await;
+    let c = reqwest::Client::new();
+    let mut cl = String::from("FEDRAT/1000\n");
+    for i in 0..3000 {
+        cl.push_str(&format!(
+            "GOTO/{:.4},{:.4},-5\n",
+            (i as f64 * 0.01).sin() * 50.0,
+            i as f64 * 0.01
+        ));
+    }
+    cl.push_str("GOTO/1,oops,3\nGOTO/1,2,3\n");
+    let j: Value = c
+        .post(format!("{base}/v1/jobs?machine=vmc-3axis&strict=true"))
+        .body(cl)
+        .json_ok()
+        .await;
+    let id = j["id"].as_str().unwrap().to_string();
+    let failed = common::wait_job(&c, &base, &id, "failed", Duration::from_secs(60)).await;
+    let url = format!("{base}/v1/jobs/{id}/diagnostics");
+    let whole = c.get(&url).text_ok().await;
+    let records = ndjson(&whole);
+    assert_eq!(records.last().unwrap()["type"], "error");
+    assert_eq!(records.last().unwrap()["error"]["line"], 3002);
+
+    // Cut mid-record, the error and half a block gone (a crash, a full disk): served with the
+    // job's error after the last whole line.
+    let file = cfg.data_dir.join("spool").join(format!("{id}.ndjson"));
+    let cut = whole.len() - whole.lines().last().unwrap().len() - 40;
+    std::fs::write(&file, &whole.as_bytes()[..cut]).unwrap();
+    let r = c.get(&url).send().await.unwrap();
+    assert_eq!(r.status(), 200);
+    let mended = ndjson(&r.text().await.unwrap());
+    assert_eq!(mended.len(), records.len() - 1, "the cut block is dropped, the error added");
+    assert_eq!(mended.last().unwrap()["type"], "error");
+    assert_eq!(mended.last().unwrap()["error"]["detail"], failed["error"]);
+    // Lost altogether: the error record alone.
+    std::fs::remove_file(&file).unwrap();
+    let r = c.get(&url).send().await.unwrap();
+    assert_eq!(r.status(), 200);
+    let alone = ndjson(&r.text().await.unwrap());
+    assert_eq!(alone.len(), 1);
+    assert_eq!(alone[0]["type"], "error");
+}

@@ -37,10 +37,12 @@ impl TestDb {
                 return None;
             }
         };
+        // One database per test: tests of this file run at once in one process.
+        static NEXT: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
         let name = format!(
             "kinepost_test_{}_{}",
             std::process::id(),
-            Instant::now().elapsed().as_nanos() % 1000
+            NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed)
         );
         let mut c = sqlx::PgConnection::connect(&admin)
             .await
@@ -238,4 +240,370 @@ async fn two_replicas_share_one_queue_and_take_over_a_dead_ones_job() {
         "the taken-over job's program is whole"
     );
     let _ = std::fs::remove_dir_all(&spool);
+}
+
+/// Where the proxy cuts a connection that committed (or is committing) a job's row.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Cut {
+    /// The commit is never sent: the transaction is rolled back, no row.
+    BeforeCommit,
+    /// The commit is sent and the sockets closed at once: PostgreSQL commits, nobody hears.
+    AtCommit,
+    /// The commit is sent, its answer read and thrown away: committed, the answer lost.
+    AfterCommit,
+    /// Passed through.
+    Not,
+}
+
+/// A TCP proxy between the service and PostgreSQL that reads the wire protocol and, each time the
+/// service commits a job's row (`INSERT INTO jobs`, then `COMMIT` or the `Sync` of an implicit
+/// transaction), does what `script` says next (cyclically), cutting both sockets.
+struct PgProxy {
+    addr: std::net::SocketAddr,
+    seen: std::sync::Arc<std::sync::Mutex<Vec<Cut>>>,
+}
+
+impl PgProxy {
+    async fn start(upstream: String, script: Vec<Cut>) -> PgProxy {
+        let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+        let addr = listener.local_addr().unwrap();
+        let seen = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
+        let (s, script) = (seen.clone(), std::sync::Arc::new(script));
+        tokio::spawn(async move {
+            while let Ok((client, _)) = listener.accept().await {
+                let (upstream, s, script) = (upstream.clone(), s.clone(), script.clone());
+                tokio::spawn(async move {
+                    if let Ok(server) = tokio::net::TcpStream::connect(&upstream).await {
+                        relay(client, server, move || {
+                            let mut seen = s.lock().unwrap();
+                            let cut = script[seen.len() % script.len()];
+                            seen.push(cut);
+                            cut
+                        })
+                        .await;
+                    }
+                });
+            }
+        });
+        PgProxy { addr, seen }
+    }
+}
+
+/// One frontend message: its type byte (0 for the untyped startup message) and payload.
+fn next_message(buf: &[u8], started: bool) -> Option<(u8, &[u8], usize)> {
+    let (kind, at) = if started { (*buf.first()?, 1) } else { (0, 0) };
+    let len = u32::from_be_bytes(buf.get(at..at + 4)?.try_into().unwrap()) as usize;
+    let end = at + len;
+    (buf.len() >= end).then(|| (kind, &buf[at + 4..end], end))
+}
+
+/// The C string at the start of `b`.
+fn cstr(b: &[u8]) -> (&[u8], &[u8]) {
+    let n = b.iter().position(|&c| c == 0).unwrap_or(b.len());
+    (&b[..n], b.get(n + 1..).unwrap_or(&[]))
+}
+
+async fn relay(mut client: tokio::net::TcpStream, mut server: tokio::net::TcpStream, mut next: impl FnMut() -> Cut) {
+    use tokio::io::{AsyncReadExt, AsyncWriteExt};
+    let (mut cr, mut cw) = client.split();
+    let (mut sr, mut sw) = server.split();
+    let (mut from_client, mut from_server) = (Vec::new(), Vec::new());
+    let (mut cbuf, mut sbuf) = (vec![0u8; 1 << 16], vec![0u8; 1 << 16]);
+    let mut started = false;
+    // Prepared statements that insert a job; a bound one executed; inside BEGIN … COMMIT.
+    let mut inserts = std::collections::HashSet::<Vec<u8>>::new();
+    let (mut bound, mut executed, mut in_tx) = (false, false, false);
+    // After an `AfterCommit`: the answer is swallowed up to its ReadyForQuery, then the cut.
+    let mut swallow = false;
+    loop {
+        tokio::select! {
+            r = cr.read(&mut cbuf) => {
+                let n = match r { Ok(0) | Err(_) => return, Ok(n) => n };
+                from_client.extend_from_slice(&cbuf[..n]);
+                let mut done = 0;
+                while let Some((kind, body, len)) = next_message(&from_client[done..], started) {
+                    let end = done + len;
+                    started = true;
+                    let commit = match kind {
+                        b'P' => {
+                            let (name, rest) = cstr(body);
+                            if String::from_utf8_lossy(cstr(rest).0).contains("INSERT INTO jobs") {
+                                inserts.insert(name.to_vec());
+                            }
+                            false
+                        }
+                        b'B' => {
+                            bound = inserts.contains(cstr(cstr(body).1).0);
+                            false
+                        }
+                        b'E' => {
+                            executed |= bound;
+                            false
+                        }
+                        b'S' => executed && !in_tx,
+                        b'Q' => {
+                            let q = String::from_utf8_lossy(body).trim_start().to_ascii_uppercase();
+                            if q.starts_with("BEGIN") {
+                                in_tx = true;
+                            } else if q.starts_with("ROLLBACK") {
+                                (in_tx, executed) = (false, false);
+                            } else if q.starts_with("COMMIT") {
+                                in_tx = false;
+                            }
+                            executed && q.starts_with("COMMIT")
+                        }
+                        _ => false,
+                    };
+                    if commit {
+                        executed = false;
+                        match next() {
+                            Cut::BeforeCommit => {
+                                let _ = sw.write_all(&from_client[..done]).await;
+                                return;
+                            }
+                            Cut::AtCommit => {
+                                let _ = sw.write_all(&from_client[..end]).await;
+                                let _ = sw.flush().await;
+                                return;
+                            }
+                            Cut::AfterCommit => swallow = true,
+                            Cut::Not => {}
+                        }
+                    }
+                    done = end;
+                }
+                if sw.write_all(&from_client[..done]).await.is_err() {
+                    return;
+                }
+                from_client.drain(..done);
+            }
+            r = sr.read(&mut sbuf) => {
+                let n = match r { Ok(0) | Err(_) => return, Ok(n) => n };
+                if !swallow {
+                    if cw.write_all(&sbuf[..n]).await.is_err() {
+                        return;
+                    }
+                    continue;
+                }
+                from_server.extend_from_slice(&sbuf[..n]);
+                let mut at = 0;
+                while let Some((kind, _, len)) = next_message(&from_server[at..], true) {
+                    if kind == b'Z' {
+                        return; // committed; the service never hears it
+                    }
+                    at += len;
+                }
+            }
+        }
+    }
+}
+
+/// `postgres://user@host:port/db` → the same database through `proxy`, and the upstream address.
+fn through(url: &str, proxy: std::net::SocketAddr) -> (String, String) {
+    let (scheme, rest) = url.split_once("://").unwrap();
+    let (user, rest) = rest.rsplit_once('@').map_or(("", rest), |(u, r)| (u, r));
+    let (host, db) = rest.split_once('/').unwrap();
+    let upstream = if host.contains(':') {
+        host.to_string()
+    } else {
+        format!("{host}:5432")
+    };
+    let at = if user.is_empty() { String::new() } else { format!("{user}@") };
+    (format!("{scheme}://{at}{proxy}/{db}?sslmode=disable"), upstream)
+}
+
+/// Job rows cut off at commit, over and over: a job answered 202 runs (its input is there), a job
+/// refused leaves neither a row nor a spool file.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_connection_cut_at_commit_loses_no_accepted_job() {
+    let Some(db) = TestDb::create().await else { return };
+    use Cut::*;
+    // Per submission, as the script comes round: plain; cut at commit then retried; committed
+    // with the answer lost; rolled back then retried; rolled back three times (refused); lost
+    // answer then rolled back twice; cut at commit three times.
+    let script = vec![
+        Not,
+        AtCommit,
+        Not,
+        AfterCommit,
+        Not,
+        BeforeCommit,
+        Not,
+        BeforeCommit,
+        BeforeCommit,
+        BeforeCommit,
+        AfterCommit,
+        BeforeCommit,
+        BeforeCommit,
+        AtCommit,
+        AtCommit,
+        AtCommit,
+    ];
+    let (_, upstream) = through(&db.url, "127.0.0.1:1".parse().unwrap());
+    let proxy = PgProxy::start(upstream, script).await;
+    let mut cfg = common::cfg();
+    cfg.database_url = Some(through(&db.url, proxy.addr).0);
+    let _ = std::fs::remove_dir_all(&cfg.data_dir);
+    let base = common::server(cfg.clone()).await;
+    let c = reqwest::Client::new();
+
+    let (mut accepted, mut refused, mut other) = (Vec::new(), 0, Vec::new());
+    for k in 0..50u64 {
+        let r = c
+            .post(format!("{base}/v1/jobs?machine=dmg-dmc75v"))
+            .header("idempotency-key", format!("cut-{k}"))
+            .body(common::generated("dmg-dmc75v", 200, k))
+            .send()
+            .await
+            .unwrap();
+        match r.status().as_u16() {
+            202 => accepted.push(r.json::<Value>().await.unwrap()["id"].as_str().unwrap().to_string()),
+            503 => {
+                assert_eq!(r.headers()["retry-after"], "5");
+                refused += 1;
+            }
+            s => other.push(format!("submission {k}: {s} {}", r.text().await.unwrap())),
+        }
+    }
+    let cuts = proxy.seen.lock().unwrap().iter().filter(|c| **c != Not).count();
+    let mut lost = Vec::new();
+    for id in &accepted {
+        let j = common::wait_finished(&c, &base, id, Duration::from_secs(120)).await;
+        if j["state"] != "succeeded" {
+            lost.push(j);
+        }
+    }
+    eprintln!(
+        "{} accepted ({} lost), {refused} refused, {} other answers, {cuts} commits cut",
+        accepted.len(),
+        lost.len(),
+        other.len()
+    );
+    assert!(lost.is_empty(), "accepted but lost: {lost:#?}");
+    assert!(other.is_empty(), "neither accepted nor refused: {other:#?}");
+    assert!(cuts >= 40 && refused > 0 && accepted.len() > 30, "the script ran");
+    // Nothing else is in the store or the spool: the refused left nothing behind.
+    let list = common::get_json(&c, &format!("{base}/v1/jobs?limit=500")).await;
+    let mut listed: Vec<&str> = list["jobs"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|j| j["id"].as_str().unwrap())
+        .collect();
+    listed.sort();
+    let mut want: Vec<&str> = accepted.iter().map(String::as_str).collect();
+    want.sort();
+    assert_eq!(listed, want, "rows of refused jobs");
+    let mut inputs: Vec<String> = std::fs::read_dir(cfg.data_dir.join("spool"))
+        .unwrap()
+        .flatten()
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .filter(|f| f.ends_with(".cl") || f.ends_with(".tmp"))
+        .collect();
+    inputs.sort();
+    let want: Vec<String> = want.iter().map(|id| format!("{id}.cl")).collect();
+    assert_eq!(inputs, want, "spool files of refused jobs");
+    let _ = std::fs::remove_dir_all(&cfg.data_dir);
+}
+
+/// Two replicas on one queue: the queue's and a client's limits hold for submissions racing on
+/// both.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn limits_hold_across_replicas_under_concurrent_submissions() {
+    for (max_queued, per_client, allowed, status) in [(5, 0, 5, 503), (1000, 3, 3, 429)] {
+        let Some(db) = TestDb::create().await else { return };
+        let (mut bases, mut spools) = (Vec::new(), Vec::new());
+        for _ in 0..2 {
+            let mut cfg = common::cfg();
+            cfg.database_url = Some(db.url.clone());
+            (cfg.workers, cfg.max_queued, cfg.max_jobs_per_client) = (0, max_queued, per_client);
+            bases.push(common::server(cfg.clone()).await);
+            spools.push(cfg.data_dir.join("spool"));
+        }
+        common::limit_holds(&bases, &spools, allowed, status).await;
+    }
+}
+
+/// A replica restarting on a shared spool removes what its previous process left and what no
+/// row owns and is an hour old, and keeps what another replica may still be writing.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_restarting_replica_sweeps_only_its_own_and_expired_spool_files() {
+    let Some(db) = TestDb::create().await else { return };
+    let spool = std::env::temp_dir().join(format!("kinepost-sweep-spool-{}", std::process::id()));
+    let data = std::env::temp_dir().join(format!("kinepost-sweep-replica-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&spool);
+    let _ = std::fs::remove_dir_all(&data);
+    let args = [
+        "--database-url",
+        &db.url,
+        "--spool-dir",
+        spool.to_str().unwrap(),
+        "--workers",
+        "1",
+    ];
+    let (child, base) = common::spawn_binary(&data, &args);
+    let mut first = Replica { child, base };
+    let c = reqwest::Client::new();
+    let j: Value = c
+        .post(format!("{}/v1/jobs?machine=dmg-dmc75v", first.base))
+        .body(common::generated("dmg-dmc75v", 200, 7))
+        .json_ok()
+        .await;
+    let id = j["id"].as_str().unwrap().to_string();
+    common::wait_job(&c, &first.base, &id, "succeeded", Duration::from_secs(60)).await;
+    let own = common::node_of(&c, &first.base).await;
+    first.child.kill().unwrap();
+    first.child.wait().unwrap();
+
+    // Rows running on another, live replica (and on this node before its restart).
+    let (r, mine) = ("c".repeat(32), "d".repeat(32));
+    let mut pg = sqlx::PgConnection::connect(&db.url).await.unwrap();
+    for (job, node) in [(&r, "replica-x-12345678"), (&mine, own.as_str())] {
+        sqlx::query(
+            "INSERT INTO jobs (id, state, machine, settings, input_bytes, created_ms, attempts, owner, heartbeat_ms)
+             VALUES ($1, 'running', 'dmg-dmc75v', '{}', 0, 0, 1, $2, $3)",
+        )
+        .bind(job)
+        .bind(node)
+        .bind(i64::MAX / 2)
+        .execute(&mut pg)
+        .await
+        .unwrap();
+    }
+    let (fresh, old) = (Duration::ZERO, Duration::from_secs(7200));
+    let (a, b) = ("a".repeat(32), "b".repeat(32));
+    let other = "replica-x-12345678";
+    let kept = [
+        (format!("{a}.{other}.cl.tmp"), fresh),
+        (format!("{a}.cl"), fresh),
+        (format!("{b}.cl.tmp"), fresh),
+        (format!("{r}.nc.1.tmp"), fresh),
+        (format!("{r}.cl"), old),
+        ("notes.txt".to_string(), old),
+    ];
+    let removed = [
+        (format!("{a}.{own}.cl.tmp"), fresh),
+        (format!("{b}.{other}.cl.tmp"), old),
+        (format!("{b}.cl"), old),
+        (format!("{b}.nc"), fresh),
+        (format!("{b}.ndjson"), fresh),
+        (format!("{b}.preview.json"), fresh),
+        (format!("{r}.nc.2.tmp"), fresh),
+        (format!("{mine}.nc.1.tmp"), fresh),
+        (format!("{id}.preview.json.1.tmp"), fresh),
+        (format!("{a}.ndjson.1.tmp"), old),
+    ];
+    for (name, age) in kept.iter().chain(&removed) {
+        common::plant(&spool, name, *age);
+    }
+    let (child, base) = common::spawn_binary(&data, &args);
+    let second = Replica { child, base };
+    // Answering at all means start-up (and its sweep) is done.
+    assert_eq!(c.get(format!("{}/v1/jobs/{id}/nc", second.base)).status_ok().await, 200);
+    let mut want: Vec<String> = kept.iter().map(|(n, _)| n.clone()).collect();
+    want.extend(["cl", "nc", "ndjson", "preview.json"].iter().map(|x| format!("{id}.{x}")));
+    want.sort();
+    assert_eq!(common::spool_names(&spool), want);
+    let _ = std::fs::remove_dir_all(&spool);
+    let _ = std::fs::remove_dir_all(&data);
 }

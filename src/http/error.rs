@@ -257,6 +257,7 @@ impl From<crate::machines::Error> for ApiError {
             E::Exists { .. } => ApiError::Conflict(e.to_string()),
             E::Precondition { .. } => ApiError::PreconditionFailed(e.to_string()),
             E::ReadOnly => ApiError::Forbidden(e.to_string()),
+            E::NoSpace(_) => ApiError::InsufficientStorage(e.to_string()),
             E::Io { .. } | E::Store(_) => ApiError::Internal(e.to_string()),
         }
     }

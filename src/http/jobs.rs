@@ -133,12 +133,15 @@ impl From<jobs::Error> for ApiError {
         match e {
             jobs::Error::NotFound(id) => ApiError::NotFound(format!("no job {id}")),
             jobs::Error::Full(n) => ApiError::Busy(format!("the job queue is full ({n} jobs waiting)")),
+            e @ jobs::Error::Unconfirmed(_) => ApiError::Busy(e.to_string()),
             e @ jobs::Error::ClientLimit { .. } => ApiError::TooManyRequests(e.to_string()),
             jobs::Error::WrongState { id, state } => ApiError::Conflict(format!("job {id} is {state}")),
             jobs::Error::Upload(m) => upload_error(m),
             e @ jobs::Error::NoSpace(_) => ApiError::InsufficientStorage(e.to_string()),
             jobs::Error::Machines(m) => m.into(),
-            e @ (jobs::Error::Db(_) | jobs::Error::Io(_) | jobs::Error::Corrupt(_)) => ApiError::Internal(e.to_string()),
+            e @ (jobs::Error::Db(_) | jobs::Error::Io(_) | jobs::Error::Corrupt(_) | jobs::Error::Open { .. }) => {
+                ApiError::Internal(e.to_string())
+            }
         }
     }
 }
@@ -327,6 +330,11 @@ async fn output(State(st): State<Arc<AppState>>, id: String, what: Output, req: 
         )));
     }
     let path = q.store.output_path(&job.id, what);
+    if what == Output::Diagnostics && job.state == JobState::Failed {
+        if let jobs::Diagnostics::Mended { keep, tail } = q.store.diagnostics(&job).await? {
+            return mended(&path, keep, tail).await;
+        }
+    }
     let (len, modified) = match tokio::fs::metadata(&path).await {
         Ok(m) => (m.len(), m.modified().ok()),
         Err(e) if e.kind() == std::io::ErrorKind::NotFound && what == Output::Preview => {
@@ -375,4 +383,21 @@ fn if_range(mut req: Request, etag: &str, modified: Option<std::time::SystemTime
         req.headers_mut().remove(header::RANGE);
     }
     req
+}
+
+/// A failed job's diagnostics whose file does not end with the error record: its complete lines,
+/// then the record, whole (no ranges: this body is made, not a file).
+async fn mended(path: &std::path::Path, keep: u64, tail: Vec<u8>) -> Result<Response, ApiError> {
+    use tokio::io::AsyncReadExt;
+    let body = if keep == 0 {
+        Body::from(tail)
+    } else {
+        let f = tokio::fs::File::open(path)
+            .await
+            .map_err(|e| ApiError::Internal(format!("job output: {e}")))?;
+        Body::from_stream(tokio_util::io::ReaderStream::new(
+            f.take(keep).chain(std::io::Cursor::new(tail)),
+        ))
+    };
+    Ok(([(header::CONTENT_TYPE, "application/x-ndjson")], body).into_response())
 }

@@ -279,7 +279,8 @@ fn written(status: StatusCode, c: &Current) -> Response {
         (status = 409, description = "The id exists", body = Problem, content_type = "application/problem+json"),
         (status = 413, body = Problem, content_type = "application/problem+json"),
         (status = 415, body = Problem, content_type = "application/problem+json"),
-        (status = 422, description = "Invalid profile: `key` names what to fix", body = Problem, content_type = "application/problem+json")),
+        (status = 422, description = "Invalid profile: `key` names what to fix", body = Problem, content_type = "application/problem+json"),
+        (status = 507, description = "The store's disk is full: nothing written (Retry-After)", body = Problem, content_type = "application/problem+json")),
     security(("admin" = [])),
     tag = "machines")]
 pub(super) async fn create_machine(State(st): State<Arc<AppState>>, req: Request) -> Result<Response, ApiError> {
@@ -302,7 +303,8 @@ pub(super) async fn create_machine(State(st): State<Arc<AppState>>, req: Request
         (status = 412, description = "If-Match names another version", body = Problem, content_type = "application/problem+json"),
         (status = 413, body = Problem, content_type = "application/problem+json"),
         (status = 415, body = Problem, content_type = "application/problem+json"),
-        (status = 422, body = Problem, content_type = "application/problem+json")),
+        (status = 422, body = Problem, content_type = "application/problem+json"),
+        (status = 507, description = "The store's disk is full: nothing written (Retry-After)", body = Problem, content_type = "application/problem+json")),
     security(("admin" = [])),
     tag = "machines")]
 pub(super) async fn put_machine(
@@ -325,7 +327,8 @@ pub(super) async fn put_machine(
         (status = 401, body = Problem, content_type = "application/problem+json"),
         (status = 403, body = Problem, content_type = "application/problem+json"),
         (status = 404, body = Problem, content_type = "application/problem+json"),
-        (status = 412, body = Problem, content_type = "application/problem+json")),
+        (status = 412, body = Problem, content_type = "application/problem+json"),
+        (status = 507, description = "The store's disk is full: nothing written (Retry-After)", body = Problem, content_type = "application/problem+json")),
     security(("admin" = [])),
     tag = "machines")]
 pub(super) async fn delete_machine(

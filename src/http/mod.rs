@@ -570,7 +570,7 @@ async fn healthz() -> &'static str {
     "ok"
 }
 
-/// Ready: machines loaded and the data directory writable.
+/// Ready: machines loaded, the data directory writable and the job store answering.
 #[utoipa::path(get, path = "/readyz", responses((status = 200, description = "ready"), (status = 503, body = Problem, content_type = "application/problem+json")), tag = "ops")]
 async fn readyz(State(st): State<Arc<AppState>>) -> Result<Response, ApiError> {
     if st.machines.is_empty() {
@@ -581,6 +581,13 @@ async fn readyz(State(st): State<Arc<AppState>>) -> Result<Response, ApiError> {
         .and_then(|_| std::fs::write(&probe, b"ok"))
         .and_then(|_| std::fs::remove_file(&probe))
         .map_err(|e| ApiError::Busy(format!("data directory {} not writable: {e}", st.config.data_dir.display())))?;
+    if let Some(q) = &st.jobs {
+        match tokio::time::timeout(Duration::from_secs(3), q.store.check()).await {
+            Ok(Ok(_)) => {}
+            Ok(Err(e)) => return Err(ApiError::Busy(e.to_string())),
+            Err(_) => return Err(ApiError::Busy("the job store did not answer in 3 s".into())),
+        }
+    }
     let node = st
         .jobs
         .as_ref()
@@ -613,15 +620,16 @@ pub async fn serve(mut cfg: Config) -> Result<(), String> {
         );
         cfg.max_connections = fit;
     }
+    // The store is opened and checked before the port: a damaged store stops the start.
+    let (queue, machines) = crate::jobs::Queue::start(cfg.jobs(), &library)
+        .await
+        .map_err(|e| format!("job queue in {}: {e}", cfg.data_dir.display()))?;
     let listener = tokio::net::TcpListener::bind(&cfg.bind)
         .await
         .map_err(|e| format!("bind {}: {e}", cfg.bind))?;
     let addr = listener.local_addr().map_err(|e| e.to_string())?;
     tracing::info!(%addr, machines = library.len(), "kinepost listening");
     eprintln!("kinepost: listening on http://{addr} ({} machines)", library.len());
-    let (queue, machines) = crate::jobs::Queue::start(cfg.jobs(), &library)
-        .await
-        .map_err(|e| format!("job queue in {}: {e}", cfg.data_dir.display()))?;
     let metrics = Arc::new(Metrics::default());
     let m = metrics.clone();
     queue.observe(Box::new(move |outcome, secs| m.record_job(outcome, secs)));

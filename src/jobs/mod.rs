@@ -9,9 +9,11 @@
 //!
 //! Knows nothing of HTTP: the service edge maps [`Error`] to statuses and [`Job`] to its DTO.
 
+mod diagnostics;
 mod store;
 
-pub use store::{Job, Output, State, Store};
+pub use diagnostics::Diagnostics;
+pub use store::{Job, Output, State, Store, Submission};
 
 use crate::machines::{Catalog, Library, Profile};
 use crate::output::preview::{Caps, PreviewBuilder};
@@ -38,6 +40,13 @@ pub enum Error {
     /// A row the store cannot read back (written by another version, or damaged).
     #[error("job store: {0}")]
     Corrupt(String),
+    /// The store could not be opened or failed its check: the service does not start.
+    #[error("job store {store}: {error}")]
+    Open { store: String, error: String },
+    /// The store did not confirm a job's row (its answers were lost): not acknowledged. A row
+    /// that did land keeps its input, so a retry with the same idempotency key finds the job.
+    #[error("the job store did not confirm the job ({0}); submit it again, with the same Idempotency-Key")]
+    Unconfirmed(String),
     #[error("no job {0}")]
     NotFound(String),
     #[error("the queue is full ({0} jobs waiting)")]
@@ -55,7 +64,7 @@ pub enum Error {
 #[derive(Clone, Debug)]
 pub struct Config {
     pub data_dir: PathBuf,
-    /// Jobs run at once (default: one per core).
+    /// Jobs run at once (default: one per core); 0: none on this node (another replica runs them).
     pub workers: usize,
     /// Jobs waiting at most; more are refused (the service answers 503).
     pub max_queued: u64,
@@ -113,9 +122,13 @@ impl Queue {
             });
         }
         let requeued = store.recover().await?;
+        let (files, bytes) = store.sweep(true).await?;
         store.started().await;
         if requeued > 0 {
             tracing::warn!(requeued, "jobs cut off by a restart run again from the start");
+        }
+        if files > 0 {
+            tracing::warn!(files, bytes, "removed spool files no job owns (left by a process cut off)");
         }
         let q = Arc::new(Queue {
             store,
@@ -125,14 +138,15 @@ impl Queue {
             wake: tokio::sync::Notify::new(),
             observer: std::sync::OnceLock::new(),
         });
-        for _ in 0..q.config.workers.max(1) {
+        for _ in 0..q.config.workers {
             tokio::spawn(q.clone().worker());
         }
         tokio::spawn(q.clone().cleaner());
         Ok((q, machines))
     }
 
-    /// Accepts a job: the input is streamed to the spool and fsynced before the row commits.
+    /// Accepts a job: the input is streamed to the spool and fsynced before the row commits, the
+    /// limits counted as the row is inserted (the counts before spooling only refuse early).
     /// With an idempotency key already seen, returns that job (and `false`).
     pub async fn submit(
         &self,
@@ -163,10 +177,16 @@ impl Queue {
                 });
             }
         }
-        let r = self
-            .store
-            .insert(settings, machine_version, client, filename, idempotency_key, input)
-            .await?;
+        let submission = Submission {
+            settings,
+            machine_version,
+            client,
+            filename,
+            key: idempotency_key,
+            max_queued: self.config.max_queued,
+            max_per_client: self.config.max_per_client,
+        };
+        let r = self.store.insert(submission, input).await?;
         self.wake.notify_one();
         Ok(r)
     }
@@ -200,12 +220,23 @@ impl Queue {
         }
     }
 
+    /// Expires finished jobs, and now and then sweeps the spool of what no job owns (another
+    /// replica's leftovers, once they are an hour old).
     async fn cleaner(self: Arc<Self>) {
+        let mut swept = std::time::Instant::now();
         loop {
             match self.store.expire(self.config.retention).await {
                 Ok(n) if n > 0 => tracing::info!(removed = n, "expired finished jobs"),
                 Ok(_) => {}
                 Err(e) => tracing::error!(error = %e, "expiring jobs"),
+            }
+            if swept.elapsed() >= Duration::from_secs(600) {
+                swept = std::time::Instant::now();
+                match self.store.sweep(false).await {
+                    Ok((files, bytes)) if files > 0 => tracing::info!(files, bytes, "removed spool files no job owns"),
+                    Ok(_) => {}
+                    Err(e) => tracing::error!(error = %e, "sweeping the spool"),
+                }
             }
             tokio::time::sleep(Duration::from_secs(60).min(self.config.retention.max(Duration::from_secs(1)))).await;
         }

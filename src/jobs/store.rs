@@ -4,6 +4,11 @@
 //! SQL is the same except where the backends differ in kind: claiming (`FOR UPDATE SKIP LOCKED`)
 //! and start-up recovery (one node may requeue every running job; replicas go by leases).
 
+mod accept;
+mod sweep;
+
+pub use accept::Submission;
+
 use super::Error;
 use crate::post::{Settings, Summary};
 use serde::{Deserialize, Serialize};
@@ -12,7 +17,6 @@ use sqlx::Row;
 use sqlx::any::{AnyPoolOptions, AnyRow};
 use std::path::{Path, PathBuf};
 use std::time::Duration;
-use tokio::io::AsyncWriteExt;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
@@ -207,6 +211,170 @@ fn row_job(r: &AnyRow) -> Result<Job, Error> {
     })
 }
 
+/// The store's name in errors: a PostgreSQL URL without its password.
+fn redacted(url: &str) -> String {
+    match (url.split_once("://"), url.rfind('@')) {
+        (Some((scheme, rest)), Some(at)) => {
+            let user = rest[..at - scheme.len() - 3].split(':').next().unwrap_or("");
+            format!("{scheme}://{user}@{}", &url[at + 1..])
+        }
+        _ => url.to_string(),
+    }
+}
+
+fn open_error(named: &str) -> impl Fn(sqlx::Error) -> Error + '_ {
+    move |e| Error::Open {
+        store: named.to_string(),
+        error: e.to_string(),
+    }
+}
+
+async fn connect_postgres(url: &str) -> Result<AnyPool, sqlx::Error> {
+    AnyPoolOptions::new()
+        .max_connections(8)
+        .acquire_timeout(Duration::from_secs(10))
+        // A client gone mid-transaction (a partition, not a closed socket) must not hold the job
+        // insert lock for as long as TCP takes to notice.
+        .after_connect(|conn, _| {
+            Box::pin(async move {
+                use sqlx::Executor;
+                conn.execute("SET idle_in_transaction_session_timeout = 10000").await?;
+                Ok(())
+            })
+        })
+        .connect(url)
+        .await
+}
+
+/// SQLite in `path`: checked before use (a damaged file is refused at start-up, naming it, not
+/// found by a request), then WAL and fsync on every commit; writers wait rather than fail.
+async fn connect_sqlite(path: &Path) -> Result<AnyPool, Error> {
+    use sqlx::Connection;
+    let named = |e: String| Error::Open {
+        store: path.display().to_string(),
+        error: e,
+    };
+    let url = format!("sqlite://{}?mode=rwc", path.display());
+    if path.exists() {
+        let check = async {
+            let mut c = sqlx::AnyConnection::connect(&url).await?;
+            let rows: Vec<String> = sqlx::query_scalar("PRAGMA quick_check").fetch_all(&mut c).await?;
+            c.close().await?;
+            Ok::<_, sqlx::Error>(rows)
+        };
+        match tokio::time::timeout(Duration::from_secs(10), check).await {
+            Ok(Ok(rows)) if rows == ["ok"] => {}
+            Ok(Ok(rows)) => return Err(named(format!("damaged: {}", rows.join("; ")))),
+            Ok(Err(e)) => return Err(named(e.to_string())),
+            Err(_) => return Err(named("no answer to a check in 10 s".into())),
+        }
+    }
+    AnyPoolOptions::new()
+        .max_connections(4)
+        .acquire_timeout(Duration::from_secs(10))
+        .after_connect(|conn, _| {
+            Box::pin(async move {
+                use sqlx::Executor;
+                conn.execute("PRAGMA journal_mode = WAL").await?;
+                conn.execute("PRAGMA synchronous = FULL").await?;
+                conn.execute("PRAGMA busy_timeout = 10000").await?;
+                Ok(())
+            })
+        })
+        .connect(&url)
+        .await
+        .map_err(|e| named(e.to_string()))
+}
+
+/// The job table, and the columns added since its first release.
+async fn migrate(pool: &AnyPool, backend: Backend) -> Result<(), sqlx::Error> {
+    for stmt in SCHEMA.split(';') {
+        sqlx::query(stmt).execute(pool).await?;
+    }
+    for (col, ty) in ADDED {
+        let has: i64 = match backend {
+            Backend::Sqlite => {
+                sqlx::query_scalar("SELECT COUNT(*) FROM pragma_table_info('jobs') WHERE name = $1")
+                    .bind(col)
+                    .fetch_one(pool)
+                    .await?
+            }
+            Backend::Postgres => {
+                sqlx::query_scalar(
+                    "SELECT COUNT(*) FROM information_schema.columns WHERE table_name = 'jobs' AND column_name = $1",
+                )
+                .bind(col)
+                .fetch_one(pool)
+                .await?
+            }
+        };
+        if has == 0 {
+            sqlx::query(sqlx::AssertSqlSafe(format!("ALTER TABLE jobs ADD COLUMN {col} {ty}")))
+                .execute(pool)
+                .await?;
+        }
+    }
+    Ok(())
+}
+
+/// This node's name as the owner of its runs and uploads: kept in the data directory, so that a
+/// restarted process knows what its predecessor left in a shared spool. One process per data
+/// directory.
+fn node_name(data_dir: &Path) -> std::io::Result<String> {
+    let path = data_dir.join("node");
+    let ok = |s: &str| !s.is_empty() && s.len() <= 80 && s.bytes().all(|b| b.is_ascii_alphanumeric() || b"-_.".contains(&b));
+    if let Ok(s) = std::fs::read_to_string(&path)
+        && ok(s.trim())
+    {
+        return Ok(s.trim().to_string());
+    }
+    let host: String = std::env::var("HOSTNAME")
+        .unwrap_or_default()
+        .chars()
+        .filter(|c| c.is_ascii_alphanumeric() || "-_.".contains(*c))
+        .take(60)
+        .collect();
+    let host = if host.is_empty() { "node".to_string() } else { host };
+    let node = format!("{host}-{}", &uuid::Uuid::new_v4().simple().to_string()[..8]);
+    let tmp = data_dir.join("node.tmp");
+    std::fs::write(&tmp, &node)?;
+    std::fs::File::open(&tmp)?.sync_all()?;
+    std::fs::rename(&tmp, &path)?;
+    sync_dir(data_dir)?;
+    Ok(node)
+}
+
+/// A row read for display: one that cannot be decoded (damaged, or written by another version)
+/// is shown as a failed job with its id and the reason, never an error for a whole listing.
+fn row_shown(r: &AnyRow) -> Job {
+    row_job(r).unwrap_or_else(|e| {
+        let id: String = r.try_get("id").unwrap_or_default();
+        tracing::warn!(job = %id, error = %e, "a job's stored row cannot be read");
+        Job {
+            error: Some(format!(
+                "this job's stored row cannot be read ({e}); DELETE /v1/jobs/{id} removes it"
+            )),
+            id,
+            state: State::Failed,
+            machine: r.try_get("machine").unwrap_or_default(),
+            machine_version: None,
+            settings: Settings::default(),
+            filename: None,
+            idempotency_key: r.try_get("idempotency_key").unwrap_or_default(),
+            input_bytes: 0,
+            created_ms: r.try_get("created_ms").unwrap_or_default(),
+            started_ms: None,
+            finished_ms: None,
+            bytes_read: 0,
+            blocks: 0,
+            attempts: 0,
+            owner: None,
+            summary: None,
+            nc_bytes: None,
+        }
+    })
+}
+
 /// Makes a rename or a new file durable: the directory entry itself is fsynced.
 fn sync_dir(dir: &Path) -> std::io::Result<()> {
     #[cfg(unix)]
@@ -227,34 +395,22 @@ impl Store {
         sqlx::any::install_default_drivers();
         let spool = spool.map_or_else(|| data_dir.join("spool"), Path::to_path_buf);
         tokio::fs::create_dir_all(&spool).await?;
-        let (pool, backend) = match database_url {
+        tokio::fs::create_dir_all(data_dir).await?;
+        let node = node_name(data_dir)?;
+        let (pool, backend, named) = match database_url {
             Some(url) if url.starts_with("postgres:") || url.starts_with("postgresql:") => {
-                let pool = AnyPoolOptions::new()
-                    .max_connections(8)
-                    .acquire_timeout(Duration::from_secs(10))
-                    .connect(url)
-                    .await?;
-                (pool, Backend::Postgres)
+                let named = redacted(url);
+                (
+                    connect_postgres(url).await.map_err(open_error(&named))?,
+                    Backend::Postgres,
+                    named,
+                )
             }
             Some(url) => return Err(Error::Corrupt(format!("database URL {url:?}: expected postgres://…"))),
             None => {
-                tokio::fs::create_dir_all(data_dir).await?;
-                let url = format!("sqlite://{}?mode=rwc", data_dir.join("jobs.sqlite").display());
-                // Durable before fast: WAL, fsync on every commit; writers wait rather than fail.
-                let pool = AnyPoolOptions::new()
-                    .max_connections(4)
-                    .after_connect(|conn, _| {
-                        Box::pin(async move {
-                            use sqlx::Executor;
-                            conn.execute("PRAGMA journal_mode = WAL").await?;
-                            conn.execute("PRAGMA synchronous = FULL").await?;
-                            conn.execute("PRAGMA busy_timeout = 10000").await?;
-                            Ok(())
-                        })
-                    })
-                    .connect(&url)
-                    .await?;
-                (pool, Backend::Sqlite)
+                let path = data_dir.join("jobs.sqlite");
+                let named = path.display().to_string();
+                (connect_sqlite(&path).await?, Backend::Sqlite, named)
             }
         };
         // Replicas starting together would race on CREATE TABLE (PostgreSQL's catalog is not
@@ -268,44 +424,25 @@ impl Store {
             }
             Backend::Sqlite => None,
         };
-        for stmt in SCHEMA.split(';') {
-            sqlx::query(stmt).execute(&pool).await?;
-        }
-        for (col, ty) in ADDED {
-            let has: i64 = match backend {
-                Backend::Sqlite => {
-                    sqlx::query_scalar("SELECT COUNT(*) FROM pragma_table_info('jobs') WHERE name = $1")
-                        .bind(col)
-                        .fetch_one(&pool)
-                        .await?
-                }
-                Backend::Postgres => {
-                    sqlx::query_scalar(
-                        "SELECT COUNT(*) FROM information_schema.columns WHERE table_name = 'jobs' AND column_name = $1",
-                    )
-                    .bind(col)
-                    .fetch_one(&pool)
-                    .await?
-                }
-            };
-            if has == 0 {
-                sqlx::query(sqlx::AssertSqlSafe(format!("ALTER TABLE jobs ADD COLUMN {col} {ty}")))
-                    .execute(&pool)
-                    .await?;
-            }
-        }
-        Ok(Store {
+        migrate(&pool, backend).await.map_err(open_error(&named))?;
+        let store = Store {
             pool,
             backend,
             spool,
-            node: format!(
-                "{}-{}",
-                std::env::var("HOSTNAME").unwrap_or_else(|_| "node".into()),
-                &uuid::Uuid::new_v4().simple().to_string()[..8]
-            ),
+            node,
             lease,
             startup: tokio::sync::Mutex::new(startup),
-        })
+        };
+        store.check().await.map_err(|e| Error::Open {
+            store: named,
+            error: e.to_string(),
+        })?;
+        Ok(store)
+    }
+
+    /// A cheap read of the job table: the store answers (readiness, start-up).
+    pub async fn check(&self) -> Result<u64, Error> {
+        self.count(State::Queued).await
     }
 
     /// Start-up is over (schema, recovery, catalog seeding): the next replica may start.
@@ -334,8 +471,8 @@ impl Store {
     }
 
     /// One node: every job found running was cut off by this node's end; they go back to the
-    /// queue and stale temporaries go. Replicas share the store: nothing is taken from a live
-    /// peer here; a dead peer's jobs are taken over by lease in `claim`.
+    /// queue (their temporaries go with the start-up sweep). Replicas share the store: nothing is
+    /// taken from a live peer here; a dead peer's jobs are taken over by lease in `claim`.
     pub async fn recover(&self) -> Result<u64, Error> {
         if self.backend != Backend::Sqlite {
             return Ok(0);
@@ -346,12 +483,6 @@ impl Store {
         .execute(&self.pool)
         .await?
         .rows_affected();
-        let mut dir = tokio::fs::read_dir(&self.spool).await?;
-        while let Some(e) = dir.next_entry().await? {
-            if e.file_name().to_string_lossy().ends_with(".tmp") {
-                let _ = tokio::fs::remove_file(e.path()).await;
-            }
-        }
         Ok(n)
     }
 
@@ -360,7 +491,7 @@ impl Store {
             .bind(key)
             .fetch_optional(&self.pool)
             .await?;
-        r.as_ref().map(row_job).transpose()
+        Ok(r.as_ref().map(row_shown))
     }
 
     pub async fn get(&self, id: &str) -> Result<Job, Error> {
@@ -369,7 +500,7 @@ impl Store {
             .fetch_optional(&self.pool)
             .await?;
         match r {
-            Some(r) => row_job(&r),
+            Some(r) => Ok(row_shown(&r)),
             None => Err(Error::NotFound(id.to_string())),
         }
     }
@@ -394,7 +525,7 @@ impl Store {
                     .await?
             }
         };
-        rows.iter().map(row_job).collect()
+        Ok(rows.iter().map(row_shown).collect())
     }
 
     pub async fn count(&self, state: State) -> Result<u64, Error> {
@@ -405,73 +536,30 @@ impl Store {
         Ok(n.max(0) as u64)
     }
 
-    pub(super) async fn insert(
-        &self,
-        settings: Settings,
-        machine_version: i64,
-        client: Option<String>,
-        filename: Option<String>,
-        key: Option<String>,
-        mut input: impl tokio::io::AsyncRead + Unpin,
-    ) -> Result<(Job, bool), Error> {
-        let id = uuid::Uuid::new_v4().simple().to_string();
-        let p = Paths::new(&self.spool, &id, 0);
-        let tmp = self.spool.join(format!("{id}.cl.tmp"));
-        let copied = async {
-            let mut f = tokio::fs::File::create(&tmp).await?;
-            let n = tokio::io::copy(&mut input, &mut f).await?;
-            f.flush().await?;
-            f.sync_all().await?;
-            Ok::<u64, std::io::Error>(n)
-        }
-        .await;
-        let n = match copied {
-            Ok(n) => n,
-            Err(e) => {
-                let _ = tokio::fs::remove_file(&tmp).await;
-                if e.kind() == std::io::ErrorKind::StorageFull || e.kind() == std::io::ErrorKind::QuotaExceeded {
-                    return Err(Error::NoSpace(e.to_string()));
+    /// Takes the oldest queued job, or a running one whose owner stopped reporting (a replica
+    /// that died). SQLite serializes writers; PostgreSQL skips rows another replica is claiming,
+    /// so two workers never get one job. A row that cannot be read is failed, naming why, and
+    /// the next one taken: it would otherwise be claimed again and again.
+    pub(super) async fn claim(&self) -> Result<Option<Job>, Error> {
+        loop {
+            let Some(r) = self.claim_row().await? else { return Ok(None) };
+            match row_job(&r) {
+                Ok(j) => return Ok(Some(j)),
+                Err(e) => {
+                    let id: String = r.try_get("id")?;
+                    tracing::error!(job = %id, error = %e, "a claimed job's row cannot be read: failed");
+                    sqlx::query("UPDATE jobs SET state = 'failed', finished_ms = $1, error = $2 WHERE id = $3")
+                        .bind(now_ms())
+                        .bind(format!("this job's stored row cannot be read ({e})"))
+                        .bind(&id)
+                        .execute(&self.pool)
+                        .await?;
                 }
-                return Err(Error::Upload(e.to_string()));
-            }
-        };
-        tokio::fs::rename(&tmp, &p.input).await?;
-        sync_dir(&self.spool)?;
-        let machine = settings.machine.clone().unwrap_or_default();
-        let res = sqlx::query(
-            "INSERT INTO jobs (id, state, machine, machine_version, settings, filename, idempotency_key, input_bytes, created_ms, client)
-             VALUES ($1, 'queued', $2, $3, $4, $5, $6, $7, $8, $9)",
-        )
-        .bind(&id)
-        .bind(&machine)
-        .bind(machine_version)
-        .bind(serde_json::to_string(&settings).unwrap_or_default())
-        .bind(&filename)
-        .bind(&key)
-        .bind(n.min(i64::MAX as u64) as i64)
-        .bind(now_ms())
-        .bind(&client)
-        .execute(&self.pool)
-        .await;
-        match res {
-            Ok(_) => Ok((self.get(&id).await?, true)),
-            Err(e) => {
-                let _ = tokio::fs::remove_file(&p.input).await;
-                // Two submissions with one key raced: the first one's job is the answer.
-                if let Some(k) = &key
-                    && let Some(j) = self.by_key(k).await?
-                {
-                    return Ok((j, false));
-                }
-                Err(e.into())
             }
         }
     }
 
-    /// Takes the oldest queued job, or a running one whose owner stopped reporting (a replica
-    /// that died). SQLite serializes writers; PostgreSQL skips rows another replica is claiming,
-    /// so two workers never get one job.
-    pub(super) async fn claim(&self) -> Result<Option<Job>, Error> {
+    async fn claim_row(&self) -> Result<Option<AnyRow>, Error> {
         let lock = match self.backend {
             Backend::Sqlite => "",
             Backend::Postgres => "FOR UPDATE SKIP LOCKED",
@@ -492,7 +580,7 @@ impl Store {
             .bind(stale)
             .fetch_optional(&self.pool)
             .await?;
-        r.as_ref().map(row_job).transpose()
+        Ok(r)
     }
 
     /// Records progress and renews this node's lease; `false` when the job is no longer this
@@ -556,6 +644,13 @@ impl Store {
         let _ = tokio::fs::remove_file(&p.nc_tmp).await;
         let _ = tokio::fs::rename(&p.diag_tmp, &p.diag).await;
         let _ = tokio::fs::rename(&p.preview_tmp, &p.preview).await;
+        // Before the row says failed, so that its diagnostics are never read unclosed.
+        let (diag, message) = (p.diag.clone(), msg.to_string());
+        match tokio::task::spawn_blocking(move || super::diagnostics::close(&diag, &message)).await {
+            Ok(Ok(())) => {}
+            Ok(Err(e)) => tracing::warn!(job = %id, error = %e, "closing a failed job's diagnostics (served mended)"),
+            Err(e) => tracing::warn!(job = %id, error = %e, "closing a failed job's diagnostics (served mended)"),
+        }
         sqlx::query(
             "UPDATE jobs SET state = 'failed', finished_ms = $1, error = $2 WHERE id = $3 AND state = 'running' AND owner = $4",
         )

@@ -96,7 +96,22 @@ fn now_ms() -> i64 {
         .unwrap_or(0)
 }
 
+/// Whether a database error is its disk being full: SQLite's `SQLITE_FULL`, PostgreSQL's
+/// `disk_full`, or the OS's `ENOSPC`/`EDQUOT` (the job store asks too).
+pub(crate) fn disk_full(e: &sqlx::Error) -> bool {
+    match e {
+        sqlx::Error::Database(d) => d
+            .code()
+            .is_some_and(|c| c == "53100" || c.parse::<i32>().is_ok_and(|n| n & 0xff == 13)),
+        sqlx::Error::Io(e) => matches!(e.kind(), std::io::ErrorKind::StorageFull | std::io::ErrorKind::QuotaExceeded),
+        _ => false,
+    }
+}
+
 fn db_err(e: sqlx::Error) -> Error {
+    if disk_full(&e) {
+        return Error::NoSpace(e.to_string());
+    }
     Error::Store(e.to_string())
 }
 
@@ -318,11 +333,15 @@ impl Catalog {
                 .bind(now_ms())
                 .execute(&mut *tx)
                 .await;
-        if inserted.is_err() {
-            return Err(Error::Precondition {
-                id: id.into(),
-                current: None,
-            });
+        match inserted {
+            Err(sqlx::Error::Database(d)) if d.is_unique_violation() => {
+                return Err(Error::Precondition {
+                    id: id.into(),
+                    current: None,
+                });
+            }
+            Err(e) => return Err(db_err(e)),
+            Ok(_) => {}
         }
         tx.commit().await.map_err(db_err)?;
         Ok((version, present.is_none()))

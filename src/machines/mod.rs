@@ -32,6 +32,9 @@ pub enum Error {
     ReadOnly,
     #[error("machine store: {0}")]
     Store(String),
+    /// The store's disk is full: the write was not made.
+    #[error("no room for the profile in the machine store: {0}")]
+    NoSpace(String),
 }
 
 /// The TOML document of one profile, exactly as `machine-model.md` shows it.

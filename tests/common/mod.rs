@@ -180,3 +180,67 @@ pub async fn read_response(s: &mut tokio::net::TcpStream, limit: std::time::Dura
         }
     }
 }
+
+/// Thirty submissions at once, spread over `bases` (replicas of one queue), where the limit lets
+/// `allowed` in and nothing drains: exactly `allowed` accepted, every other one refused with
+/// `status` and Retry-After, and no input of a refused one left in the spools.
+pub async fn limit_holds(bases: &[String], spools: &[std::path::PathBuf], allowed: usize, status: u16) {
+    let c = reqwest::Client::new();
+    let cl = generated("dmg-dmc75v", 2000, 3);
+    let sends = (0..30).map(|k| {
+        c.post(format!("{}/v1/jobs?machine=dmg-dmc75v", bases[k % bases.len()]))
+            .body(cl.clone())
+            .send()
+    });
+    let (mut accepted, mut refused) = (0, 0);
+    for r in futures_util::future::join_all(sends).await {
+        let r = r.unwrap();
+        match r.status().as_u16() {
+            202 => accepted += 1,
+            s if s == status => {
+                assert_eq!(r.headers()["retry-after"], "5");
+                refused += 1;
+            }
+            s => panic!("{s}: {}", r.text().await.unwrap()),
+        }
+    }
+    assert_eq!((accepted, refused), (allowed, 30 - allowed), "accepted, refused ({status})");
+    let jobs = get_json(&c, &format!("{}/v1/jobs?limit=100", bases[0])).await;
+    assert_eq!(jobs["jobs"].as_array().unwrap().len(), allowed);
+    let inputs: usize = spools
+        .iter()
+        .map(|s| {
+            std::fs::read_dir(s)
+                .unwrap()
+                .flatten()
+                .filter(|e| e.file_name().to_string_lossy().contains(".cl"))
+                .count()
+        })
+        .sum();
+    assert_eq!(inputs, allowed, "spool inputs");
+}
+
+/// Writes a spool file last modified `age` ago.
+pub fn plant(spool: &std::path::Path, name: &str, age: std::time::Duration) {
+    let path = spool.join(name);
+    std::fs::write(&path, b"left behind").unwrap();
+    let f = std::fs::File::options().write(true).open(&path).unwrap();
+    f.set_modified(std::time::SystemTime::now() - age).unwrap();
+}
+
+/// The names in a spool, sorted.
+pub fn spool_names(spool: &std::path::Path) -> Vec<String> {
+    let mut v: Vec<String> = std::fs::read_dir(spool)
+        .unwrap()
+        .flatten()
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .collect();
+    v.sort();
+    v
+}
+
+/// The node a server names in `/readyz` (its jobs' owner).
+pub async fn node_of(c: &reqwest::Client, base: &str) -> String {
+    let t = c.get(format!("{base}/readyz")).send().await.unwrap().text().await.unwrap();
+    t.rsplit_once("node ").unwrap().1.trim().to_string()
+}
