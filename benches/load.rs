@@ -36,15 +36,17 @@ fn main() {
         let cl = bytes::Bytes::from(cl);
         let data_dir = std::env::temp_dir().join(format!("kinepost-load-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&data_dir);
-        let cfg = Config { machines, data_dir: data_dir.clone(), max_streams: conc * 2, ..Config::default() };
+        // Every client is 127.0.0.1 here: the per-client job limit would count all 32 as one.
+        let cfg = Config { machines, data_dir: data_dir.clone(), max_streams: conc * 2, max_jobs_per_client: 0, ..Config::default() };
         let (queue, machines) = kinepost::jobs::Queue::start(cfg.jobs(), &library).await.unwrap();
-        let state = Arc::new(AppState { machines, config: cfg, metrics: Arc::new(Metrics::default()), jobs: Some(queue) });
+        let state = Arc::new(AppState { machines, config: cfg.clone(), metrics: Arc::new(Metrics::default()), jobs: Some(queue) });
         let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
         let base = format!("http://{}", listener.local_addr().unwrap());
         let url = format!("{base}/v1/post?machine=haas-umc750&mode=tcp");
         let jobs_url = format!("{base}/v1/jobs?machine=haas-umc750&mode=tcp");
         let mut job_ids: Vec<String> = Vec::new();
-        tokio::spawn(async move { axum::serve(listener, app(state)).await.unwrap() });
+        // The service's own accept loop: its deadlines, upload pace and connection bound in force.
+        tokio::spawn(async move { kinepost::http::run(listener, app(state), &cfg, std::future::pending()).await });
         let rss0 = rss_kb();
         for round in 1..=rounds {
             let deadline = Instant::now() + Duration::from_secs(secs);
@@ -64,7 +66,15 @@ fn main() {
                                     Ok(j) => ids.push(j["id"].as_str().unwrap_or_default().to_string()),
                                     Err(_) => errors += 1,
                                 },
-                                _ => errors += 1,
+                                Ok(r) => {
+                                    let st = r.status();
+                                    eprintln!("job submission: {st} {}", r.text().await.unwrap_or_default());
+                                    errors += 1
+                                }
+                                Err(e) => {
+                                    eprintln!("job submission: {e}");
+                                    errors += 1
+                                }
                             }
                             continue;
                         }
@@ -77,7 +87,14 @@ fn main() {
                                 }
                                 _ => errors += 1,
                             },
-                            _ => errors += 1,
+                            Ok(r) => {
+                                eprintln!("post: {}", r.status());
+                                errors += 1
+                            }
+                            Err(e) => {
+                                eprintln!("post: {e}");
+                                errors += 1
+                            }
                         }
                     }
                     (lat, errors, bytes, ids)

@@ -231,6 +231,8 @@ impl Store {
     }
 
     /// Why a row was not inserted (its key was not taken): the full queue or the client's limit.
+    /// Counted again after the refusal, so a job may have ended since: with room in the queue it
+    /// was the client's limit, whatever the client's count is now.
     async fn refusal(&self, s: &Submission) -> Result<Error, Error> {
         let waiting = self.count(State::Queued).await?;
         if let Some(c) = &s.client
@@ -238,12 +240,10 @@ impl Store {
             && waiting < s.max_queued
         {
             let active = self.active_for(c).await?;
-            if active >= s.max_per_client {
-                return Ok(Error::ClientLimit {
-                    client: c.clone(),
-                    active,
-                });
-            }
+            return Ok(Error::ClientLimit {
+                client: c.clone(),
+                active: active.max(s.max_per_client),
+            });
         }
         Ok(Error::Full(waiting.max(s.max_queued)))
     }
