@@ -10,6 +10,7 @@ use std::path::Path;
 struct Collect {
     nc: String,
     blocks: Vec<BlockInfo>,
+    diags: Vec<kinepost::diag::Diagnostic>,
 }
 
 impl Sink for Collect {
@@ -17,8 +18,13 @@ impl Sink for Collect {
         self.nc.push_str(text);
         self.nc.push('\n');
         if let Some(b) = b {
+            self.diags.extend(b.diagnostics.iter().cloned());
             self.blocks.push(b.clone());
         }
+        Ok(())
+    }
+    fn diagnostic(&mut self, d: &kinepost::diag::Diagnostic) -> std::io::Result<()> {
+        self.diags.push(d.clone());
         Ok(())
     }
 }
@@ -1273,5 +1279,39 @@ fn a_program_with_errors_says_so_in_its_own_text() {
         let nc = s(good);
         assert!(!nc.contains("ERROR "), "{d}:\n{nc}");
         assert!(nc.contains("KINEPOST: ERRORS 0, WARNINGS "), "{d}:\n{nc}");
+    }
+}
+
+/// `STOP` and `OPSTOP` are each dialect's program stop and optional stop, where the CL puts them;
+/// the spindle and coolant they halt start again before the next move unless the CL restarts
+/// them itself (the operator presses cycle start, not the spindle and coolant buttons).
+#[test]
+fn stops_in_every_dialect() {
+    let lib = Library::load_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap();
+    let cl = "UNITS/MM\nLOADTL/1\nSPINDL/5000,CLW\nCOOLNT/ON\nFEDRAT/500,MMPM\nGOTO/0,0,20,0,0,1\n\
+              GOTO/10,0,20,0,0,1\nSTOP\nGOTO/20,0,20,0,0,1\nOPSTOP\nSPINDL/6000,CLW\nGOTO/30,0,20,0,0,1\nEND\n";
+    for (d, machine) in CASES {
+        let m = lib.get(machine).unwrap().machine.clone();
+        let mut o = Options::new(&m);
+        o.dialect = kinepost::nc::dialect(d).unwrap();
+        let mut sink = Collect::default();
+        post::post(cl.as_bytes(), &m, &o, &mut sink).unwrap();
+        let lines: Vec<&str> = sink.nc.lines().collect();
+        let at = |w: &str| {
+            lines
+                .iter()
+                .position(|l| l.split_whitespace().any(|t| t == w))
+                .unwrap_or_else(|| panic!("{d}: no {w}:\n{}", sink.nc))
+        };
+        let (stop, opt) = (at("M0"), at("M1"));
+        assert!(stop < opt, "{d}");
+        let between = &lines[stop..opt].join("\n");
+        assert!(between.contains("S5000") && between.contains("M3") && between.contains("M8"), "{d}: {between}");
+        let after = &lines[opt..].join("\n");
+        assert_eq!(after.matches("S6000").count(), 1, "{d}: the CL's own SPINDL only: {after}");
+        assert!(!after.contains("S5000") && after.contains("M8"), "{d}: {after}");
+        let told: Vec<_> = sink.diags.iter().filter(|x| x.message.contains("the stop halts")).map(|x| x.line).collect();
+        assert_eq!(told, [Some(8), Some(8), Some(10)], "{d}: {:?}", sink.diags);
+        assert_golden(&format!("stops-{d}-{machine}.nc"), &sink.nc);
     }
 }

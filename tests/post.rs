@@ -2455,3 +2455,31 @@ fn a_negative_tool_length_from_the_cl_is_refused() {
     assert!(d.severity == Severity::Error && d.line == Some(2), "{d:?}");
     assert_eq!(s.tool_length, m.default_tool_length);
 }
+
+/// Records that change what the machine does, placed in the middle of a path: each either
+/// changes the NC or is told with its line. (The vocabulary's coordinate records and the rest of
+/// the list are still to come; this is the part written so far.)
+#[test]
+fn records_that_change_the_machine_change_the_nc_or_are_told() {
+    let m = machine("spinner-u5-620");
+    let cl = |mid: &str| {
+        format!(
+            "UNITS/MM\nLOADTL/1\nSPINDL/1000,CLW\nFEDRAT/100,MMPM\nGOTO/0,0,10,0,0,1\nGOTO/5,0,10,0,0,1\n{mid}\nGOTO/10,0,10,0,0,1\nEND\n"
+        )
+    };
+    let (plain, _) = run(&m, cl("").as_bytes(), &Options::new(&m));
+    for rec in [
+        "STOP",
+        "OPSTOP",
+        "CUTCOM/LEFT",
+        "CUTCOM/RIGHT,1",
+        "CUTCOM/ ON ",
+        "OPSKIP/ON",
+        "AUXFUN/77",
+        "PREFUN/61",
+    ] {
+        let (sink, _) = run(&m, cl(rec).as_bytes(), &Options::new(&m));
+        let told = sink.diags.iter().any(|d| d.line == Some(7) && d.severity >= Severity::Warning);
+        assert!(told || sink.nc != plain.nc, "{rec}: neither written nor told: {:?}", sink.diags);
+    }
+}

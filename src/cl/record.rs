@@ -139,6 +139,8 @@ pub enum Record {
     PartNo(String),
     /// Text to pass through as an NC comment (PPRINT, INSERT).
     Comment(String),
+    /// `STOP` (a program stop) or `OPSTOP` (`optional`: the operator's optional stop).
+    Stop { optional: bool },
     End,
     /// Recognised and deliberately not used (PAINT, MSYS, CSYS, vendor records, …).
     Ignored(String),
@@ -159,14 +161,10 @@ const IGNORED: &[&str] = &[
     "SYN",
     "PPFUN",
     "REWIND",
-    "CUTCOM",
     "CLRSRF",
     "MODE",
     "CLEARP",
     "DISPLY",
-    "OPSKIP",
-    "OPSTOP",
-    "STOP",
     "MFGNO",
     "FEATNO",
     "AUTOPS",
@@ -178,8 +176,6 @@ const IGNORED: &[&str] = &[
     "ORIGIN",
     "OPTIONS",
     "TECHNO",
-    "PREFUN",
-    "AUXFUN",
     "SEQNO",
     "MOVE_ATTRIB",
     "SWITCH",
@@ -725,7 +721,10 @@ fn informational(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
         "INFORMATION" | "DATE" | "CURRENT" | "NODE" | "TOOL" if is_nx_listing(st.s) => Some(Record::Ignored("NX LISTING".into())),
         "PARTNO" => Some(Record::PartNo(st.rest.trim().to_string())),
         "PPRINT" | "INSERT" => Some(Record::Comment(st.rest.trim().to_string())),
+        "STOP" => Some(Record::Stop { optional: false }),
+        "OPSTOP" => Some(Record::Stop { optional: true }),
         "FINI" | "END" => Some(Record::End),
+        "CUTCOM" | "OPSKIP" | "AUXFUN" | "PREFUN" => unhonoured(st, diags),
         m if IGNORED.contains(&m) || m.starts_with("CSI_") => Some(Record::Ignored(m.to_string())),
         m => {
             let shown: String = st.s.chars().take(60).collect();
@@ -734,6 +733,22 @@ fn informational(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
             None
         }
     }
+}
+
+/// Records that change what the machine does and that kinepost does not write yet: each is told
+/// where it stands, with what the program does instead (turning them off needs no word).
+fn unhonoured(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
+    let first = st.args.first().map(|a| a.word()).unwrap_or_default();
+    let why = match st.major.as_str() {
+        "CUTCOM" | "OPSKIP" if first == "OFF" => return Some(Record::Ignored(st.major.clone())),
+        "CUTCOM" => "cutter compensation is not written (no G41/G42 or RL/RR): the path is cut as the CL gives it",
+        "OPSKIP" => "block delete is not written: the blocks after it run whatever the switch",
+        "AUXFUN" => "the auxiliary (M) function is not written",
+        _ => "the preparatory (G) function is not written",
+    };
+    let msg = format!("{}/{first}: {why}", st.major);
+    diags.push(Diagnostic::new(Code::IgnoredRecord, Severity::Warning, Some(st.line), msg).at(st.lead + 1));
+    Some(Record::Ignored(st.major.clone()))
 }
 
 fn split_args(rest: &str, start_col: u32) -> Vec<Arg<'_>> {

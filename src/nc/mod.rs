@@ -81,6 +81,9 @@ pub struct Dialect {
     pub coolant_mist: &'static str,
     pub coolant_through: &'static str,
     pub coolant_off: &'static str,
+    /// Program stop and optional stop (CL `STOP`, `OPSTOP`).
+    pub stop: &'static str,
+    pub optional_stop: &'static str,
     /// N numbers are optional (a job option) on word-address controls.
     pub block_numbers: bool,
     /// How the control writes canned drilling cycles.
@@ -204,6 +207,8 @@ pub const FANUC: Dialect = Dialect {
     coolant_mist: "M7",
     coolant_through: "M88",
     coolant_off: "M9",
+    stop: "M0",
+    optional_stop: "M1",
     block_numbers: true,
     cycles: Cycles::Iso { dwell_ms: true },
     planes: Planes::Fanuc,
@@ -297,6 +302,8 @@ pub const HEIDENHAIN: Dialect = Dialect {
     coolant_mist: "M7",
     coolant_through: "M8",
     coolant_off: "M9",
+    stop: "M0",
+    optional_stop: "M1",
     block_numbers: true,
     cycles: Cycles::Heidenhain,
     planes: Planes::Heidenhain,

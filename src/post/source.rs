@@ -85,6 +85,11 @@ pub enum ProgEvent {
     Spindle(SpindleCmd),
     Coolant(CoolantCmd),
     Comment(String),
+    /// A program stop (`optional`: the operator's optional stop).
+    Stop {
+        optional: bool,
+        line: u32,
+    },
     Operation(String),
     Diag(Diagnostic),
     End,
@@ -436,6 +441,7 @@ impl<R: BufRead> Source<R> {
                 self.frame_pending |= self.set_axis(a, line) && self.table != [0.0; 3];
             }
             Record::Delay(dwell) => self.out.push_back(Item::Event(ProgEvent::Dwell { dwell, line })),
+            Record::Stop { optional } => self.out.push_back(Item::Event(ProgEvent::Stop { optional, line })),
             Record::RotaryTable { axis, angle, incr } => match axis {
                 Some(i) => {
                     self.table[i] = if incr { self.table[i] + angle } else { angle };

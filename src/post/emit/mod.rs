@@ -92,6 +92,9 @@ pub(super) struct Emitter<'a, S: Sink + ?Sized> {
     /// spindle and the changer) until the next tool's first move turns it on again.
     pub(super) coolant: Option<&'static str>,
     pub(super) coolant_restore: Option<u32>,
+    /// The CL line of a program stop that halted the spindle, or the coolant, not yet restarted.
+    pub(super) stopped_spindle: Option<u32>,
+    pub(super) stopped_coolant: Option<u32>,
     /// Coolant the CL turned on before its first tool and first move (CATIA writes COOLNT/ON
     /// before LOADTL): written at the first move, not before a tool change that turns it off.
     pub(super) coolant_deferred: bool,
@@ -189,6 +192,8 @@ impl<'a, S: Sink + ?Sized> Emitter<'a, S> {
             spindle_said_off: false,
             coolant: None,
             coolant_restore: None,
+            stopped_spindle: None,
+            stopped_coolant: None,
             coolant_deferred: false,
             arc_words: None,
             locked: [true; 3],

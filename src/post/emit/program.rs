@@ -109,6 +109,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                 self.out(&c)?;
             }
             ProgEvent::Dwell { dwell, line } => self.dwell(dwell, line)?,
+            ProgEvent::Stop { optional, line } => self.program_stop(optional, line)?,
             ProgEvent::Diag(dg) => self.note(dg)?,
             ProgEvent::End => {}
         }
@@ -197,6 +198,8 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         if std::mem::take(&mut self.spindle_on) {
             self.spindle_restore = Some(line);
         }
+        // The tool change restarts what it stopped (`ensure_comp`).
+        (self.stopped_spindle, self.stopped_coolant) = (None, None);
         self.spindle_said_off = false;
         Ok(())
     }
@@ -219,6 +222,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         };
         self.rpm = speed;
         self.spindle_restore = None;
+        self.stopped_spindle = None;
         self.spindle_said_off = speed.is_none();
         match speed {
             Some(v) => self.spindle_start(v, cw)?,
@@ -251,7 +255,50 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         }
         self.coolant = on.then_some(w);
         self.coolant_restore = None;
+        self.stopped_coolant = None;
         self.coolant_deferred = early && on;
+        Ok(())
+    }
+
+    /// STOP / OPSTOP: the control's program stop or optional stop. Most controls stop the
+    /// spindle and coolant at either and do not start them on cycle start: unless the CL says
+    /// otherwise first, the next move starts again what ran before.
+    fn program_stop(&mut self, optional: bool, line: u32) -> Result<(), Error> {
+        let d = self.o.dialect;
+        if let Some(l) = self.f.line(if optional { d.optional_stop } else { d.stop }, 0, 0) {
+            self.out(&l)?;
+        }
+        self.stopped_spindle = (self.spindle_on && self.spindle_restore.is_none()).then_some(line);
+        self.stopped_coolant = (self.coolant.is_some() && !self.coolant_deferred).then_some(line);
+        Ok(())
+    }
+
+    /// Before the first move after a stop: the spindle and coolant that ran before it.
+    #[cold]
+    fn restart_after_stop(&mut self) -> std::io::Result<()> {
+        if let Some(line) = self.stopped_spindle.take()
+            && let Some(v) = self.rpm
+        {
+            self.note(Diagnostic::new(
+                Code::SpindleStopped,
+                Severity::Info,
+                Some(line),
+                format!("the stop halts the spindle and the CL did not start it again: S{} restarted", v.round()),
+            ))?;
+            self.spindle_start(v, self.spindle_cw)?;
+        }
+        if let Some(line) = self.stopped_coolant.take()
+            && let Some(w) = self.coolant
+            && let Some(l) = self.f.line(w, 0, 0)
+        {
+            self.note(Diagnostic::new(
+                Code::CoolantRestored,
+                Severity::Info,
+                Some(line),
+                format!("the stop halts the coolant and the CL did not turn it on again: {l} restarted"),
+            ))?;
+            self.out(&l)?;
+        }
         Ok(())
     }
 
@@ -338,6 +385,9 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
     /// spindle again where the tool change stopped it, or at `spindle_speed` where the CL started
     /// none.
     pub(super) fn ensure_comp(&mut self, line: u32) -> std::io::Result<()> {
+        if self.stopped_spindle.is_some() || self.stopped_coolant.is_some() {
+            self.restart_after_stop()?;
+        }
         if self.comp_on {
             return Ok(());
         }
