@@ -40,6 +40,8 @@ enum Failure {
     Refused(sqlx::Error),
     /// The answer was lost every time: the row may or may not be there.
     Unknown(String),
+    /// The answer was lost every time, and asking afterwards found no row: nothing was written.
+    Lost(String),
 }
 
 /// Whether a failed statement may still have taken effect: the connection went away (or the pool
@@ -129,6 +131,10 @@ impl Store {
                     e.into()
                 })
             }
+            Err(Failure::Lost(why)) => {
+                let _ = tokio::fs::remove_file(&p.input).await;
+                Err(Error::Unconfirmed(why))
+            }
             Err(Failure::Unknown(why)) => {
                 tracing::warn!(job = %job.id, error = %why, "the job store did not answer; the input stays until it is known whether the row is there");
                 let (pool, backend, input, id) = (self.pool.clone(), self.backend, p.input.clone(), job.id.clone());
@@ -166,8 +172,8 @@ impl Store {
     }
 
     /// Inserts the row, asking again where an answer was lost: `true` when the row is there
-    /// (inserted now or by an attempt whose answer was lost), `false` when it was not inserted
-    /// (a limit, or the key taken).
+    /// (inserted now or by an attempt whose answer was lost), `false` when the insert refused it
+    /// (a limit, or the key taken); `Lost` when the answers were lost and no row is there.
     async fn commit_row(&self, job: &Job, s: &Submission) -> Result<bool, Failure> {
         let mut why = String::new();
         for pause in INSERTS {
@@ -182,8 +188,10 @@ impl Store {
         // Writing keeps failing: find out, without writing, whether one of the attempts landed.
         for pause in CHECKS {
             tokio::time::sleep(Duration::from_millis(pause)).await;
-            if let Ok(Ok(there)) = tokio::time::timeout(ATTEMPT, row_there(&self.pool, self.backend, &job.id)).await {
-                return Ok(there);
+            match tokio::time::timeout(ATTEMPT, row_there(&self.pool, self.backend, &job.id)).await {
+                Ok(Ok(true)) => return Ok(true),
+                Ok(Ok(false)) => return Err(Failure::Lost(why)),
+                _ => {}
             }
         }
         Err(Failure::Unknown(why))
