@@ -666,3 +666,24 @@ async fn a_post_over_the_servers_budget_ends_saying_so() {
     assert_eq!(j["state"], "failed", "{j}");
     assert!(j["error"].as_str().unwrap().contains("output bound"), "{j}");
 }
+
+/// A request over `--request-timeout` is 408 with a problem document naming the limit, as every
+/// error (it was an empty body).
+#[tokio::test]
+async fn a_request_over_its_time_is_a_problem_document() {
+    let base = server(Config {
+        request_timeout: Duration::ZERO,
+        ..cfg()
+    })
+    .await;
+    let r = reqwest::Client::new()
+        .post(format!("{base}/v1/machines/spinner-u5-620/fk"))
+        .json(&serde_json::json!({"joints": {"X": 0, "Y": 0, "Z": 0, "B": 0, "C": 0}}))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 408);
+    assert_eq!(r.headers()["content-type"], "application/problem+json");
+    let p: Value = r.json().await.unwrap();
+    assert!(p["detail"].as_str().unwrap().contains("--request-timeout"), "{p}");
+}

@@ -32,6 +32,9 @@ pub enum ApiError {
     /// The client sent its upload slower than `--min-upload-rate`.
     #[error("{0}")]
     UploadTooSlow(String),
+    /// A non-streaming request over `--request-timeout`.
+    #[error("{0}")]
+    Timeout(String),
     #[error("{0}")]
     NotFound(String),
     #[error("{0}")]
@@ -100,6 +103,7 @@ impl ApiError {
             ApiError::TooLarge(_) => (StatusCode::PAYLOAD_TOO_LARGE, "too-large", "Upload too large"),
             ApiError::FieldTooLarge { .. } => (StatusCode::PAYLOAD_TOO_LARGE, "field-too-large", "Form field too large"),
             ApiError::UploadTooSlow(_) => (StatusCode::REQUEST_TIMEOUT, "upload-too-slow", "Upload too slow"),
+            ApiError::Timeout(_) => (StatusCode::REQUEST_TIMEOUT, "request-timeout", "Request timed out"),
             ApiError::NotFound(_) => (StatusCode::NOT_FOUND, "not-found", "Not found"),
             ApiError::Conflict(_) => (StatusCode::CONFLICT, "conflict", "Conflict"),
             ApiError::Busy(_) => (StatusCode::SERVICE_UNAVAILABLE, "busy", "Server busy"),

@@ -316,7 +316,7 @@ pub fn app(state: Arc<AppState>) -> axum::Router {
     // The pace is metered inside the length limit, so that the limit's error reaches the
     // multipart reader as its own type (413, not 400).
     let streams = tower::ServiceBuilder::new()
-        .layer(middleware::map_response_with_state(state.clone(), too_large_problem))
+        .layer(middleware::map_response_with_state(state.clone(), bare_problem))
         .layer(middleware::from_fn_with_state(state.clone(), limits::min_upload_rate))
         .layer(axum::extract::DefaultBodyLimit::disable())
         .layer(tower_http::limit::RequestBodyLimitLayer::new(
@@ -392,7 +392,8 @@ pub fn app(state: Arc<AppState>) -> axum::Router {
         .layer(tower_http::timeout::TimeoutLayer::with_status_code(
             StatusCode::REQUEST_TIMEOUT,
             state.config.request_timeout,
-        ));
+        ))
+        .layer(middleware::map_response_with_state(state.clone(), bare_problem));
     streaming
         .merge(api)
         .layer(middleware::from_fn_with_state(state.clone(), count_requests))
@@ -479,10 +480,9 @@ fn not_modified(headers: &axum::http::HeaderMap, etag: &str) -> Option<Response>
     hit.then(|| (StatusCode::NOT_MODIFIED, [(header::ETAG, etag)]).into_response())
 }
 
-/// Requests by route and status, for `/metrics`.
-/// The body limit layer answers a declared length over `--max-upload` in text/plain: as every
-/// error, a problem document naming the limit.
-async fn too_large_problem<B>(State(st): State<Arc<AppState>>, resp: axum::http::Response<B>) -> Response
+/// The layers that answer on their own (the body limit's 413 in text/plain, the request
+/// timeout's empty 408) answer, as every error, with a problem document naming the limit.
+async fn bare_problem<B>(State(st): State<Arc<AppState>>, resp: axum::http::Response<B>) -> Response
 where
     B: axum::body::HttpBody<Data = bytes::Bytes> + Send + 'static,
     B::Error: Into<axum::BoxError>,
@@ -491,12 +491,21 @@ where
         .headers()
         .get(header::CONTENT_TYPE)
         .is_some_and(|v| v.as_bytes().starts_with(b"application/problem+json"));
-    if resp.status() == StatusCode::PAYLOAD_TOO_LARGE && !is_problem {
-        return error::ApiError::TooLarge(Some(st.config.max_upload)).into_response();
+    if is_problem {
+        return resp.map(axum::body::Body::new);
     }
-    resp.map(axum::body::Body::new)
+    match resp.status() {
+        StatusCode::PAYLOAD_TOO_LARGE => error::ApiError::TooLarge(Some(st.config.max_upload)).into_response(),
+        StatusCode::REQUEST_TIMEOUT => error::ApiError::Timeout(format!(
+            "the request took longer than {:?} (--request-timeout)",
+            st.config.request_timeout
+        ))
+        .into_response(),
+        _ => resp.map(axum::body::Body::new),
+    }
 }
 
+/// Requests by route and status, for `/metrics`.
 async fn count_requests(State(st): State<Arc<AppState>>, req: Request, next: Next) -> Response {
     let route = req
         .extensions()
