@@ -668,17 +668,21 @@ async fn a_post_over_the_servers_budget_ends_saying_so() {
 }
 
 /// A request over `--request-timeout` is 408 with a problem document naming the limit, as every
-/// error (it was an empty body).
+/// error (it was an empty body): here a JSON body that never ends.
 #[tokio::test]
 async fn a_request_over_its_time_is_a_problem_document() {
+    use futures_util::StreamExt;
     let base = server(Config {
-        request_timeout: Duration::ZERO,
+        request_timeout: Duration::from_millis(300),
         ..cfg()
     })
     .await;
+    let body = futures_util::stream::once(async { Ok::<_, std::io::Error>(bytes::Bytes::from_static(b"{")) })
+        .chain(futures_util::stream::pending());
     let r = reqwest::Client::new()
         .post(format!("{base}/v1/machines/spinner-u5-620/fk"))
-        .json(&serde_json::json!({"joints": {"X": 0, "Y": 0, "Z": 0, "B": 0, "C": 0}}))
+        .header("content-type", "application/json")
+        .body(reqwest::Body::wrap_stream(body))
         .send()
         .await
         .unwrap();
