@@ -1282,18 +1282,23 @@ fn a_program_with_errors_says_so_in_its_own_text() {
     }
 }
 
-/// `STOP` and `OPSTOP` are each dialect's program stop and optional stop, where the CL puts them;
-/// the spindle and coolant they halt start again before the next move unless the CL restarts
-/// them itself (the operator presses cycle start, not the spindle and coolant buttons).
+/// Program flow in every dialect, where the CL puts it: `STOP` and `OPSTOP` are the program stop
+/// and the optional stop, and the spindle and coolant they halt start again before the next move
+/// unless the CL restarts them itself (the operator presses cycle start, not the spindle and
+/// coolant buttons); `OPSKIP` marks the blocks between with the block delete `/` (told, not
+/// written, on a conversational control); `AUXFUN` and `PREFUN` pass their code through, told,
+/// and a program end or a coordinate-changing G code is an error, not written.
 #[test]
-fn stops_in_every_dialect() {
+fn program_flow_in_every_dialect() {
     let lib = Library::load_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap();
     let cl = "UNITS/MM\nLOADTL/1\nSPINDL/5000,CLW\nCOOLNT/ON\nFEDRAT/500,MMPM\nGOTO/0,0,20,0,0,1\n\
-              GOTO/10,0,20,0,0,1\nSTOP\nGOTO/20,0,20,0,0,1\nOPSTOP\nSPINDL/6000,CLW\nGOTO/30,0,20,0,0,1\nEND\n";
+              GOTO/10,0,20,0,0,1\nSTOP\nGOTO/20,0,20,0,0,1\nOPSTOP\nSPINDL/6000,CLW\nGOTO/30,0,20,0,0,1\n\
+              OPSKIP/ON\nGOTO/40,0,20,0,0,1\nOPSKIP/OFF\nAUXFUN/77\nPREFUN/64\nAUXFUN/30\nPREFUN/91\nGOTO/50,0,20,0,0,1\nEND\n";
     for (d, machine) in CASES {
         let m = lib.get(machine).unwrap().machine.clone();
         let mut o = Options::new(&m);
         o.dialect = kinepost::nc::dialect(d).unwrap();
+        let conv = o.dialect.style == kinepost::nc::Style::Conversational;
         let mut sink = Collect::default();
         post::post(cl.as_bytes(), &m, &o, &mut sink).unwrap();
         let lines: Vec<&str> = sink.nc.lines().collect();
@@ -1310,8 +1315,21 @@ fn stops_in_every_dialect() {
         let after = &lines[opt..].join("\n");
         assert_eq!(after.matches("S6000").count(), 1, "{d}: the CL's own SPINDL only: {after}");
         assert!(!after.contains("S5000") && after.contains("M8"), "{d}: {after}");
-        let told: Vec<_> = sink.diags.iter().filter(|x| x.message.contains("the stop halts")).map(|x| x.line).collect();
-        assert_eq!(told, [Some(8), Some(8), Some(10)], "{d}: {:?}", sink.diags);
-        assert_golden(&format!("stops-{d}-{machine}.nc"), &sink.nc);
+        let line_of = |needle: &str| -> Vec<Option<u32>> {
+            sink.diags.iter().filter(|x| x.message.contains(needle)).map(|x| x.line).collect()
+        };
+        assert_eq!(line_of("the stop halts"), [Some(8), Some(8), Some(10)], "{d}: {:?}", sink.diags);
+        let skipped: Vec<&&str> = lines.iter().filter(|l| l.starts_with('/')).collect();
+        if conv {
+            assert!(skipped.is_empty() && line_of("block delete is not written") == [Some(13)], "{d}");
+        } else {
+            assert_eq!(skipped.len(), 1, "{d}: the one block between OPSKIP/ON and OFF: {skipped:?}");
+            assert!(skipped[0].contains('X'), "{d}: the move to X40 mm: {skipped:?}");
+        }
+        assert!(lines.contains(&"M77") || lines.iter().any(|l| l.ends_with(" M77")), "{d}");
+        assert_eq!(line_of("M30 not written"), [Some(18)], "{d}");
+        assert_eq!(line_of("G91 not written"), [Some(19)], "{d}");
+        assert_eq!(line_of("G64 not written").len(), conv as usize, "{d}: G64 passes on word address");
+        assert_golden(&format!("flow-{d}-{machine}.nc"), &sink.nc);
     }
 }

@@ -141,6 +141,10 @@ pub enum Record {
     Comment(String),
     /// `STOP` (a program stop) or `OPSTOP` (`optional`: the operator's optional stop).
     Stop { optional: bool },
+    /// `AUXFUN/n` (`M`) or `PREFUN/n` (`G`): a machine function the CAM passes to the control.
+    Function { letter: char, code: String },
+    /// `OPSKIP/ON|OFF`: the blocks between are skipped with the operator's block delete.
+    BlockSkip(bool),
     End,
     /// Recognised and deliberately not used (PAINT, MSYS, CSYS, vendor records, …).
     Ignored(String),
@@ -724,7 +728,16 @@ fn informational(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
         "STOP" => Some(Record::Stop { optional: false }),
         "OPSTOP" => Some(Record::Stop { optional: true }),
         "FINI" | "END" => Some(Record::End),
-        "CUTCOM" | "OPSKIP" | "AUXFUN" | "PREFUN" => unhonoured(st, diags),
+        "CUTCOM" => unhonoured(st, diags),
+        "OPSKIP" => match st.args.first().map(Arg::word).as_deref() {
+            Some("ON") | None => Some(Record::BlockSkip(true)),
+            Some("OFF") => Some(Record::BlockSkip(false)),
+            Some(other) => {
+                st.bad(diags, st.args[0].col, format!("OPSKIP: expected ON or OFF, found {other:?}"));
+                None
+            }
+        },
+        "AUXFUN" | "PREFUN" => function(st, diags),
         m if IGNORED.contains(&m) || m.starts_with("CSI_") => Some(Record::Ignored(m.to_string())),
         m => {
             let shown: String = st.s.chars().take(60).collect();
@@ -735,20 +748,42 @@ fn informational(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
     }
 }
 
-/// Records that change what the machine does and that kinepost does not write yet: each is told
-/// where it stands, with what the program does instead (turning them off needs no word).
+/// `CUTCOM`, not written yet: told where it stands, with what the program does instead
+/// (turning it off needs no word).
 fn unhonoured(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
     let first = st.args.first().map(|a| a.word()).unwrap_or_default();
-    let why = match st.major.as_str() {
-        "CUTCOM" | "OPSKIP" if first == "OFF" => return Some(Record::Ignored(st.major.clone())),
-        "CUTCOM" => "cutter compensation is not written (no G41/G42 or RL/RR): the path is cut as the CL gives it",
-        "OPSKIP" => "block delete is not written: the blocks after it run whatever the switch",
-        "AUXFUN" => "the auxiliary (M) function is not written",
-        _ => "the preparatory (G) function is not written",
-    };
-    let msg = format!("{}/{first}: {why}", st.major);
+    if first == "OFF" {
+        return Some(Record::Ignored(st.major.clone()));
+    }
+    let msg = format!(
+        "CUTCOM/{first}: cutter compensation is not written (no G41/G42 or RL/RR): the path is cut as the CL gives it"
+    );
     diags.push(Diagnostic::new(Code::IgnoredRecord, Severity::Warning, Some(st.line), msg).at(st.lead + 1));
     Some(Record::Ignored(st.major.clone()))
+}
+
+/// `AUXFUN/n` and `PREFUN/n`: a code number (`5.1` for G) the control is to get as it is.
+fn function(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
+    let letter = if st.major == "AUXFUN" { 'M' } else { 'G' };
+    let Some(a) = st.args.first() else {
+        st.bad(diags, st.rest_col, format!("{}: expected a code number", st.major));
+        return None;
+    };
+    let code = a.text.trim().trim_end_matches('.');
+    let (whole, frac) = code.split_once('.').unwrap_or((code, ""));
+    let digits = |s: &str, most: usize| s.len() <= most && s.bytes().all(|b| b.is_ascii_digit());
+    if whole.is_empty() || !digits(whole, 3) || !digits(frac, 1) {
+        st.bad(diags, a.col, format!("{}: expected a code number (up to 3 digits), found {code:?}", st.major));
+        return None;
+    }
+    let whole = whole.trim_start_matches('0');
+    let code = match (whole.is_empty(), frac.is_empty()) {
+        (true, true) => "0".to_string(),
+        (_, true) => whole.to_string(),
+        (true, false) => format!("0.{frac}"),
+        (false, false) => format!("{whole}.{frac}"),
+    };
+    Some(Record::Function { letter, code })
 }
 
 fn split_args(rest: &str, start_col: u32) -> Vec<Arg<'_>> {

@@ -84,6 +84,10 @@ pub struct Dialect {
     /// Program stop and optional stop (CL `STOP`, `OPSTOP`).
     pub stop: &'static str,
     pub optional_stop: &'static str,
+    /// G codes a CL's `PREFUN` may pass through: they set only how the control moves (exact
+    /// stop, continuous path, look-ahead); any other could change coordinates, units, plane,
+    /// compensation or motion under the program's own words.
+    pub harmless_g: &'static [&'static str],
     /// N numbers are optional (a job option) on word-address controls.
     pub block_numbers: bool,
     /// How the control writes canned drilling cycles.
@@ -209,6 +213,7 @@ pub const FANUC: Dialect = Dialect {
     coolant_off: "M9",
     stop: "M0",
     optional_stop: "M1",
+    harmless_g: &["5.1", "8", "9", "61", "61.1", "62", "63", "64"],
     block_numbers: true,
     cycles: Cycles::Iso { dwell_ms: true },
     planes: Planes::Fanuc,
@@ -218,6 +223,7 @@ pub const FANUC: Dialect = Dialect {
 pub const HAAS: Dialect = Dialect {
     name: "haas",
     title: "Haas NGC",
+    harmless_g: &["9", "61", "64", "187"],
     begin: &[("%", false), ("O{n5}", false)],
     tcp_on: "G234 H{t}",
     cycles: Cycles::Iso { dwell_ms: false },
@@ -229,6 +235,7 @@ pub const HAAS: Dialect = Dialect {
 pub const LINUXCNC: Dialect = Dialect {
     name: "linuxcnc",
     title: "LinuxCNC",
+    harmless_g: &["61", "61.1", "64"],
     begin: &[("%", false)],
     end: &[("M30", true), ("%", false)],
     tcp_on: "G43 H{t} (TCP: SWITCH THE KINEMATICS TO TOOL-TIP MODE IN THE MACHINE CONFIG)",
@@ -245,6 +252,7 @@ pub const LINUXCNC: Dialect = Dialect {
 pub const SIEMENS: Dialect = Dialect {
     name: "siemens",
     title: "Siemens Sinumerik 840D",
+    harmless_g: &["9", "60", "64", "601", "602", "603", "641", "642", "644", "645"],
     style: Style::WordAddress,
     comment: ("; ", ""),
     begin: &[("; PROGRAM {n}", false)],
@@ -304,6 +312,7 @@ pub const HEIDENHAIN: Dialect = Dialect {
     coolant_off: "M9",
     stop: "M0",
     optional_stop: "M1",
+    harmless_g: &[],
     block_numbers: true,
     cycles: Cycles::Heidenhain,
     planes: Planes::Heidenhain,
@@ -416,6 +425,8 @@ pub struct Formatter {
     buf: String,
     program_number: u32,
     units: &'static str,
+    /// Blocks start with `/`: the operator's block delete skips them (CL `OPSKIP/ON`).
+    pub block_skip: bool,
 }
 
 /// The axis words' addresses as bytes, for the formatter's hot loop.
@@ -431,6 +442,35 @@ pub const AXIS_LETTERS: [char; 6] = {
     }
     letters
 };
+
+/// What passing an M or G code from the CL (`AUXFUN`, `PREFUN`) to a control risks.
+pub enum Risk {
+    None,
+    /// Written, but it changes what kinepost keeps track of (the spindle, the coolant).
+    Untracked(&'static str),
+    /// Not written: it contradicts what the program's own words do.
+    Refused(&'static str),
+}
+
+/// Whether `letter``code` may pass to `d`'s program as the CL asks.
+pub fn function_risk(d: &Dialect, letter: char, code: &str) -> Risk {
+    if letter == 'G' {
+        return match (d.style, d.harmless_g.contains(&code)) {
+            (Style::Conversational, _) => Risk::Refused("the control takes no G codes"),
+            (_, true) => Risk::None,
+            _ => Risk::Refused("a G code that may change coordinates, units, plane, compensation or motion under the program's own words"),
+        };
+    }
+    match code {
+        "0" | "1" => Risk::Refused("a stop is STOP or OPSTOP in the CL"),
+        "2" | "30" => Risk::Refused("a program end in the middle of the program"),
+        "6" => Risk::Refused("a tool change is LOADTL in the CL"),
+        "98" | "99" => Risk::Refused("a subprogram call or return"),
+        "3" | "4" | "5" => Risk::Untracked("the spindle is SPINDL in the CL; kinepost does not know of this one"),
+        "7" | "8" | "9" => Risk::Untracked("the coolant is COOLNT in the CL; kinepost does not know of this one"),
+        _ => Risk::None,
+    }
+}
 
 /// `text` as one comment in `d`'s syntax, appended to `buf`: nothing in it can end the comment
 /// early or open another (parentheses, `;`, control characters), at most 120 characters.
@@ -469,6 +509,7 @@ impl Formatter {
             buf: String::with_capacity(128),
             program_number: 1000,
             units: "MM",
+            block_skip: false,
         }
     }
 
@@ -478,6 +519,9 @@ impl Formatter {
 
     fn start(&mut self) {
         self.buf.clear();
+        if self.block_skip {
+            self.buf.push('/');
+        }
         if let Some(n) = self.sequence.as_mut() {
             if self.d.style == Style::Conversational {
                 self.buf.push_str(itoa::Buffer::new().format(*n));
@@ -570,6 +614,8 @@ impl Formatter {
     /// Program end: spindle and coolant off, compensation off (then, `z_up`, the spindle to
     /// machine Z home), the dialect's closing lines.
     pub fn footer(&mut self, z_up: bool) -> Vec<String> {
+        // The program's end runs whatever the block delete switch says.
+        self.block_skip = false;
         let mut out = Vec::new();
         let up = if z_up { self.d.machine_z_up } else { "" };
         for w in [self.d.spindle_off, self.d.coolant_off, self.d.tcp_off, up] {

@@ -90,6 +90,17 @@ pub enum ProgEvent {
         optional: bool,
         line: u32,
     },
+    /// An M or G code the CAM passes to the control.
+    Function {
+        letter: char,
+        code: String,
+        line: u32,
+    },
+    /// `OPSKIP/ON` or `OFF`.
+    BlockSkip {
+        on: bool,
+        line: u32,
+    },
     Operation(String),
     Diag(Diagnostic),
     End,
@@ -442,6 +453,10 @@ impl<R: BufRead> Source<R> {
             }
             Record::Delay(dwell) => self.out.push_back(Item::Event(ProgEvent::Dwell { dwell, line })),
             Record::Stop { optional } => self.out.push_back(Item::Event(ProgEvent::Stop { optional, line })),
+            Record::Function { letter, code } => {
+                self.out.push_back(Item::Event(ProgEvent::Function { letter, code, line }))
+            }
+            Record::BlockSkip(on) => self.out.push_back(Item::Event(ProgEvent::BlockSkip { on, line })),
             Record::RotaryTable { axis, angle, incr } => match axis {
                 Some(i) => {
                     self.table[i] = if incr { self.table[i] + angle } else { angle };

@@ -110,6 +110,8 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             }
             ProgEvent::Dwell { dwell, line } => self.dwell(dwell, line)?,
             ProgEvent::Stop { optional, line } => self.program_stop(optional, line)?,
+            ProgEvent::Function { letter, code, line } => self.function(letter, &code, line)?,
+            ProgEvent::BlockSkip { on, line } => self.block_skip(on, line)?,
             ProgEvent::Diag(dg) => self.note(dg)?,
             ProgEvent::End => {}
         }
@@ -270,6 +272,43 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         }
         self.stopped_spindle = (self.spindle_on && self.spindle_restore.is_none()).then_some(line);
         self.stopped_coolant = (self.coolant.is_some() && !self.coolant_deferred).then_some(line);
+        Ok(())
+    }
+
+    /// AUXFUN / PREFUN: the code as the CAM gave it, on its own line, told; one that would
+    /// contradict what kinepost writes (a program end, a tool change, a coordinate or motion
+    /// mode) is an error and not written.
+    fn function(&mut self, letter: char, code: &str, line: u32) -> Result<(), Error> {
+        let word = format!("{letter}{code}");
+        let (severity, what) = match crate::nc::function_risk(self.o.dialect, letter, code) {
+            crate::nc::Risk::Refused(why) => (Severity::Error, format!("{word} not written: {why}")),
+            crate::nc::Risk::Untracked(why) => (Severity::Warning, format!("{word} written as the CL asks: {why}")),
+            crate::nc::Risk::None => (Severity::Info, format!("{word} written as the CL asks")),
+        };
+        if severity != Severity::Error {
+            let l = self.f.words(&word).to_string();
+            self.out(&l)?;
+        }
+        self.note(Diagnostic::new(Code::IgnoredRecord, severity, Some(line), what))?;
+        Ok(())
+    }
+
+    /// OPSKIP: the blocks until `OPSKIP/OFF` start with `/`, the operator's block delete. Not on
+    /// a conversational control, whose skip syntax kinepost does not write: told instead.
+    fn block_skip(&mut self, on: bool, line: u32) -> Result<(), Error> {
+        if self.o.dialect.style != crate::nc::Style::Conversational {
+            self.f.block_skip = on;
+        } else if on {
+            self.note(Diagnostic::new(
+                Code::IgnoredRecord,
+                Severity::Warning,
+                Some(line),
+                format!(
+                    "OPSKIP/ON: block delete is not written on {}: the blocks after it run whatever the switch",
+                    self.o.dialect.name
+                ),
+            ))?;
+        }
         Ok(())
     }
 
