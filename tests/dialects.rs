@@ -1285,14 +1285,14 @@ fn a_program_with_errors_says_so_in_its_own_text() {
 /// Program flow in every dialect, where the CL puts it: `STOP` and `OPSTOP` are the program stop
 /// and the optional stop, and the spindle and coolant they halt start again before the next move
 /// unless the CL restarts them itself (the operator presses cycle start, not the spindle and
-/// coolant buttons); `OPSKIP` marks the blocks between with the block delete `/` (told, not
+/// coolant buttons); `SELCTL` readies the next tool; `OPSKIP` marks the blocks between with the block delete `/` (told, not
 /// written, on a conversational control); `AUXFUN` and `PREFUN` pass their code through, told,
 /// and a program end or a coordinate-changing G code is an error, not written.
 #[test]
 fn program_flow_in_every_dialect() {
     let lib = Library::load_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap();
     let cl = "UNITS/MM\nLOADTL/1\nSPINDL/5000,CLW\nCOOLNT/ON\nFEDRAT/500,MMPM\nGOTO/0,0,20,0,0,1\n\
-              GOTO/10,0,20,0,0,1\nSTOP\nGOTO/20,0,20,0,0,1\nOPSTOP\nSPINDL/6000,CLW\nGOTO/30,0,20,0,0,1\n\
+              SELCTL/2\nSTOP\nGOTO/20,0,20,0,0,1\nOPSTOP\nSPINDL/6000,CLW\nGOTO/30,0,20,0,0,1\n\
               OPSKIP/ON\nGOTO/40,0,20,0,0,1\nOPSKIP/OFF\nAUXFUN/77\nPREFUN/64\nAUXFUN/30\nPREFUN/91\nGOTO/50,0,20,0,0,1\nEND\n";
     for (d, machine) in CASES {
         let m = lib.get(machine).unwrap().machine.clone();
@@ -1330,6 +1330,8 @@ fn program_flow_in_every_dialect() {
         assert_eq!(line_of("M30 not written"), [Some(18)], "{d}");
         assert_eq!(line_of("G91 not written"), [Some(19)], "{d}");
         assert_eq!(line_of("G64 not written").len(), conv as usize, "{d}: G64 passes on word address");
+        let preselect = if conv { "TOOL DEF 2" } else { "T2" };
+        assert!(lines.iter().any(|l| l.ends_with(preselect)), "{d}: SELCTL/2 readies tool 2");
         assert_golden(&format!("flow-{d}-{machine}.nc"), &sink.nc);
     }
 }

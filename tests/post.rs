@@ -2477,6 +2477,7 @@ fn records_that_change_the_machine_change_the_nc_or_are_told() {
         "OPSKIP/ON",
         "AUXFUN/77",
         "PREFUN/61",
+        "SELCTL/2",
     ] {
         let (sink, _) = run(&m, cl(rec).as_bytes(), &Options::new(&m));
         let told = sink.diags.iter().any(|d| d.line == Some(7) && d.severity >= Severity::Warning);

@@ -145,6 +145,8 @@ pub enum Record {
     Function { letter: char, code: String },
     /// `OPSKIP/ON|OFF`: the blocks between are skipped with the operator's block delete.
     BlockSkip(bool),
+    /// `SELCTL/n`: tool `n` readied for the next change.
+    Preselect(u32),
     End,
     /// Recognised and deliberately not used (PAINT, MSYS, CSYS, vendor records, …).
     Ignored(String),
@@ -738,6 +740,17 @@ fn informational(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
             }
         },
         "AUXFUN" | "PREFUN" => function(st, diags),
+        "SELCTL" => match st.args.first().map(|a| (a, a.text.trim().trim_end_matches('.').parse::<u32>())) {
+            Some((_, Ok(n))) => Some(Record::Preselect(n)),
+            Some((a, Err(_))) => {
+                st.bad(diags, a.col, format!("SELCTL: expected a tool number, found {:?}", a.text.trim()));
+                None
+            }
+            None => {
+                st.bad(diags, st.rest_col, "SELCTL: expected a tool number".into());
+                None
+            }
+        },
         m if IGNORED.contains(&m) || m.starts_with("CSI_") => Some(Record::Ignored(m.to_string())),
         m => {
             let shown: String = st.s.chars().take(60).collect();

@@ -65,6 +65,8 @@ pub struct Dialect {
     /// The numbers its words take.
     pub ranges: Ranges,
     pub tool_change: &'static [&'static str],
+    /// The next tool readied in the magazine while this one cuts (CL `SELCTL`).
+    pub tool_preselect: &'static str,
     pub length_comp: &'static str,
     pub tcp_on: &'static str,
     pub tcp_off: &'static str,
@@ -199,6 +201,7 @@ pub const FANUC: Dialect = Dialect {
         dwell_s: 99_999.999,
     },
     tool_change: &["T{t} M6"],
+    tool_preselect: "T{t}",
     length_comp: "G43 H{t}",
     tcp_on: "G43.4 H{t}",
     tcp_off: "G49",
@@ -263,6 +266,7 @@ pub const SIEMENS: Dialect = Dialect {
     // G58 and G59 are programmable (additive) offsets on a Sinumerik, not settable datums.
     work_coordinates: &["G54", "G55", "G56", "G57"],
     tool_change: &["T{t}", "M6", "D1"],
+    tool_preselect: "T{t}",
     length_comp: "",
     tcp_on: "TRAORI",
     tcp_off: "TRAFOOF",
@@ -298,6 +302,7 @@ pub const HEIDENHAIN: Dialect = Dialect {
         dwell_s: 3_600.0,
     },
     tool_change: &["TOOL CALL {t} Z"],
+    tool_preselect: "TOOL DEF {t}",
     length_comp: "",
     tcp_on: "FUNCTION TCPM F TCP AXIS POS PATHCTRL AXIS",
     tcp_off: "FUNCTION RESET TCPM",

@@ -96,6 +96,11 @@ pub enum ProgEvent {
         code: String,
         line: u32,
     },
+    /// The next tool readied (`SELCTL`).
+    Preselect {
+        tool: u32,
+        line: u32,
+    },
     /// `OPSKIP/ON` or `OFF`.
     BlockSkip {
         on: bool,
@@ -456,6 +461,7 @@ impl<R: BufRead> Source<R> {
             Record::Function { letter, code } => {
                 self.out.push_back(Item::Event(ProgEvent::Function { letter, code, line }))
             }
+            Record::Preselect(tool) => self.out.push_back(Item::Event(ProgEvent::Preselect { tool, line })),
             Record::BlockSkip(on) => self.out.push_back(Item::Event(ProgEvent::BlockSkip { on, line })),
             Record::RotaryTable { axis, angle, incr } => match axis {
                 Some(i) => {

@@ -112,6 +112,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             ProgEvent::Stop { optional, line } => self.program_stop(optional, line)?,
             ProgEvent::Function { letter, code, line } => self.function(letter, &code, line)?,
             ProgEvent::BlockSkip { on, line } => self.block_skip(on, line)?,
+            ProgEvent::Preselect { tool, line } => self.preselect(tool, line)?,
             ProgEvent::Diag(dg) => self.note(dg)?,
             ProgEvent::End => {}
         }
@@ -290,6 +291,24 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             self.out(&l)?;
         }
         self.note(Diagnostic::new(Code::IgnoredRecord, severity, Some(line), what))?;
+        Ok(())
+    }
+
+    /// SELCTL: the next tool readied while this one cuts, within the tool word's range.
+    fn preselect(&mut self, tool: u32, line: u32) -> Result<(), Error> {
+        let max = self.o.dialect.ranges.tool;
+        if tool > max {
+            return self.note(Diagnostic::new(
+                Code::WordRange,
+                Severity::Error,
+                Some(line),
+                format!("SELCTL/{tool}: beyond the tool numbers {} takes (up to {max}): not written", self.o.dialect.name),
+            ))
+            .map_err(Error::from);
+        }
+        if let Some(l) = self.f.line(self.o.dialect.tool_preselect, tool, 0) {
+            self.out(&l)?;
+        }
         Ok(())
     }
 
