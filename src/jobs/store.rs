@@ -89,7 +89,32 @@ pub struct Job {
     pub nc_bytes: Option<u64>,
 }
 
-/// A job's files in the spool.
+impl Job {
+    /// A job of `machine` in `state`, nothing run or recorded yet.
+    pub(super) fn new(id: String, state: State, machine: String, created_ms: i64) -> Job {
+        Job {
+            id,
+            state,
+            machine,
+            machine_version: None,
+            settings: Settings::default(),
+            filename: None,
+            idempotency_key: None,
+            input_bytes: 0,
+            created_ms,
+            started_ms: None,
+            finished_ms: None,
+            bytes_read: 0,
+            blocks: 0,
+            attempts: 0,
+            owner: None,
+            summary: None,
+            error: None,
+            nc_bytes: None,
+        }
+    }
+}
+
 /// What a finished job publishes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Output {
@@ -101,6 +126,7 @@ pub enum Output {
     Preview,
 }
 
+/// A job's files in the spool.
 pub(super) struct Paths {
     pub input: PathBuf,
     pub nc: PathBuf,
@@ -350,27 +376,15 @@ fn row_shown(r: &AnyRow) -> Job {
     row_job(r).unwrap_or_else(|e| {
         let id: String = r.try_get("id").unwrap_or_default();
         tracing::warn!(job = %id, error = %e, "a job's stored row cannot be read");
+        let error = format!("this job's stored row cannot be read ({e}); DELETE /v1/jobs/{id} removes it");
+        let (machine, created_ms) = (
+            r.try_get("machine").unwrap_or_default(),
+            r.try_get("created_ms").unwrap_or_default(),
+        );
         Job {
-            error: Some(format!(
-                "this job's stored row cannot be read ({e}); DELETE /v1/jobs/{id} removes it"
-            )),
-            id,
-            state: State::Failed,
-            machine: r.try_get("machine").unwrap_or_default(),
-            machine_version: None,
-            settings: Settings::default(),
-            filename: None,
+            error: Some(error),
             idempotency_key: r.try_get("idempotency_key").unwrap_or_default(),
-            input_bytes: 0,
-            created_ms: r.try_get("created_ms").unwrap_or_default(),
-            started_ms: None,
-            finished_ms: None,
-            bytes_read: 0,
-            blocks: 0,
-            attempts: 0,
-            owner: None,
-            summary: None,
-            nc_bytes: None,
+            ..Job::new(id, State::Failed, machine, created_ms)
         }
     })
 }

@@ -80,25 +80,14 @@ impl Store {
         let id = uuid::Uuid::new_v4().simple().to_string();
         let p = Paths::new(&self.spool, &id, 0);
         let n = self.spool_input(&id, &p, input).await?;
+        let machine = s.settings.machine.clone().unwrap_or_default();
         let job = Job {
-            id,
-            state: State::Queued,
-            machine: s.settings.machine.clone().unwrap_or_default(),
             machine_version: Some(s.machine_version),
             settings: s.settings.clone(),
             filename: s.filename.clone(),
             idempotency_key: s.key.clone(),
             input_bytes: n,
-            created_ms: now_ms(),
-            started_ms: None,
-            finished_ms: None,
-            bytes_read: 0,
-            blocks: 0,
-            attempts: 0,
-            owner: None,
-            summary: None,
-            error: None,
-            nc_bytes: None,
+            ..Job::new(id, State::Queued, machine, now_ms())
         };
         match self.commit_row(&job, &s).await {
             Ok(true) if tokio::fs::try_exists(&p.input).await.unwrap_or(false) => Ok((job, true)),
