@@ -44,6 +44,10 @@ pub enum Code {
     TableIndex,
     /// A number beyond what the control's word takes (F, S, T, H, dwell).
     WordRange,
+    /// A UNITS record after motion changes the units in force.
+    UnitsChanged,
+    /// The input is no CL data (NC, or nothing recognisable): refused.
+    NotCl,
 }
 
 impl Code {
@@ -77,6 +81,8 @@ impl Code {
             Code::CoolantRestored => "coolant_restored",
             Code::ToolLength => "tool_length",
             Code::TableIndex => "table_index",
+            Code::UnitsChanged => "units_changed",
+            Code::NotCl => "not_cl",
         }
     }
 }

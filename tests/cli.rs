@@ -349,6 +349,32 @@ fn post_exits_0_clean_1_with_errors_2_refused() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
+/// An NC program given where CL is meant is refused (exit 2), naming what it looks like, and
+/// nothing is written for the machinist to take for a program.
+#[test]
+fn post_refuses_g_code_given_as_cl() {
+    let dir = std::env::temp_dir().join(format!("kinepost-cli-notcl-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let nc = dir.join("part.nc");
+    std::fs::write(&nc, "%\nO1000\nG21 G90 G54\nG0 X10 Y20 Z30\nG1 Z5 F500\nM30\n%\n").unwrap();
+    let out = dir.join("out.nc");
+    let (code, stdout, err) = kinepost(&[
+        "post",
+        "--machine",
+        "vmc-3axis",
+        nc.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains("this looks like G-code (\"O1000\" at line 2), not CL data"),
+        "{err}"
+    );
+    assert!(stdout.is_empty() && std::fs::read_to_string(&out).unwrap().is_empty());
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
 /// A whitespace-only admin token would be a token anyone can guess: the service refuses to start.
 #[test]
 fn a_blank_admin_token_is_refused_at_start() {

@@ -335,6 +335,43 @@ async fn errors_before_the_first_byte_have_their_status() {
     assert!(detail.contains("limit of") && !detail.contains(" 0 bytes"), "{p}");
 }
 
+/// An NC program uploaded where CL is meant: 422 with a problem document naming what it looks
+/// like and the line, in text and NDJSON alike; a job of it fails with the reason.
+#[tokio::test]
+async fn g_code_given_as_cl_is_refused_with_422() {
+    let base = server(cfg()).await;
+    let c = reqwest::Client::new();
+    let nc = "%\nO1000\nG21 G90\nG0 X10 Y20 Z30\nG1 Z5 F500\nM30\n%\n";
+    for accept in ["text/plain", "application/x-ndjson"] {
+        let r = c
+            .post(format!("{base}/v1/post?machine=vmc-3axis"))
+            .header("content-type", "text/plain")
+            .header("accept", accept)
+            .body(nc)
+            .send()
+            .await
+            .unwrap();
+        assert_eq!(r.status(), 422, "{accept}");
+        assert_eq!(r.headers()["content-type"], "application/problem+json");
+        let p: Value = r.json().await.unwrap();
+        assert_eq!(p["type"], "https://kinepost.dev/problems/not-cl-data", "{p}");
+        assert_eq!((p["code"].as_str(), p["line"].as_u64()), (Some("not_cl"), Some(2)), "{p}");
+        assert!(p["detail"].as_str().unwrap().starts_with("this looks like G-code"), "{p}");
+    }
+    let r = c
+        .post(format!("{base}/v1/jobs?machine=vmc-3axis"))
+        .header("content-type", "text/plain")
+        .body(nc)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 202);
+    let id = r.json::<Value>().await.unwrap()["id"].as_str().unwrap().to_string();
+    let j = common::wait_finished(&c, &base, &id, std::time::Duration::from_secs(60)).await;
+    assert_eq!(j["state"], "failed", "{j}");
+    assert!(j["error"].as_str().unwrap().contains("looks like G-code"), "{j}");
+}
+
 #[tokio::test]
 async fn nc_bytes_arrive_before_the_upload_completes() {
     let base = server(cfg()).await;

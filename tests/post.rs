@@ -372,13 +372,148 @@ fn a_feed_per_revolution_at_s0_is_not_f0() {
 #[test]
 fn a_file_without_motion_is_told() {
     let m = machine("spinner-u5-620");
-    for cl in ["", "PARTNO/EMPTY\nUNITS/MM\nFINI\n", "\u{1}\u{2}PNG\n"] {
-        let (sink, s) = run(&m, cl.as_bytes(), &Options::new(&m));
-        let d = sink.first(Code::NoMotion);
-        assert_eq!((d.severity, s.cl_points), (Severity::Warning, 0));
-    }
+    let (sink, s) = run(&m, b"PARTNO/EMPTY\nUNITS/MM\nFINI\n", &Options::new(&m));
+    let d = sink.first(Code::NoMotion);
+    assert_eq!((d.severity, s.cl_points), (Severity::Warning, 0));
     let (sink, _) = run(&m, b"UNITS/MM\nGOTO/1,2,3\n", &Options::new(&m));
     assert!(!sink.diags.iter().any(|d| d.code == Code::NoMotion));
+}
+
+/// Input that is no CL (an NC program uploaded instead of its CL, an empty or binary file) is
+/// refused before a byte is written, saying what it looks like and where; CL with NC-looking
+/// lines among its records is CL, and a malformed CL record is CL all the same.
+#[test]
+fn input_that_is_no_cl_is_refused_saying_what_it_looks_like() {
+    let m = machine("vmc-3axis");
+    let refused = |cl: &str| {
+        let mut sink = Collect::default();
+        match post::post(cl.as_bytes(), &m, &Options::new(&m), &mut sink) {
+            Err(post::Error::NotCl(d)) => {
+                assert!(sink.nc.is_empty() && sink.diags.is_empty(), "{cl:?}: {}", sink.nc);
+                assert_eq!((d.code, d.severity), (Code::NotCl, Severity::Error));
+                d
+            }
+            other => panic!("{cl:?}: {other:?}\n{}", sink.nc),
+        }
+    };
+    let d = refused("%\nO1000 (PART)\nG21 G90\nG0 X1 Y2 Z3\nG1 X5 F500\nM30\n%\n");
+    assert_eq!(d.line, Some(2), "{d}");
+    assert!(
+        d.message
+            .starts_with("this looks like G-code (\"O1000 (PART)\" at line 2), not CL data"),
+        "{d}"
+    );
+    // A long program is told after a few blocks, not read to its end.
+    let long = "G1 X1 Y2 F100\n".repeat(100_000);
+    assert!(refused(&long).message.contains("G-code"));
+    let d = refused("0 BEGIN PGM 1 MM\n1 TOOL CALL 1 Z S3000\n2 L X+10 Y+5 R0 FMAX\n3 END PGM 1 MM\n");
+    assert!(d.message.contains("Heidenhain conversational"), "{d}");
+    let d = refused("");
+    assert!(d.message.contains("empty"), "{d}");
+    let d = refused("\u{1}\u{2}PNG\n");
+    assert!(
+        d.message
+            .starts_with("nothing in the input is CL data (line 1: unknown record"),
+        "{d}"
+    );
+    let utf16: Vec<u8> = [0xFF, 0xFE]
+        .into_iter()
+        .chain("GOTO/1,2,3\n".bytes().flat_map(|b| [b, 0]))
+        .collect();
+    let d = refused(&String::from_utf8_lossy(&utf16));
+    assert!(d.message.contains("nothing in the input is CL data"), "{d}");
+    // CL that carries NC-looking lines, and CL whose only record is malformed: posted.
+    let (sink, s) = run(&m, b"G0 X1 Y2\nUNITS/MM\nGOTO/1,2,3\nM30\n", &Options::new(&m));
+    assert_eq!(s.cl_points, 1);
+    assert_eq!(sink.diags.iter().filter(|d| d.code == Code::UnknownRecord).count(), 2);
+    let (sink, _) = run(&m, b"GOTO/1,x,3\n", &Options::new(&m));
+    assert!(sink.diags.iter().any(|d| d.code == Code::BadRecord));
+}
+
+/// A words-by-CL-line view of a program: the motion blocks, keyed by the CL line each ends.
+#[derive(Default)]
+struct ByLine(std::collections::BTreeMap<u32, String>);
+
+impl Sink for ByLine {
+    fn line(&mut self, text: &str, b: Option<&BlockInfo>) -> std::io::Result<()> {
+        if let Some(l) = b.and_then(|b| b.source_line) {
+            self.0.insert(l, text.to_string());
+        }
+        Ok(())
+    }
+}
+
+/// An explicit UNITS applies from its line on, wherever it sits: the same file with
+/// `UNITS/INCHES` at statement 100 or at statement 5 000 writes the same words for the points
+/// before the one and after the other. (Within the units look-ahead a later record once scaled
+/// the points before it, beyond it not: programs 25.4× apart.)
+#[test]
+fn units_apply_from_their_line_wherever_they_sit() {
+    let m = machine("vmc-3axis");
+    let o = Options::new(&m);
+    let file = |at: usize| {
+        let mut lines = vec!["FEDRAT/20".to_string()];
+        lines.extend((0..6000).map(|i| {
+            let t = f64::from(i) * 0.01;
+            format!(
+                "GOTO/{:.4},{:.4},{:.4}",
+                2.0 + t.sin(),
+                2.0 + t.cos(),
+                1.0 + 0.5 * (0.3 * t).sin()
+            )
+        }));
+        lines.insert(at - 1, "UNITS/INCHES".into());
+        lines.join("\n")
+    };
+    let post = |at: usize| {
+        let mut sink = ByLine::default();
+        let s = post::post(file(at).as_bytes(), &m, &o, &mut sink).unwrap();
+        assert_eq!((s.errors, s.counts.get("units_changed")), (0, Some(&1)), "{at}");
+        sink.0
+    };
+    let (early, late) = (post(100), post(5000));
+    let mut compared = 0;
+    for (line, words) in &early {
+        // Between the two records the files differ; the first block after each writes its F.
+        if *line < 100 || *line > 5001 {
+            assert_eq!(Some(words), late.get(line), "CL line {line}");
+            compared += 1;
+        }
+    }
+    assert!(compared > 1000, "{compared}");
+    // Before the record, mm (the profile's, assumed); after it, inch.
+    assert!(early[&2].contains("X2.000"), "{}", early[&2]);
+    assert_ne!(early[&4000], late[&4000]);
+}
+
+/// A UNITS record after motion that changes the units is a warning naming its line; one before
+/// motion decides the units of everything, silently, and one that changes nothing says nothing.
+#[test]
+fn a_units_change_after_motion_is_told_with_its_line() {
+    let m = machine("vmc-3axis");
+    let o = Options::new(&m);
+    let (sink, s) = run(
+        &m,
+        b"UNITS/MM\nFEDRAT/100\nGOTO/1,2,3\nGOTO/2,2,3\nUNITS/INCHES\nGOTO/1,2,3\n",
+        &o,
+    );
+    let d = sink.only(Code::UnitsChanged);
+    assert_eq!((d.severity, d.line), (Severity::Warning, Some(5)), "{d}");
+    assert!(d.message.contains("from mm to inch") && d.message.contains("line 5"), "{d}");
+    assert_eq!((s.cl_units.as_str(), s.cl_units_source.as_str()), ("mm", "UNITS record"));
+    assert!(sink.nc.contains("X25.400 Y50.800 Z76.200"), "{}", sink.nc);
+    let (sink, s) = run(&m, b"FEDRAT/4\nUNITS/INCHES\nGOTO/1,2,3\nGOTO/2,2,3\n", &o);
+    assert!(
+        !sink
+            .diags
+            .iter()
+            .any(|d| matches!(d.code, Code::UnitsChanged | Code::UnitsAssumed))
+    );
+    assert_eq!(s.cl_units, "inch");
+    // No units before the motion: assumed (told), and a later record in the same units is no change.
+    let (sink, _) = run(&m, b"FEDRAT/100\nGOTO/1,2,3\nUNITS/MM\nGOTO/2,2,3\n", &o);
+    assert!(!sink.diags.iter().any(|d| d.code == Code::UnitsChanged));
+    sink.only(Code::UnitsAssumed);
 }
 
 /// The tool tilting about a tip that stands still: the tip's path gives no time, so each block

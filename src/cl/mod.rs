@@ -6,7 +6,10 @@
 
 mod cycle;
 mod fast;
+mod foreign;
 mod record;
+
+pub use foreign::{NcKind, NcSeen, nc_kind};
 
 pub use record::{CoolantCmd, CycleKind, CycleParams, Dwell, FeedUnit, Record, SpindleCmd, parse_statement};
 
@@ -50,6 +53,8 @@ pub struct Reader<R> {
     started: bool,
     /// Bytes of input consumed: what a post's output budget is counted against.
     consumed: u64,
+    /// Unknown records that read as NC: what the input is when it is no CL.
+    nc: NcSeen,
 }
 
 impl<R: BufRead> Reader<R> {
@@ -66,6 +71,7 @@ impl<R: BufRead> Reader<R> {
             done: false,
             started: false,
             consumed: 0,
+            nc: NcSeen::default(),
         }
     }
 
@@ -75,6 +81,11 @@ impl<R: BufRead> Reader<R> {
 
     pub fn bytes_read(&self) -> u64 {
         self.consumed
+    }
+
+    /// The unknown records so far that read as NC.
+    pub fn nc_seen(&self) -> &NcSeen {
+        &self.nc
     }
 
     /// Reads one physical line into `raw` without letting a huge line grow memory: past
@@ -296,6 +307,9 @@ impl<R: BufRead> Reader<R> {
         } else {
             let mut diags = Vec::new();
             let rec = parse_statement(&self.pending, line, &mut diags);
+            if rec.is_none() && diags.iter().any(|d| d.code == Code::UnknownRecord) {
+                self.nc.note(&self.pending, line);
+            }
             self.queue.extend(diags.into_iter().map(Event::Diagnostic));
             if let Some(record) = rec {
                 self.queue.push_back(Event::Statement(Statement { line, record }));

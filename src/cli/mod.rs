@@ -820,7 +820,10 @@ fn post_cmd(p: &machines::Profile, a: &PostArgs) -> Result<(), Failure> {
     let mut sink = kinepost::output::FileSink::new(out, diag);
     sink.echo_warnings = true;
     let res = post::post(input, m, &o, &mut sink);
-    if let Err(e) = &res {
+    // Input that is no CL is refused before the program begins: there is nothing to mark.
+    if let Err(e) = &res
+        && !matches!(e, post::Error::NotCl(_))
+    {
         // Cut short: the file says so where the machinist reads it.
         let _ = sink.line(&o.dialect.comment_line(&format!("KINEPOST: NOT FIT TO RUN, CUT SHORT: {e}")), None);
     }

@@ -23,6 +23,9 @@ pub enum ApiError {
         column: Option<u32>,
         code: &'static str,
     },
+    /// The upload is no CL data (an NC program, nothing recognisable): the line it is told by.
+    #[error("{message}")]
+    NotCl { message: String, line: Option<u32> },
     /// The limit in bytes where the handler knows it (else the service's `--max-upload`).
     #[error("upload larger than {}", .0.map_or("the service's limit (--max-upload)".to_string(), |n| format!("the limit of {n} bytes")))]
     TooLarge(Option<u64>),
@@ -100,6 +103,7 @@ impl ApiError {
             ),
             ApiError::NotAcceptable(_) => (StatusCode::NOT_ACCEPTABLE, "not-acceptable", "Not acceptable"),
             ApiError::BadRecord { .. } => (StatusCode::UNPROCESSABLE_ENTITY, "bad-record", "Bad CL record"),
+            ApiError::NotCl { .. } => (StatusCode::UNPROCESSABLE_ENTITY, "not-cl-data", "Not CL data"),
             ApiError::TooLarge(_) => (StatusCode::PAYLOAD_TOO_LARGE, "too-large", "Upload too large"),
             ApiError::FieldTooLarge { .. } => (StatusCode::PAYLOAD_TOO_LARGE, "field-too-large", "Form field too large"),
             ApiError::UploadTooSlow(_) => (StatusCode::REQUEST_TIMEOUT, "upload-too-slow", "Upload too slow"),
@@ -122,6 +126,7 @@ impl ApiError {
         };
         let (line, column, code) = match self {
             ApiError::BadRecord { line, column, code, .. } => (*line, *column, Some(code.to_string())),
+            ApiError::NotCl { line, .. } => (*line, None, Some(crate::diag::Code::NotCl.as_str().to_string())),
             _ => (None, None, None),
         };
         let key = match self {

@@ -165,6 +165,12 @@ impl ErrorBody {
                 column: d.column,
                 code: Some(d.code.as_str()),
             },
+            crate::post::Error::NotCl(d) => ErrorBody {
+                detail: d.message.clone(),
+                line: d.line,
+                column: None,
+                code: Some(d.code.as_str()),
+            },
             crate::post::Error::Budget(why) => ErrorBody {
                 code: Some("over_budget"),
                 ..ErrorBody::new(why.clone())

@@ -33,7 +33,10 @@ use std::io::BufRead;
 #[derive(Debug, thiserror::Error)]
 pub enum Error {
     #[error(transparent)]
-    Read(#[from] source::Error),
+    Read(source::Error),
+    /// The input is no CL data (NC, or nothing recognisable): refused before anything is written.
+    #[error("{}", .0.message)]
+    NotCl(Diagnostic),
     #[error("writing output: {0}")]
     Io(#[from] std::io::Error),
     /// Strict mode: the first error diagnostic ends the run.
@@ -42,6 +45,15 @@ pub enum Error {
     /// The run went over its [`Budget`]: what it wrote before is all it writes.
     #[error("{0}")]
     Budget(String),
+}
+
+impl From<source::Error> for Error {
+    fn from(e: source::Error) -> Self {
+        match e {
+            source::Error::NotCl(d) => Error::NotCl(d),
+            e => Error::Read(e),
+        }
+    }
 }
 
 /// Post-processes CL from `input` for machine `m` into `sink`.

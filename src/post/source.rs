@@ -11,8 +11,12 @@ use nalgebra::{Matrix3, Rotation3, Unit};
 use std::collections::VecDeque;
 use std::io::BufRead;
 
-/// Statements read ahead to find the CL units before the first motion is planned.
+/// Events read ahead before the first motion is planned: to find the units the CL starts in,
+/// and to tell CL from what is not.
 const UNITS_LOOKAHEAD: usize = 4096;
+
+/// NC-looking statements before any CL record after which the input is refused as NC.
+const NC_VERDICT: u32 = 16;
 
 #[derive(Clone, Debug)]
 pub struct MotionPt {
@@ -161,37 +165,107 @@ pub struct Source<R> {
 pub enum Error {
     #[error(transparent)]
     Read(#[from] crate::cl::Error),
+    /// The input is no CL data: NC, or nothing a CL reader recognises.
+    #[error("{}", .0.message)]
+    NotCl(Diagnostic),
 }
 
-impl<R: BufRead> Source<R> {
-    /// `cl_units`: the caller's statement of the CL units (wins over the file's).
-    pub fn new(input: R, profile_units: Units, cl_units: Option<Units>, strict: bool) -> Result<Self, Error> {
-        let mut reader = Reader::new(input);
-        let mut ahead = VecDeque::new();
-        let mut found: Option<(Units, &'static str)> = cl_units.map(|u| (u, "option"));
-        let mut feed_hint: Option<Units> = None;
-        while found.is_none() && ahead.len() < UNITS_LOOKAHEAD {
-            let Some(ev) = reader.next_event()? else { break };
-            if let Event::Statement(s) = &ev {
+/// What the look-ahead found: the units the CL starts in, and whether it is CL at all.
+struct Start {
+    ahead: VecDeque<Event>,
+    units: Units,
+    source: &'static str,
+}
+
+/// Reads ahead to the units the CL starts in: a UNITS record before the first motion decides
+/// them; one after motion applies from its line only (the same program wherever it sits), so
+/// the start is the caller's `cl_units`, else the first unit-bearing FEDRAT before it, else the
+/// profile's, assumed. Input with no CL record in the look-ahead is refused here, before
+/// anything is written.
+fn look_ahead<R: BufRead>(reader: &mut Reader<R>, profile_units: Units, cl_units: Option<Units>) -> Result<Start, Error> {
+    let mut ahead = VecDeque::new();
+    let (mut units_rec, mut units_seen, mut moved, mut cl) = (None, false, false, false);
+    let mut feed_hint: Option<Units> = None;
+    let mut first_diag: Option<Diagnostic> = None;
+    while ahead.len() < UNITS_LOOKAHEAD {
+        let decided = units_seen || moved && (cl_units.is_some() || feed_hint.is_some());
+        if cl && decided || !cl && reader.nc_seen().blocks >= NC_VERDICT {
+            break;
+        }
+        let Some(ev) = reader.next_event()? else { break };
+        match &ev {
+            Event::Statement(s) => {
+                // `END` alone is no evidence: Heidenhain's `END PGM` reads as one.
+                cl |= !matches!(s.record, Record::End);
                 match &s.record {
-                    Record::Units(u) => found = Some((*u, "UNITS record")),
-                    Record::Feedrate { units: Some(u), .. } if feed_hint.is_none() => feed_hint = Some(*u),
+                    Record::Units(u) if !units_seen => {
+                        units_seen = true;
+                        units_rec = (!moved).then_some(*u);
+                    }
+                    Record::Feedrate { units: Some(u), .. } if !units_seen && feed_hint.is_none() => feed_hint = Some(*u),
+                    Record::Goto { .. } | Record::GoDelta { .. } | Record::From { .. } => moved = true,
                     _ => {}
                 }
             }
-            ahead.push_back(ev);
+            // A record the reader knew but could not read is CL all the same.
+            Event::Diagnostic(d) => {
+                cl |= d.code == Code::BadRecord;
+                first_diag.get_or_insert_with(|| d.clone());
+            }
         }
-        let (cl_units, units_source) = found
-            .or(feed_hint.map(|u| (u, "FEDRAT unit")))
-            .unwrap_or((profile_units, "assumed: the profile's"));
+        ahead.push_back(ev);
+    }
+    if !cl {
+        return Err(Error::NotCl(not_cl(reader, first_diag, ahead.len())));
+    }
+    let (units, source) = units_rec
+        .map(|u| (u, "UNITS record"))
+        .or(cl_units.map(|u| (u, "option")))
+        .or(feed_hint.map(|u| (u, "FEDRAT unit")))
+        .unwrap_or((profile_units, "assumed: the profile's"));
+    Ok(Start { ahead, units, source })
+}
+
+/// Why input with no CL record is refused: what it looks like, where.
+fn not_cl<R: BufRead>(reader: &Reader<R>, first: Option<Diagnostic>, read: usize) -> Diagnostic {
+    let what = "not CL data (APT/CLSF): post the CL file the CAM system wrote, not an NC program";
+    let (line, message) = match (&reader.nc_seen().first, first) {
+        (Some((kind, line, text)), _) => (
+            Some(*line),
+            format!(
+                "this looks like {} ({} at line {line}), {what}",
+                kind.name(),
+                crate::text::quote(text)
+            ),
+        ),
+        (None, Some(d)) => {
+            let within = if read >= UNITS_LOOKAHEAD {
+                format!(" in its first {read} statements")
+            } else {
+                String::new()
+            };
+            let at = d.line.map(|l| format!("line {l}: ")).unwrap_or_default();
+            (d.line, format!("nothing in the input is CL data{within} ({at}{})", d.message))
+        }
+        (None, None) => (None, "the input holds no CL data: it is empty (or comments only)".into()),
+    };
+    Diagnostic::new(Code::NotCl, Severity::Error, line, message)
+}
+
+impl<R: BufRead> Source<R> {
+    /// `cl_units`: the caller's statement of the CL units where the file makes none before its
+    /// first motion.
+    pub fn new(input: R, profile_units: Units, cl_units: Option<Units>, strict: bool) -> Result<Self, Error> {
+        let mut reader = Reader::new(input);
+        let Start { ahead, units, source } = look_ahead(&mut reader, profile_units, cl_units)?;
         let mut out = VecDeque::new();
-        if units_source.starts_with("assumed") {
+        if source.starts_with("assumed") {
             out.push_back(Item::Event(ProgEvent::Diag(Diagnostic::new(
                 Code::UnitsAssumed,
                 Severity::Warning,
                 None,
                 format!(
-                    "no UNITS record or unit-bearing FEDRAT found: CL taken as {}",
+                    "no UNITS record before the first motion and no unit-bearing FEDRAT: CL taken as {} until a UNITS record says otherwise",
                     profile_units.as_str()
                 ),
             ))));
@@ -200,9 +274,9 @@ impl<R: BufRead> Source<R> {
             reader,
             ahead,
             out,
-            scale: cl_units.factor_to(profile_units),
-            cl_units,
-            units_source,
+            scale: units.factor_to(profile_units),
+            cl_units: units,
+            units_source: source,
             profile_units,
             tip: None,
             axis: Vec3::z(),
@@ -348,6 +422,22 @@ impl<R: BufRead> Source<R> {
         }
     }
 
+    /// UNITS: from its line on. After motion a change is told: the points before it keep the
+    /// units they were read in.
+    fn units(&mut self, u: Units, line: u32) {
+        if u != self.cl_units && self.tip.is_some() {
+            let (was, now) = (self.cl_units.as_str(), u.as_str());
+            self.diag(
+                Code::UnitsChanged,
+                Severity::Warning,
+                line,
+                format!("units change after motion, from {was} to {now}: the CL from line {line} on is read as {now}, the points before it as {was}"),
+            );
+        }
+        self.cl_units = u;
+        self.scale = u.factor_to(self.profile_units);
+    }
+
     /// FEDRAT: in profile units, within the F word's range.
     fn feedrate(&mut self, value: f64, unit: FeedUnit, units: Option<Units>, line: u32) {
         let f = units.map_or(self.scale, |u| u.factor_to(self.profile_units));
@@ -424,10 +514,7 @@ impl<R: BufRead> Source<R> {
             }
             Record::Rapid => self.rapid_next = true,
             Record::Feedrate { value, unit, units } => self.feedrate(value, unit, units, line),
-            Record::Units(u) => {
-                self.cl_units = u;
-                self.scale = u.factor_to(self.profile_units);
-            }
+            Record::Units(u) => self.units(u, line),
             Record::Spindle(c) => self.spindle(c, line),
             Record::Coolant(c) => self.out.push_back(Item::Event(ProgEvent::Coolant(c))),
             Record::LoadTool { number, length, adjust } => {
