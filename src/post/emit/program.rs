@@ -334,30 +334,31 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
     /// Before the first move after a stop: the spindle and coolant that ran before it.
     #[cold]
     fn restart_after_stop(&mut self) -> std::io::Result<()> {
-        if let Some(line) = self.stopped_spindle.take()
-            && let Some(v) = self.rpm
-        {
-            self.note(Diagnostic::new(
-                Code::SpindleStopped,
-                Severity::Info,
-                Some(line),
-                format!("the stop halts the spindle and the CL did not start it again: S{} restarted", v.round()),
-            ))?;
-            self.spindle_start(v, self.spindle_cw)?;
+        if let Some(line) = self.stopped_spindle.take() {
+            self.restart_spindle(line, "the stop halts the spindle")?;
         }
-        if let Some(line) = self.stopped_coolant.take()
-            && let Some(w) = self.coolant
-            && let Some(l) = self.f.line(w, 0, 0)
-        {
-            self.note(Diagnostic::new(
-                Code::CoolantRestored,
-                Severity::Info,
-                Some(line),
-                format!("the stop halts the coolant and the CL did not turn it on again: {l} restarted"),
-            ))?;
-            self.out(&l)?;
+        if let Some(line) = self.stopped_coolant.take() {
+            self.restart_coolant(line, "the stop halts the coolant")?;
         }
         Ok(())
+    }
+
+    /// The spindle again at the CL's last speed and direction, told at `line`: `why` it stood.
+    fn restart_spindle(&mut self, line: u32, why: &str) -> std::io::Result<()> {
+        let Some(v) = self.rpm else { return Ok(()) };
+        let msg = format!("{why} and the CL did not start it again: S{} restarted", v.round());
+        self.note(Diagnostic::new(Code::SpindleStopped, Severity::Info, Some(line), msg))?;
+        self.spindle_start(v, self.spindle_cw)
+    }
+
+    /// The coolant in force again, told at `line`: `why` it was off.
+    fn restart_coolant(&mut self, line: u32, why: &str) -> std::io::Result<()> {
+        let Some(l) = self.coolant.and_then(|w| self.f.line(w, 0, 0)) else {
+            return Ok(());
+        };
+        let msg = format!("{why} and the CL did not turn it on again: {l} restarted");
+        self.note(Diagnostic::new(Code::CoolantRestored, Severity::Info, Some(line), msg))?;
+        self.out(&l)
     }
 
     /// DELAY: seconds, or revolutions at the speed in force.
@@ -449,19 +450,8 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         if self.comp_on {
             return Ok(());
         }
-        if let Some(line) = self.spindle_restore.take()
-            && let Some(v) = self.rpm
-        {
-            self.note(Diagnostic::new(
-                Code::SpindleStopped,
-                Severity::Info,
-                Some(line),
-                format!(
-                    "the tool change stopped the spindle and the CL did not start it again: S{} restarted",
-                    v.round()
-                ),
-            ))?;
-            self.spindle_start(v, self.spindle_cw)?;
+        if let Some(line) = self.spindle_restore.take() {
+            self.restart_spindle(line, "the tool change stopped the spindle")?;
         }
         if let Some(v) = self.o.spindle_speed
             && !self.spindle_on
@@ -485,17 +475,8 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         {
             self.out(&l)?;
         }
-        if let Some(line) = self.coolant_restore.take()
-            && let Some(w) = self.coolant
-            && let Some(l) = self.f.line(w, 0, 0)
-        {
-            self.note(Diagnostic::new(
-                Code::CoolantRestored,
-                Severity::Info,
-                Some(line),
-                format!("coolant off for the tool change and the CL did not turn it on again: {l} restarted"),
-            ))?;
-            self.out(&l)?;
+        if let Some(line) = self.coolant_restore.take() {
+            self.restart_coolant(line, "coolant off for the tool change")?;
         }
         let t = match self.tool {
             Some(t) => t,
