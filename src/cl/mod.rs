@@ -6,6 +6,7 @@
 
 mod cycle;
 mod fast;
+mod flow;
 mod foreign;
 mod record;
 

@@ -279,17 +279,17 @@ fn parse_general(stmt: &str, line: u32, diags: &mut Vec<Diagnostic>) -> Option<R
 }
 
 /// One statement cut at its major word, as every family parser reads it.
-struct Stmt<'a> {
+pub(super) struct Stmt<'a> {
     /// The statement without its leading blanks, `lead` bytes of them.
     s: &'a str,
-    lead: u32,
+    pub(super) lead: u32,
     /// The major word upper-cased, inner runs of blanks made one (`TOOL PATH`).
-    major: String,
+    pub(super) major: String,
     rest: &'a str,
     /// Column (1-based) where `rest` begins: where a record with no usable argument is blamed.
-    rest_col: u32,
-    args: Vec<Arg<'a>>,
-    line: u32,
+    pub(super) rest_col: u32,
+    pub(super) args: Vec<Arg<'a>>,
+    pub(super) line: u32,
 }
 
 impl<'a> Stmt<'a> {
@@ -316,7 +316,7 @@ impl<'a> Stmt<'a> {
         }
     }
 
-    fn bad(&self, diags: &mut Vec<Diagnostic>, col: u32, msg: String) {
+    pub(super) fn bad(&self, diags: &mut Vec<Diagnostic>, col: u32, msg: String) {
         diags.push(Diagnostic::new(Code::BadRecord, Severity::Error, Some(self.line), msg).at(col));
     }
 
@@ -730,27 +730,10 @@ fn informational(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
         "STOP" => Some(Record::Stop { optional: false }),
         "OPSTOP" => Some(Record::Stop { optional: true }),
         "FINI" | "END" => Some(Record::End),
-        "CUTCOM" => unhonoured(st, diags),
-        "OPSKIP" => match st.args.first().map(Arg::word).as_deref() {
-            Some("ON") | None => Some(Record::BlockSkip(true)),
-            Some("OFF") => Some(Record::BlockSkip(false)),
-            Some(other) => {
-                st.bad(diags, st.args[0].col, format!("OPSKIP: expected ON or OFF, found {other:?}"));
-                None
-            }
-        },
-        "AUXFUN" | "PREFUN" => function(st, diags),
-        "SELCTL" => match st.args.first().map(|a| (a, a.text.trim().trim_end_matches('.').parse::<u32>())) {
-            Some((_, Ok(n))) => Some(Record::Preselect(n)),
-            Some((a, Err(_))) => {
-                st.bad(diags, a.col, format!("SELCTL: expected a tool number, found {:?}", a.text.trim()));
-                None
-            }
-            None => {
-                st.bad(diags, st.rest_col, "SELCTL: expected a tool number".into());
-                None
-            }
-        },
+        "CUTCOM" => super::flow::cutcom(st, diags),
+        "OPSKIP" => super::flow::block_skip(st, diags),
+        "AUXFUN" | "PREFUN" => super::flow::function(st, diags),
+        "SELCTL" => super::flow::preselect(st, diags),
         m if IGNORED.contains(&m) || m.starts_with("CSI_") => Some(Record::Ignored(m.to_string())),
         m => {
             let shown: String = st.s.chars().take(60).collect();
@@ -759,44 +742,6 @@ fn informational(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
             None
         }
     }
-}
-
-/// `CUTCOM`, not written yet: told where it stands, with what the program does instead
-/// (turning it off needs no word).
-fn unhonoured(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
-    let first = st.args.first().map(|a| a.word()).unwrap_or_default();
-    if first == "OFF" {
-        return Some(Record::Ignored(st.major.clone()));
-    }
-    let msg = format!(
-        "CUTCOM/{first}: cutter compensation is not written (no G41/G42 or RL/RR): the path is cut as the CL gives it"
-    );
-    diags.push(Diagnostic::new(Code::IgnoredRecord, Severity::Warning, Some(st.line), msg).at(st.lead + 1));
-    Some(Record::Ignored(st.major.clone()))
-}
-
-/// `AUXFUN/n` and `PREFUN/n`: a code number (`5.1` for G) the control is to get as it is.
-fn function(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
-    let letter = if st.major == "AUXFUN" { 'M' } else { 'G' };
-    let Some(a) = st.args.first() else {
-        st.bad(diags, st.rest_col, format!("{}: expected a code number", st.major));
-        return None;
-    };
-    let code = a.text.trim().trim_end_matches('.');
-    let (whole, frac) = code.split_once('.').unwrap_or((code, ""));
-    let digits = |s: &str, most: usize| s.len() <= most && s.bytes().all(|b| b.is_ascii_digit());
-    if whole.is_empty() || !digits(whole, 3) || !digits(frac, 1) {
-        st.bad(diags, a.col, format!("{}: expected a code number (up to 3 digits), found {code:?}", st.major));
-        return None;
-    }
-    let whole = whole.trim_start_matches('0');
-    let code = match (whole.is_empty(), frac.is_empty()) {
-        (true, true) => "0".to_string(),
-        (_, true) => whole.to_string(),
-        (true, false) => format!("0.{frac}"),
-        (false, false) => format!("{whole}.{frac}"),
-    };
-    Some(Record::Function { letter, code })
 }
 
 fn split_args(rest: &str, start_col: u32) -> Vec<Arg<'_>> {
