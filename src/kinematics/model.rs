@@ -145,13 +145,13 @@ impl Rotary {
             out.push(self.word(actual + k * TAU));
             return out;
         };
-        // Turns k from a turn below the first word in range to a turn past the last (angle
-        // error is bounded, so a turn of margin catches every word); truncation, not floor/ceil
-        // (libm calls on baseline x86-64).
         if !actual.is_finite() {
             return out;
         }
         let near = if near.is_finite() { near } else { actual };
+        // Turns k from a turn below the first word in range to a turn past the last (angle
+        // error is bounded, so a turn of margin catches every word); truncation, not floor/ceil
+        // (libm calls on baseline x86-64).
         let k_lo = ((lo - actual) / TAU) as i64 - 2;
         let k_hi = ((hi - actual) / TAU) as i64 + 2;
         let x = (near - actual) / TAU;

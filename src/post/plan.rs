@@ -474,7 +474,6 @@ fn candidates(
     Ok(())
 }
 
-/// Column `k` (if any) to read and column `i` (another) to write.
 /// The rotary words of the cheapest candidate of `prev`, or of the committed root.
 fn best_words(prev: Option<&Column>, root: Option<&Cand>) -> [Option<f64>; 3] {
     let best = match prev {
@@ -489,6 +488,7 @@ fn best_words(prev: Option<&Column>, root: Option<&Cand>) -> [Option<f64>; 3] {
     best.map_or([None; 3], |c| c.sol.joints.rotary.map(Some))
 }
 
+/// Column `k` (if any) to read and column `i` (another) to write.
 fn two(v: &mut [Column], k: Option<usize>, i: usize) -> (Option<&Column>, &mut Column) {
     match k {
         None => (None, &mut v[i]),
