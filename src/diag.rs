@@ -48,6 +48,8 @@ pub enum Code {
     UnitsChanged,
     /// The input is no CL data (NC, or nothing recognisable): refused.
     NotCl,
+    /// A coordinate-system record (`MSYS`, …): what the points after it are taken in.
+    CoordinateSystem,
 }
 
 impl Code {
@@ -83,6 +85,7 @@ impl Code {
             Code::TableIndex => "table_index",
             Code::UnitsChanged => "units_changed",
             Code::NotCl => "not_cl",
+            Code::CoordinateSystem => "coordinate_system",
         }
     }
 }

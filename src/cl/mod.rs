@@ -8,6 +8,7 @@ mod cycle;
 mod fast;
 mod flow;
 mod foreign;
+mod frames;
 mod record;
 
 pub use foreign::{NcKind, NcSeen, nc_kind};

@@ -147,6 +147,9 @@ pub enum Record {
     BlockSkip(bool),
     /// `SELCTL/n`: tool `n` readied for the next change.
     Preselect(u32),
+    /// NX's `MSYS`: the operation's machine coordinate system (origin, X and Y axes, all in
+    /// NX's absolute frame; unit and square); the points and axes after it are in it.
+    Mcs { origin: [f64; 3], x: [f64; 3], y: [f64; 3] },
     End,
     /// Recognised and deliberately not used (PAINT, MSYS, CSYS, vendor records, …).
     Ignored(String),
@@ -155,7 +158,6 @@ pub enum Record {
 /// Records kinepost recognises and does not act on (no warning for these).
 const IGNORED: &[&str] = &[
     "PAINT",
-    "MSYS",
     "CSYS",
     "TRNTYP",
     "BOX",
@@ -734,6 +736,7 @@ fn informational(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
         "OPSKIP" => super::flow::block_skip(st, diags),
         "AUXFUN" | "PREFUN" => super::flow::function(st, diags),
         "SELCTL" => super::flow::preselect(st, diags),
+        "MSYS" => super::frames::msys(st, diags),
         m if IGNORED.contains(&m) || m.starts_with("CSI_") => Some(Record::Ignored(m.to_string())),
         m => {
             let shown: String = st.s.chars().take(60).collect();

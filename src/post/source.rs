@@ -7,9 +7,11 @@
 use crate::cl::{CoolantCmd, CycleKind, CycleParams, Dwell, Event, FeedUnit, Reader, Record, SpindleCmd};
 use crate::diag::{Code, Diagnostic, Severity};
 use crate::kinematics::{Pose, Units, Vec3};
-use nalgebra::{Matrix3, Rotation3, Unit};
+use nalgebra::Matrix3;
 use std::collections::VecDeque;
 use std::io::BufRead;
+
+mod frames;
 
 /// Events read ahead before the first motion is planned: to find the units the CL starts in,
 /// and to tell CL from what is not.
@@ -152,6 +154,10 @@ pub struct Source<R> {
     /// motion after the index changes (`frame_pending`).
     frame: Option<Matrix3<f64>>,
     frame_pending: bool,
+    /// NX `MSYS`: the first operation's MCS (rotation, origin in mm), and the current one
+    /// relative to it (rotation, translation in mm) while they differ.
+    mcs0: Option<(Matrix3<f64>, Vec3)>,
+    mcs: Option<(Matrix3<f64>, Vec3)>,
     /// Mark drilling holes for canned-cycle output (and approach them at the start level).
     pub canned_cycles: bool,
     /// The largest feed per minute the control's F word takes, profile units.
@@ -293,6 +299,8 @@ impl<R: BufRead> Source<R> {
             table_line: 0,
             frame: None,
             frame_pending: false,
+            mcs0: None,
+            mcs: None,
             canned_cycles: false,
             feed_max: f64::INFINITY,
             ended: false,
@@ -536,11 +544,12 @@ impl<R: BufRead> Source<R> {
             }
             Record::Multax(on) => {
                 if !on {
-                    self.axis = Vec3::z();
+                    self.axis = self.to_program(Vec3::z());
                 }
             }
             Record::ToolAxis(a) => {
                 // Under an index, a new tool axis must agree with it again.
+                let a = self.to_program(Vec3::from(a)).into();
                 self.frame_pending |= self.set_axis(a, line) && self.table != [0.0; 3];
             }
             Record::Delay(dwell) => self.out.push_back(Item::Event(ProgEvent::Dwell { dwell, line })),
@@ -550,6 +559,7 @@ impl<R: BufRead> Source<R> {
             }
             Record::Preselect(tool) => self.out.push_back(Item::Event(ProgEvent::Preselect { tool, line })),
             Record::BlockSkip(on) => self.out.push_back(Item::Event(ProgEvent::BlockSkip { on, line })),
+            Record::Mcs { origin, x, y } => self.mcs(origin, x, y, line),
             Record::RotaryTable { axis, angle, incr } => match axis {
                 Some(i) => {
                     self.table[i] = if incr { self.table[i] + angle } else { angle };
@@ -613,83 +623,6 @@ impl<R: BufRead> Source<R> {
         axis.is_none_or(|a| self.set_axis(self.to_part(Vec3::from(a)).into(), line))
     }
 
-    /// A vector of the CL's (indexed) frame in the part frame.
-    fn to_part(&self, v: Vec3) -> Vec3 {
-        self.frame.map_or(v, |r| r * v)
-    }
-
-    /// The frame a `ROTABL` index puts the CL in, where the CL itself confirms it: CAMWorks
-    /// writes `TLAXIS` in the part frame and the path after `ROTABL` in the turned one (plunges
-    /// along its Z, arcs about its Z), its angle in radians where ICAM-style APT has degrees,
-    /// and either sense is in use (CLW/CCLW). The one reading that turns the CL's +Z onto the
-    /// tool axis in force is taken; none or several (an index about the tool axis itself) is an
-    /// error and the CL taken as written, never a guess.
-    fn resolve_frame(&mut self, line: u32) {
-        self.frame_pending = false;
-        self.frame = None;
-        match self.index_frame() {
-            Ok(None) => {}
-            Ok(Some((r, told))) => {
-                self.frame = Some(r);
-                self.diag(Code::TableIndex, Severity::Info, line, told);
-            }
-            Err(problem) => self.diag(
-                Code::TableIndex,
-                Severity::Error,
-                line,
-                format!("{problem}: the frame of the CL from here is not known; taken as written"),
-            ),
-        }
-    }
-
-    /// [`Self::resolve_frame`]'s reading of the index in force: none, the one frame with what to
-    /// say of it, or why there is none.
-    fn index_frame(&self) -> Result<Option<(Matrix3<f64>, String)>, String> {
-        let names = ['A', 'B', 'C'];
-        let at = self.table_line;
-        let turned: Vec<usize> = (0..3).filter(|&i| self.table[i] != 0.0).collect();
-        let i = match turned.as_slice() {
-            [] => return Ok(None),
-            [i] => *i,
-            _ => {
-                let axes: Vec<String> = turned.iter().map(|&i| names[i].to_string()).collect();
-                return Err(format!(
-                    "ROTABL (line {at}) indexes {} at once: the order they turn in is not known",
-                    axes.join(", ")
-                ));
-            }
-        };
-        let (v, axis) = (self.table[i], names[i]);
-        let about = Unit::new_normalize(Vec3::from(std::array::from_fn(|k| f64::from(u8::from(k == i)))));
-        let mut found: Vec<(Rotation3<f64>, &str)> = Vec::new();
-        for (angle, unit) in [(v, "radians"), (v.to_radians(), "degrees")] {
-            for s in [1.0, -1.0] {
-                let r = Rotation3::from_axis_angle(&about, s * angle);
-                if (r * Vec3::z() - self.axis).norm() < 1e-4 && !found.iter().any(|(f, _)| f.angle_to(&r) < 1e-9) {
-                    found.push((r, unit));
-                }
-            }
-        }
-        let (i_, j_, k_) = (self.axis.x, self.axis.y, self.axis.z);
-        match found.as_slice() {
-            [(r, unit)] => {
-                let deg = r.scaled_axis().dot(&about).to_degrees();
-                Ok(Some((
-                    *r.matrix(),
-                    format!(
-                        "ROTABL {v} about {axis} (line {at}, {unit}): the CL from here is in the part turned {deg:.4}° about {axis}, the tool axis in force ({i_:.4}, {j_:.4}, {k_:.4}) its Z: taken into the part frame"
-                    ),
-                )))
-            }
-            [] => Err(format!(
-                "ROTABL {v} about {axis} (line {at}): no reading of it (radians or degrees, either sense) turns the CL's Z onto the tool axis in force ({i_:.4}, {j_:.4}, {k_:.4})"
-            )),
-            _ => Err(format!(
-                "ROTABL {v} about {axis} (line {at}): the tool axis in force ({i_:.4}, {j_:.4}, {k_:.4}) does not tell which way, or by how much, the part is turned"
-            )),
-        }
-    }
-
     fn push(&mut self, line: u32, p_cl: Vec3, rapid: bool, inserted: bool, comment: Option<&'static str>) {
         let pt = self.motion_pt(line, p_cl, rapid, inserted, comment);
         self.out.push_back(Item::Motion(pt));
@@ -699,7 +632,7 @@ impl<R: BufRead> Source<R> {
         MotionPt {
             line,
             pose: Pose {
-                tip: self.to_part(p_cl) * self.scale,
+                tip: self.to_part_point(p_cl),
                 axis: self.axis,
             },
             rapid,
@@ -783,7 +716,7 @@ impl<R: BufRead> Source<R> {
         // The plane's centre: where the start point projects onto the axis line.
         let c_plane = center + k * k.dot(&a);
         Some(ArcSpec {
-            center: self.to_part(c_plane) * self.scale,
+            center: self.to_part_point(c_plane),
             normal: self.to_part(k),
             radius: a_p.norm() * self.scale,
             sweep,
@@ -792,7 +725,7 @@ impl<R: BufRead> Source<R> {
 
     fn hole(&mut self, line: u32, p: Vec3, c: CycleParams) {
         // Along the tool axis, in the CL's frame (the points go into the part frame as pushed).
-        let u = self.frame.map_or(self.axis, |r| r.transpose() * self.axis);
+        let u = self.to_cl(self.axis);
         let clear = p + u * c.rapid_to;
         let saved = self.feed;
         if let Some((f, unit, units)) = c.feed {

@@ -1,0 +1,124 @@
+//! Programs of several setups: each NX operation's points are in its own MCS (`MSYS`), and the
+//! program's frame is the first operation's.
+
+use kinepost::diag::{Code, Diagnostic, Severity};
+use kinepost::kinematics::{Machine, Setup, Vec3};
+use kinepost::machines::Library;
+use kinepost::post::verify::{VerifyOptions, verify};
+use kinepost::post::{self, BlockInfo, Mode, Options, Sink};
+
+fn machine(id: &str) -> Machine {
+    let lib = Library::load_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/machines").as_ref()).unwrap();
+    lib.get(id).unwrap().machine.clone()
+}
+
+fn data(name: &str) -> String {
+    std::fs::read_to_string(format!("{}/tests/data/{name}", env!("CARGO_MANIFEST_DIR"))).unwrap()
+}
+
+#[derive(Default)]
+struct Collect {
+    nc: String,
+    blocks: Vec<BlockInfo>,
+    diags: Vec<Diagnostic>,
+}
+
+impl Sink for Collect {
+    fn line(&mut self, text: &str, b: Option<&BlockInfo>) -> std::io::Result<()> {
+        self.nc.push_str(text);
+        self.nc.push('\n');
+        if let Some(b) = b {
+            self.diags.extend(b.diagnostics.iter().cloned());
+            self.blocks.push(b.clone());
+        }
+        Ok(())
+    }
+    fn diagnostic(&mut self, d: &Diagnostic) -> std::io::Result<()> {
+        self.diags.push(d.clone());
+        Ok(())
+    }
+}
+
+fn post(m: &Machine, cl: &str, mode: Mode) -> Collect {
+    let mut o = Options::new(m);
+    o.mode = mode;
+    o.dialect = &kinepost::nc::FANUC;
+    let mut sink = Collect::default();
+    post::post(cl.as_bytes(), m, &o, &mut sink).unwrap();
+    sink
+}
+
+fn verified(m: &Machine, cl: &str, nc: &str, mode: Mode) -> kinepost::post::verify::Report {
+    let o = VerifyOptions {
+        mode,
+        setup: Setup::new(m.default_tool_length, Vec3::zeros()),
+        tolerance: 0.01,
+        angle_tolerance_deg: 0.01,
+        cl_units: None,
+        cl_tool_length: true,
+    };
+    verify(cl.as_bytes(), nc.as_bytes(), m, &o).unwrap()
+}
+
+/// The second operation's MCS is the first's moved 100 mm along its X and turned 90° about its
+/// Z (and the first is itself turned 30° in NX's absolute frame): its points are cut where the
+/// same path written in the first MCS is, which `verify` confirms against that file and
+/// against the program's own, in both modes. Read as written, they were 100 mm and a quarter
+/// turn away.
+#[test]
+fn a_second_operations_mcs_is_taken_into_the_first() {
+    let m = machine("spinner-u5-620");
+    let (two, one) = (data("nx_two_setups.cls"), data("nx_two_setups_first_mcs.cls"));
+    for mode in [Mode::Joint, Mode::Tcp] {
+        let s = post(&m, &two, mode);
+        let errors: Vec<_> = s.diags.iter().filter(|d| d.severity == Severity::Error).collect();
+        assert!(errors.is_empty(), "{mode:?}: {errors:?}");
+        for cl in [&one, &two] {
+            let r = verified(&m, cl, &s.nc, mode);
+            assert!(r.ok && r.matched == 80, "{mode:?}: {r:?}");
+        }
+        let d = s.diags.iter().find(|d| d.code == Code::CoordinateSystem).expect("the MCS change is told");
+        assert_eq!((d.line, d.severity), (Some(55), Severity::Info), "{d:?}");
+        assert!(d.message.contains("100.0000, 0.0000, 0.0000 mm") && d.message.contains("turned 90.0000°"), "{d:?}");
+        assert!(s.nc.contains("(MCS MOVED 100.0000, 0.0000, 0.0000 MM TURNED 90.000 DEG FROM THE FIRST"), "{}", s.nc);
+        // The same machine motion as the path written in one MCS.
+        let same = post(&m, &one, mode);
+        assert_eq!(s.blocks.len(), same.blocks.len(), "{mode:?}");
+        for (a, b) in s.blocks.iter().zip(&same.blocks) {
+            for (x, y) in a.joints.0.iter().zip(b.joints.0.iter()) {
+                let (x, y) = (x.unwrap_or(0.0), y.unwrap_or(0.0));
+                assert!((x - y).abs() < 2e-3, "{mode:?} block {}: {:?} vs {:?}", a.n, a.joints, b.joints);
+            }
+        }
+    }
+}
+
+/// 3-axis operations give no tool axis: the axis in force is the MCS's Z, so a second operation
+/// whose MCS is turned onto the part's side is cut along that side's normal.
+#[test]
+fn a_turned_mcs_turns_the_modal_tool_axis() {
+    let m = machine("dmg-dmc75v");
+    let cl = "UNITS/MM\nMSYS/0,0,0,1,0,0,0,1,0\nLOADTL/1\nFEDRAT/500,MMPM\nGOTO/10,0,20\nGOTO/10,10,20\n\
+              MSYS/0,0,0,1,0,0,0,0,1\nRAPID\nGOTO/10,0,20\nGOTO/10,10,20\nFINI\n";
+    let s = post(&m, cl, Mode::Tcp);
+    let last = s.blocks.iter().find(|b| b.source_line == Some(10)).unwrap();
+    // Second MCS: X along X, Y along the first's Z, Z along the first's -Y.
+    let (tip, axis) = (Vec3::from(last.tip), Vec3::from(last.axis));
+    assert!((tip - Vec3::new(10.0, -20.0, 10.0)).norm() < 1e-6, "{tip:?}");
+    assert!((axis - Vec3::new(0.0, -1.0, 0.0)).norm() < 1e-9, "{axis:?}");
+    let errors: Vec<_> = s.diags.iter().filter(|d| d.severity == Severity::Error).collect();
+    assert!(errors.is_empty(), "{errors:?}");
+}
+
+/// An MCS whose axes are not square is an error at its line, and the points stay as written
+/// rather than in a frame the record does not define.
+#[test]
+fn an_mcs_that_is_no_frame_is_refused_at_its_line() {
+    let m = machine("haas-umc750");
+    let cl = "UNITS/MM\nMSYS/0,0,0,1,0,0,0,0,1\nLOADTL/1\nFEDRAT/500,MMPM\nGOTO/10,0,20\nMSYS/5,0,0,1,0,0,0.5,0.5,0\nGOTO/10,10,20\nFINI\n";
+    let s = post(&m, cl, Mode::Tcp);
+    let d = s.diags.iter().find(|d| d.line == Some(6) && d.severity == Severity::Error).expect("line 6 told");
+    assert_eq!(d.code, Code::BadRecord, "{d:?}");
+    assert!(d.message.contains("MSYS") && d.message.contains("not applied"), "{d:?}");
+    assert!(s.nc.contains("ERROR"), "{}", s.nc);
+}
