@@ -13,7 +13,7 @@ fn machine(id: &str) -> Machine {
 }
 
 fn data(name: &str) -> String {
-    std::fs::read_to_string(format!("{}/tests/data/{name}", env!("CARGO_MANIFEST_DIR"))).unwrap()
+    std::fs::read_to_string(format!("{}/tests/data/generated/{name}", env!("CARGO_MANIFEST_DIR"))).unwrap()
 }
 
 #[derive(Default)]

@@ -68,3 +68,20 @@ pub(super) fn function(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record>
     };
     Some(Record::Function { letter, code })
 }
+
+/// `SELECT/TOOL,n` (NX, SOLIDWORKS CAM): `SELCTL/n` in other words.
+pub(super) fn select(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
+    match (st.args.first().map(Arg::word).as_deref(), st.args.get(1)) {
+        (Some("TOOL"), Some(a)) => match a.text.trim().trim_end_matches('.').parse::<u32>() {
+            Ok(n) => Some(Record::Preselect(n)),
+            Err(_) => {
+                st.bad(diags, a.col, format!("SELECT: expected a tool number, found {:?}", a.text.trim()));
+                None
+            }
+        },
+        _ => {
+            st.bad(diags, st.rest_col, "SELECT: expected TOOL and a tool number".into());
+            None
+        }
+    }
+}

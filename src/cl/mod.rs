@@ -9,9 +9,12 @@ mod fast;
 mod flow;
 mod foreign;
 mod frames;
+mod moves;
 mod record;
+pub mod vocabulary;
 
 pub use foreign::{NcKind, NcSeen, nc_kind};
+pub use moves::Plane;
 
 pub use record::{CoolantCmd, CycleKind, CycleParams, Dwell, FeedUnit, Record, SpindleCmd, parse_statement};
 

@@ -3,6 +3,7 @@
 //! records without a slash.
 
 use super::fast::fast_goto;
+use super::vocabulary::Treatment;
 use crate::diag::{Code, Diagnostic, Severity};
 use crate::kinematics::Units;
 
@@ -130,7 +131,13 @@ pub enum Record {
         radius: Option<f64>,
         clockwise: bool,
         turns: u32,
+        /// `MOVARC`'s sweep in degrees: the arc that sweeps it is the one meant.
+        sweep_deg: Option<f64>,
     },
+    /// `CLEARP`/`CLRSRF`: the plane a `RETRCT` withdraws to (none: `OFF`).
+    Clearance(Option<super::moves::Plane>),
+    /// `RETRCT`: along the tool axis to the clearance plane.
+    Retract,
     Cycle(CycleParams),
     CycleOff,
     /// Operation start (`TOOL PATH/…`) with its name.
@@ -151,51 +158,11 @@ pub enum Record {
     /// NX's absolute frame; unit and square); the points and axes after it are in it.
     Mcs { origin: [f64; 3], x: [f64; 3], y: [f64; 3] },
     End,
-    /// Recognised and deliberately not used (PAINT, MSYS, CSYS, vendor records, …).
+    /// Recognised and not acted on: informational, or told where it stands
+    /// ([`super::vocabulary`]).
     Ignored(String),
 }
 
-/// Records kinepost recognises and does not act on (no warning for these).
-const IGNORED: &[&str] = &[
-    "PAINT",
-    "CSYS",
-    "TRNTYP",
-    "BOX",
-    "MACHIN",
-    "OPFEATSTART",
-    "OPFEATEND",
-    "SELECT",
-    "TPRINT",
-    "SYN",
-    "PPFUN",
-    "REWIND",
-    "CLRSRF",
-    "MODE",
-    "CLEARP",
-    "DISPLY",
-    "MFGNO",
-    "FEATNO",
-    "AUTOPS",
-    "TRANS",
-    "NURBS",
-    "OPERATION",
-    "CYCLE_DEF",
-    "SET",
-    "ORIGIN",
-    "OPTIONS",
-    "TECHNO",
-    "SEQNO",
-    "MOVE_ATTRIB",
-    "SWITCH",
-    "LINTOL",
-    "INTOL",
-    "OUTTOL",
-    "THICK",
-    "ROTATE",
-    "INDIRV",
-    "ARCSLP",
-    "PITCH",
-];
 
 pub(super) struct Arg<'a> {
     pub(super) text: &'a str,
@@ -269,13 +236,16 @@ fn parse_general(stmt: &str, line: u32, diags: &mut Vec<Diagnostic>) -> Option<R
         "LOADTL" | "LOAD" => load_tool(&st, diags),
         "TLDATA" | "TURRET" | "TOOLNO" | "CUTTER" => Some(tool_data(&st)),
         "CIRCLE" => circle(&st, diags),
+        "MOVARC" => super::moves::movarc(&st, diags),
+        "CLEARP" | "CLRSRF" => super::moves::clearance(&st, diags),
+        "RETRCT" => super::moves::retract(&st, diags),
         "CYCLE" => super::cycle::parse_cycle(&st.args, line, st.rest_col, diags),
         "UNITS" | "UNIT" => units(&st, diags),
         "MULTAX" => Some(Record::Multax(!matches!(
             st.args.first().map(Arg::word).as_deref(),
             Some("OFF")
         ))),
-        "DELAY" => delay(&st, diags),
+        "DELAY" | "DWELL" => delay(&st, diags),
         _ => informational(&st, diags),
     }
 }
@@ -667,6 +637,7 @@ fn circle(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
         radius: v.get(6).copied(),
         clockwise,
         turns,
+        sweep_deg: None,
     })
 }
 
@@ -736,8 +707,17 @@ fn informational(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
         "OPSKIP" => super::flow::block_skip(st, diags),
         "AUXFUN" | "PREFUN" => super::flow::function(st, diags),
         "SELCTL" => super::flow::preselect(st, diags),
+        "SELECT" => super::flow::select(st, diags),
         "MSYS" => super::frames::msys(st, diags),
-        m if IGNORED.contains(&m) || m.starts_with("CSI_") => Some(Record::Ignored(m.to_string())),
+        // SOLIDWORKS CAM's vendor records: tool and path parameters for its own posts.
+        m if m.starts_with("CSI_") => Some(Record::Ignored(m.to_string())),
+        m if let Some(w) = super::vocabulary::word(m) && w.treatment != Treatment::Honoured => {
+            if let Treatment::Told(sev, why) = w.treatment {
+                let msg = format!("{m}: {why}");
+                diags.push(Diagnostic::new(Code::IgnoredRecord, sev, Some(st.line), msg).at(st.lead + 1));
+            }
+            Some(Record::Ignored(m.to_string()))
+        }
         m => {
             let shown: String = st.s.chars().take(60).collect();
             let msg = format!("unknown record {:?}: ignored", if m.is_empty() { &shown } else { m });

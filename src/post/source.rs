@@ -12,6 +12,7 @@ use std::collections::VecDeque;
 use std::io::BufRead;
 
 mod frames;
+mod moves;
 
 /// Events read ahead before the first motion is planned: to find the units the CL starts in,
 /// and to tell CL from what is not.
@@ -145,6 +146,10 @@ pub struct Source<R> {
     circle: Option<([f64; 3], [f64; 3], Option<f64>)>,
     circle_cw: bool,
     circle_turns: u32,
+    /// `MOVARC`'s sweep (radians): which way round the arc goes.
+    circle_sweep: Option<f64>,
+    /// The clearance plane (`CLEARP`) in the part frame, profile units: unit normal, offset.
+    clearance: Option<(Vec3, f64)>,
     cycle: Option<CycleParams>,
     /// `ROTABL` angles (A, B, C) as the CL states them, and the line of the last one.
     table: [f64; 3],
@@ -163,6 +168,8 @@ pub struct Source<R> {
     /// The largest feed per minute the control's F word takes, profile units.
     pub feed_max: f64,
     ended: bool,
+    /// The line of an `END`/`FINI` not yet followed by motion.
+    end_line: Option<u32>,
     pub strict_error: Option<Diagnostic>,
     strict: bool,
 }
@@ -294,6 +301,8 @@ impl<R: BufRead> Source<R> {
             circle: None,
             circle_cw: false,
             circle_turns: 1,
+            circle_sweep: None,
+            clearance: None,
             cycle: None,
             table: [0.0; 3],
             table_line: 0,
@@ -304,6 +313,7 @@ impl<R: BufRead> Source<R> {
             canned_cycles: false,
             feed_max: f64::INFINITY,
             ended: false,
+            end_line: None,
             strict_error: None,
             strict,
         })
@@ -582,11 +592,15 @@ impl<R: BufRead> Source<R> {
                 radius,
                 clockwise,
                 turns,
+                sweep_deg,
             } => {
                 self.circle = Some((center, axis, radius));
                 self.circle_cw = clockwise;
                 self.circle_turns = turns;
+                self.circle_sweep = sweep_deg.map(f64::to_radians);
             }
+            Record::Clearance(plane) => self.clearance(plane),
+            Record::Retract => self.retract(line),
             Record::Cycle(c) => {
                 self.cycle = Some(c);
                 // Canned output says per hole what it could not write as a cycle.
@@ -606,6 +620,7 @@ impl<R: BufRead> Source<R> {
             Record::PartNo(t) => self.out.push_back(Item::Event(ProgEvent::Comment(format!("PART {t}")))),
             Record::Comment(t) => self.out.push_back(Item::Event(ProgEvent::Comment(t))),
             Record::End => {
+                self.end_line.get_or_insert(line);
                 self.out.push_back(Item::Event(ProgEvent::End));
             }
             Record::Ignored(_) => {}
@@ -617,6 +632,10 @@ impl<R: BufRead> Source<R> {
     /// the tool axis it gives (CL frame) taken into the part frame. False: the axis is bad and
     /// the record skipped.
     fn motion_axis(&mut self, axis: Option<[f64; 3]>, line: u32) -> bool {
+        if let Some(end) = self.end_line.take() {
+            let msg = format!("the CL ends here, yet moves on (line {line}): what follows is posted as the CL goes on");
+            self.diag(Code::IgnoredRecord, Severity::Warning, end, msg);
+        }
         if self.frame_pending {
             self.resolve_frame(line);
         }
@@ -713,6 +732,10 @@ impl<R: BufRead> Source<R> {
         }
         // A helix (NX's TIMES,n) passes the end's angle n times: n − 1 whole turns first.
         sweep += f64::from(self.circle_turns.saturating_sub(1)) * std::f64::consts::TAU;
+        let (k, sweep) = match self.circle_sweep.take() {
+            Some(want) => self.movarc_sense(line, k, sweep, want)?,
+            None => (k, sweep),
+        };
         // The plane's centre: where the start point projects onto the axis line.
         let c_plane = center + k * k.dot(&a);
         Some(ArcSpec {

@@ -34,6 +34,12 @@ impl<R: BufRead> Source<R> {
         self.frame.map_or(v, |r| r.transpose() * v)
     }
 
+    /// A part-frame point (profile units) in the CL's frame and units: [`Self::to_part_point`]
+    /// undone.
+    pub(super) fn to_cl_point(&self, p: Vec3) -> Vec3 {
+        self.to_cl(p - self.mcs_shift()) / self.scale
+    }
+
     /// NX's `MSYS`: the first is the program's frame; a later one's points and axes are taken
     /// into it, so a program of several setups is cut where each was programmed. The modal tool
     /// axis and the last point keep their numbers, now read in the new MCS.
@@ -55,7 +61,7 @@ impl<R: BufRead> Source<R> {
         let tip_part = self.tip.map(|p| self.to_part_point(p));
         self.mcs = new;
         self.axis = self.to_part(axis_cl);
-        self.tip = tip_part.map(|p| self.to_cl(p - self.mcs_shift()) / self.scale);
+        self.tip = tip_part.map(|p| self.to_cl_point(p));
         let (said, comment) = describe_mcs(new, self.cl_units);
         self.diag(Code::CoordinateSystem, Severity::Info, line, format!("MSYS: {said}"));
         self.out.push_back(Item::Event(ProgEvent::Comment(comment)));
