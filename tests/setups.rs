@@ -122,3 +122,85 @@ fn an_mcs_that_is_no_frame_is_refused_at_its_line() {
     assert!(d.message.contains("MSYS") && d.message.contains("not applied"), "{d:?}");
     assert!(s.nc.contains("ERROR"), "{}", s.nc);
 }
+
+fn post_offsets(m: &Machine, cl: &str, mode: Mode) -> Collect {
+    let s = post::Settings {
+        mode: Some(if mode == Mode::Tcp { "tcp" } else { "joint" }.into()),
+        dialect: Some("fanuc".into()),
+        setups: Some("work-offsets".into()),
+        ..Default::default()
+    };
+    let o = s.options(m).unwrap();
+    let mut sink = Collect::default();
+    post::post(cl.as_bytes(), m, &o, &mut sink).unwrap();
+    sink
+}
+
+/// `setups=work-offsets`: the second operation, its MCS moved 100 mm, runs in G55 with its words
+/// measured from G55's origin, and the program says where to set G55; `verify` measures each
+/// block from its offset and finds every point. The machine moves as in the default.
+#[test]
+fn with_work_offsets_a_moved_mcs_runs_in_the_next_offset() {
+    let m = machine("spinner-u5-620");
+    let moved = data("nx_two_setups_moved.cls");
+    for mode in [Mode::Joint, Mode::Tcp] {
+        let s = post_offsets(&m, &moved, mode);
+        let errors: Vec<_> = s.diags.iter().filter(|d| d.severity == Severity::Error).collect();
+        assert!(errors.is_empty(), "{mode:?}: {errors:?}");
+        let lines: Vec<&str> = s.nc.lines().collect();
+        let g55 = lines.iter().position(|l| *l == "G55").expect("G55 selected");
+        assert_eq!(lines[g55 + 1], "(WORK OFFSET G55 = G54 + X100.000 Y0.000 Z0.000)", "{mode:?}");
+        assert_eq!(lines.iter().filter(|l| l.starts_with("(WORK OFFSET G55 = G54 + X100.000")).count(), 2, "{mode:?}: at the change and before the end");
+        let r = verified(&m, &moved, &s.nc, mode);
+        assert!(r.ok && r.matched == 80, "{mode:?}: {r:?}");
+        // The same machine motion as with the points taken into the first MCS.
+        let plain = post(&m, &moved, mode);
+        assert_eq!(s.blocks.len(), plain.blocks.len(), "{mode:?}");
+        for (a, b) in s.blocks.iter().zip(&plain.blocks) {
+            assert_eq!(a.joints.0, b.joints.0, "{mode:?} block {}", a.n);
+        }
+        // Block by block after the change, an X both write is 100 less in G55.
+        let motion = |nc: &str| -> Vec<Option<f64>> {
+            let after = nc.lines().skip_while(|l| !l.starts_with("(MCS MOVED") && !l.starts_with("(WORK OFFSET")).skip(1);
+            after
+                .filter(|l| l.starts_with(['G', 'X', 'Y', 'Z', 'A', 'B', 'C']) && *l != "G55")
+                .map(|l| l.split(' ').find_map(|w| w.strip_prefix('X')?.parse().ok()))
+                .collect()
+        };
+        let (wo, tr) = (motion(&s.nc), motion(&plain.nc));
+        assert_eq!(wo.len(), tr.len(), "{mode:?}");
+        let both: Vec<(f64, f64)> = wo.iter().zip(&tr).filter_map(|(a, b)| Some(((*a)?, (*b)?))).collect();
+        assert!(both.len() > 10 && both.iter().all(|(a, b)| (b - a - 100.0).abs() < 2e-3), "{mode:?}: {both:?}");
+    }
+}
+
+/// A turned MCS cannot be a work offset on these controls: an error at its line, and its points
+/// taken into the first MCS, so the cut is still right.
+#[test]
+fn with_work_offsets_a_turned_mcs_is_an_error_and_still_cut_right() {
+    let m = machine("spinner-u5-620");
+    let two = data("nx_two_setups.cls");
+    let s = post_offsets(&m, &two, Mode::Joint);
+    let e = s.diags.iter().find(|d| d.severity == Severity::Error).expect("an error");
+    assert_eq!((e.code, e.line), (Code::CoordinateSystem, Some(55)), "{e:?}");
+    assert!(!s.nc.contains("G55"), "{}", s.nc);
+    assert!(verified(&m, &data("nx_two_setups_first_mcs.cls"), &s.nc, Mode::Joint).ok);
+}
+
+#[test]
+fn work_offsets_are_refused_where_the_program_selects_none_or_uses_planes() {
+    let m = machine("spinner-u5-620");
+    for (dialect, wcs, planes) in [("heidenhain", None, None), ("fanuc", Some("none"), None), ("fanuc", None, Some("tilted"))] {
+        let s = post::Settings {
+            dialect: Some(dialect.into()),
+            work_coordinates: wcs.map(Into::into),
+            planes: planes.map(Into::into),
+            setups: Some("work-offsets".into()),
+            ..Default::default()
+        };
+        let e = s.options(&m).unwrap_err();
+        assert!(e.starts_with("setups work-offsets"), "{dialect} {wcs:?} {planes:?}: {e}");
+    }
+    let bad = post::Settings { setups: Some("offsets".into()), ..Default::default() };
+    assert!(bad.options(&m).unwrap_err().contains("expected transform or work-offsets"));
+}

@@ -480,6 +480,11 @@ pub struct PostArgs {
     /// mode: the profile's origin; TCP: the part's).
     #[arg(long)]
     pub work_coordinates: Option<String>,
+    /// Programs of several setups (NX MSYS per operation): transform (default: every operation
+    /// taken into the first's MCS) or work-offsets (each distinct MCS in the next work offset,
+    /// G55 …, the program listing where to set each).
+    #[arg(long)]
+    pub setups: Option<String>,
     /// Spindle speed (RPM, clockwise) for a tool the CL starts no spindle for before its first
     /// move (NX CLSF listings carry no SPINDL); the CL's own SPINDL and SPINDL/OFF win.
     #[arg(long, allow_hyphen_values = true)]
@@ -794,6 +799,7 @@ fn post_cmd(p: &machines::Profile, a: &PostArgs) -> Result<(), Failure> {
         cycles: a.canned_cycles.then(|| "canned".into()),
         planes: a.tilted_planes.then(|| "tilted".into()),
         work_coordinates: a.work_coordinates.clone(),
+        setups: a.setups.clone(),
         spindle_speed: a.spindle_speed,
     };
     let mut o = settings.profile_options(p)?;

@@ -65,6 +65,10 @@ pub struct PostParams {
     /// `none`; its origin must be where X Y Z are measured from (joint mode: the profile's
     /// origin; TCP: the part's). heidenhain: none only.
     pub work_coordinates: Option<String>,
+    /// Programs of several setups (NX `MSYS` per operation): `transform` (default: every
+    /// operation taken into the first's MCS) or `work-offsets` (each distinct MCS in the next
+    /// work offset, G55 …).
+    pub setups: Option<String>,
     /// Spindle speed (RPM, clockwise, 1 to 200000) for a tool the CL starts no spindle for
     /// before its first move (NX CLSF carries no SPINDL); the CL's SPINDL and SPINDL/OFF win.
     pub spindle_speed: Option<f64>,
@@ -87,6 +91,7 @@ impl PostParams {
             cycles: self.cycles.clone(),
             planes: self.planes.clone(),
             work_coordinates: self.work_coordinates.clone(),
+            setups: self.setups.clone(),
             spindle_speed: self.spindle_speed,
         }
     }
@@ -124,6 +129,7 @@ impl PostParams {
             "cycles" => self.cycles = Some(v).filter(|s| !s.is_empty()),
             "planes" => self.planes = Some(v).filter(|s| !s.is_empty()),
             "work_coordinates" => self.work_coordinates = Some(v).filter(|s| !s.is_empty()),
+            "setups" => self.setups = Some(v).filter(|s| !s.is_empty()),
             "spindle_speed" => self.spindle_speed = if v.trim().is_empty() { None } else { Some(num(&v)?) },
             other => {
                 return Err(ApiError::BadParameter(format!(

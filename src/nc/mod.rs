@@ -266,6 +266,9 @@ pub struct Formatter {
     units: &'static str,
     /// Blocks start with `/`: the operator's block delete skips them (CL `OPSKIP/ON`).
     pub block_skip: bool,
+    /// The origin of the work offset in force relative to the program's first (profile units):
+    /// X Y Z words are measured from it (`setups=work-offsets`).
+    shift: [f64; 3],
 }
 
 /// The axis words' addresses as bytes, for the formatter's hot loop.
@@ -320,6 +323,7 @@ impl Formatter {
             program_number: 1000,
             units: "MM",
             block_skip: false,
+            shift: [0.0; 3],
         }
     }
 
@@ -613,6 +617,16 @@ impl Formatter {
     /// dwell, so only the position is written (it calls the cycle).
     pub fn canned(&mut self, c: &Canned, modal: bool) -> Vec<String> {
         let lin = self.fmt.linear;
+        let [sx, sy, sz] = self.shift;
+        let c = &Canned {
+            x: c.x.map(|x| x - sx),
+            y: c.y.map(|y| y - sy),
+            z_top: c.z_top - sz,
+            z_r: c.z_r - sz,
+            z_bottom: c.z_bottom - sz,
+            z_start: c.z_start - sz,
+            ..*c
+        };
         let mut out = Vec::new();
         let feed_r = round_to(c.feed, self.fmt.feed);
         match self.d.cycles {
@@ -833,7 +847,20 @@ impl Formatter {
     }
 
     pub fn written(&self, value: f64, axis_index: usize) -> f64 {
-        number::rounded(value, self.decimals(axis_index))
+        let s = self.shift_of(axis_index);
+        number::rounded(value - s, self.decimals(axis_index)) + s
+    }
+
+    /// From here X Y Z words are measured from `shift` (another work offset's origin); every
+    /// word is written again.
+    pub fn set_shift(&mut self, shift: [f64; 3]) {
+        self.shift = shift;
+        self.reset_modal();
+    }
+
+    #[inline]
+    fn shift_of(&self, axis_index: usize) -> f64 {
+        if axis_index < 3 { self.shift[axis_index] } else { 0.0 }
     }
 
     /// Decimals of the word for axis slot `axis_index` (X Y Z A B C).
@@ -847,7 +874,7 @@ impl Formatter {
     pub fn round_words(&self, axes: &[Option<f64>; 6]) -> [Option<i64>; 6] {
         let mut r = [None; 6];
         for (k, v) in axes.iter().enumerate() {
-            r[k] = v.map(|v| round_to(v, self.decimals(k)));
+            r[k] = v.map(|v| round_to(v - self.shift_of(k), self.decimals(k)));
         }
         r
     }
@@ -855,6 +882,6 @@ impl Formatter {
     /// The value a rounded word stands for: [`Formatter::written`] of what it was rounded from.
     #[inline]
     pub fn word_value(&self, rounded: i64, axis_index: usize) -> f64 {
-        number::value(rounded, self.decimals(axis_index))
+        number::value(rounded, self.decimals(axis_index)) + self.shift_of(axis_index)
     }
 }

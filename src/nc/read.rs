@@ -15,6 +15,8 @@ pub struct NcBlock {
     pub tcp: bool,
     /// The tilted working plane the block's X Y Z are in, if any.
     pub plane: Option<Plane>,
+    /// The work coordinate system in force (`G54` … `G59`), once the program selects one.
+    pub wcs: Option<&'static str>,
     pub comment: String,
 }
 
@@ -59,6 +61,7 @@ pub struct NcReader<R> {
     units: Units,
     tcp: bool,
     plane: Option<Plane>,
+    wcs: Option<&'static str>,
     incremental: bool,
     /// A `%` after program text ends the tape: what follows is not part of the program.
     percents: u32,
@@ -85,6 +88,7 @@ impl<R: std::io::BufRead> NcReader<R> {
             units: default_units,
             tcp: false,
             plane: None,
+            wcs: None,
             incremental: false,
             percents: 0,
             content: false,
@@ -464,6 +468,10 @@ impl<R: std::io::BufRead> NcReader<R> {
             434 | 435 | 2340 => self.tcp = true,
             490 => self.tcp = false,
             280 | 300 | 530 => w.machine_coords = true,
+            540 | 550 | 560 | 570 | 580 | 590 => {
+                const CODES: [&str; 6] = ["G54", "G55", "G56", "G57", "G58", "G59"];
+                self.wcs = Some(CODES[((v * 10.0).round() as usize - 540) / 10]);
+            }
             682 => w.plane_def = true,
             690 | 2550 => self.plane = None,
             2540 => {
@@ -560,6 +568,7 @@ impl<R: std::io::BufRead> NcReader<R> {
             units: self.units,
             tcp: self.tcp,
             plane: self.plane,
+            wcs: self.wcs,
             comment: comment.trim().to_string(),
         }
     }

@@ -13,6 +13,7 @@ mod emit;
 mod lookahead;
 mod plan;
 mod settings;
+pub mod setups;
 mod sink;
 mod source;
 pub mod verify;

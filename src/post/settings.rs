@@ -54,6 +54,9 @@ pub struct Options {
     /// `None`: the dialect's first (none on a control without one); `Some("none")`: the program
     /// selects none and runs in whatever the control has active.
     pub work_coordinates: Option<String>,
+    /// Each distinct MCS of the program (NX `MSYS`) in the next work offset, its X Y Z words
+    /// measured from it; else, and by default, every operation taken into the first's frame.
+    pub setup_offsets: bool,
     /// Spindle speed (RPM, clockwise) for a tool whose CL starts none before its first move (NX's
     /// CLSF listings carry no SPINDL: its post takes the speed from the operation). `None`: the
     /// CL's own, and a cut with none is a `spindle_stopped` warning.
@@ -136,6 +139,7 @@ impl Options {
             canned_cycles: false,
             tilted_planes: false,
             work_coordinates: None,
+            setup_offsets: false,
             spindle_speed: None,
             budget: Budget::default(),
         }
@@ -192,6 +196,11 @@ pub struct Settings {
     /// (the TNC's preset is chosen on the control).
     #[serde(default)]
     pub work_coordinates: Option<String>,
+    /// Programs of several setups (NX `MSYS` per operation): `transform` (default: every
+    /// operation's points taken into the first's MCS) or `work-offsets` (each distinct MCS in
+    /// the next work offset, G55 …; the program lists where to set each).
+    #[serde(default)]
+    pub setups: Option<String>,
     /// Spindle speed (RPM, clockwise) for a tool the CL starts no spindle for before its first
     /// move (NX's CLSF listings carry no SPINDL); the CL's own SPINDL, and SPINDL/OFF, win.
     #[serde(default)]
@@ -304,6 +313,14 @@ impl Settings {
                 ));
             }
         }
+        o.setup_offsets = match self.setups.as_deref() {
+            None | Some("transform") => false,
+            Some("work-offsets") => true,
+            Some(x) => return Err(format!("setups {}: expected transform or work-offsets", quote(x))),
+        };
+        if o.setup_offsets {
+            setups_allowed(&o)?;
+        }
         if let Some(s) = self.spindle_speed {
             if !(s.is_finite() && (1.0..=MAX_SPINDLE_SPEED).contains(&s)) {
                 return Err(format!("spindle_speed must be from 1 to {MAX_SPINDLE_SPEED} RPM"));
@@ -312,6 +329,21 @@ impl Settings {
         }
         Ok(o)
     }
+}
+
+/// `setups=work-offsets` needs offsets to select, and words measured from them.
+fn setups_allowed(o: &Options) -> Result<(), String> {
+    if o.dialect.work_coordinates.is_empty() || o.work_coordinates.as_deref() == Some("none") {
+        return Err(format!(
+            "setups work-offsets: the program selects no work offset ({}, work_coordinates {}): use setups=transform",
+            o.dialect.name,
+            o.work_coordinates.as_deref().unwrap_or("default")
+        ));
+    }
+    if o.tilted_planes {
+        return Err("setups work-offsets: not with planes=tilted (a plane's origin is in the first offset's words): use setups=transform".into());
+    }
+    Ok(())
 }
 
 /// The largest `spindle_speed` taken: above any machining spindle (a typo's extra digit fails).

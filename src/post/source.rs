@@ -108,6 +108,16 @@ pub enum ProgEvent {
         tool: u32,
         line: u32,
     },
+    /// The operation's MCS changed (NX `MSYS`): its origin from the first's (part frame,
+    /// profile units), and whether it is turned against it. Its points come already taken into
+    /// the first's frame.
+    Setup {
+        shift: Vec3,
+        turned: bool,
+        line: u32,
+        /// What the program says of it where the points are taken into the first's frame.
+        comment: String,
+    },
     /// `OPSKIP/ON` or `OFF`.
     BlockSkip {
         on: bool,

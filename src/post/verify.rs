@@ -4,7 +4,11 @@
 //! segment.
 
 use super::source::{HolePart, Item, MotionPt, ProgEvent, Source};
+use super::setups::WorkOffsets;
 use super::{Mode, seg_dist};
+
+/// The work coordinate systems an NC program may select, in order.
+const WCS_CODES: [&str; 6] = ["G54", "G55", "G56", "G57", "G58", "G59"];
 use crate::kinematics::{Joints, Machine, Setup, Units, Vec3, angle_between, fk};
 use crate::nc::read::{NcBlock, NcReader};
 use serde::Serialize;
@@ -127,6 +131,7 @@ pub fn verify<C: BufRead, N: BufRead>(cl: C, nc: N, m: &Machine, o: &VerifyOptio
         setup: o.setup,
         last: None,
         last_block: None,
+        offsets: None,
         rep: Report {
             machine: m.id.clone(),
             mode: Some(o.mode),
@@ -140,6 +145,7 @@ pub fn verify<C: BufRead, N: BufRead>(cl: C, nc: N, m: &Machine, o: &VerifyOptio
             // Arcs and cycles expanded by the reader are not CL points of the file.
             Item::Motion(_) => {}
             Item::Event(ProgEvent::ToolLength(l)) if o.cl_tool_length => replay.tool_length(l),
+            Item::Event(ProgEvent::Setup { shift, turned, .. }) => replay.setup(shift, turned),
             Item::Event(_) => {}
         }
     }
@@ -162,6 +168,9 @@ struct Replay<'a, N> {
     last: Option<(Vec3, Vec3, bool)>,
     /// The block that matched it.
     last_block: Option<NcBlock>,
+    /// The work offsets of the program's setups (NX `MSYS`), from the one its first block is in:
+    /// a block in another is measured from that one's origin.
+    offsets: Option<WorkOffsets>,
     rep: Report,
 }
 
@@ -204,6 +213,42 @@ impl<N: BufRead> Replay<'_, N> {
         }
     }
 
+    /// The CL's next setup: as `post` gives each distinct one the next work offset, a block in
+    /// that offset is measured from its origin, the blocks read ahead in it too.
+    fn setup(&mut self, shift: Vec3, turned: bool) {
+        let Some(offsets) = self.offsets.as_mut() else {
+            return;
+        };
+        let known = offsets.listing().count();
+        let Ok(i) = offsets.pick(shift, turned) else {
+            return;
+        };
+        if i <= known {
+            return;
+        }
+        let code = offsets.code(i);
+        for k in 0..self.ahead.len() {
+            if self.ahead[k].0.wcs == Some(code) {
+                let mut b = self.ahead[k].0.clone();
+                self.shift_block(&mut b);
+                self.ahead[k] = (b.clone(), block_pose(self.m, &b, self.o, &self.setup));
+            }
+        }
+    }
+
+    /// A block's X Y Z from its work offset's origin to the first's.
+    fn shift_block(&self, b: &mut NcBlock) {
+        let Some(shift) = self.offsets.as_ref().zip(b.wcs).and_then(|(o, c)| o.index_of(c).map(|i| o.shift(i))) else {
+            return;
+        };
+        let s = b.units.factor_to(self.m.units);
+        for i in 0..3 {
+            if let Some(v) = b.axes[i].as_mut() {
+                *v += shift[i] / s;
+            }
+        }
+    }
+
     /// One CL point of the file: matched to a block, or a miss.
     fn point(&mut self, pt: &MotionPt) -> Result<(), Error> {
         self.rep.cl_points += 1;
@@ -243,6 +288,13 @@ impl<N: BufRead> Replay<'_, N> {
             return Ok(false);
         };
         self.rep.nc_blocks += 1;
+        let mut b = b;
+        if self.offsets.is_none()
+            && let Some(first) = b.wcs
+        {
+            self.offsets = Some(WorkOffsets::new(&WCS_CODES, first));
+        }
+        self.shift_block(&mut b);
         let p = block_pose(self.m, &b, self.o, &self.setup);
         self.ahead.push_back((b, p));
         Ok(true)

@@ -7,6 +7,7 @@
 //! | singular handling: free rotary turned, held, smoothed | `singular.rs` |
 //! | linearization of a feed segment | `linearize.rs` |
 //! | positioning: retract, approach, reposition, clamps | `position.rs` |
+//! | work offsets of a program of several setups | `setups.rs` |
 //! | arcs | `arcs.rs` |
 //! | canned cycles | `cycles.rs` |
 //! | tilted working planes | `planes.rs` |
@@ -24,6 +25,7 @@ mod planes;
 mod point;
 mod position;
 mod program;
+mod setups;
 mod singular;
 
 use super::{AxisStats, Error, Options, Sink, Source, Summary};
@@ -142,6 +144,9 @@ pub(super) struct Emitter<'a, S: Sink + ?Sized> {
     /// told at its first block).
     pub(super) range_run: bool,
     pub(super) clamp_run: bool,
+    /// `setups=work-offsets`: the offsets used, and the one in force.
+    pub(super) offsets: Option<crate::post::setups::WorkOffsets>,
+    pub(super) offset_at: usize,
 }
 
 impl<'a, S: Sink + ?Sized> Emitter<'a, S> {
@@ -198,6 +203,10 @@ impl<'a, S: Sink + ?Sized> Emitter<'a, S> {
             arc_words: None,
             locked: [true; 3],
             plane: "G17",
+            offsets: o
+                .setup_offsets
+                .then(|| crate::post::setups::WorkOffsets::new(o.dialect.work_coordinates, o.wcs_word().unwrap_or(""))),
+            offset_at: 0,
             exact_prev: None,
             exact_travel: 0.0,
             held_prev: None,
@@ -232,6 +241,7 @@ impl<'a, S: Sink + ?Sized> Emitter<'a, S> {
                 "no motion in the CL input (no GOTO, GODLTA or FROM was read): the program moves nothing",
             ))?;
         }
+        self.list_work_offsets()?;
         self.program_end()?;
         for (k, st) in self.stats.iter().enumerate() {
             if let Some(st) = st {

@@ -113,6 +113,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             ProgEvent::Function { letter, code, line } => self.function(letter, &code, line)?,
             ProgEvent::BlockSkip { on, line } => self.block_skip(on, line)?,
             ProgEvent::Preselect { tool, line } => self.preselect(tool, line)?,
+            ProgEvent::Setup { shift, turned, line, comment } => self.setup_change(shift, turned, line, &comment)?,
             ProgEvent::Diag(dg) => self.note(dg)?,
             ProgEvent::End => {}
         }

@@ -64,7 +64,9 @@ impl<R: BufRead> Source<R> {
         self.tip = tip_part.map(|p| self.to_cl_point(p));
         let (said, comment) = describe_mcs(new, self.cl_units);
         self.diag(Code::CoordinateSystem, Severity::Info, line, format!("MSYS: {said}"));
-        self.out.push_back(Item::Event(ProgEvent::Comment(comment)));
+        let turned = new.is_some_and(|(r, _)| (r - Matrix3::identity()).amax() > 1e-9);
+        let shift = self.mcs_shift();
+        self.out.push_back(Item::Event(ProgEvent::Setup { shift, turned, line, comment }));
     }
 
     /// The frame a `ROTABL` index puts the CL in, where the CL itself confirms it: CAMWorks

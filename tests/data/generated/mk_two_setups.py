@@ -1,5 +1,6 @@
 # Writes nx_two_setups.cls and nx_two_setups_first_mcs.cls from `kinepost generate --machine spinner-u5-620 --points 80 --seed 7`:
 # python3 mk_two_setups.py gen.cls nx_two_setups.cls nx_two_setups_first_mcs.cls
+# and nx_two_setups_moved.cls (the second MCS only moved): the same with a fourth argument, 0.
 """Two NX-style operations from one generated path: the second written in its own MCS (moved
 100 mm along the first's X, turned 90° about its Z); and the same path in the first MCS."""
 import math, re, sys
@@ -11,7 +12,8 @@ def mul(a, b): return [[sum(a[i][k]*b[k][j] for k in range(3)) for j in range(3)
 def mv(a, v): return [sum(a[i][k]*v[k] for k in range(3)) for i in range(3)]
 def tr(a): return [[a[j][i] for j in range(3)] for i in range(3)]
 R1, O1 = rz(30), [10.0, 20.0, 0.0]
-R2 = mul(R1, rz(90)); O2 = [O1[i] + mv(R1, [100, 0, 0])[i] for i in range(3)]
+TURN = float(sys.argv[4]) if len(sys.argv) > 4 else 90.0
+R2 = mul(R1, rz(TURN)); O2 = [O1[i] + mv(R1, [100, 0, 0])[i] for i in range(3)]
 def msys(o, r):
     x = [r[i][0] for i in range(3)]; y = [r[i][1] for i in range(3)]
     return "MSYS/" + ",".join(f"{v:.4f}" for v in o) + "," + ",".join(f"{v:.7f}" for v in x + y)
