@@ -164,6 +164,20 @@ impl Canned {
         (self.x, self.y) = (x, y);
     }
 
+    /// The cycle's positions and levels measured from `origin` (a work offset's).
+    fn measured_from(&self, origin: [f64; 3]) -> Canned {
+        let [sx, sy, sz] = origin;
+        Canned {
+            x: self.x.map(|x| x - sx),
+            y: self.y.map(|y| y - sy),
+            z_top: self.z_top - sz,
+            z_r: self.z_r - sz,
+            z_bottom: self.z_bottom - sz,
+            z_start: self.z_start - sz,
+            ..*self
+        }
+    }
+
     /// Same cycle as written (levels, feed, peck, dwell): a next hole needs only its position.
     pub fn same_cycle(&self, o: &Canned, f: &Formats) -> bool {
         let l = |a: f64, b: f64| round_to(a, f.linear) == round_to(b, f.linear);
@@ -617,16 +631,7 @@ impl Formatter {
     /// dwell, so only the position is written (it calls the cycle).
     pub fn canned(&mut self, c: &Canned, modal: bool) -> Vec<String> {
         let lin = self.fmt.linear;
-        let [sx, sy, sz] = self.shift;
-        let c = &Canned {
-            x: c.x.map(|x| x - sx),
-            y: c.y.map(|y| y - sy),
-            z_top: c.z_top - sz,
-            z_r: c.z_r - sz,
-            z_bottom: c.z_bottom - sz,
-            z_start: c.z_start - sz,
-            ..*c
-        };
+        let c = &c.measured_from(self.shift);
         let mut out = Vec::new();
         let feed_r = round_to(c.feed, self.fmt.feed);
         match self.d.cycles {
