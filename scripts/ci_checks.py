@@ -160,6 +160,22 @@ def main():
     if not rotabl_ok:
         fails.append(f'rotabl {f}: exit {p.returncode}, {errors} errors, first move {first!r}')
 
+    # Two NX operations, the second in its own MCS (moved 100 mm, turned 90°): posted, every block
+    # reproduces the path written in the first MCS, under the shared verifier's FK.
+    setups = 0
+    gen = os.path.join(here, '..', 'tests', 'data', 'generated')
+    for dialect in ('fanuc', 'siemens', 'heidenhain'):
+        for mode in ('joint', 'tcp'):
+            setups += 1
+            nc = os.path.join(tmp, f'two-setups-{dialect}-{mode}.nc')
+            p = run([a.kinepost, 'post', '--machine', 'spinner-u5-620', '--dialect', dialect, '--mode', mode,
+                     os.path.join(gen, 'nx_two_setups.cls'), '-o', nc])
+            rep = verify(a.shared, machines, 'spinner-u5-620', os.path.join(gen, 'nx_two_setups_first_mcs.cls'), nc, mode, dialect)
+            c = rep.get('counts', {})
+            print(f'two setups {dialect:10s} {mode:5s} exit {p.returncode} ok={rep.get("ok")} matched={c.get("matched")}/{c.get("cl_points")}')
+            if p.returncode or not rep.get('ok'):
+                fails.append(f'two setups {dialect} {mode}: exit {p.returncode}, {rep.get("failed")}')
+
     # The NX golden: kinepost's rotary travel and largest step next to NX's.
     nc = os.path.join(tmp, 'va-haas-tcp.nc')
     run([a.kinepost, 'post', '--machine', 'haas-umc750', '--mode', 'tcp', os.path.join(corpus, 'nx_clsf_mech491_variable_axis_inch_5ax.cls'), '-o', nc])
@@ -175,7 +191,7 @@ def main():
 
     for f in fails:
         print('FAIL', f)
-    print(f'{ok + len(CORPUS) * 2 + planes + replays + 1 - len(fails)} passed, {len(fails)} failed')
+    print(f'{ok + len(CORPUS) * 2 + planes + replays + setups + 1 - len(fails)} passed, {len(fails)} failed')
     return 1 if fails else 0
 
 
