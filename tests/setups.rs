@@ -204,3 +204,18 @@ fn work_offsets_are_refused_where_the_program_selects_none_or_uses_planes() {
     let bad = post::Settings { setups: Some("offsets".into()), ..Default::default() };
     assert!(bad.options(&m).unwrap_err().contains("expected transform or work-offsets"));
 }
+
+/// A file can be read twice: the CLI's header lists the offsets before the program starts,
+/// where the operator reads first.
+#[test]
+fn the_cli_header_lists_the_work_offsets_of_a_file() {
+    let path = format!("{}/tests/data/generated/nx_two_setups_moved.cls", env!("CARGO_MANIFEST_DIR"));
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_kinepost"))
+        .args(["post", "--machine", "spinner-u5-620", "--setups", "work-offsets", &path])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let nc = String::from_utf8(out.stdout).unwrap();
+    let at = |s: &str| nc.find(s).unwrap_or_else(|| panic!("{s} missing:\n{nc}"));
+    assert!(at("(WORK OFFSET G55 = G54 + X100.000 Y0.000 Z0.000)") < at("G90 G17"), "{nc}");
+}

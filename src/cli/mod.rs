@@ -812,6 +812,10 @@ fn post_cmd(p: &machines::Profile, a: &PostArgs) -> Result<(), Failure> {
             .and_then(|f| f.to_str())
             .unwrap_or("-")
     ));
+    if o.setup_offsets && a.input != "-" {
+        // Input that is no CL is refused by the post itself, with its line.
+        o.header.extend(post::setups::header_lines(open_input(&a.input)?, m, &o).unwrap_or_default());
+    }
     let input = open_input(&a.input)?;
     let out: Box<dyn Write> = match &a.output {
         Some(p) => Box::new(std::fs::File::create(p).map_err(|e| format!("{}: {e}", p.display()))?),

@@ -385,6 +385,11 @@ fn execute(
         opts.header.push(format!("SOURCE {f}"));
     }
     let io = |e: std::io::Error| format!("job spool: {e}");
+    if opts.setup_offsets {
+        // The spool can be read twice: the header lists the offsets the program selects.
+        let first = std::io::BufReader::new(std::fs::File::open(&paths.input).map_err(io)?);
+        opts.header.extend(post::setups::header_lines(first, &profile.machine, &opts).unwrap_or_default());
+    }
     let input = std::fs::File::open(&paths.input).map_err(io)?;
     let input = std::io::BufReader::with_capacity(
         64 * 1024,

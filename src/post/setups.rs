@@ -2,7 +2,10 @@
 //! of the dialect, its origin measured from the first's; the program then says where to set it.
 //! The one rule both the emitter and `verify` follow.
 
-use crate::kinematics::Vec3;
+use super::source::{Item, ProgEvent, Source};
+use super::Options;
+use crate::kinematics::{Machine, Vec3};
+use std::io::BufRead;
 
 /// Origins closer than this (profile units) are the same offset.
 const SAME: f64 = 1e-6;
@@ -70,4 +73,25 @@ impl WorkOffsets {
     pub fn first(&self) -> &'static str {
         self.codes[0]
     }
+}
+
+/// `G55 = G54 + X100.000 Y0.000 Z0.000`: where the operator sets an offset.
+pub(crate) fn offset_text(code: &str, first: &str, s: Vec3, dec: usize) -> String {
+    format!("WORK OFFSET {code} = {first} + X{:.dec$} Y{:.dec$} Z{:.dec$}", s.x, s.y, s.z)
+}
+
+/// The header lines that list the offsets a program of several setups will select: a first
+/// pass over a CL that can be read twice (a file, a job's spool). A CL read once lists each
+/// where it is selected, and before its end.
+pub fn header_lines<R: BufRead>(cl: R, m: &Machine, o: &Options) -> Result<Vec<String>, super::source::Error> {
+    let first = o.wcs_word().unwrap_or("");
+    let mut offsets = WorkOffsets::new(o.dialect.work_coordinates, first);
+    let mut src = Source::new(cl, m.units, o.cl_units, false)?;
+    while let Some(item) = src.next_item()? {
+        if let Item::Event(ProgEvent::Setup { shift, turned, .. }) = item {
+            let _ = offsets.pick(shift, turned);
+        }
+    }
+    let dec = crate::nc::Formats::for_units(m.units).linear as usize;
+    Ok(offsets.listing().map(|(code, s)| offset_text(code, offsets.first(), s, dec)).collect())
 }

@@ -6,7 +6,7 @@
 use super::Emitter;
 use crate::diag::{Code, Diagnostic, Severity};
 use crate::kinematics::Vec3;
-use crate::post::setups::Refused;
+use crate::post::setups::{Refused, offset_text};
 use crate::post::{Error, Sink};
 
 impl<S: Sink + ?Sized> Emitter<'_, S> {
@@ -68,9 +68,4 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         }
         Ok(())
     }
-}
-
-/// `G55 = G54 + X100.000 Y0.000 Z0.000`: where the operator sets an offset.
-fn offset_text(code: &str, first: &str, s: Vec3, dec: usize) -> String {
-    format!("WORK OFFSET {code} = {first} + X{:.dec$} Y{:.dec$} Z{:.dec$}", s.x, s.y, s.z)
 }
