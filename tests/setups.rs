@@ -1,11 +1,14 @@
 //! Programs of several setups: each NX operation's points are in its own MCS (`MSYS`), and the
 //! program's frame is the first operation's.
 
-use kinepost::diag::{Code, Diagnostic, Severity};
+mod common;
+
+use common::collect::Collect;
+use kinepost::diag::{Code, Severity};
 use kinepost::kinematics::{Machine, Setup, Vec3};
 use kinepost::machines::Library;
 use kinepost::post::verify::{VerifyOptions, verify};
-use kinepost::post::{self, BlockInfo, Mode, Options, Sink};
+use kinepost::post::{self, Mode, Options};
 
 fn machine(id: &str) -> Machine {
     let lib = Library::load_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/machines").as_ref()).unwrap();
@@ -14,29 +17,6 @@ fn machine(id: &str) -> Machine {
 
 fn data(name: &str) -> String {
     std::fs::read_to_string(format!("{}/tests/data/generated/{name}", env!("CARGO_MANIFEST_DIR"))).unwrap()
-}
-
-#[derive(Default)]
-struct Collect {
-    nc: String,
-    blocks: Vec<BlockInfo>,
-    diags: Vec<Diagnostic>,
-}
-
-impl Sink for Collect {
-    fn line(&mut self, text: &str, b: Option<&BlockInfo>) -> std::io::Result<()> {
-        self.nc.push_str(text);
-        self.nc.push('\n');
-        if let Some(b) = b {
-            self.diags.extend(b.diagnostics.iter().cloned());
-            self.blocks.push(b.clone());
-        }
-        Ok(())
-    }
-    fn diagnostic(&mut self, d: &Diagnostic) -> std::io::Result<()> {
-        self.diags.push(d.clone());
-        Ok(())
-    }
 }
 
 fn post(m: &Machine, cl: &str, mode: Mode) -> Collect {

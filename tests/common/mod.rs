@@ -1,6 +1,8 @@
 //! A real kinepost server on an ephemeral loopback port, for integration tests.
 #![allow(dead_code)] // each test crate uses part of it
 
+pub mod collect;
+
 use kinepost::http::{AppState, Config, Metrics, app};
 use kinepost::machines::Library;
 use std::sync::Arc;

@@ -1,0 +1,44 @@
+//! A sink that keeps everything a post writes: the NC text, each block, every diagnostic.
+
+use kinepost::diag::{Code, Diagnostic};
+use kinepost::post::{BlockInfo, Sink};
+
+#[derive(Default)]
+pub struct Collect {
+    pub nc: String,
+    pub blocks: Vec<BlockInfo>,
+    pub diags: Vec<Diagnostic>,
+}
+
+impl Sink for Collect {
+    fn line(&mut self, text: &str, b: Option<&BlockInfo>) -> std::io::Result<()> {
+        self.nc.push_str(text);
+        self.nc.push('\n');
+        if let Some(b) = b {
+            self.diags.extend(b.diagnostics.iter().cloned());
+            self.blocks.push(b.clone());
+        }
+        Ok(())
+    }
+    fn diagnostic(&mut self, d: &Diagnostic) -> std::io::Result<()> {
+        self.diags.push(d.clone());
+        Ok(())
+    }
+}
+
+impl Collect {
+    /// The first diagnostic with `code` (the test fails without one).
+    pub fn first(&self, code: Code) -> &Diagnostic {
+        self.diags
+            .iter()
+            .find(|d| d.code == code)
+            .unwrap_or_else(|| panic!("no {} diagnostic: {:?}", code.as_str(), self.diags))
+    }
+
+    /// The one diagnostic with `code` (the test fails on none or several).
+    pub fn only(&self, code: Code) -> &Diagnostic {
+        let all: Vec<_> = self.diags.iter().filter(|d| d.code == code).collect();
+        assert_eq!(all.len(), 1, "one {} diagnostic: {all:?}", code.as_str());
+        all[0]
+    }
+}
