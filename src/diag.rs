@@ -48,6 +48,8 @@ pub enum Code {
     UnitsChanged,
     /// The input is no CL data (NC, or nothing recognisable): refused.
     NotCl,
+    /// Cutter radius compensation (`CUTCOM`): what it is taken to mean, or why it is not written.
+    CutterComp,
 }
 
 impl Code {
@@ -83,6 +85,7 @@ impl Code {
             Code::TableIndex => "table_index",
             Code::UnitsChanged => "units_changed",
             Code::NotCl => "not_cl",
+            Code::CutterComp => "cutter_comp",
         }
     }
 }

@@ -10,6 +10,7 @@ mod flow;
 mod foreign;
 mod record;
 
+pub use flow::{CutterComp, Side};
 pub use foreign::{NcKind, NcSeen, nc_kind};
 
 pub use record::{CoolantCmd, CycleKind, CycleParams, Dwell, FeedUnit, Record, SpindleCmd, parse_statement};
@@ -270,6 +271,9 @@ impl<R: BufRead> Reader<R> {
         if code.is_empty() {
             if let Some(c) = comment {
                 self.in_comment = c.trim_end().ends_with('$');
+                if let Some(record) = flow::comment_record(c) {
+                    self.queue.push_back(Event::Statement(Statement { line: line_no, record }));
+                }
             }
             return;
         }

@@ -147,6 +147,11 @@ pub enum Record {
     BlockSkip(bool),
     /// `SELCTL/n`: tool `n` readied for the next change.
     Preselect(u32),
+    /// `CUTCOM`: cutter radius compensation on (a side, a register) or off.
+    CutterComp(super::flow::CutterComp),
+    /// The CL says whether its path is the tool centre (`centre`) or the contour: `said`, its
+    /// words (Creo's `CUTCOM_GEOMETRY_TYPE` comment).
+    PathMeaning { centre: bool, said: String },
     End,
     /// Recognised and deliberately not used (PAINT, MSYS, CSYS, vendor records, …).
     Ignored(String),

@@ -9,12 +9,14 @@
 //! | positioning: retract, approach, reposition, clamps | `position.rs` |
 //! | arcs | `arcs.rs` |
 //! | canned cycles | `cycles.rs` |
+//! | cutter radius compensation | `cutcom.rs` |
 //! | tilted working planes | `planes.rs` |
 //! | the feed and the time of a block | `feed.rs` |
 //! | the block writer and its FK replay | `block.rs` |
 
 mod arcs;
 mod block;
+mod cutcom;
 mod cycles;
 pub(super) mod feed;
 pub(super) mod linearize;
@@ -142,6 +144,8 @@ pub(super) struct Emitter<'a, S: Sink + ?Sized> {
     /// told at its first block).
     pub(super) range_run: bool,
     pub(super) clamp_run: bool,
+    /// Cutter radius compensation: asked, on, and what the CL says its path is.
+    pub(super) cutcom: cutcom::State,
 }
 
 impl<'a, S: Sink + ?Sized> Emitter<'a, S> {
@@ -217,6 +221,7 @@ impl<'a, S: Sink + ?Sized> Emitter<'a, S> {
             quiet_tan2: 0.0,
             range_run: false,
             clamp_run: false,
+            cutcom: cutcom::State::new(src.stated_path()),
         }
     }
 
