@@ -1,7 +1,8 @@
 #!/usr/bin/env python3
 """CI checks that read ../shared: every corpus file lints without errors; generated paths on every
 shipped profile, joint and TCP mode, pass the independent verifier; real corpus files posted on
-suitable machines pass it; the NX golden comparison (travel, largest step).
+suitable machines pass it; cutter compensation where the corpus's CL says; the NX golden
+comparison (travel, largest step).
 
     python3 scripts/ci_checks.py --kinepost target/release/kinepost --shared ../shared
 """
@@ -175,6 +176,47 @@ def main():
             print(f'two setups {dialect:10s} {mode:5s} exit {p.returncode} ok={rep.get("ok")} matched={c.get("matched")}/{c.get("cl_points")}')
             if p.returncode or not rep.get('ok'):
                 fails.append(f'two setups {dialect} {mode}: exit {p.returncode}, {rep.get("failed")}')
+    # Cutter compensation where the CL says: every CUTCOM/LEFT|RIGHT puts G41/G42 on the first move
+    # after it, every CUTCOM/OFF puts G40 on the first move after it (the corpus's CUTCOM files are
+    # GPL: read in place). Joint mode on the table machines (plain G41 in 3+2), and TCP with
+    # Fanuc's 3D compensation for the tilted 3+2 stretches; no compensation error anywhere.
+    comps = 0
+    for f, mid, mode in (('swcam_apt_basemach_3ax.apt', 'vmc-3axis', 'joint'),
+                         ('swcam_apt_interface_glue_3ax_cycles.apt', 'vmc-3axis', 'joint'),
+                         ('swcam_apt_boss_3plus2.apt', 'haas-umc750', 'joint'),
+                         ('swcam_apt_boss_3plus2.apt', 'haas-umc750', 'tcp'),
+                         ('swcam_apt_wall_holes_3plus2.apt', 'haas-umc750', 'joint'),
+                         ('camworks_clt_interface_glue_rotabl.clt', 'vmc-4axis-a', 'joint')):
+        comps += 1
+        cl = os.path.join(corpus, f)
+        nc, nd = os.path.join(tmp, 'cutcom.nc'), os.path.join(tmp, 'cutcom.ndjson')
+        p = run([a.kinepost, 'post', '--machine', mid, '--dialect', 'fanuc', '--mode', mode, cl, '-o', nc, '--diagnostics', nd])
+        want, after = {'on': [], 'off': []}, None
+        for no, text in enumerate(open(cl, errors='replace'), 1):
+            t = text.strip().upper().replace(' ', '')
+            if t.startswith('CUTCOM/'):
+                after = 'off' if 'OFF' in t else ('on' if ('LEFT' in t or 'RIGHT' in t) else after)
+            elif t.startswith('GOTO/') and after:
+                want[after].append(no)
+                after = None
+        got, errors = {'on': [], 'off': []}, 0
+        for line in open(nd):
+            o = json.loads(line)
+            if o.get('type') == 'block':
+                words = o['nc'].split()
+                for k, ws in (('on', ('G41', 'G42', 'G41.2', 'G42.2')), ('off', ('G40',))):
+                    if any(w in ws for w in words):
+                        got[k].append(o['source_line'])
+            for d in o.get('diagnostics', []) + [o.get('diagnostic') or {}]:
+                errors += d.get('code') == 'cutter_comp' and d.get('severity') == 'error'
+        # The shared verifier reads no ROTABL (see the rotabl check below): kinepost's own replay there.
+        rep = verify(a.shared, machines, mid, cl, nc, mode) if not f.endswith('.clt') else {'counts': {}}
+        ok = p.returncode == 0 and got == want and errors == 0 and rep['counts'].get('matched') == rep['counts'].get('cl_points')
+        print(f'cutcom {f:40s} {mid:12s} {mode:5s} G41/G42 x{len(got["on"])} (CL {len(want["on"])}) G40 x{len(got["off"])} '
+              f'(CL {len(want["off"])}) errors {errors} verifier failed={rep.get("failed")} ok={ok}')
+        if not ok:
+            fails.append(f'cutcom {f} {mid} {mode}: exit {p.returncode}, on {got["on"][:5]} want {want["on"][:5]}, '
+                         f'off {got["off"][:5]} want {want["off"][:5]}, {errors} errors')
 
     # The NX golden: kinepost's rotary travel and largest step next to NX's.
     nc = os.path.join(tmp, 'va-haas-tcp.nc')
@@ -191,7 +233,7 @@ def main():
 
     for f in fails:
         print('FAIL', f)
-    print(f'{ok + len(CORPUS) * 2 + planes + replays + setups + 1 - len(fails)} passed, {len(fails)} failed')
+    print(f'{ok + len(CORPUS) * 2 + planes + replays + setups + comps + 1 - len(fails)} passed, {len(fails)} failed')
     return 1 if fails else 0
 
 

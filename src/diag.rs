@@ -50,6 +50,8 @@ pub enum Code {
     NotCl,
     /// A coordinate-system record (`MSYS`, …): what the points after it are taken in.
     CoordinateSystem,
+    /// Cutter radius compensation (`CUTCOM`): what it is taken to mean, or why it is not written.
+    CutterComp,
 }
 
 impl Code {
@@ -86,6 +88,7 @@ impl Code {
             Code::UnitsChanged => "units_changed",
             Code::NotCl => "not_cl",
             Code::CoordinateSystem => "coordinate_system",
+            Code::CutterComp => "cutter_comp",
         }
     }
 }

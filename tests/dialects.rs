@@ -10,7 +10,21 @@ use std::path::Path;
 struct Collect {
     nc: String,
     blocks: Vec<BlockInfo>,
+    /// Each motion block's text.
+    texts: Vec<String>,
     diags: Vec<kinepost::diag::Diagnostic>,
+}
+
+impl Collect {
+    /// The CL lines of the motion blocks that carry `word`.
+    fn comp_lines(&self, word: &str) -> Vec<u32> {
+        self.blocks
+            .iter()
+            .zip(&self.texts)
+            .filter(|(_, t)| t.split_whitespace().any(|w| w == word))
+            .filter_map(|(b, _)| b.source_line)
+            .collect()
+    }
 }
 
 impl Sink for Collect {
@@ -20,6 +34,7 @@ impl Sink for Collect {
         if let Some(b) = b {
             self.diags.extend(b.diagnostics.iter().cloned());
             self.blocks.push(b.clone());
+            self.texts.push(text.to_string());
         }
         Ok(())
     }
@@ -1287,13 +1302,16 @@ fn a_program_with_errors_says_so_in_its_own_text() {
 /// unless the CL restarts them itself (the operator presses cycle start, not the spindle and
 /// coolant buttons); `SELCTL` readies the next tool; `OPSKIP` marks the blocks between with the block delete `/` (told, not
 /// written, on a conversational control); `AUXFUN` and `PREFUN` pass their code through, told,
-/// and a program end or a coordinate-changing G code is an error, not written.
+/// and a program end or a coordinate-changing G code is an error, not written; `CUTCOM` starts
+/// compensation on the next move and `CUTCOM/OFF` ends it on the move after it (G41 D…/G40,
+/// Siemens' G41 with the tool's D1, Heidenhain's RL/R0).
 #[test]
 fn program_flow_in_every_dialect() {
     let lib = Library::load_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap();
     let cl = "UNITS/MM\nLOADTL/1\nSPINDL/5000,CLW\nCOOLNT/ON\nFEDRAT/500,MMPM\nGOTO/0,0,20,0,0,1\n\
               SELCTL/2\nSTOP\nGOTO/20,0,20,0,0,1\nOPSTOP\nSPINDL/6000,CLW\nGOTO/30,0,20,0,0,1\n\
-              OPSKIP/ON\nGOTO/40,0,20,0,0,1\nOPSKIP/OFF\nAUXFUN/77\nPREFUN/64\nAUXFUN/30\nPREFUN/91\nGOTO/50,0,20,0,0,1\nEND\n";
+              OPSKIP/ON\nGOTO/40,0,20,0,0,1\nOPSKIP/OFF\nAUXFUN/77\nPREFUN/64\nAUXFUN/30\nPREFUN/91\nGOTO/50,0,20,0,0,1\n\
+              CUTCOM/LEFT,7\nGOTO/60,10,20,0,0,1\nGOTO/70,10,20,0,0,1\nCUTCOM/OFF\nGOTO/80,0,20,0,0,1\nEND\n";
     for (d, machine) in CASES {
         let m = lib.get(machine).unwrap().machine.clone();
         let mut o = Options::new(&m);
@@ -1332,6 +1350,11 @@ fn program_flow_in_every_dialect() {
         assert_eq!(line_of("G64 not written").len(), conv as usize, "{d}: G64 passes on word address");
         let preselect = if conv { "TOOL DEF 2" } else { "T2" };
         assert!(lines.iter().any(|l| l.ends_with(preselect)), "{d}: SELCTL/2 readies tool 2");
+        let (on, off) = if conv { ("RL", "R0") } else { ("G41", "G40") };
+        assert_eq!(sink.comp_lines(on), [22], "{d}: compensation on the move after CUTCOM/LEFT:\n{}", sink.nc);
+        assert_eq!(sink.comp_lines(off), [25], "{d}: and off on the move after CUTCOM/OFF:\n{}", sink.nc);
+        let d_word = lines.iter().any(|l| l.split_whitespace().any(|t| t == "D7"));
+        assert_eq!(d_word, !matches!(d, "siemens" | "heidenhain"), "{d}: the CL's register where the control has one");
         assert_golden(&format!("flow-{d}-{machine}.nc"), &sink.nc);
     }
 }

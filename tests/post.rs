@@ -2593,7 +2593,7 @@ fn a_negative_tool_length_from_the_cl_is_refused() {
 
 /// Records that change what the machine does, placed in the middle of a path: each either
 /// changes the NC or is told with its line. (The vocabulary's coordinate records and the rest of
-/// the list are still to come; this is the part written so far.)
+/// the list are still to come; this is the part written so far.) `CUTCOM` changes the NC.
 #[test]
 fn records_that_change_the_machine_change_the_nc_or_are_told() {
     let m = machine("spinner-u5-620");
@@ -2618,4 +2618,12 @@ fn records_that_change_the_machine_change_the_nc_or_are_told() {
         let told = sink.diags.iter().any(|d| d.line == Some(7) && d.severity >= Severity::Warning);
         assert!(told || sink.nc != plain.nc, "{rec}: neither written nor told: {:?}", sink.diags);
     }
+    // Cutter compensation is written, on the move after it (`ON` with no side before it names
+    // none: an error there).
+    for (rec, word) in [("CUTCOM/LEFT", "G41 D1 X10.000"), ("CUTCOM/RIGHT,1", "G42 D1 X10.000"), ("CUTCOM/LEFT,XYPLAN,4", "G41 D4 X10.000")] {
+        let (sink, _) = run(&m, cl(rec).as_bytes(), &Options::new(&m));
+        assert!(sink.nc.lines().any(|l| l.ends_with(word)), "{rec}:\n{}", sink.nc);
+    }
+    let (sink, _) = run(&m, cl("CUTCOM/ ON ").as_bytes(), &Options::new(&m));
+    assert!(sink.diags.iter().any(|d| d.line == Some(7) && d.severity == Severity::Error && d.code == Code::CutterComp));
 }

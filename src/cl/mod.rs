@@ -13,6 +13,7 @@ mod moves;
 mod record;
 pub mod vocabulary;
 
+pub use flow::{CutterComp, Side};
 pub use foreign::{NcKind, NcSeen, nc_kind};
 pub use moves::Plane;
 
@@ -274,6 +275,9 @@ impl<R: BufRead> Reader<R> {
         if code.is_empty() {
             if let Some(c) = comment {
                 self.in_comment = c.trim_end().ends_with('$');
+                if let Some(record) = flow::comment_record(c) {
+                    self.queue.push_back(Event::Statement(Statement { line: line_no, record }));
+                }
             }
             return;
         }

@@ -157,6 +157,11 @@ pub enum Record {
     /// NX's `MSYS`: the operation's machine coordinate system (origin, X and Y axes, all in
     /// NX's absolute frame; unit and square); the points and axes after it are in it.
     Mcs { origin: [f64; 3], x: [f64; 3], y: [f64; 3] },
+    /// `CUTCOM`: cutter radius compensation on (a side, a register) or off.
+    CutterComp(super::flow::CutterComp),
+    /// The CL says whether its path is the tool centre (`centre`) or the contour: `said`, its
+    /// words (Creo's `CUTCOM_GEOMETRY_TYPE` comment).
+    PathMeaning { centre: bool, said: String },
     End,
     /// Recognised and not acted on: informational, or told where it stands
     /// ([`super::vocabulary`]).

@@ -42,6 +42,10 @@ pub const FANUC: Dialect = Dialect {
     coolant_off: "M9",
     stop: "M0",
     optional_stop: "M1",
+    cutcom: ["G41 D{t}", "G42 D{t}", "G40"],
+    // 30i: 3-dimensional cutter compensation, tool side offset (an option of the control).
+    cutcom_3d: Some(["G41.2 D{t}", "G42.2 D{t}", "G40"]),
+    cutcom_radius: "D REGISTER",
     harmless_g: &["5.1", "8", "9", "61", "61.1", "62", "63", "64"],
     block_numbers: true,
     cycles: Cycles::Iso { dwell_ms: true },
@@ -57,6 +61,9 @@ pub const HAAS: Dialect = Dialect {
     tcp_on: "G234 H{t}",
     cycles: Cycles::Iso { dwell_ms: false },
     planes: Planes::Haas,
+    // G141 (3D+ compensation) needs the surface normal on every block, which kinepost does not
+    // write.
+    cutcom_3d: None,
     notes: "TCP with G234 (TCPC); inverse time G93",
     ..FANUC
 };
@@ -74,6 +81,8 @@ pub const LINUXCNC: Dialect = Dialect {
     coolant_through: "M8",
     cycles: Cycles::Iso { dwell_ms: false },
     planes: Planes::None,
+    cutcom_3d: None,
+    cutcom_radius: "TOOL TABLE RADIUS OF TOOL D",
     notes: "no TCP G-code: the machine configuration switches kinematics; inverse time G93",
     ..FANUC
 };
@@ -99,6 +108,11 @@ pub const SIEMENS: Dialect = Dialect {
     machine_z_up: "",
     cycles: Cycles::Siemens,
     planes: Planes::Siemens,
+    // The radius is the tool's cutting edge D1 (with its length): no register of its own.
+    cutcom: ["G41", "G42", "G40"],
+    // 3D tool radius compensation for circumferential milling with TRAORI.
+    cutcom_3d: Some(["CUT3DC G41", "CUT3DC G42", "G40 CUT2D"]),
+    cutcom_radius: "D1 RADIUS",
     notes: "TCP with TRAORI; tool offset with D1; inverse time G93; rotaries programmed as linear (not modulo) axes",
     ..FANUC
 };
@@ -143,6 +157,11 @@ pub const HEIDENHAIN: Dialect = Dialect {
     coolant_off: "M9",
     stop: "M0",
     optional_stop: "M1",
+    // The radius is the tool table's R + DR; with FUNCTION TCPM, RL/RR offset across the tool
+    // axis and the path (3D radius compensation for peripheral milling).
+    cutcom: ["RL", "RR", "R0"],
+    cutcom_3d: Some(["RL", "RR", "R0"]),
+    cutcom_radius: "TOOL TABLE R+DR",
     harmless_g: &[],
     block_numbers: true,
     cycles: Cycles::Heidenhain,

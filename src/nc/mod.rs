@@ -88,6 +88,15 @@ pub struct Dialect {
     /// Program stop and optional stop (CL `STOP`, `OPSTOP`).
     pub stop: &'static str,
     pub optional_stop: &'static str,
+    /// Cutter radius compensation (CL `CUTCOM`) left, right and off, in the working plane (G17);
+    /// `{t}` is the offset register. Started and ended on a straight move.
+    pub cutcom: [&'static str; 3],
+    /// The same for simultaneous 5-axis motion in TCP mode (3D tool-side compensation: the
+    /// offset across the tool axis and the path), where the control has it.
+    pub cutcom_3d: Option<[&'static str; 3]>,
+    /// Where the control takes the compensation radius from: what the header tells the operator
+    /// to set to the wear (tool centre path) or the full radius (contour).
+    pub cutcom_radius: &'static str,
     /// G codes a CL's `PREFUN` may pass through: they set only how the control moves (exact
     /// stop, continuous path, look-ahead); any other could change coordinates, units, plane,
     /// compensation or motion under the program's own words.
@@ -475,6 +484,7 @@ impl Formatter {
         words: &[Option<i64>; 6],
         feed: Option<(FeedMode, f64)>,
         extra: &str,
+        comp: &str,
         comment: Option<&str>,
     ) -> Option<&str> {
         let seq_before = self.sequence;
@@ -509,6 +519,16 @@ impl Formatter {
             self.buf.truncate(start_len);
             self.sequence = seq_before;
             return None;
+        }
+        // Compensation words: ISO before the axes (`G1 G41 D5 X…`), conversational after them
+        // (`L X+… RL F…`).
+        if !comp.is_empty() {
+            if conv {
+                self.buf.push_str(comp);
+                self.buf.push(' ');
+            } else {
+                self.buf.insert_str(motion_pos, &format!("{comp} "));
+            }
         }
         if conv {
             if motion == Motion::Rapid {

@@ -413,6 +413,11 @@ impl<R: std::io::BufRead> NcReader<R> {
                 i += len;
                 continue;
             }
+            // Siemens' 3D cutter compensation on and off: the path stays the words'.
+            if let Some(kw) = ["CUT3DC", "CUT2D"].into_iter().find(|kw| code[i..].starts_with(kw)) {
+                i += kw.len();
+                continue;
+            }
             let end = value_end(b, i + 1);
             let num = code[i + 1..end].replace(' ', "");
             i = end;

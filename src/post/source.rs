@@ -4,7 +4,7 @@
 //! by CIRCLE, an active drilling cycle. Arcs and cycles become plain points here (linearized or
 //! expanded) so the planner sees one kind of motion.
 
-use crate::cl::{CoolantCmd, CycleKind, CycleParams, Dwell, Event, FeedUnit, Reader, Record, SpindleCmd};
+use crate::cl::{CoolantCmd, CutterComp, CycleKind, CycleParams, Dwell, Event, FeedUnit, Reader, Record, SpindleCmd};
 use crate::diag::{Code, Diagnostic, Severity};
 use crate::kinematics::{Pose, Units, Vec3};
 use nalgebra::Matrix3;
@@ -123,6 +123,19 @@ pub enum ProgEvent {
         on: bool,
         line: u32,
     },
+    /// `CUTCOM`; `turns`: the line of the first record before its `OFF` that turns the tool
+    /// axis (simultaneous motion under compensation), as far as the source reads ahead.
+    CutterComp {
+        comp: CutterComp,
+        line: u32,
+        turns: Option<u32>,
+    },
+    /// The CL's word on its path: the tool centre (`centre`) or the contour.
+    PathMeaning {
+        centre: bool,
+        said: String,
+        line: u32,
+    },
     Operation(String),
     Diag(Diagnostic),
     End,
@@ -180,6 +193,8 @@ pub struct Source<R> {
     ended: bool,
     /// The line of an `END`/`FINI` not yet followed by motion.
     end_line: Option<u32>,
+    /// For the `CUTCOM` being handled: where its compensated stretch turns the tool axis.
+    comp_turns: Option<u32>,
     pub strict_error: Option<Diagnostic>,
     strict: bool,
 }
@@ -324,9 +339,63 @@ impl<R: BufRead> Source<R> {
             feed_max: f64::INFINITY,
             ended: false,
             end_line: None,
+            comp_turns: None,
             strict_error: None,
             strict,
         })
+    }
+
+    /// What the CL said of its path (tool centre or contour) before the first motion, as far as
+    /// the units look-ahead read: the header states it.
+    pub fn stated_path(&self) -> Option<(bool, String, u32)> {
+        self.ahead.iter().find_map(|e| match e {
+            Event::Statement(s) => match &s.record {
+                Record::PathMeaning { centre, said } => Some((*centre, said.clone(), s.line)),
+                _ => None,
+            },
+            _ => None,
+        })
+    }
+
+    /// Reads ahead (at most [`UNITS_LOOKAHEAD`] events held) over the stretch a `CUTCOM` turns
+    /// compensation on for, to its `OFF` or a tool change: the line of the first record there
+    /// that turns the tool axis. The control's compensation must be chosen at its start (2D in
+    /// a plane, or 3D), before those moves are planned.
+    fn stretch_turns(&mut self) -> Result<Option<u32>, Error> {
+        let mut axis = self.frame.map_or(self.axis, |r| r.transpose() * self.axis);
+        let mut k = 0;
+        loop {
+            if k == self.ahead.len() {
+                if self.ahead.len() >= UNITS_LOOKAHEAD {
+                    return Ok(None);
+                }
+                match self.reader.next_event()? {
+                    Some(e) => self.ahead.push_back(e),
+                    None => return Ok(None),
+                }
+            }
+            let Event::Statement(s) = &self.ahead[k] else {
+                k += 1;
+                continue;
+            };
+            let given = match &s.record {
+                Record::CutterComp(CutterComp::Off) | Record::LoadTool { .. } | Record::End => return Ok(None),
+                Record::RotaryTable { .. } => return Ok(Some(s.line)),
+                Record::Goto { axis: Some(a), .. }
+                | Record::GoDelta { axis: Some(a), .. }
+                | Record::From { axis: Some(a), .. } => Some(*a),
+                Record::ToolAxis(a) => Some(*a),
+                Record::Multax(false) => Some([0.0, 0.0, 1.0]),
+                _ => None,
+            };
+            if let Some(a) = given.map(Vec3::from).filter(|a| a.norm() > 1e-9).map(|a| a.normalize()) {
+                if (a - axis).norm() > 1e-6 {
+                    return Ok(Some(s.line));
+                }
+                axis = a;
+            }
+            k += 1;
+        }
     }
 
     /// CL bytes consumed so far.
@@ -360,6 +429,9 @@ impl<R: BufRead> Source<R> {
                     self.out.push_back(Item::Event(ProgEvent::Diag(d)));
                 }
                 Event::Statement(s) => {
+                    if matches!(s.record, Record::CutterComp(CutterComp::On { .. })) {
+                        self.comp_turns = self.stretch_turns()?;
+                    }
                     if let Some(pt) = self.statement(s.line, s.record) {
                         // The common case, nothing queued before it: handed over directly.
                         if self.out.is_empty() {
@@ -580,6 +652,13 @@ impl<R: BufRead> Source<R> {
             Record::Preselect(tool) => self.out.push_back(Item::Event(ProgEvent::Preselect { tool, line })),
             Record::BlockSkip(on) => self.out.push_back(Item::Event(ProgEvent::BlockSkip { on, line })),
             Record::Mcs { origin, x, y } => self.mcs(origin, x, y, line),
+            Record::CutterComp(comp) => {
+                let turns = self.comp_turns.take();
+                self.out.push_back(Item::Event(ProgEvent::CutterComp { comp, line, turns }));
+            }
+            Record::PathMeaning { centre, said } => {
+                self.out.push_back(Item::Event(ProgEvent::PathMeaning { centre, said, line }))
+            }
             Record::RotaryTable { axis, angle, incr } => match axis {
                 Some(i) => {
                     self.table[i] = if incr { self.table[i] + angle } else { angle };

@@ -42,6 +42,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         let prev = self.at;
         let (feed, time) = self.feed(&to, prev.as_ref(), pt, rapid, &mut diags);
         self.pose_diagnostics(&to, pt, rapid, inserted, &mut diags);
+        let comp = self.cutcom_words(&to, pt.line, !rapid && self.arc_words.is_some(), &mut diags)?;
         // Each word is rounded once, for the line and for the replay.
         let rounded = self.f.round_words(words);
         self.replay(&to, &axes, &rounded, words, pt.line, &mut diags);
@@ -75,8 +76,12 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         self.at = Some(to);
         self.tool_changed = false;
         self.last_line = pt.line;
-        match self.f.motion(motion, &rounded, feed, extra, comment) {
+        let comp_words = comp.as_ref().map_or("", |c| c.0.as_str());
+        match self.f.motion(motion, &rounded, feed, extra, comp_words, comment) {
             Some(text) => {
+                if let Some((_, now)) = comp {
+                    self.cutcom.on = now;
+                }
                 self.blocks += 1;
                 self.sum.blocks += 1;
                 self.sum.inserted_blocks += inserted as u64;

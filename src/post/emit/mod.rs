@@ -10,12 +10,14 @@
 //! | work offsets of a program of several setups | `setups.rs` |
 //! | arcs | `arcs.rs` |
 //! | canned cycles | `cycles.rs` |
+//! | cutter radius compensation | `cutcom.rs` |
 //! | tilted working planes | `planes.rs` |
 //! | the feed and the time of a block | `feed.rs` |
 //! | the block writer and its FK replay | `block.rs` |
 
 mod arcs;
 mod block;
+mod cutcom;
 mod cycles;
 pub(super) mod feed;
 pub(super) mod linearize;
@@ -147,6 +149,8 @@ pub(super) struct Emitter<'a, S: Sink + ?Sized> {
     /// `setups=work-offsets`: the offsets used, and the one in force.
     pub(super) offsets: Option<crate::post::setups::WorkOffsets>,
     pub(super) offset_at: usize,
+    /// Cutter radius compensation: asked, on, and what the CL says its path is.
+    pub(super) cutcom: cutcom::State,
 }
 
 impl<'a, S: Sink + ?Sized> Emitter<'a, S> {
@@ -226,6 +230,7 @@ impl<'a, S: Sink + ?Sized> Emitter<'a, S> {
             quiet_tan2: 0.0,
             range_run: false,
             clamp_run: false,
+            cutcom: cutcom::State::new(src.stated_path()),
         }
     }
 

@@ -51,6 +51,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         let free = kinematics::outer_rotary(m);
         let master = (0..m.rotaries.len()).find(|&i| Some(i) != free).unwrap_or(0);
         let positive = at.joints.rotary[master] >= 0.0;
+        self.cutcom_end("a tilted plane's start")?;
         let c = self.f.comment("TILTED WORK PLANE").to_string();
         self.out(&c)?;
         self.comp_cancel()?;
@@ -70,9 +71,11 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
     /// Back to untilted coordinates; `recomp`: length compensation on again for the blocks that
     /// follow (not before a tool change, which sets its own).
     pub(super) fn leave_plane(&mut self, recomp: bool) -> std::io::Result<()> {
-        if self.tilt.take().is_none() {
+        if self.tilt.is_none() {
             return Ok(());
         }
+        self.cutcom_end("a tilted plane's end")?;
+        self.tilt = None;
         self.cancel_cycle()?;
         self.comp_cancel()?;
         if let Some(l) = self.f.plane_off() {

@@ -35,6 +35,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         if let Some(s) = self.o.spindle_speed {
             lines.push(format!("SPINDLE S{} WHERE THE CL STARTS NONE", s.round()));
         }
+        lines.extend(self.path_header());
         lines.extend(self.o.header.iter().cloned());
         for l in self.f.header(self.o.program_number, self.m.units, &lines, self.o.wcs_word()) {
             self.out(&l)?;
@@ -61,6 +62,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
 
     pub(in crate::post) fn program_end(&mut self) -> Result<(), Error> {
         self.cancel_cycle()?;
+        self.cutcom_end("the program's end")?;
         self.leave_plane(false)?;
         self.retract_up()?;
         self.lock_all()?;
@@ -78,7 +80,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
     pub(in crate::post) fn event(&mut self, ev: ProgEvent) -> Result<(), Error> {
         if !matches!(
             ev,
-            ProgEvent::Comment(_) | ProgEvent::Operation(_) | ProgEvent::Diag(_) | ProgEvent::End
+            ProgEvent::Comment(_) | ProgEvent::Operation(_) | ProgEvent::Diag(_) | ProgEvent::End | ProgEvent::PathMeaning { .. }
         ) {
             self.cancel_cycle()?;
         }
@@ -114,6 +116,8 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             ProgEvent::BlockSkip { on, line } => self.block_skip(on, line)?,
             ProgEvent::Preselect { tool, line } => self.preselect(tool, line)?,
             ProgEvent::Setup { shift, turned, line, comment } => self.setup_change(shift, turned, line, &comment)?,
+            ProgEvent::CutterComp { comp, line, turns } => self.cutter_comp(comp, line, turns),
+            ProgEvent::PathMeaning { centre, said, line } => self.path_meaning(centre, said, line),
             ProgEvent::Diag(dg) => self.note(dg)?,
             ProgEvent::End => {}
         }
@@ -162,6 +166,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             ))?;
             return Ok(());
         }
+        self.cutcom_end("a tool change")?;
         self.leave_plane(false)?;
         self.retract_up()?;
         if self.comp_on {
