@@ -197,7 +197,7 @@ pub async fn submit(
     // Settings are checked now, so a job never fails for a typo hours later.
     let current = params.profile(&st)?;
     let settings = params.settings();
-    settings.profile_options(&current.profile).map_err(ApiError::BadParameter)?;
+    settings.profile_options(&current.profile, None).map_err(ApiError::BadParameter)?;
     let input = StreamReader::new(body.into_data_stream().map(|r| r.map_err(std::io::Error::other)));
     let (job, _created) = q.submit(settings, current.version, filename, key, client, input).await?;
     let location = format!("/v1/jobs/{}", job.id);

@@ -378,7 +378,7 @@ fn execute(
     progress: &Arc<Progress>,
 ) -> Result<Summary, String> {
     let paths = store::Paths::new(spool, &job.id, job.attempts);
-    let mut opts = job.settings.profile_options(&profile)?;
+    let mut opts = job.settings.profile_options(&profile, None)?;
     opts.budget = budget;
     opts.header.push(format!("JOB {}", job.id));
     if let Some(f) = &job.filename {
