@@ -834,6 +834,7 @@ fn post_cmd(
             }
             None => None,
         },
+        machine_tools_version: None,
     };
     let mut o = settings.profile_options(p, standing)?;
     o.budget = a.budget.budget()?;

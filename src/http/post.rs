@@ -82,6 +82,7 @@ impl PostParams {
             mode: self.mode.clone(),
             tool_length: self.tool_length,
             tool_table: self.tool_table.clone(),
+            machine_tools_version: None,
             work_offset: self.work_offset.clone(),
             tolerance: self.tolerance,
             sequence_numbers: self.sequence_numbers,
@@ -289,8 +290,9 @@ pub async fn post_cl(
     let ndjson = wants_ndjson(req.headers())?;
     let slot = req.extensions_mut().remove::<Arc<limits::StreamSlot>>();
     let (params, filename, body) = upload(&st, query, req).await?;
-    let profile = params.profile(&st)?.profile;
-    let mut opts = params.settings().profile_options(&profile, None).map_err(ApiError::BadParameter)?;
+    let profile = params.profile(&st)?.item;
+    let standing = super::tools::standing(&st, &profile.machine.id);
+    let mut opts = params.settings().profile_options(&profile, standing).map_err(ApiError::BadParameter)?;
     opts.budget = st.config.post_budget;
     opts.header.push(format!("DATE {} UTC", crate::output::utc_now()));
     if let Some(f) = &filename {

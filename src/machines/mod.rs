@@ -12,7 +12,7 @@ use std::sync::Arc;
 
 pub mod catalog;
 pub mod tools;
-pub use catalog::{Catalog, Current, Expect};
+pub use catalog::{Catalog, Current, Expect, Kind, Shelf};
 
 #[derive(Debug, thiserror::Error)]
 pub enum Error {

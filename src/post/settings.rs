@@ -176,6 +176,11 @@ pub struct Settings {
     /// the machine's for this job.
     #[serde(default)]
     pub tool_table: Option<String>,
+    /// Set by the service when it accepts a job, never by a request: the version of the
+    /// machine's tool table the job runs with (none: the machine had none, or the job brings
+    /// its own).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub machine_tools_version: Option<i64>,
     /// Work offset `x,y,z` in profile units.
     pub work_offset: Option<String>,
     /// Chord tolerance in profile units (default 0.01 mm / 0.0004 in, at most 1 mm / 0.04 in):
