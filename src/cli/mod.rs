@@ -907,6 +907,18 @@ fn post_cmd(
         s.warnings,
         s.cycle_time_s / 60.0
     );
+    // Each tool's length and its source, where more than one length could have applied.
+    if s.tools.len() > 1 || o.tool_table.is_some() {
+        let t: Vec<String> = s
+            .tools
+            .iter()
+            .map(|t| match t.tool {
+                Some(n) => format!("T{n} {} ({})", t.length, t.from.as_str()),
+                None => format!("no tool {} ({})", t.length, t.from.as_str()),
+            })
+            .collect();
+        eprintln!("kinepost: tool lengths: {}", t.join(", "));
+    }
     if s.errors > 0 {
         return Err(Failure::Written(format!(
             "the program has {} error diagnostics: written, but not fit to run as it is",
