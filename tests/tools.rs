@@ -5,7 +5,7 @@ use kinepost::diag::{Code, Diagnostic, Severity};
 use kinepost::kinematics::Machine;
 use kinepost::machines::{Library, Profile};
 use kinepost::post::verify::{VerifyOptions, verify};
-use kinepost::post::{self, BlockInfo, LengthFrom, Mode, Options, Settings, Sink, Summary};
+use kinepost::post::{self, BlockInfo, LengthFrom, Options, Settings, Sink, Summary};
 use std::path::Path;
 use std::sync::Arc;
 

@@ -161,7 +161,7 @@ async fn round_trip(base: &str) {
     let r = put(&TABLE.replace("length = 3.5", "length = -3.5"), None).await.unwrap();
     assert_eq!(r.status(), 422);
     let p: Value = r.json().await.unwrap();
-    assert_eq!(p["key"], "tool[0] (T1).length", "{p}");
+    assert_eq!((p["key"].as_str(), p["title"].as_str()), (Some("tool[0] (T1).length"), Some("Invalid tool table")), "{p}");
     let vs = common::get_json(&c, &format!("{url}/versions")).await;
     assert_eq!(vs["current"], 2, "{vs}");
     assert_eq!(c.get(format!("{url}/versions/1")).text_ok().await, TABLE);

@@ -150,8 +150,13 @@ pub(super) async fn put_tools(
     authorize(&st, req.headers())?;
     machine(&st, &id)?;
     let expect = expectation_of::<ToolTable>(req.headers(), &id)?;
-    let text = toml_body::<ToolTableDoc>(req, "tool table").await?;
-    let (c, created) = st.machines.tools.put(&text, Some(&id), expect).await?;
+    // The loader's refusals are the table's, not a profile's.
+    let table_err = |e: ApiError| match e {
+        ApiError::BadProfile { message, key } => ApiError::BadToolTable { message, key },
+        e => e,
+    };
+    let text = toml_body::<ToolTableDoc>(req, "tool table").await.map_err(table_err)?;
+    let (c, created) = st.machines.tools.put(&text, Some(&id), expect).await.map_err(|e| table_err(e.into()))?;
     tracing::info!(machine = %id, version = c.version, "tool table written");
     let mut r = (
         if created { StatusCode::CREATED } else { StatusCode::OK },
