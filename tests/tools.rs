@@ -386,3 +386,34 @@ fn the_cli_takes_a_tool_table_and_a_machine_table_beside_the_profile() {
     assert!(!out.status.success() && String::from_utf8_lossy(&out.stderr).contains("fryer-5x-54.tools.toml"));
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// NX gives the next tool's `TLDATA` before its `LOAD/TOOL`: each length is that tool's, in the
+/// summary and in the replay, with a table or without.
+#[test]
+fn nx_lengths_before_the_tool_change_belong_to_the_next_tool() {
+    let lib = library();
+    let p = lib.get("fryer-5x-45").unwrap();
+    let cl = format!(
+        "UNITS/INCHES\nTLDATA/MILL,0.5000,0.0000,4.0000,0.0000,0.0000\nLOAD/TOOL,1\nSPINDL/3000\n{}TLDATA/MILL,0.2500,0.0000,5.0000,0.0000,0.0000\nLOAD/TOOL,2\nSPINDL/3000\n{}FINI\n",
+        cut(6, -3.0),
+        cut(6, 0.5)
+    );
+    let only_two = "units = \"inch\"\n[[tool]]\nnumber = 2\nlength = 5.5\n";
+    for (table, want) in [
+        (None, [(Some(1), 4.0, LengthFrom::Cl), (Some(2), 5.0, LengthFrom::Cl)]),
+        (
+            Some(only_two),
+            [(Some(1), 4.0, LengthFrom::Cl), (Some(2), 5.5, LengthFrom::Table)],
+        ),
+    ] {
+        let s = Settings {
+            tool_table: table.map(str::to_string),
+            ..Default::default()
+        };
+        let (sink, sum, o) = post_with(&p, &s, &cl);
+        let tools: Vec<_> = sum.tools.iter().map(|t| (t.tool, t.length, t.from)).collect();
+        assert_eq!(tools, want, "{table:?}: {:?}", sink.diags);
+        let rep = verify_with(&p.machine, &o, &cl, &sink.nc);
+        assert!(rep.ok && rep.matched == 12, "{table:?}: {rep:?}");
+    }
+}

@@ -912,9 +912,12 @@ fn post_cmd(
         let t: Vec<String> = s
             .tools
             .iter()
-            .map(|t| match t.tool {
-                Some(n) => format!("T{n} {} ({})", t.length, t.from.as_str()),
-                None => format!("no tool {} ({})", t.length, t.from.as_str()),
+            .map(|t| {
+                let l = format!("{:.*}", if m.units == Units::Mm { 3 } else { 4 }, t.length);
+                match t.tool {
+                    Some(n) => format!("T{n} {l} ({})", t.from.as_str()),
+                    None => format!("no tool {l} ({})", t.from.as_str()),
+                }
             })
             .collect();
         eprintln!("kinepost: tool lengths: {}", t.join(", "));

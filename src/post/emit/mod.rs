@@ -68,8 +68,8 @@ pub(super) struct Emitter<'a, S: Sink + ?Sized> {
     /// The tool length the program last said it is cut for (a comment).
     /// The last tool length comment written (said again only when it changes).
     pub(super) length_said: Option<String>,
-    /// The summary's last tool line is the tool change's, its length not yet weighed.
-    pub(super) tool_line_fresh: bool,
+    /// A tool or length changed: the summary's line for it is written at the next move.
+    pub(super) tool_line_due: bool,
     /// Where the tool length in force came from.
     pub(super) length_from: crate::post::tools::LengthFrom,
     pub(super) tool: Option<u32>,
@@ -214,7 +214,7 @@ impl<'a, S: Sink + ?Sized> Emitter<'a, S> {
             plane_ahead: false,
             free_hint: None,
             length_said: None,
-            tool_line_fresh: false,
+            tool_line_due: true,
             length_from: if o.tool_length.is_some() {
                 crate::post::tools::LengthFrom::Job
             } else {

@@ -78,7 +78,9 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
     /// working plane once the machine stands there.
     pub(in crate::post) fn point(&mut self, c: Committed) -> Result<(), Error> {
         let (rapid, tip, ahead) = (c.pt.rapid, c.pt.pose.tip, self.plane_ahead);
-        self.tool_line_fresh = false; // a length from here on is a change of this tool's
+        if self.tool_line_due {
+            self.record_tool();
+        }
         self.point_at(c)?;
         if rapid && ahead && self.tilt.is_none() {
             self.enter_plane(&tip)?;

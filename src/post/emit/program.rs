@@ -61,13 +61,12 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         self.setup.tool_length = l;
         self.sum.tool_length = l;
         self.length_from = from;
-        self.record_tool();
+        self.tool_line_due = true;
         let w = self.f.fmt.linear as usize;
         let text = match self.tool {
-            // Without a table the CL's length is the CL's, whichever tool: the words as always.
-            Some(n) if self.o.tool_table.is_some() => {
-                format!("TOOL {n} LENGTH {l:.w$} FROM {}", from.as_str().to_uppercase())
-            }
+            // The table's length, or the fallback for a tool it lacks, is that tool's; the CL's
+            // may be the next tool's (NX's TLDATA comes before its LOAD/TOOL): no number.
+            Some(n) if from != LengthFrom::Cl => format!("TOOL {n} LENGTH {l:.w$} FROM {}", from.as_str().to_uppercase()),
             _ => format!("TOOL LENGTH {l:.w$} FROM {}", from.as_str().to_uppercase()),
         };
         // When it changes: NX repeats TLDATA with every operation (before its LOAD/TOOL).
@@ -79,21 +78,17 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         self.out(&c)
     }
 
-    /// The summary's line for the tool in the spindle: its length and where it came from.
-    fn record_tool(&mut self) {
+    /// The summary's line for the tool in the spindle, at its first move with a new tool or
+    /// length: the length it cut with, and where it came from (NX gives the next tool's TLDATA
+    /// before its LOAD/TOOL: a line at the change would name the old tool).
+    pub(super) fn record_tool(&mut self) {
+        self.tool_line_due = false;
         let u = ToolUse {
             tool: self.tool,
             length: self.setup.tool_length,
             from: self.length_from,
         };
         let tools = &mut self.sum.tools;
-        // The tool change is written before its length is weighed: one line for both.
-        let fresh = std::mem::take(&mut self.tool_line_fresh);
-        // A length given before any tool and any move (NX's TLDATA before its first LOAD/TOOL)
-        // is the first tool's, not a line of its own.
-        if tools.last().is_some_and(|last| (fresh && last.tool == u.tool) || (last.tool.is_none() && self.at.is_none())) {
-            tools.pop();
-        }
         if !tools.contains(&u) && tools.len() < MAX_TOOL_LINES {
             tools.push(u);
         }
@@ -238,8 +233,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         self.tool = Some(number);
         self.adjust = adjust;
         self.tool_changed = true;
-        self.record_tool();
-        self.tool_line_fresh = true;
+        self.tool_line_due = true;
         if std::mem::take(&mut self.spindle_on) {
             self.spindle_restore = Some(line);
         }
