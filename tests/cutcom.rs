@@ -77,6 +77,7 @@ fn verifies(m: &Machine, cl: &str, nc: &str, mode: Mode) {
         angle_tolerance_deg: 0.01,
         cl_units: None,
         cl_tool_length: true,
+        tool_table: None,
     };
     let r = verify(cl.as_bytes(), nc.as_bytes(), m, &o).unwrap();
     assert!(r.ok && r.matched == r.cl_points, "{r:?}\n{nc}");

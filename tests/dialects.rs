@@ -601,6 +601,7 @@ fn canned_cycles_reach_every_hole_on_every_profile() {
                 angle_tolerance_deg: 0.01,
                 cl_units: None,
                 cl_tool_length: true,
+                tool_table: None,
             };
             let r = verify(HOLES.as_bytes(), sink.nc.as_bytes(), m, &vo).unwrap();
             assert!(r.ok && r.matched == 12, "{id} {d}: {r:?}\n{}", sink.nc);
@@ -670,6 +671,7 @@ fn verify_catches_a_wrong_canned_cycle() {
         angle_tolerance_deg: 0.01,
         cl_units: None,
         cl_tool_length: true,
+        tool_table: None,
     };
     let first = iso_holes(&sink.nc, true)[0];
     let r_word = format!("R{:.3}", first.r);
@@ -770,6 +772,7 @@ fn random_holes(id: &str, seed: &[f64]) -> Result<(), proptest::test_runner::Tes
         angle_tolerance_deg: 0.01,
         cl_units: None,
         cl_tool_length: true,
+        tool_table: None,
     };
     let r = verify(cl.as_bytes(), sink.nc.as_bytes(), m, &vo).unwrap();
     prop_assert!(r.ok && r.matched == holes as u64, "{r:?}\n{cl}\n{}", sink.nc);
@@ -946,6 +949,7 @@ fn random_planes(id: &str, seed: &[f64]) -> Result<(), proptest::test_runner::Te
             angle_tolerance_deg: 0.01,
             cl_units: None,
             cl_tool_length: true,
+            tool_table: None,
         };
         let r = verify(cl.as_bytes(), sink.nc.as_bytes(), m, &vo).unwrap();
         prop_assert!(r.ok && r.matched == r.cl_points, "{id} {d}: {r:?}\n{cl}\n{}", sink.nc);
@@ -1017,6 +1021,7 @@ fn a_plane_left_inside_a_cut_is_repositioned_out_of_it() {
         angle_tolerance_deg: 0.01,
         cl_units: None,
         cl_tool_length: true,
+        tool_table: None,
     };
     let r = verify(cl.as_bytes(), sink.nc.as_bytes(), m, &vo).unwrap();
     assert!(r.ok && r.matched == 2003, "{r:?}");
@@ -1236,6 +1241,7 @@ fn a_delay_is_each_controls_dwell() {
             angle_tolerance_deg: 0.01,
             cl_units: None,
             cl_tool_length: true,
+            tool_table: None,
         };
         let rep = post::verify::verify(cl.as_bytes(), nc.as_bytes(), m, &vo).unwrap();
         assert!(rep.ok, "{dialect}: {rep:?}\n{nc}");

@@ -216,6 +216,7 @@ fn generated_paths_on_every_profile_post_clean_in_joint_and_tcp_mode() {
                 angle_tolerance_deg: 0.01,
                 cl_units: None,
                 cl_tool_length: true,
+                tool_table: None,
             };
             let r = kinepost::post::verify::verify(cl_text.as_bytes(), sink.nc.as_bytes(), m, &vo).unwrap();
             assert!(r.ok, "{} {mode:?}: {r:?}", m.id);
@@ -836,6 +837,7 @@ fn verify_replays_any_program_and_names_the_cl_lines_it_misses() {
         angle_tolerance_deg: 0.01,
         cl_units: None,
         cl_tool_length: true,
+        tool_table: None,
     };
     let ours = verify(&cl[..], sink.nc.as_bytes(), &m, &vo).unwrap();
     assert!(ours.ok && ours.matched == 348, "{ours:?}");
@@ -885,6 +887,7 @@ fn a_singular_tolerance_holds_the_free_rotary_within_its_bound_and_reports_what_
         angle_tolerance_deg: 0.5 + 1e-3,
         cl_units: None,
         cl_tool_length: true,
+        tool_table: None,
     };
     assert!(verify(&cl[..], sink.nc.as_bytes(), &m, &vo).unwrap().ok);
 }
@@ -1328,6 +1331,7 @@ fn linearization_follows_a_near_singular_swing_and_is_bounded() {
         angle_tolerance_deg: 0.01,
         cl_units: None,
         cl_tool_length: true,
+        tool_table: None,
     };
     let r = kinepost::post::verify::verify(cl.as_bytes(), sink.nc.as_bytes(), &m, &vo).unwrap();
     assert!(r.ok, "{r:?}");
@@ -1458,6 +1462,7 @@ fn verify_options(m: &Machine, o: &Options) -> kinepost::post::verify::VerifyOpt
         angle_tolerance_deg: 0.01,
         cl_units: None,
         cl_tool_length: true,
+        tool_table: None,
     }
 }
 
@@ -1711,6 +1716,7 @@ fn the_cls_tool_lengths_are_stated_and_verify_follows_them() {
                 let verify = |cl_tool_length: bool| {
                     let vo = kinepost::post::verify::VerifyOptions {
                         cl_tool_length,
+                        tool_table: None,
                         ..verify_options(&m, &o)
                     };
                     kinepost::post::verify::verify(cl.as_bytes(), sink.nc.as_bytes(), &m, &vo).unwrap()

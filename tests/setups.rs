@@ -36,6 +36,7 @@ fn verified(m: &Machine, cl: &str, nc: &str, mode: Mode) -> kinepost::post::veri
         angle_tolerance_deg: 0.01,
         cl_units: None,
         cl_tool_length: true,
+        tool_table: None,
     };
     verify(cl.as_bytes(), nc.as_bytes(), m, &o).unwrap()
 }

@@ -95,6 +95,10 @@ pub enum Command {
         #[arg(long)]
         #[arg(value_enum)]
         cl_units: Option<UnitsArg>,
+        /// The tool table the program was posted with (default: the machine's,
+        /// `machines/<id>.tools.toml`, if there is one).
+        #[arg(long)]
+        tool_table: Option<PathBuf>,
     },
     /// Read a CL file and report its diagnostics and record counts (JSON summary on stdout).
     Lint {
@@ -123,7 +127,7 @@ pub enum Command {
 /// Managing the machine library offline.
 #[derive(Subcommand, Debug)]
 pub enum MachinesCmd {
-    /// Check profile files with the same loader the service uses.
+    /// Check profile files (and tool tables, `<id>.tools.toml`) with the loaders the service uses.
     Validate { files: Vec<PathBuf> },
     /// Validate a profile and copy it into the library directory.
     Add {
@@ -188,6 +192,16 @@ fn machines_cmd(lib: &Library, dir: &std::path::Path, a: &MachinesCmd) -> Result
         MachinesCmd::Validate { files } => {
             let mut bad = 0;
             for f in files {
+                if f.to_string_lossy().ends_with(machines::tools::TABLE_SUFFIX) {
+                    match machines::tools::load_tool_table(f) {
+                        Ok(t) => say!("ok   {} (tool table, {} tools)", f.display(), t.len()),
+                        Err(e) => {
+                            bad += 1;
+                            say!("FAIL {e}");
+                        }
+                    }
+                    continue;
+                }
                 match machines::load_file(f) {
                     Ok(p) => say!("ok   {} ({}, {})", f.display(), p.machine.id, p.machine.kinematics_kind()),
                     Err(e) => {
@@ -489,6 +503,10 @@ pub struct PostArgs {
     /// move (NX CLSF listings carry no SPINDL); the CL's own SPINDL and SPINDL/OFF win.
     #[arg(long, allow_hyphen_values = true)]
     pub spindle_speed: Option<f64>,
+    /// A tool table (TOML: units, [[tool]] number, length …): each tool's length in joint mode
+    /// on a head machine. Replaces the machine's (`machines/<id>.tools.toml`) for this job.
+    #[arg(long)]
+    pub tool_table: Option<PathBuf>,
     /// Write per-block diagnostics as NDJSON to this file.
     #[arg(long)]
     pub diagnostics: Option<PathBuf>,
@@ -694,10 +712,17 @@ fn run(cli: Cli) -> Result<(), Failure> {
             setup,
             tolerance,
             cl_units,
+            tool_table,
         } => {
             use kinepost::post::verify;
             let p = lib.get(&machine).map_err(|e| e.to_string())?;
             let m = &p.machine;
+            let tool_table = match &tool_table {
+                Some(f) => Some(std::sync::Arc::new(
+                    machines::tools::load_tool_table(f).map_err(|e| e.to_string())?,
+                )),
+                None => lib.tools(&machine),
+            };
             let o = verify::VerifyOptions {
                 mode: mode.into(),
                 setup: setup.setup(m)?,
@@ -705,6 +730,7 @@ fn run(cli: Cli) -> Result<(), Failure> {
                 angle_tolerance_deg: 0.01,
                 cl_units: cl_units.map(Units::from),
                 cl_tool_length: setup.tool_length.is_none(),
+                tool_table,
             };
             let rep = verify::verify(open_input(&cl)?, open_input(&nc)?, m, &o).map_err(|e| e.to_string())?;
             say!("{}", serde_json::to_string_pretty(&rep).map_err(|e| e.to_string())?);
@@ -719,7 +745,8 @@ fn run(cli: Cli) -> Result<(), Failure> {
         }
         Command::Post(a) => {
             let p = lib.get(&a.machine).map_err(|e| e.to_string())?;
-            post_cmd(&p, &a)
+            let standing = lib.tools(&a.machine).map(|t| (t, "THE MACHINE'S TOOL TABLE".to_string()));
+            post_cmd(&p, standing, &a)
         }
         Command::Machines { action: Some(a), .. } => {
             let dir = cli.machines.clone().unwrap_or_else(machines::default_dir);
@@ -777,7 +804,11 @@ fn run(cli: Cli) -> Result<(), Failure> {
     }
 }
 
-fn post_cmd(p: &machines::Profile, a: &PostArgs) -> Result<(), Failure> {
+fn post_cmd(
+    p: &machines::Profile,
+    standing: Option<(std::sync::Arc<machines::tools::ToolTable>, String)>,
+    a: &PostArgs,
+) -> Result<(), Failure> {
     let m = &p.machine;
     use kinepost::post::{self, Settings, Sink};
     use std::io::Write;
@@ -801,8 +832,17 @@ fn post_cmd(p: &machines::Profile, a: &PostArgs) -> Result<(), Failure> {
         work_coordinates: a.work_coordinates.clone(),
         setups: a.setups.clone(),
         spindle_speed: a.spindle_speed,
+        tool_table: match &a.tool_table {
+            // Read and checked here, so that an error names the file.
+            Some(f) => {
+                machines::tools::load_tool_table(f).map_err(|e| e.to_string())?;
+                Some(machines::read_text(f).map_err(|e| format!("{}: {e}", f.display()))?)
+            }
+            None => None,
+        },
+        machine_tools_version: None,
     };
-    let mut o = settings.profile_options(p)?;
+    let mut o = settings.profile_options(p, standing)?;
     o.budget = a.budget.budget()?;
     o.header.push(format!("DATE {} UTC", utc_now()));
     o.header.push(format!(
@@ -877,6 +917,21 @@ fn post_cmd(p: &machines::Profile, a: &PostArgs) -> Result<(), Failure> {
         s.warnings,
         s.cycle_time_s / 60.0
     );
+    // Each tool's length and its source, where more than one length could have applied.
+    if s.tools.len() > 1 || o.tool_table.is_some() {
+        let t: Vec<String> = s
+            .tools
+            .iter()
+            .map(|t| {
+                let l = format!("{:.*}", if m.units == Units::Mm { 3 } else { 4 }, t.length);
+                match t.tool {
+                    Some(n) => format!("T{n} {l} ({})", t.from.as_str()),
+                    None => format!("no tool {l} ({})", t.from.as_str()),
+                }
+            })
+            .collect();
+        eprintln!("kinepost: tool lengths: {}", t.join(", "));
+    }
     if s.errors > 0 {
         return Err(Failure::Written(format!(
             "the program has {} error diagnostics: written, but not fit to run as it is",

@@ -49,6 +49,9 @@ pub enum ApiError {
     /// A profile the loader rejects; `key` names what to fix when the loader knows it.
     #[error("{message}")]
     BadProfile { message: String, key: Option<String> },
+    /// A tool table the loader refused: `key` names the entry to fix.
+    #[error("{message}")]
+    BadToolTable { message: String, key: Option<String> },
     #[error("{0}")]
     Unauthorized(String),
     #[error("{0}")]
@@ -113,6 +116,7 @@ impl ApiError {
             ApiError::Busy(_) => (StatusCode::SERVICE_UNAVAILABLE, "busy", "Server busy"),
             ApiError::Internal(_) => (StatusCode::INTERNAL_SERVER_ERROR, "internal", "Internal error"),
             ApiError::BadProfile { .. } => (StatusCode::UNPROCESSABLE_ENTITY, "bad-profile", "Invalid machine profile"),
+            ApiError::BadToolTable { .. } => (StatusCode::UNPROCESSABLE_ENTITY, "bad-tool-table", "Invalid tool table"),
             ApiError::Unauthorized(_) => (StatusCode::UNAUTHORIZED, "unauthorized", "Unauthorized"),
             ApiError::Forbidden(_) => (StatusCode::FORBIDDEN, "forbidden", "Forbidden"),
             ApiError::PreconditionFailed(_) => (StatusCode::PRECONDITION_FAILED, "precondition-failed", "Precondition failed"),
@@ -130,7 +134,7 @@ impl ApiError {
             _ => (None, None, None),
         };
         let key = match self {
-            ApiError::BadProfile { key, .. } => key.clone(),
+            ApiError::BadProfile { key, .. } | ApiError::BadToolTable { key, .. } => key.clone(),
             _ => None,
         };
         Problem {

@@ -25,6 +25,12 @@ pub struct JobView {
     pub machine: String,
     /// The profile version the job runs with (see `GET /v1/machines/{id}/versions`).
     pub machine_version: Option<i64>,
+    /// The version of the machine's tool table the job runs with (`GET
+    /// /v1/machines/{id}/tools/versions`); absent when the machine had none or the job brought
+    /// its own (`own_tool_table`).
+    pub tool_table_version: Option<i64>,
+    /// The job brought its own `tool_table`.
+    pub own_tool_table: bool,
     pub filename: Option<String>,
     pub idempotency_key: Option<String>,
     pub created_ms: i64,
@@ -84,6 +90,8 @@ impl From<Job> for JobView {
             state: j.state.as_str().to_string(),
             machine: j.machine,
             machine_version: j.machine_version,
+            tool_table_version: j.settings.machine_tools_version,
+            own_tool_table: j.settings.tool_table.is_some(),
             filename: j.filename,
             idempotency_key: j.idempotency_key,
             created_ms: j.created_ms,
@@ -196,8 +204,13 @@ pub async fn submit(
     let (params, filename, body) = upload(&st, query, req).await?;
     // Settings are checked now, so a job never fails for a typo hours later.
     let current = params.profile(&st)?;
-    let settings = params.settings();
-    settings.profile_options(&current.profile).map_err(ApiError::BadParameter)?;
+    let mut settings = params.settings();
+    let standing = super::tools::standing(&st, &current.id);
+    if settings.tool_table.is_none() {
+        // The machine's table as it is now, whatever is written to it before the job runs.
+        settings.machine_tools_version = st.machines.tools.get(&current.id).ok().map(|c| c.version);
+    }
+    settings.profile_options(&current.item, standing).map_err(ApiError::BadParameter)?;
     let input = StreamReader::new(body.into_data_stream().map(|r| r.map_err(std::io::Error::other)));
     let (job, _created) = q.submit(settings, current.version, filename, key, client, input).await?;
     let location = format!("/v1/jobs/{}", job.id);

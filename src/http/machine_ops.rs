@@ -128,7 +128,7 @@ pub struct CalibrateResponse {
 fn profile(st: &AppState, id: &str) -> Result<Arc<Profile>, ApiError> {
     st.machines
         .get(id)
-        .map(|c| c.profile)
+        .map(|c| c.item)
         .map_err(|_| ApiError::UnknownMachine(id.into()))
 }
 

@@ -4,7 +4,7 @@
 
 use super::AppState;
 use super::error::{ApiError, Problem};
-use crate::machines::{Current, Expect, Profile, ProfileDoc};
+use crate::machines::{Current, Expect, Kind, Profile, ProfileDoc, Shelf};
 use crate::text::quote;
 use axum::Json;
 use axum::extract::{Path, Request, State};
@@ -70,7 +70,7 @@ pub struct AngleErrorDto {
 
 impl From<&Current> for MachineDto {
     fn from(c: &Current) -> Self {
-        let p: &Profile = &c.profile;
+        let p: &Profile = &c.item;
         let d = &p.doc;
         MachineDto {
             version: c.version,
@@ -126,13 +126,13 @@ fn etag_header(c: &Current) -> HeaderValue {
     HeaderValue::from_str(&c.etag()).unwrap_or(HeaderValue::from_static("\"\""))
 }
 
-fn wants_toml(h: &HeaderMap) -> bool {
+pub(super) fn wants_toml(h: &HeaderMap) -> bool {
     h.get(header::ACCEPT)
         .and_then(|v| v.to_str().ok())
         .is_some_and(|a| a.contains("application/toml"))
 }
 
-fn toml_response(status: StatusCode, text: String) -> Response {
+pub(super) fn toml_response(status: StatusCode, text: String) -> Response {
     (status, [(header::CONTENT_TYPE, "application/toml; charset=utf-8")], text).into_response()
 }
 
@@ -169,16 +169,16 @@ pub(super) async fn get_machine(
 
 /// The stored TOML of the current version (files-only processes: the document re-serialized).
 async fn version_text(st: &AppState, c: &Current) -> Result<String, ApiError> {
-    match st.machines.text(&c.profile.machine.id, c.version).await {
+    match st.machines.text(&c.item.machine.id, c.version).await {
         Ok(t) => Ok(t),
-        Err(crate::machines::Error::ReadOnly) => toml::to_string(&c.profile.doc).map_err(|e| ApiError::Internal(e.to_string())),
+        Err(crate::machines::Error::ReadOnly) => toml::to_string(&c.item.doc).map_err(|e| ApiError::Internal(e.to_string())),
         Err(e) => Err(e.into()),
     }
 }
 
 /// Writes carry `Authorization: Bearer <KINEPOST_ADMIN_TOKEN>`; without a configured token
 /// there are no writes at all.
-fn authorize(st: &AppState, h: &HeaderMap) -> Result<(), ApiError> {
+pub(super) fn authorize(st: &AppState, h: &HeaderMap) -> Result<(), ApiError> {
     let Some(want) = st.config.admin_token.as_deref() else {
         return Err(ApiError::Forbidden(
             "machine profile writes are off: start the service with KINEPOST_ADMIN_TOKEN set".into(),
@@ -211,6 +211,11 @@ fn constant_time_eq(a: &[u8], b: &[u8]) -> bool {
 
 /// `If-Match` → what the write expects (checked in the store's transaction); none: anything.
 fn expectation(h: &HeaderMap, id: &str) -> Result<Expect, ApiError> {
+    expectation_of::<Profile>(h, id)
+}
+
+/// [`expectation`] for a kind's ETags (`"id-v3"`, `"id-tools-v3"`).
+pub(super) fn expectation_of<T: Kind>(h: &HeaderMap, id: &str) -> Result<Expect, ApiError> {
     let Some(v) = h.get(header::IF_MATCH) else {
         return Ok(Expect::Any);
     };
@@ -222,15 +227,21 @@ fn expectation(h: &HeaderMap, id: &str) -> Result<Expect, ApiError> {
         return Ok(Expect::Present);
     }
     let version = v
-        .strip_prefix(&format!("\"{id}-v"))
+        .strip_prefix(&format!("\"{id}{}", T::ETAG))
         .and_then(|r| r.strip_suffix('"'))
         .and_then(|n| n.parse::<i64>().ok())
-        .ok_or_else(|| ApiError::PreconditionFailed(format!("If-Match {}: not an ETag of machine {}", quote(v), quote(id))))?;
+        .ok_or_else(|| ApiError::PreconditionFailed(format!("If-Match {}: not an ETag of {} {}", quote(v), T::WHAT, quote(id))))?;
     Ok(Expect::Version(version))
 }
 
 /// The profile in the body: TOML (`application/toml`), or the same document as JSON.
 async fn profile_text(req: Request) -> Result<String, ApiError> {
+    toml_body::<ProfileDoc>(req, "profile").await
+}
+
+/// A TOML document in the body (`application/toml`), or the same document `D` as JSON, as TOML
+/// text for the loader; `what` names it in errors.
+pub(super) async fn toml_body<D: serde::de::DeserializeOwned + Serialize>(req: Request, what: &str) -> Result<String, ApiError> {
     let ctype = req
         .headers()
         .get(header::CONTENT_TYPE)
@@ -240,30 +251,30 @@ async fn profile_text(req: Request) -> Result<String, ApiError> {
     let json = ctype.starts_with("application/json");
     if !(json || ctype.starts_with("application/toml") || ctype.starts_with("text/toml")) {
         return Err(ApiError::UnsupportedMediaType(format!(
-            "{ctype}: send the profile as application/toml or application/json"
+            "{ctype}: send the {what} as application/toml or application/json"
         )));
     }
     let bytes = axum::body::to_bytes(req.into_body(), 1 << 20)
         .await
         .map_err(|_| ApiError::TooLarge(Some(1 << 20)))?;
     let text = String::from_utf8(bytes.to_vec()).map_err(|_| ApiError::BadProfile {
-        message: "the profile is not UTF-8".into(),
+        message: format!("the {what} is not UTF-8"),
         key: None,
     })?;
     if !json {
         return Ok(text);
     }
-    let doc: ProfileDoc = serde_json::from_str(&text).map_err(|e| ApiError::BadProfile {
+    let doc: D = serde_json::from_str(&text).map_err(|e| ApiError::BadProfile {
         message: format!("request body: {e}"),
         key: None,
     })?;
-    toml::to_string(&doc).map_err(|e| ApiError::Internal(format!("profile as TOML: {e}")))
+    toml::to_string(&doc).map_err(|e| ApiError::Internal(format!("{what} as TOML: {e}")))
 }
 
 fn written(status: StatusCode, c: &Current) -> Response {
     let mut r = (status, Json(MachineDto::from(c))).into_response();
     r.headers_mut().insert(header::ETAG, etag_header(c));
-    if let Ok(v) = HeaderValue::from_str(&format!("/v1/machines/{}", c.profile.machine.id)) {
+    if let Ok(v) = HeaderValue::from_str(&format!("/v1/machines/{}", c.item.machine.id)) {
         r.headers_mut().insert(header::LOCATION, v);
     }
     r
@@ -287,7 +298,7 @@ pub(super) async fn create_machine(State(st): State<Arc<AppState>>, req: Request
     authorize(&st, req.headers())?;
     let text = profile_text(req).await?;
     let (c, _) = st.machines.put(&text, None, Expect::Absent).await?;
-    tracing::info!(machine = %c.profile.machine.id, version = c.version, "machine profile created");
+    tracing::info!(machine = %c.item.machine.id, version = c.version, "machine profile created");
     Ok(written(StatusCode::CREATED, &c))
 }
 
@@ -370,15 +381,20 @@ pub(super) async fn list_versions(
     State(st): State<Arc<AppState>>,
     Path(id): Path<String>,
 ) -> Result<Json<VersionsDto>, ApiError> {
-    let versions = match st.machines.versions(&id).await {
+    versions_of(&st.machines, id.clone()).await?.map(Json).ok_or(ApiError::UnknownMachine(id))
+}
+
+/// A shelf's history of `id`; `None` when it never had one.
+pub(super) async fn versions_of<T: Kind>(shelf: &Shelf<T>, id: String) -> Result<Option<VersionsDto>, ApiError> {
+    let versions = match shelf.versions(&id).await {
         Err(crate::machines::Error::ReadOnly) => Vec::new(),
         r => r?,
     };
-    let current = st.machines.get(&id).ok();
+    let current = shelf.get(&id).ok();
     if versions.is_empty() && current.is_none() {
-        return Err(ApiError::UnknownMachine(id));
+        return Ok(None);
     }
-    Ok(Json(VersionsDto {
+    Ok(Some(VersionsDto {
         current: current.map(|c| c.version),
         versions: versions
             .into_iter()
@@ -402,10 +418,15 @@ pub(super) async fn get_version(
     State(st): State<Arc<AppState>>,
     Path((id, version)): Path<(String, String)>,
 ) -> Result<Response, ApiError> {
+    version_toml(&st.machines, &id, &version).await
+}
+
+/// One version's TOML of a shelf, by the path's `version`.
+pub(super) async fn version_toml<T: Kind>(shelf: &Shelf<T>, id: &str, version: &str) -> Result<Response, ApiError> {
     let v: i64 = version
         .parse()
-        .map_err(|_| ApiError::NotFound(format!("no version {} of {}", quote(&version), quote(&id))))?;
-    match st.machines.text(&id, v).await {
+        .map_err(|_| ApiError::NotFound(format!("no version {} of {}", quote(version), quote(id))))?;
+    match shelf.text(id, v).await {
         Ok(t) => Ok(toml_response(StatusCode::OK, t)),
         Err(crate::machines::Error::ReadOnly) => Err(ApiError::NotFound("no version store in this process".into())),
         Err(e) => Err(ApiError::NotFound(e.to_string())),

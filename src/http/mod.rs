@@ -10,6 +10,7 @@ mod machine_ops;
 mod machines;
 mod post;
 mod server;
+mod tools;
 
 pub use error::{ApiError, ApiJson, Problem};
 pub use post::PostParams;
@@ -269,11 +270,12 @@ pub struct AppState {
 #[openapi(
     info(title = "kinepost", description = "5-axis CNC postprocessor: CL data in, verified NC out, for any machine profile."),
     paths(post::post_cl, machines::list_machines, machines::get_machine, machines::create_machine, machines::put_machine,
-        machines::delete_machine, machines::list_versions, machines::get_version, list_dialects, machine_ops::fk_route, machine_ops::ik_route,
+        machines::delete_machine, machines::list_versions, machines::get_version, tools::get_tools, tools::put_tools,
+        tools::delete_tools, tools::list_tool_versions, tools::get_tool_version, list_dialects, machine_ops::fk_route, machine_ops::ik_route,
         machine_ops::validate_pose, machine_ops::angle_error_fit, machine_ops::calibrate, healthz, readyz, metrics_route,
         jobs::submit, jobs::list_jobs, jobs::get_job, jobs::delete_job, jobs::job_nc, jobs::job_diagnostics, jobs::job_preview),
     components(schemas(Problem, machines::MachineDto, machines::LinearDto, machines::RotaryDto, machines::AngleErrorDto,
-        machines::VersionsDto, machines::VersionDto, DialectDto, PostParams, machine_ops::FkRequest,
+        machines::VersionsDto, machines::VersionDto, tools::ToolTableDto, tools::ToolDto, tools::HolderDto, DialectDto, PostParams, machine_ops::FkRequest,
         machine_ops::PoseDto, machine_ops::PoseRequest, machine_ops::ReachDto, machine_ops::AngleFitRequest, machine_ops::FitDto,
         machine_ops::AngleFitResponse, machine_ops::MeasurementDto, machine_ops::CalibrateRequest, machine_ops::CalibrateResponse,
         jobs::JobView, jobs::JobProgress, jobs::JobLinks, jobs::JobList)),
@@ -348,6 +350,12 @@ pub fn app(state: Arc<AppState>) -> axum::Router {
         )
         .route("/v1/machines/{id}/versions", get(machines::list_versions))
         .route("/v1/machines/{id}/versions/{version}", get(machines::get_version))
+        .route(
+            "/v1/machines/{id}/tools",
+            get(tools::get_tools).put(tools::put_tools).delete(tools::delete_tools),
+        )
+        .route("/v1/machines/{id}/tools/versions", get(tools::list_tool_versions))
+        .route("/v1/machines/{id}/tools/versions/{version}", get(tools::get_tool_version))
         .route("/v1/machines/{id}/fk", post_route(machine_ops::fk_route))
         .route("/v1/machines/{id}/ik", post_route(machine_ops::ik_route))
         .route("/v1/machines/{id}/validate-pose", post_route(machine_ops::validate_pose))
@@ -561,8 +569,8 @@ async fn list_dialects(State(st): State<Arc<AppState>>) -> Json<Vec<DialectDto>>
                     .machines
                     .list()
                     .iter()
-                    .filter(|c| c.profile.machine.controller == d.name)
-                    .map(|c| c.profile.machine.id.clone())
+                    .filter(|c| c.item.machine.controller == d.name)
+                    .map(|c| c.item.machine.id.clone())
                     .collect(),
                 canned_cycles: d.cycles.describe().into(),
                 tilted_planes: d.planes.describe().into(),

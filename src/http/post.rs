@@ -38,8 +38,12 @@ pub struct PostParams {
     pub dialect: Option<String>,
     /// `joint` (default) or `tcp`.
     pub mode: Option<String>,
-    /// Tool length (gauge line to tip), profile units; default: the CL file's, else the profile's.
+    /// Tool length (gauge line to tip), profile units, one for every tool (a single-tool job);
+    /// default per tool: the tool table's, else the CL file's, else the profile's.
     pub tool_length: Option<f64>,
+    /// The job's own tool table, as TOML text (`units = "mm"`, `[[tool]] number = 3, length =
+    /// 112.5 …`): each tool's length; it replaces the machine's (`/v1/machines/{id}/tools`).
+    pub tool_table: Option<String>,
     /// Work offset `x,y,z` in profile units.
     pub work_offset: Option<String>,
     /// Chord tolerance in profile units (default 0.01 mm / 0.0004 in, at most 1 mm / 0.04 in):
@@ -81,6 +85,8 @@ impl PostParams {
             dialect: self.dialect.clone(),
             mode: self.mode.clone(),
             tool_length: self.tool_length,
+            tool_table: self.tool_table.clone(),
+            machine_tools_version: None,
             work_offset: self.work_offset.clone(),
             tolerance: self.tolerance,
             sequence_numbers: self.sequence_numbers,
@@ -119,6 +125,7 @@ impl PostParams {
             "dialect" => self.dialect = Some(v).filter(|s| !s.is_empty()),
             "mode" => self.mode = Some(v).filter(|s| !s.is_empty()),
             "tool_length" => self.tool_length = if v.trim().is_empty() { None } else { Some(num(&v)?) },
+            "tool_table" => self.tool_table = Some(v).filter(|s| !s.trim().is_empty()),
             "work_offset" => self.work_offset = Some(v).filter(|s| !s.trim().is_empty()),
             "tolerance" => self.tolerance = if v.trim().is_empty() { None } else { Some(num(&v)?) },
             "sequence_numbers" => self.sequence_numbers = Some(flag(&v)?),
@@ -289,8 +296,9 @@ pub async fn post_cl(
     let ndjson = wants_ndjson(req.headers())?;
     let slot = req.extensions_mut().remove::<Arc<limits::StreamSlot>>();
     let (params, filename, body) = upload(&st, query, req).await?;
-    let profile = params.profile(&st)?.profile;
-    let mut opts = params.settings().profile_options(&profile).map_err(ApiError::BadParameter)?;
+    let profile = params.profile(&st)?.item;
+    let standing = super::tools::standing(&st, &profile.machine.id);
+    let mut opts = params.settings().profile_options(&profile, standing).map_err(ApiError::BadParameter)?;
     opts.budget = st.config.post_budget;
     opts.header.push(format!("DATE {} UTC", crate::output::utc_now()));
     if let Some(f) = &filename {

@@ -253,14 +253,22 @@ impl Queue {
         // The version it was submitted with, even if the profile changed or went since.
         let profile = match job.machine_version {
             Some(v) => self.machines.version(&job.machine, v).await,
-            None => self.machines.get(&job.machine).map(|c| c.profile),
+            None => self.machines.get(&job.machine).map(|c| c.item),
         }
         .map_err(|e| format!("machine {:?}: {e}", job.machine));
+        // And the machine's tool table it was submitted with, if it took one.
+        let tools = match job.settings.machine_tools_version {
+            Some(v) => match self.machines.tools.version(&job.machine, v).await {
+                Ok(t) => Ok(Some((t, format!("THE MACHINE'S TOOL TABLE V{v}")))),
+                Err(e) => Err(format!("machine {:?}: tool table version {v}: {e}", job.machine)),
+            },
+            None => Ok(None),
+        };
         let task = {
             let (job, cancel, progress) = (job.clone(), cancel.clone(), progress.clone());
             let spool = self.store.spool().to_path_buf();
             let budget = self.config.budget;
-            tokio::task::spawn_blocking(move || execute(profile?, &spool, &job, budget, &cancel, &progress))
+            tokio::task::spawn_blocking(move || execute(profile?, tools?, &spool, &job, budget, &cancel, &progress))
         };
         tokio::pin!(task);
         let result = loop {
@@ -371,6 +379,7 @@ impl Sink for JobSink<'_> {
 /// message a user reads in the job's `error`.
 fn execute(
     profile: Arc<Profile>,
+    tools: Option<(Arc<crate::machines::tools::ToolTable>, String)>,
     spool: &std::path::Path,
     job: &Job,
     budget: post::Budget,
@@ -378,7 +387,7 @@ fn execute(
     progress: &Arc<Progress>,
 ) -> Result<Summary, String> {
     let paths = store::Paths::new(spool, &job.id, job.attempts);
-    let mut opts = job.settings.profile_options(&profile)?;
+    let mut opts = job.settings.profile_options(&profile, tools)?;
     opts.budget = budget;
     opts.header.push(format!("JOB {}", job.id));
     if let Some(f) = &job.filename {

@@ -1,10 +1,13 @@
-//! The live machine library: the profile files as the first versions, then every change made
-//! over the API as a new version, in the same store as the jobs. A job names the version it was
-//! submitted with and runs with that one, whatever happens to the profile meanwhile.
+//! The live machine library: the profile files (and each machine's tool table beside its
+//! profile) as the first versions, then every change made over the API as a new version, in the
+//! same store as the jobs. A job names the versions it was submitted with and runs with those,
+//! whatever happens to the profile or the table meanwhile.
 //!
-//! Reads come from memory (the current version of each profile); writes go to the store in one
-//! transaction each, then to memory, one writer at a time.
+//! Reads come from memory (the current version of each); writes go to the store in one
+//! transaction each, then to memory, one writer at a time. Profiles and tool tables are two
+//! [`Shelf`]s of the same kind of history, each in its own table of the store.
 
+use super::tools::{TABLE_SUFFIX, ToolTable, parse_tool_table};
 use super::{Error, Library, Profile, parse_profile};
 use sqlx::AnyPool;
 use sqlx::Row;
@@ -32,19 +35,80 @@ impl Source {
     }
 }
 
-/// The current version of a profile.
-#[derive(Clone, Debug)]
-pub struct Current {
+/// What a [`Shelf`] keeps versions of: machine profiles, and each machine's tool table.
+pub trait Kind: Send + Sync + Sized + 'static {
+    /// The store's table of versions (the same columns for every kind).
+    const TABLE: &'static str;
+    /// A file of this kind in the library directory is `<id><SUFFIX>`.
+    const SUFFIX: &'static str;
+    /// Between the id and the version in an ETag (`"id-v3"`, `"id-tools-v3"`): the two never
+    /// stand for each other in `If-Match`.
+    const ETAG: &'static str;
+    /// What it is, in messages.
+    const WHAT: &'static str;
+    /// Parses and validates `text` (named `file` in errors); `id`: the id it must have. Returns
+    /// its id.
+    fn parse(text: &str, file: &str, id: Option<&str>) -> Result<(String, Self), Error>;
+    /// The library's files of this kind, by id.
+    fn files(lib: &Library) -> Vec<(String, Arc<Self>)>;
+}
+
+impl Kind for Profile {
+    const TABLE: &'static str = "machine_versions";
+    const SUFFIX: &'static str = ".toml";
+    const ETAG: &'static str = "-v";
+    const WHAT: &'static str = "machine";
+    fn parse(text: &str, file: &str, id: Option<&str>) -> Result<(String, Self), Error> {
+        let p = parse_profile(text, file, id)?;
+        Ok((p.machine.id.clone(), p))
+    }
+    fn files(lib: &Library) -> Vec<(String, Arc<Self>)> {
+        lib.iter().map(|p| (p.machine.id.clone(), p.clone())).collect()
+    }
+}
+
+impl Kind for ToolTable {
+    const TABLE: &'static str = "tool_table_versions";
+    const SUFFIX: &'static str = TABLE_SUFFIX;
+    const ETAG: &'static str = "-tools-v";
+    const WHAT: &'static str = "tool table of machine";
+    fn parse(text: &str, file: &str, id: Option<&str>) -> Result<(String, Self), Error> {
+        // A table is always written to a machine's path: its id is the machine's.
+        let id = id.ok_or_else(|| Error::Store("a tool table needs its machine's id".into()))?;
+        Ok((id.to_string(), parse_tool_table(text, file)?))
+    }
+    fn files(lib: &Library) -> Vec<(String, Arc<Self>)> {
+        lib.iter().filter_map(|p| Some((p.machine.id.clone(), lib.tools(&p.machine.id)?))).collect()
+    }
+}
+
+/// The current version of a profile (or tool table).
+#[derive(Debug)]
+pub struct Current<T = Profile> {
+    pub id: String,
     pub version: i64,
-    pub profile: Arc<Profile>,
+    pub item: Arc<T>,
     pub source: Source,
     pub created_ms: i64,
 }
 
-impl Current {
+// Not derived: that would ask `T: Clone`, and only the `Arc` is cloned.
+impl<T> Clone for Current<T> {
+    fn clone(&self) -> Self {
+        Current {
+            id: self.id.clone(),
+            version: self.version,
+            item: self.item.clone(),
+            source: self.source,
+            created_ms: self.created_ms,
+        }
+    }
+}
+
+impl<T: Kind> Current<T> {
     /// A strong validator: a version never changes once written.
     pub fn etag(&self) -> String {
-        format!("\"{}-v{}\"", self.profile.machine.id, self.version)
+        format!("\"{}{}{}\"", self.id, T::ETAG, self.version)
     }
 }
 
@@ -71,23 +135,71 @@ pub enum Expect {
     Any,
 }
 
+/// The machine profiles, with each machine's tool table beside them. Reads of profiles go
+/// straight to the profiles' shelf (`Deref`).
 pub struct Catalog {
+    profiles: Shelf<Profile>,
+    pub tools: Shelf<ToolTable>,
+}
+
+impl std::ops::Deref for Catalog {
+    type Target = Shelf<Profile>;
+    fn deref(&self) -> &Shelf<Profile> {
+        &self.profiles
+    }
+}
+
+impl Catalog {
+    /// The files only, read-only (a process without a store: benches, tools).
+    pub fn files_only(files: &Library) -> Arc<Catalog> {
+        Arc::new(Catalog {
+            profiles: Shelf::files_only(files),
+            tools: Shelf::files_only(files),
+        })
+    }
+
+    /// Opens both shelves on a store (see [`Shelf::open`]).
+    pub async fn open(files: &Library, db: AnyPool) -> Result<Arc<Catalog>, Error> {
+        Ok(Arc::new(Catalog {
+            profiles: Shelf::open(files, db.clone()).await?,
+            tools: Shelf::open(files, db).await?,
+        }))
+    }
+
+    /// Re-reads both shelves' current versions from the store.
+    pub async fn refresh(&self) -> Result<(), Error> {
+        self.profiles.refresh().await?;
+        self.tools.refresh().await
+    }
+}
+
+/// The versions of one kind: the current ones in memory, the history in the store.
+pub struct Shelf<T: Kind> {
     db: Option<AnyPool>,
-    current: RwLock<BTreeMap<String, Current>>,
+    current: RwLock<BTreeMap<String, Current<T>>>,
     /// Versions jobs asked for, parsed once.
-    old: Mutex<HashMap<(String, i64), Arc<Profile>>>,
+    old: Mutex<HashMap<(String, i64), Arc<T>>>,
     /// One writer at a time, so memory follows the store in commit order.
     write: tokio::sync::Mutex<()>,
 }
 
-const SCHEMA: &str = "CREATE TABLE IF NOT EXISTS machine_versions (
+fn schema(table: &str) -> String {
+    format!(
+        "CREATE TABLE IF NOT EXISTS {table} (
     id TEXT NOT NULL,
     version BIGINT NOT NULL,
     toml TEXT,
     source TEXT NOT NULL,
     created_ms BIGINT NOT NULL,
     PRIMARY KEY (id, version)
-)";
+)"
+    )
+}
+
+/// A statement on kind `T`'s table: `{table}` in `sql` names it (a constant, never input).
+fn sql<T: Kind>(sql: &str) -> sqlx::AssertSqlSafe<String> {
+    sqlx::AssertSqlSafe(sql.replace("{table}", T::TABLE))
+}
 
 fn now_ms() -> i64 {
     std::time::SystemTime::now()
@@ -115,49 +227,46 @@ fn db_err(e: sqlx::Error) -> Error {
     Error::Store(e.to_string())
 }
 
-impl Catalog {
-    /// The files only, read-only (a process without a store: benches, tools).
-    pub fn files_only(files: &Library) -> Arc<Catalog> {
-        let current = files
-            .iter()
-            .map(|p| {
-                (
-                    p.machine.id.clone(),
-                    Current {
-                        version: 1,
-                        profile: p.clone(),
-                        source: Source::File,
-                        created_ms: 0,
-                    },
-                )
+impl<T: Kind> Shelf<T> {
+    fn files_only(files: &Library) -> Shelf<T> {
+        let current = T::files(files)
+            .into_iter()
+            .map(|(id, item)| {
+                let c = Current {
+                    id: id.clone(),
+                    version: 1,
+                    item,
+                    source: Source::File,
+                    created_ms: 0,
+                };
+                (id, c)
             })
             .collect();
-        Arc::new(Catalog {
+        Shelf {
             db: None,
             current: RwLock::new(current),
             old: Mutex::new(HashMap::new()),
             write: tokio::sync::Mutex::new(()),
-        })
+        }
     }
 
-    /// Opens the catalog on a store. A profile file becomes a new version when its text differs
-    /// from the last version that came from a file and no API write or deletion came after it:
-    /// a shop's own changes are never overwritten by a file at start-up.
-    pub async fn open(files: &Library, db: AnyPool) -> Result<Arc<Catalog>, Error> {
-        sqlx::query(SCHEMA).execute(&db).await.map_err(db_err)?;
-        for p in files.iter() {
-            let id = &p.machine.id;
-            let path = files.dir.join(format!("{id}.toml"));
+    /// Opens the shelf on a store. A file becomes a new version when its text differs from the
+    /// last version that came from a file and no API write or deletion came after it: a shop's
+    /// own changes are never overwritten by a file at start-up.
+    async fn open(files: &Library, db: AnyPool) -> Result<Shelf<T>, Error> {
+        sqlx::query(sqlx::AssertSqlSafe(schema(T::TABLE))).execute(&db).await.map_err(db_err)?;
+        for (id, _) in T::files(files) {
+            let id = &id;
+            let path = files.dir.join(format!("{id}{}", T::SUFFIX));
             let text = &tokio::fs::read_to_string(&path).await.map_err(|source| Error::Io {
                 path: path.display().to_string(),
                 source,
             })?;
-            let last =
-                sqlx::query("SELECT version, toml, source FROM machine_versions WHERE id = $1 ORDER BY version DESC LIMIT 1")
-                    .bind(id)
-                    .fetch_optional(&db)
-                    .await
-                    .map_err(db_err)?;
+            let last = sqlx::query(sql::<T>("SELECT version, toml, source FROM {table} WHERE id = $1 ORDER BY version DESC LIMIT 1"))
+                .bind(id)
+                .fetch_optional(&db)
+                .await
+                .map_err(db_err)?;
             let next = match &last {
                 None => Some(1),
                 Some(r) => {
@@ -165,7 +274,7 @@ impl Catalog {
                     match (Source::parse(&s), t) {
                         (Source::File, Some(t)) if t != *text => Some(v + 1),
                         (Source::Api, _) | (_, None) => {
-                            tracing::info!(machine = %id, version = v, "kept the API's version over the profile file");
+                            tracing::info!(machine = %id, version = v, table = T::TABLE, "kept the API's version over the file");
                             None
                         }
                         _ => None,
@@ -173,9 +282,9 @@ impl Catalog {
                 }
             };
             if let Some(v) = next {
-                sqlx::query(
-                    "INSERT INTO machine_versions (id, version, toml, source, created_ms) VALUES ($1, $2, $3, 'file', $4)",
-                )
+                sqlx::query(sql::<T>(
+                    "INSERT INTO {table} (id, version, toml, source, created_ms) VALUES ($1, $2, $3, 'file', $4)",
+                ))
                 .bind(id)
                 .bind(v)
                 .bind(text)
@@ -185,17 +294,17 @@ impl Catalog {
                 .map_err(db_err)?;
             }
         }
-        let catalog = Arc::new(Catalog {
+        let shelf = Shelf {
             db: Some(db),
             current: RwLock::new(BTreeMap::new()),
             old: Mutex::new(HashMap::new()),
             write: tokio::sync::Mutex::new(()),
-        });
-        catalog.refresh().await?;
-        Ok(catalog)
+        };
+        shelf.refresh().await?;
+        Ok(shelf)
     }
 
-    pub fn get(&self, id: &str) -> Result<Current, Error> {
+    pub fn get(&self, id: &str) -> Result<Current<T>, Error> {
         self.current
             .read()
             .map_err(|_| Error::Store("catalog lock poisoned".into()))?
@@ -204,7 +313,7 @@ impl Catalog {
             .ok_or_else(|| Error::NotFound(id.into()))
     }
 
-    pub fn list(&self) -> Vec<Current> {
+    pub fn list(&self) -> Vec<Current<T>> {
         self.current.read().map(|m| m.values().cloned().collect()).unwrap_or_default()
     }
 
@@ -220,18 +329,18 @@ impl Catalog {
         self.db.as_ref().ok_or(Error::ReadOnly)
     }
 
-    /// A version's profile (a job's); the current one without a store.
-    pub async fn version(&self, id: &str, version: i64) -> Result<Arc<Profile>, Error> {
+    /// A version (a job's); the current one without a store.
+    pub async fn version(&self, id: &str, version: i64) -> Result<Arc<T>, Error> {
         if let Ok(c) = self.get(id)
             && c.version == version
         {
-            return Ok(c.profile);
+            return Ok(c.item);
         }
         if let Some(p) = self.old.lock().ok().and_then(|m| m.get(&(id.to_string(), version)).cloned()) {
             return Ok(p);
         }
         let text = self.text(id, version).await?;
-        let p = Arc::new(parse_profile(&text, &format!("{id} v{version}"), Some(id))?);
+        let p = Arc::new(T::parse(&text, &format!("{id} v{version}"), Some(id))?.1);
         if let Ok(mut m) = self.old.lock() {
             if m.len() > 256 {
                 m.clear();
@@ -243,7 +352,7 @@ impl Catalog {
 
     /// The TOML of a version, exactly as written (`None`: the version is a deletion).
     pub async fn text(&self, id: &str, version: i64) -> Result<String, Error> {
-        let row = sqlx::query("SELECT toml FROM machine_versions WHERE id = $1 AND version = $2")
+        let row = sqlx::query(sql::<T>("SELECT toml FROM {table} WHERE id = $1 AND version = $2"))
             .bind(id)
             .bind(version)
             .fetch_optional(self.db()?)
@@ -259,7 +368,7 @@ impl Catalog {
     /// A profile's history, oldest first; empty for an id never seen.
     pub async fn versions(&self, id: &str) -> Result<Vec<Version>, Error> {
         let rows =
-            sqlx::query("SELECT version, source, created_ms, CAST(CASE WHEN toml IS NULL THEN 1 ELSE 0 END AS BIGINT) FROM machine_versions WHERE id = $1 ORDER BY version")
+            sqlx::query(sql::<T>("SELECT version, source, created_ms, CAST(CASE WHEN toml IS NULL THEN 1 ELSE 0 END AS BIGINT) FROM {table} WHERE id = $1 ORDER BY version"))
                 .bind(id)
                 .fetch_all(self.db()?)
                 .await
@@ -278,14 +387,14 @@ impl Catalog {
     /// Validates `text` with the files' loader and stores it as the next version. `id`: the id
     /// it must have (PUT's path). Returns the new current version and whether it created the
     /// profile.
-    pub async fn put(&self, text: &str, id: Option<&str>, expect: Expect) -> Result<(Current, bool), Error> {
-        let profile = parse_profile(text, "request body", id)?;
-        let id = profile.machine.id.clone();
+    pub async fn put(&self, text: &str, id: Option<&str>, expect: Expect) -> Result<(Current<T>, bool), Error> {
+        let (id, item) = T::parse(text, "request body", id)?;
         let _w = self.write.lock().await;
         let (version, created) = self.append(&id, Some(text), expect).await?;
         let cur = Current {
+            id: id.clone(),
             version,
-            profile: Arc::new(profile),
+            item: Arc::new(item),
             source: Source::Api,
             created_ms: now_ms(),
         };
@@ -310,10 +419,17 @@ impl Catalog {
     /// the key: that is a failed precondition, not an error.
     async fn append(&self, id: &str, text: Option<&str>, expect: Expect) -> Result<(i64, bool), Error> {
         let mut tx = self.db()?.begin().await.map_err(db_err)?;
-        let last = sqlx::query(
-            "SELECT version, CAST(CASE WHEN toml IS NULL THEN 1 ELSE 0 END AS BIGINT) FROM machine_versions
+        // A write first, so the transaction holds the write lock before it reads: on SQLite one
+        // that reads and then writes cannot wait for a writer that came between (a job's
+        // progress): "database is locked" at once, busy timeout or not. PostgreSQL: a no-op.
+        sqlx::query(sql::<T>("UPDATE {table} SET version = version WHERE 1 = 0"))
+            .execute(&mut *tx)
+            .await
+            .map_err(db_err)?;
+        let last = sqlx::query(sql::<T>(
+            "SELECT version, CAST(CASE WHEN toml IS NULL THEN 1 ELSE 0 END AS BIGINT) FROM {table}
              WHERE id = $1 ORDER BY version DESC LIMIT 1",
-        )
+        ))
         .bind(id)
         .fetch_optional(&mut *tx)
         .await
@@ -326,7 +442,7 @@ impl Catalog {
         check(id, present, expect)?;
         let version = last.map_or(0, |(v, _)| v) + 1;
         let inserted =
-            sqlx::query("INSERT INTO machine_versions (id, version, toml, source, created_ms) VALUES ($1, $2, $3, 'api', $4)")
+            sqlx::query(sql::<T>("INSERT INTO {table} (id, version, toml, source, created_ms) VALUES ($1, $2, $3, 'api', $4)"))
                 .bind(id)
                 .bind(version)
                 .bind(text)
@@ -351,7 +467,7 @@ impl Catalog {
     /// other's writes. A stored version this build rejects is reported, not served.
     pub async fn refresh(&self) -> Result<(), Error> {
         let Ok(db) = self.db() else { return Ok(()) };
-        let rows = sqlx::query("SELECT id, MAX(version) FROM machine_versions GROUP BY id")
+        let rows = sqlx::query(sql::<T>("SELECT id, MAX(version) FROM {table} GROUP BY id"))
             .fetch_all(db)
             .await
             .map_err(db_err)?;
@@ -360,7 +476,7 @@ impl Catalog {
             if self.get(&id).ok().is_some_and(|c| c.version == v) {
                 continue;
             }
-            let row = sqlx::query("SELECT toml, source, created_ms FROM machine_versions WHERE id = $1 AND version = $2")
+            let row = sqlx::query(sql::<T>("SELECT toml, source, created_ms FROM {table} WHERE id = $1 AND version = $2"))
                 .bind(&id)
                 .bind(v)
                 .fetch_one(db)
@@ -368,22 +484,23 @@ impl Catalog {
                 .map_err(db_err)?;
             let (text, source, created_ms): (Option<String>, String, i64) = (row.get(0), row.get(1), row.get(2));
             let Ok(mut m) = self.current.write() else { continue };
-            match text.map(|t| parse_profile(&t, &format!("{id} v{v}"), Some(&id))) {
+            match text.map(|t| T::parse(&t, &format!("{id} v{v}"), Some(&id))) {
                 None => {
                     m.remove(&id);
                 }
-                Some(Ok(p)) => {
+                Some(Ok((_, p))) => {
                     m.insert(
-                        id,
+                        id.clone(),
                         Current {
+                            id,
                             version: v,
-                            profile: Arc::new(p),
+                            item: Arc::new(p),
                             source: Source::parse(&source),
                             created_ms,
                         },
                     );
                 }
-                Some(Err(e)) => tracing::error!(error = %e, "a stored machine version no longer loads; not served"),
+                Some(Err(e)) => tracing::error!(error = %e, table = T::TABLE, "a stored version no longer loads; not served"),
             }
         }
         Ok(())

@@ -11,7 +11,8 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 pub mod catalog;
-pub use catalog::{Catalog, Current, Expect};
+pub mod tools;
+pub use catalog::{Catalog, Current, Expect, Kind, Shelf};
 
 #[derive(Debug, thiserror::Error)]
 pub enum Error {
@@ -288,10 +289,12 @@ pub fn load_file(path: &Path) -> Result<Profile, Error> {
     parse_profile(&text, &file, Some(stem))
 }
 
-/// The machine library: every `*.toml` of a directory, by id.
+/// The machine library: every `*.toml` of a directory, by id, with each machine's standing tool
+/// table (`<id>.tools.toml`) where there is one.
 #[derive(Clone, Debug, Default)]
 pub struct Library {
     profiles: BTreeMap<String, Arc<Profile>>,
+    tools: BTreeMap<String, Arc<tools::ToolTable>>,
     pub dir: PathBuf,
 }
 
@@ -308,15 +311,36 @@ impl Library {
             .filter(|p| p.extension().is_some_and(|x| x == "toml"))
             .collect();
         paths.sort();
+        let is_table = |p: &Path| p.to_string_lossy().ends_with(tools::TABLE_SUFFIX);
         let mut profiles = BTreeMap::new();
-        for p in paths {
-            let prof = load_file(&p)?;
+        for p in paths.iter().filter(|p| !is_table(p)) {
+            let prof = load_file(p)?;
             profiles.insert(prof.machine.id.clone(), Arc::new(prof));
+        }
+        let mut tables = BTreeMap::new();
+        for p in paths.iter().filter(|p| is_table(p)) {
+            let name = p.file_name().map(|n| n.to_string_lossy().to_string()).unwrap_or_default();
+            let id = name.trim_end_matches(tools::TABLE_SUFFIX);
+            if !profiles.contains_key(id) {
+                // A table for no machine is a typo in its name: it would never be used.
+                return Err(Error::Invalid {
+                    file: p.display().to_string(),
+                    key: String::new(),
+                    problem: format!("a tool table for no machine profile: no {}", quote(&format!("{id}.toml"))),
+                });
+            }
+            tables.insert(id.to_string(), Arc::new(tools::load_tool_table(p)?));
         }
         Ok(Library {
             profiles,
+            tools: tables,
             dir: dir.to_path_buf(),
         })
+    }
+
+    /// Machine `id`'s standing tool table, if its file is there.
+    pub fn tools(&self, id: &str) -> Option<Arc<tools::ToolTable>> {
+        self.tools.get(id).cloned()
     }
 
     pub fn get(&self, id: &str) -> Result<Arc<Profile>, Error> {

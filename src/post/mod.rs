@@ -16,11 +16,13 @@ mod settings;
 pub mod setups;
 mod sink;
 mod source;
+pub mod tools;
 pub mod verify;
 
 pub use emit::linearize::{NONLINEAR_SAMPLES, seg_dist};
 pub use settings::{Budget, MAX_SPINDLE_SPEED, Mode, Options, Settings, parse_triple};
-pub use sink::{AxisStats, AxisWords, BlockInfo, Sink, Summary, TextSink};
+pub use sink::{AxisStats, AxisWords, BlockInfo, Sink, Summary, TextSink, ToolUse};
+pub use tools::LengthFrom;
 pub use source::{ArcSpec, Hole, HolePart, Item, MotionPt, ProgEvent, Source};
 
 use crate::diag::Diagnostic;
@@ -76,7 +78,8 @@ fn run<R: BufRead, S: Sink + ?Sized>(
     let mut src = Source::new(input, m.units, o.cl_units, o.strict)?;
     src.canned_cycles = o.canned_cycles;
     src.feed_max = emit::feed_max(o.dialect, m.units, crate::nc::FeedMode::PerMinute);
-    let setup = Setup::new(o.tool_length.unwrap_or(m.default_tool_length), o.work_offset);
+    let mut lengths = tools::Lengths::new(m.units, o.tool_length, o.tool_table.as_deref(), m.default_tool_length);
+    let setup = Setup::new(lengths.length, o.work_offset);
     let mut e = Emitter::new(m, o, sink, setup, &src);
     e.program_start()?;
     let mut planner = Planner::new(m, setup);
@@ -86,15 +89,37 @@ fn run<R: BufRead, S: Sink + ?Sized>(
         let item = src.next_item()?;
         e.sink.read = src.bytes_read();
         let Some(item) = item else { break };
+        // The tool length governs IK: a change cannot wait in the window. It takes effect after
+        // the tool change it belongs to is written (the retract is the old tool's).
+        let step = match &item {
+            Item::Event(ProgEvent::ToolLength { length, line }) if o.tool_length.is_none() => {
+                lengths.cl_length(*length, *line)
+            }
+            Item::Event(ProgEvent::Tool { number, line, .. }) => lengths.tool(*number, *line),
+            Item::Motion(_) if lengths.waiting() => lengths.motion(),
+            _ => tools::Step::default(),
+        };
+        let length_change = step.set.is_some() || step.diag.is_some();
+        if length_change {
+            planner.finish(&mut |x| deliver(&mut e, &mut pending, &mut failed, x));
+            let tool = match &item {
+                Item::Event(ev @ ProgEvent::Tool { .. }) => Some(ev.clone()),
+                _ => None,
+            };
+            for ev in tool.into_iter().chain(step.diag.map(ProgEvent::Diag)) {
+                planner.push_event(ev, &mut |x| deliver(&mut e, &mut pending, &mut failed, x));
+            }
+            e.drain(&mut pending, true)?;
+            if let Some((l, from)) = step.set {
+                planner.setup.tool_length = l;
+                e.tool_length(l, from)?;
+            }
+        }
         match item {
             Item::Motion(pt) => planner.push_point(pt, &mut |x| deliver(&mut e, &mut pending, &mut failed, x)),
-            Item::Event(ProgEvent::ToolLength(l)) if o.tool_length.is_none() => {
-                // The tool length governs IK: it cannot wait in the window.
-                planner.finish(&mut |x| deliver(&mut e, &mut pending, &mut failed, x));
-                e.drain(&mut pending, true)?;
-                planner.setup.tool_length = l;
-                e.cl_tool_length(l)?;
-            }
+            // Weighed above (with the job's length fixed, the emitter tells a CL length it overrides).
+            Item::Event(ProgEvent::ToolLength { .. }) if o.tool_length.is_none() => {}
+            Item::Event(ProgEvent::Tool { .. }) if length_change => {} // written above
             Item::Event(ev) => planner.push_event(ev, &mut |x| deliver(&mut e, &mut pending, &mut failed, x)),
         }
         if let Some(err) = failed.take() {

@@ -2,9 +2,11 @@
 //! place, [`Settings::options`], into the engine's [`Options`].
 
 use crate::kinematics::{Machine, Units, Vec3};
+use crate::machines::tools::{ToolTable, parse_tool_table};
 use crate::nc::Dialect;
 use crate::text::quote;
 use serde::Serialize;
+use std::sync::Arc;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "lowercase")]
@@ -19,8 +21,12 @@ pub enum Mode {
 pub struct Options {
     pub mode: Mode,
     pub dialect: &'static Dialect,
-    /// Profile units; overrides the CL file's and the profile's default.
+    /// Profile units; overrides the CL file's, the tool table's and the profile's default.
     pub tool_length: Option<f64>,
+    /// Lengths per tool number (the job's table, else the machine's): `post::tools` weighs them.
+    pub tool_table: Option<Arc<ToolTable>>,
+    /// How the program's header names that table.
+    pub tool_table_label: String,
     pub work_offset: Vec3,
     /// Chord tolerance (profile units): linearization, arcs, and the self-verification bound.
     pub tolerance: f64,
@@ -124,6 +130,8 @@ impl Options {
             mode: Mode::Joint,
             dialect: crate::nc::dialect(&m.controller).unwrap_or(&crate::nc::FANUC),
             tool_length: None,
+            tool_table: None,
+            tool_table_label: String::new(),
             work_offset: Vec3::zeros(),
             tolerance: if mm { 0.01 } else { 0.0004 },
             sequence_numbers: false,
@@ -165,8 +173,18 @@ pub struct Settings {
     pub dialect: Option<String>,
     /// `joint` (default) or `tcp`.
     pub mode: Option<String>,
-    /// Tool length (gauge line to tip), profile units; default: the CL file's, else the profile's.
+    /// Tool length (gauge line to tip), profile units, for every tool: a single-tool job's;
+    /// default: per tool, the tool table's, else the CL file's, else the profile's.
     pub tool_length: Option<f64>,
+    /// The job's own tool table (TOML text: `units`, `[[tool]] number, length, …`); it replaces
+    /// the machine's for this job.
+    #[serde(default)]
+    pub tool_table: Option<String>,
+    /// Set by the service when it accepts a job, never by a request: the version of the
+    /// machine's tool table the job runs with (none: the machine had none, or the job brings
+    /// its own).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub machine_tools_version: Option<i64>,
     /// Work offset `x,y,z` in profile units.
     pub work_offset: Option<String>,
     /// Chord tolerance in profile units (default 0.01 mm / 0.0004 in, at most 1 mm / 0.04 in):
@@ -209,10 +227,21 @@ pub struct Settings {
 
 impl Settings {
     /// Options for a loaded profile: [`Settings::options`] plus what the profile adds beyond
-    /// its kinematics (rotary clamp words).
-    pub fn profile_options(&self, p: &crate::machines::Profile) -> Result<Options, String> {
+    /// its kinematics (rotary clamp words) and the machine's standing tool table (`label` names
+    /// it in the header), which the job's own replaces.
+    pub fn profile_options(
+        &self,
+        p: &crate::machines::Profile,
+        standing: Option<(Arc<ToolTable>, String)>,
+    ) -> Result<Options, String> {
         let mut o = self.options(&p.machine)?;
         o.clamps = p.clamps();
+        if o.tool_table.is_none()
+            && let Some((t, label)) = standing
+        {
+            o.tool_table = Some(t);
+            o.tool_table_label = label;
+        }
         Ok(o)
     }
 
@@ -236,6 +265,11 @@ impl Settings {
                 ));
             }
             o.tool_length = Some(l);
+        }
+        if let Some(text) = self.tool_table.as_deref().filter(|t| !t.trim().is_empty()) {
+            let t = parse_tool_table(text, "tool_table").map_err(|e| e.to_string())?;
+            o.tool_table = Some(Arc::new(t));
+            o.tool_table_label = "THE JOB'S TOOL TABLE".into();
         }
         if let Some(w) = &self.work_offset {
             o.work_offset = parse_triple(w).map_err(|e| format!("work_offset: {e}"))?;

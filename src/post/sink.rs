@@ -84,6 +84,15 @@ pub struct AxisStats {
     pub largest_step_line: Option<u32>,
 }
 
+/// One tool's length in a program, and where it came from.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct ToolUse {
+    /// `None`: before any tool change.
+    pub tool: Option<u32>,
+    pub length: f64,
+    pub from: crate::post::tools::LengthFrom,
+}
+
 #[derive(Clone, Debug, Default, Serialize)]
 pub struct Summary {
     pub machine: String,
@@ -91,7 +100,11 @@ pub struct Summary {
     pub units: String,
     pub cl_units: String,
     pub cl_units_source: String,
+    /// The tool length in force at the end.
     pub tool_length: f64,
+    /// Each tool's length and where it came from, in the order the tools were loaded (a tool
+    /// whose length changed has a line per length).
+    pub tools: Vec<ToolUse>,
     pub cl_points: u64,
     pub blocks: u64,
     pub inserted_blocks: u64,

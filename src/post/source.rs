@@ -84,7 +84,11 @@ pub enum ProgEvent {
         adjust: Option<u32>,
         line: u32,
     },
-    ToolLength(f64),
+    /// A tool length the CL gives (profile units), at `line`.
+    ToolLength {
+        length: f64,
+        line: u32,
+    },
     Dwell {
         dwell: Dwell,
         line: u32,
@@ -517,7 +521,10 @@ impl<R: BufRead> Source<R> {
                 line,
                 format!("tool length {l} is negative: not used (the length in force stays)"),
             ),
-            Some(l) => self.out.push_back(Item::Event(ProgEvent::ToolLength(l * self.scale))),
+            Some(l) => self.out.push_back(Item::Event(ProgEvent::ToolLength {
+                length: l * self.scale,
+                line,
+            })),
             None => {}
         }
     }

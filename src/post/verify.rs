@@ -5,6 +5,7 @@
 
 use super::source::{HolePart, Item, MotionPt, ProgEvent, Source};
 use super::setups::WorkOffsets;
+use super::tools::Lengths;
 use super::{Mode, seg_dist};
 
 /// The work coordinate systems an NC program may select, in order.
@@ -69,6 +70,9 @@ pub struct VerifyOptions {
     /// Take the tool length the CL file sets (`LOADTL/n,LENGTH,l`, `TLDATA`) from where it sets
     /// it, as `post` does when the job fixes none (`setup`'s length until then).
     pub cl_tool_length: bool,
+    /// The tool table the program was posted with: each tool's length as `post` weighs it
+    /// (`post::tools`), unless `cl_tool_length` is off (one length for every tool).
+    pub tool_table: Option<std::sync::Arc<crate::machines::tools::ToolTable>>,
 }
 
 /// The joints a block commands, for the motion between blocks.
@@ -139,14 +143,30 @@ pub fn verify<C: BufRead, N: BufRead>(cl: C, nc: N, m: &Machine, o: &VerifyOptio
             ..Default::default()
         },
     };
+    let fixed = (!o.cl_tool_length).then_some(o.setup.tool_length);
+    let mut lengths = Lengths::new(m.units, fixed, o.tool_table.as_deref(), o.setup.tool_length);
     while let Some(item) = src.next_item()? {
-        match item {
-            Item::Motion(pt) if !pt.inserted => replay.point(&pt)?,
-            // Arcs and cycles expanded by the reader are not CL points of the file.
-            Item::Motion(_) => {}
-            Item::Event(ProgEvent::ToolLength(l)) if o.cl_tool_length => replay.tool_length(l),
-            Item::Event(ProgEvent::Setup { shift, turned, .. }) => replay.setup(shift, turned),
-            Item::Event(_) => {}
+        let step = match item {
+            Item::Motion(pt) => {
+                if let Some((l, _)) = lengths.motion().set {
+                    replay.tool_length(l);
+                }
+                // Arcs and cycles expanded by the reader are not CL points of the file.
+                if !pt.inserted {
+                    replay.point(&pt)?;
+                }
+                continue;
+            }
+            Item::Event(ProgEvent::ToolLength { length, line }) => lengths.cl_length(length, line),
+            Item::Event(ProgEvent::Tool { number, line, .. }) => lengths.tool(number, line),
+            Item::Event(ProgEvent::Setup { shift, turned, .. }) => {
+                replay.setup(shift, turned);
+                continue;
+            }
+            Item::Event(_) => continue,
+        };
+        if let Some((l, _)) = step.set {
+            replay.tool_length(l);
         }
     }
     let mut rep = replay.rep;

@@ -70,7 +70,12 @@ pub(super) struct Emitter<'a, S: Sink + ?Sized> {
     /// The CL line of the last block written (a retract at a tool change or the end has none).
     pub(super) last_line: u32,
     /// The tool length the program last said it is cut for (a comment).
-    pub(super) length_said: Option<f64>,
+    /// The last tool length comment written (said again only when it changes).
+    pub(super) length_said: Option<String>,
+    /// A tool or length changed: the summary's line for it is written at the next move.
+    pub(super) tool_line_due: bool,
+    /// Where the tool length in force came from.
+    pub(super) length_from: crate::post::tools::LengthFrom,
     pub(super) tool: Option<u32>,
     /// The tool's length offset register where the CL names one other than its number.
     pub(super) adjust: Option<u32>,
@@ -222,6 +227,12 @@ impl<'a, S: Sink + ?Sized> Emitter<'a, S> {
             plane_ahead: false,
             free_hint: None,
             length_said: None,
+            tool_line_due: true,
+            length_from: if o.tool_length.is_some() {
+                crate::post::tools::LengthFrom::Job
+            } else {
+                crate::post::tools::LengthFrom::Profile
+            },
             stats: Default::default(),
             singular: kinematics::singular_direction(m).map(|d| (d.normalize(), o.singular_cone.cos())),
             lever_base: setup.work_offset.norm() + m.rotaries.iter().map(|r| r.pivot.norm()).sum::<f64>(),

@@ -78,6 +78,9 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
     /// working plane once the machine stands there.
     pub(in crate::post) fn point(&mut self, c: Committed) -> Result<(), Error> {
         let (rapid, tip, ahead) = (c.pt.rapid, c.pt.pose.tip, self.plane_ahead);
+        if self.tool_line_due {
+            self.record_tool();
+        }
         self.point_at(c)?;
         if rapid && ahead && self.tilt.is_none() {
             self.enter_plane(&tip)?;

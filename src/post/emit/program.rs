@@ -5,7 +5,12 @@ use super::Emitter;
 use crate::cl::{CoolantCmd, Dwell, SpindleCmd};
 use crate::diag::{Code, Diagnostic, Severity};
 use crate::kinematics::Vec3;
+use crate::post::sink::ToolUse;
+use crate::post::tools::LengthFrom;
 use crate::post::{Error, Mode, ProgEvent, Sink};
+
+/// Lines of the summary's tool list: a program of thousands of tool changes repeats its tools.
+const MAX_TOOL_LINES: usize = 1000;
 
 impl<S: Sink + ?Sized> Emitter<'_, S> {
     pub(in crate::post) fn program_start(&mut self) -> std::io::Result<()> {
@@ -20,14 +25,21 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                 self.m.units.as_str(),
                 self.setup.tool_length,
                 // The header is out before the CL is read: say which length the NC is cut for.
-                if self.o.tool_length.is_some() {
-                    ""
-                } else {
-                    " UNTIL THE CL SETS ONE"
+                match (self.o.tool_length, &self.o.tool_table) {
+                    (Some(_), _) => "",
+                    (None, None) => " UNTIL THE CL SETS ONE",
+                    (None, Some(_)) => " UNTIL A TOOL IS LOADED",
                 },
                 self.o.tolerance
             ),
         ];
+        if let (None, Some(t)) = (self.o.tool_length, &self.o.tool_table) {
+            let label = &self.o.tool_table_label;
+            lines.push(format!(
+                "TOOL LENGTHS FROM {label}, {} TOOLS, ELSE THE CL'S, ELSE THE PROFILE'S",
+                t.len()
+            ));
+        }
         let wo = self.o.work_offset;
         if wo != Vec3::zeros() {
             lines.push(format!("WORK OFFSET {},{},{}", wo.x, wo.y, wo.z));
@@ -43,21 +55,44 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         Ok(())
     }
 
-    /// The CL sets the tool length (the job fixed none): the NC from here on is cut for it, so
-    /// the program says so where it takes effect (the header only knew the profile's).
-    pub(in crate::post) fn cl_tool_length(&mut self, l: f64) -> std::io::Result<()> {
+    /// A new tool length in force (the job fixed none): the NC from here on is cut for it, so
+    /// the program says so where it takes effect, and where it came from (the header only knew
+    /// the profile's).
+    pub(in crate::post) fn tool_length(&mut self, l: f64, from: LengthFrom) -> std::io::Result<()> {
         self.setup.tool_length = l;
         self.sum.tool_length = l;
+        self.length_from = from;
+        self.tool_line_due = true;
+        let w = self.f.fmt.linear as usize;
+        let text = match self.tool {
+            // The table's length, or the fallback for a tool it lacks, is that tool's; the CL's
+            // may be the next tool's (NX's TLDATA comes before its LOAD/TOOL): no number.
+            Some(n) if from != LengthFrom::Cl => format!("TOOL {n} LENGTH {l:.w$} FROM {}", from.as_str().to_uppercase()),
+            _ => format!("TOOL LENGTH {l:.w$} FROM {}", from.as_str().to_uppercase()),
+        };
         // When it changes: NX repeats TLDATA with every operation (before its LOAD/TOOL).
-        if self.length_said == Some(l) {
+        if self.length_said.as_deref() == Some(text.as_str()) {
             return Ok(());
         }
-        self.length_said = Some(l);
-        let c = self
-            .f
-            .comment(&format!("TOOL LENGTH {l:.*} FROM THE CL", self.f.fmt.linear as usize))
-            .to_string();
+        let c = self.f.comment(&text).to_string();
+        self.length_said = Some(text);
         self.out(&c)
+    }
+
+    /// The summary's line for the tool in the spindle, at its first move with a new tool or
+    /// length: the length it cut with, and where it came from (NX gives the next tool's TLDATA
+    /// before its LOAD/TOOL: a line at the change would name the old tool).
+    pub(super) fn record_tool(&mut self) {
+        self.tool_line_due = false;
+        let u = ToolUse {
+            tool: self.tool,
+            length: self.setup.tool_length,
+            from: self.length_from,
+        };
+        let tools = &mut self.sum.tools;
+        if !tools.contains(&u) && tools.len() < MAX_TOOL_LINES {
+            tools.push(u);
+        }
     }
 
     pub(in crate::post) fn program_end(&mut self) -> Result<(), Error> {
@@ -86,8 +121,8 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         }
         match ev {
             ProgEvent::Tool { number, adjust, line } => self.tool_change(number, adjust, line)?,
-            ProgEvent::ToolLength(l) => {
-                // Only when the job fixed the length (else `cl_tool_length`, before planning).
+            ProgEvent::ToolLength { length: l, .. } => {
+                // Only when the job fixed the length (else `tool_length`, before planning).
                 if (l - self.setup.tool_length).abs() > self.f.fmt.half_linear() {
                     self.note(Diagnostic::new(
                         Code::ToolLength,
@@ -204,6 +239,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         self.tool = Some(number);
         self.adjust = adjust;
         self.tool_changed = true;
+        self.tool_line_due = true;
         if std::mem::take(&mut self.spindle_on) {
             self.spindle_restore = Some(line);
         }
