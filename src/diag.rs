@@ -50,6 +50,8 @@ pub enum Code {
     NotCl,
     /// A coordinate-system record (`MSYS`, …): what the points after it are taken in.
     CoordinateSystem,
+    /// A word the dialect's control does not know (a profile's clamp M code on LinuxCNC).
+    UnknownWord,
     /// Cutter radius compensation (`CUTCOM`): what it is taken to mean, or why it is not written.
     CutterComp,
 }
@@ -88,6 +90,7 @@ impl Code {
             Code::UnitsChanged => "units_changed",
             Code::NotCl => "not_cl",
             Code::CoordinateSystem => "coordinate_system",
+            Code::UnknownWord => "unknown_word",
             Code::CutterComp => "cutter_comp",
         }
     }

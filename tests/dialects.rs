@@ -1308,7 +1308,8 @@ fn a_program_with_errors_says_so_in_its_own_text() {
 /// unless the CL restarts them itself (the operator presses cycle start, not the spindle and
 /// coolant buttons); `SELCTL` readies the next tool; `OPSKIP` marks the blocks between with the block delete `/` (told, not
 /// written, on a conversational control); `AUXFUN` and `PREFUN` pass their code through, told,
-/// and a program end or a coordinate-changing G code is an error, not written; `CUTCOM` starts
+/// and a program end, a coordinate-changing G code or an M code the control does not know
+/// (LinuxCNC's are data) is an error, not written; `CUTCOM` starts
 /// compensation on the next move and `CUTCOM/OFF` ends it on the move after it (G41 D…/G40,
 /// Siemens' G41 with the tool's D1, Heidenhain's RL/R0).
 #[test]
@@ -1316,7 +1317,7 @@ fn program_flow_in_every_dialect() {
     let lib = Library::load_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap();
     let cl = "UNITS/MM\nLOADTL/1\nSPINDL/5000,CLW\nCOOLNT/ON\nFEDRAT/500,MMPM\nGOTO/0,0,20,0,0,1\n\
               SELCTL/2\nSTOP\nGOTO/20,0,20,0,0,1\nOPSTOP\nSPINDL/6000,CLW\nGOTO/30,0,20,0,0,1\n\
-              OPSKIP/ON\nGOTO/40,0,20,0,0,1\nOPSKIP/OFF\nAUXFUN/77\nPREFUN/64\nAUXFUN/30\nPREFUN/91\nGOTO/50,0,20,0,0,1\n\
+              OPSKIP/ON\nGOTO/40,0,20,0,0,1\nOPSKIP/OFF\nAUXFUN/19\nPREFUN/64\nAUXFUN/30\nPREFUN/91\nGOTO/50,0,20,0,0,1\n\
               CUTCOM/LEFT,7\nGOTO/60,10,20,0,0,1\nGOTO/70,10,20,0,0,1\nCUTCOM/OFF\nGOTO/80,0,20,0,0,1\nEND\n";
     for (d, machine) in CASES {
         let m = lib.get(machine).unwrap().machine.clone();
@@ -1350,7 +1351,7 @@ fn program_flow_in_every_dialect() {
             assert_eq!(skipped.len(), 1, "{d}: the one block between OPSKIP/ON and OFF: {skipped:?}");
             assert!(skipped[0].contains('X'), "{d}: the move to X40 mm: {skipped:?}");
         }
-        assert!(lines.contains(&"M77") || lines.iter().any(|l| l.ends_with(" M77")), "{d}");
+        assert!(lines.contains(&"M19") || lines.iter().any(|l| l.ends_with(" M19")), "{d}");
         assert_eq!(line_of("M30 not written"), [Some(18)], "{d}");
         assert_eq!(line_of("G91 not written"), [Some(19)], "{d}");
         assert_eq!(line_of("G64 not written").len(), conv as usize, "{d}: G64 passes on word address");
@@ -1362,5 +1363,31 @@ fn program_flow_in_every_dialect() {
         let d_word = lines.iter().any(|l| l.split_whitespace().any(|t| t == "D7"));
         assert_eq!(d_word, !matches!(d, "siemens" | "heidenhain"), "{d}: the CL's register where the control has one");
         assert_golden(&format!("flow-{d}-{machine}.nc"), &sink.nc);
+    }
+}
+
+/// LinuxCNC stops on an M code it does not know (its interpreter, `rs274`, says "Unknown m
+/// code"): its codes are data, an `AUXFUN` outside them is an error and not written, and a
+/// profile's clamp words outside them (the Haas UMC-750's M10–M13) are told once and not
+/// written. Fanuc and Haas controls take the builder's own codes.
+#[test]
+fn codes_linuxcnc_does_not_know_are_not_written() {
+    let lib = Library::load_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap();
+    let p = lib.get("haas-umc750").unwrap();
+    let cl = "UNITS/MM\nLOADTL/1\nFEDRAT/500,MMPM\nGOTO/0,0,20,0,0,1\nAUXFUN/77\nAUXFUN/101\n\
+              RAPID\nGOTO/0,0,20,0,0.5,0.8660254\nGOTO/10,0,20,0,0.5,0.8660254\nEND\n";
+    for (d, known) in [("linuxcnc", false), ("haas", true)] {
+        let s = post::Settings { dialect: Some(d.into()), ..Default::default() };
+        let o = s.profile_options(&p, None).unwrap();
+        let mut sink = Collect::default();
+        post::post(cl.as_bytes(), &p.machine, &o, &mut sink).unwrap();
+        let has = |w: &str| sink.nc.lines().any(|l| !l.starts_with('(') && l.split_whitespace().any(|t| t == w));
+        assert_eq!(has("M77"), known, "{d}:\n{}", sink.nc);
+        assert!(has("M101"), "{d}: a user code passes");
+        assert_eq!(has("M13") && has("M12"), known, "{d}: clamp words:\n{}", sink.nc);
+        let refused = sink.diags.iter().any(|x| x.line == Some(5) && x.severity == kinepost::diag::Severity::Error);
+        assert_eq!(refused, !known, "{d}: {:?}", sink.diags);
+        let told = sink.diags.iter().filter(|x| x.code == kinepost::diag::Code::UnknownWord).count();
+        assert_eq!(told, if known { 0 } else { 2 }, "{d}: once per clamped rotary: {:?}", sink.diags);
     }
 }

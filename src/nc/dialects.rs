@@ -47,6 +47,7 @@ pub const FANUC: Dialect = Dialect {
     cutcom_3d: Some(["G41.2 D{t}", "G42.2 D{t}", "G40"]),
     cutcom_radius: "D REGISTER",
     harmless_g: &["5.1", "8", "9", "61", "61.1", "62", "63", "64"],
+    m_codes: None,
     block_numbers: true,
     cycles: Cycles::Iso { dwell_ms: true },
     planes: Planes::Fanuc,
@@ -72,6 +73,8 @@ pub const LINUXCNC: Dialect = Dialect {
     name: "linuxcnc",
     title: "LinuxCNC",
     harmless_g: &["61", "61.1", "64"],
+    // LinuxCNC's own M codes and the user's M100–M199 (scripts its configuration provides).
+    m_codes: Some(&[(0, 9), (19, 19), (30, 30), (48, 53), (60, 68), (70, 73), (100, 199)]),
     begin: &[("%", false)],
     end: &[("M30", true), ("%", false)],
     tcp_on: "G43 H{t} (TCP: SWITCH THE KINEMATICS TO TOOL-TIP MODE IN THE MACHINE CONFIG)",
@@ -91,6 +94,7 @@ pub const SIEMENS: Dialect = Dialect {
     name: "siemens",
     title: "Siemens Sinumerik 840D",
     harmless_g: &["9", "60", "64", "601", "602", "603", "641", "642", "644", "645"],
+    m_codes: None,
     style: Style::WordAddress,
     comment: ("; ", ""),
     begin: &[("; PROGRAM {n}", false)],
@@ -163,6 +167,7 @@ pub const HEIDENHAIN: Dialect = Dialect {
     cutcom_3d: Some(["RL", "RR", "R0"]),
     cutcom_radius: "TOOL TABLE R+DR",
     harmless_g: &[],
+    m_codes: None,
     block_numbers: true,
     cycles: Cycles::Heidenhain,
     planes: Planes::Heidenhain,
@@ -215,6 +220,9 @@ pub fn function_risk(d: &Dialect, letter: char, code: &str) -> Risk {
         "98" | "99" => Risk::Refused("a subprogram call or return"),
         "3" | "4" | "5" => Risk::Untracked("the spindle is SPINDL in the CL; kinepost does not know of this one"),
         "7" | "8" | "9" => Risk::Untracked("the coolant is COOLNT in the CL; kinepost does not know of this one"),
+        _ if !d.knows(&format!("M{code}")) => {
+            Risk::Refused("an M code the control does not know: it stops the program where it is read")
+        }
         _ => Risk::None,
     }
 }

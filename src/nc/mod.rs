@@ -101,6 +101,9 @@ pub struct Dialect {
     /// stop, continuous path, look-ahead); any other could change coordinates, units, plane,
     /// compensation or motion under the program's own words.
     pub harmless_g: &'static [&'static str],
+    /// The M codes the control knows, as ranges; `None`: any (a machine builder adds its own,
+    /// as on Fanuc and Haas controls). A code outside them stops the program where it is read.
+    pub m_codes: Option<&'static [(u32, u32)]>,
     /// N numbers are optional (a job option) on word-address controls.
     pub block_numbers: bool,
     /// How the control writes canned drilling cycles.
@@ -323,6 +326,17 @@ fn push_comment(buf: &mut String, d: &Dialect, text: &str) {
 }
 
 impl Dialect {
+    /// Whether the control knows `word` (a whole word such as `M13`); words other than M codes
+    /// are not judged here.
+    pub fn knows(&self, word: &str) -> bool {
+        let Some(ranges) = self.m_codes else { return true };
+        match word.strip_prefix('M').map(str::parse::<u32>) {
+            Some(Ok(n)) => ranges.iter().any(|(lo, hi)| (*lo..=*hi).contains(&n)),
+            Some(Err(_)) => false,
+            None => true,
+        }
+    }
+
     /// A comment line outside any program's numbering: the last line of a program cut short.
     pub fn comment_line(&self, text: &str) -> String {
         let mut s = String::new();

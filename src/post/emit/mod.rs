@@ -154,6 +154,8 @@ pub(super) struct Emitter<'a, S: Sink + ?Sized> {
     /// `setups=work-offsets`: the offsets used, and the one in force.
     pub(super) offsets: Option<crate::post::setups::WorkOffsets>,
     pub(super) offset_at: usize,
+    /// Per rotary: its clamp words are no codes of the dialect's control, and not written.
+    pub(super) clamp_unknown: [bool; 3],
     /// Cutter radius compensation: asked, on, and what the CL says its path is.
     pub(super) cutcom: cutcom::State,
 }
@@ -216,6 +218,7 @@ impl<'a, S: Sink + ?Sized> Emitter<'a, S> {
                 .setup_offsets
                 .then(|| crate::post::setups::WorkOffsets::new(o.dialect.work_coordinates, o.wcs_word().unwrap_or(""))),
             offset_at: 0,
+            clamp_unknown: [false; 3],
             exact_prev: None,
             exact_travel: 0.0,
             held_prev: None,

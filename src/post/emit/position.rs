@@ -271,6 +271,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         for i in 0..3 {
             if let Some((lock, _)) = &self.o.clamps[i]
                 && !self.locked[i]
+                && !self.clamp_unknown[i]
             {
                 let (open, close) = self.o.dialect.comment;
                 let l = format!(
@@ -292,6 +293,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         for i in 0..self.m.rotaries.len() {
             if let Some((_, unlock)) = &self.o.clamps[i]
                 && self.locked[i]
+                && !self.clamp_unknown[i]
                 && (to.rotary[i] - from[i]).abs() > 1e-12
             {
                 let (open, close) = self.o.dialect.comment;
@@ -303,6 +305,29 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                 self.out(&l)?;
                 self.locked[i] = false;
             }
+        }
+        Ok(())
+    }
+
+    /// Clamp words the control does not know stop the program where it reads them: not
+    /// written, told once per rotary at the start.
+    pub(super) fn unknown_clamps(&mut self) -> std::io::Result<()> {
+        for i in 0..self.m.rotaries.len() {
+            let Some((lock, unlock)) = &self.o.clamps[i] else { continue };
+            let d = self.o.dialect;
+            let bad: Vec<&str> = [lock, unlock].into_iter().map(String::as_str).filter(|w| !d.knows(w)).collect();
+            if bad.is_empty() {
+                continue;
+            }
+            self.clamp_unknown[i] = true;
+            let msg = format!(
+                "the profile's clamp words for {} ({}) are no {} codes: not written, so {} turns and cuts unclamped; give the profile the codes this control's configuration provides",
+                self.m.rotaries[i].name,
+                bad.join(", "),
+                d.title,
+                self.m.rotaries[i].name
+            );
+            self.note(Diagnostic::new(Code::UnknownWord, Severity::Warning, None, msg))?;
         }
         Ok(())
     }

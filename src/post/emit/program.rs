@@ -52,7 +52,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         for l in self.f.header(self.o.program_number, self.m.units, &lines, self.o.wcs_word()) {
             self.out(&l)?;
         }
-        Ok(())
+        self.unknown_clamps()
     }
 
     /// A new tool length in force (the job fixed none): the NC from here on is cut for it, so
