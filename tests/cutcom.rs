@@ -2,11 +2,14 @@
 //! only where the control's compensation plane is across the tool; everything else an error
 //! naming the line. The programs read back through `verify` as the path the CL gave.
 
+mod common;
+
+use common::collect::Collect;
 use kinepost::diag::{Code, Diagnostic, Severity};
 use kinepost::kinematics::{Machine, Setup};
 use kinepost::machines::Library;
 use kinepost::post::verify::{VerifyOptions, verify};
-use kinepost::post::{self, BlockInfo, Mode, Options, Sink};
+use kinepost::post::{self, Mode, Options};
 use std::path::Path;
 
 fn machine(id: &str) -> Machine {
@@ -14,40 +17,7 @@ fn machine(id: &str) -> Machine {
     lib.get(id).unwrap().machine.clone()
 }
 
-#[derive(Default)]
-struct Collect {
-    nc: String,
-    /// Each motion block's text with its CL line.
-    blocks: Vec<(String, Option<u32>)>,
-    diags: Vec<Diagnostic>,
-}
-
-impl Sink for Collect {
-    fn line(&mut self, text: &str, b: Option<&BlockInfo>) -> std::io::Result<()> {
-        self.nc.push_str(text);
-        self.nc.push('\n');
-        if let Some(b) = b {
-            self.diags.extend(b.diagnostics.iter().cloned());
-            self.blocks.push((text.to_string(), b.source_line));
-        }
-        Ok(())
-    }
-    fn diagnostic(&mut self, d: &Diagnostic) -> std::io::Result<()> {
-        self.diags.push(d.clone());
-        Ok(())
-    }
-}
-
 impl Collect {
-    /// The CL lines of the blocks that carry `word`.
-    fn lines_with(&self, word: &str) -> Vec<u32> {
-        self.blocks
-            .iter()
-            .filter(|(t, _)| t.split_whitespace().any(|w| w == word))
-            .filter_map(|(_, l)| *l)
-            .collect()
-    }
-
     /// The lines of the cutter-compensation diagnostics of `severity`.
     fn told(&self, severity: Severity) -> Vec<u32> {
         self.diags

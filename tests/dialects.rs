@@ -2,47 +2,12 @@
 //! `KINEPOST_UPDATE_GOLDEN=1` rewrites them), and the ISO dialects read back by an independent
 //! G-code parser (the `gcode` crate).
 
+mod common;
+
+use common::collect::Collect;
 use kinepost::machines::Library;
 use kinepost::post::{self, BlockInfo, Mode, Options, Sink};
 use std::path::Path;
-
-#[derive(Default)]
-struct Collect {
-    nc: String,
-    blocks: Vec<BlockInfo>,
-    /// Each motion block's text.
-    texts: Vec<String>,
-    diags: Vec<kinepost::diag::Diagnostic>,
-}
-
-impl Collect {
-    /// The CL lines of the motion blocks that carry `word`.
-    fn comp_lines(&self, word: &str) -> Vec<u32> {
-        self.blocks
-            .iter()
-            .zip(&self.texts)
-            .filter(|(_, t)| t.split_whitespace().any(|w| w == word))
-            .filter_map(|(b, _)| b.source_line)
-            .collect()
-    }
-}
-
-impl Sink for Collect {
-    fn line(&mut self, text: &str, b: Option<&BlockInfo>) -> std::io::Result<()> {
-        self.nc.push_str(text);
-        self.nc.push('\n');
-        if let Some(b) = b {
-            self.diags.extend(b.diagnostics.iter().cloned());
-            self.blocks.push(b.clone());
-            self.texts.push(text.to_string());
-        }
-        Ok(())
-    }
-    fn diagnostic(&mut self, d: &kinepost::diag::Diagnostic) -> std::io::Result<()> {
-        self.diags.push(d.clone());
-        Ok(())
-    }
-}
 
 /// (dialect, the machine it is shown on)
 const CASES: [(&str, &str); 5] = [
@@ -1358,8 +1323,8 @@ fn program_flow_in_every_dialect() {
         let preselect = if conv { "TOOL DEF 2" } else { "T2" };
         assert!(lines.iter().any(|l| l.ends_with(preselect)), "{d}: SELCTL/2 readies tool 2");
         let (on, off) = if conv { ("RL", "R0") } else { ("G41", "G40") };
-        assert_eq!(sink.comp_lines(on), [22], "{d}: compensation on the move after CUTCOM/LEFT:\n{}", sink.nc);
-        assert_eq!(sink.comp_lines(off), [25], "{d}: and off on the move after CUTCOM/OFF:\n{}", sink.nc);
+        assert_eq!(sink.lines_with(on), [22], "{d}: compensation on the move after CUTCOM/LEFT:\n{}", sink.nc);
+        assert_eq!(sink.lines_with(off), [25], "{d}: and off on the move after CUTCOM/OFF:\n{}", sink.nc);
         let d_word = lines.iter().any(|l| l.split_whitespace().any(|t| t == "D7"));
         assert_eq!(d_word, !matches!(d, "siemens" | "heidenhain"), "{d}: the CL's register where the control has one");
         assert_golden(&format!("flow-{d}-{machine}.nc"), &sink.nc);

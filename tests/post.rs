@@ -1,6 +1,9 @@
 //! The engine end to end: real CL files, generated paths on every profile in both modes, the real
 //! NX post's program as a golden reference, strict mode, diagnostics that keep going.
 
+mod common;
+
+use common::collect::Collect;
 use kinepost::cl::{Event, Reader};
 use kinepost::diag::{Code, Diagnostic, Severity};
 use kinepost::kinematics::{Joints, Machine, Setup, Units, Vec3, angle_between, fk};
@@ -16,46 +19,6 @@ fn machine(id: &str) -> Machine {
 
 fn data(name: &str) -> String {
     format!("{}/tests/data/{name}", env!("CARGO_MANIFEST_DIR"))
-}
-
-#[derive(Default)]
-struct Collect {
-    nc: String,
-    blocks: Vec<BlockInfo>,
-    diags: Vec<Diagnostic>,
-}
-
-impl Sink for Collect {
-    fn line(&mut self, text: &str, b: Option<&BlockInfo>) -> std::io::Result<()> {
-        self.nc.push_str(text);
-        self.nc.push('\n');
-        if let Some(b) = b {
-            self.diags.extend(b.diagnostics.iter().cloned());
-            self.blocks.push(b.clone());
-        }
-        Ok(())
-    }
-    fn diagnostic(&mut self, d: &Diagnostic) -> std::io::Result<()> {
-        self.diags.push(d.clone());
-        Ok(())
-    }
-}
-
-impl Collect {
-    /// The first diagnostic with `code` (the test fails without one).
-    fn first(&self, code: Code) -> &Diagnostic {
-        self.diags
-            .iter()
-            .find(|d| d.code == code)
-            .unwrap_or_else(|| panic!("no {} diagnostic: {:?}", code.as_str(), self.diags))
-    }
-
-    /// The one diagnostic with `code` (the test fails on none or several).
-    fn only(&self, code: Code) -> &Diagnostic {
-        let all: Vec<_> = self.diags.iter().filter(|d| d.code == code).collect();
-        assert_eq!(all.len(), 1, "one {} diagnostic: {all:?}", code.as_str());
-        all[0]
-    }
 }
 
 fn run(m: &Machine, cl: &[u8], o: &Options) -> (Collect, Summary) {

@@ -1,39 +1,19 @@
 //! Tool tables: each tool's own length in joint mode on a head machine, in the program and in
 //! `verify`; the precedence of the job's length, the table, the CL and the profile; bad tables.
 
-use kinepost::diag::{Code, Diagnostic, Severity};
+mod common;
+
+use common::collect::Collect;
+use kinepost::diag::{Code, Severity};
 use kinepost::kinematics::Machine;
 use kinepost::machines::{Library, Profile};
 use kinepost::post::verify::{VerifyOptions, verify};
-use kinepost::post::{self, BlockInfo, LengthFrom, Options, Settings, Sink, Summary};
+use kinepost::post::{self, LengthFrom, Options, Settings, Summary};
 use std::path::Path;
 use std::sync::Arc;
 
 fn library() -> Library {
     Library::load_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap()
-}
-
-#[derive(Default)]
-struct Collect {
-    nc: String,
-    blocks: Vec<BlockInfo>,
-    diags: Vec<Diagnostic>,
-}
-
-impl Sink for Collect {
-    fn line(&mut self, text: &str, b: Option<&BlockInfo>) -> std::io::Result<()> {
-        self.nc.push_str(text);
-        self.nc.push('\n');
-        if let Some(b) = b {
-            self.diags.extend(b.diagnostics.iter().cloned());
-            self.blocks.push(b.clone());
-        }
-        Ok(())
-    }
-    fn diagnostic(&mut self, d: &Diagnostic) -> std::io::Result<()> {
-        self.diags.push(d.clone());
-        Ok(())
-    }
 }
 
 /// A short 5-axis cut, the tool tilted up to 25° about two axes, on the fryer's table.

@@ -7,6 +7,8 @@ use kinepost::post::{BlockInfo, Sink};
 pub struct Collect {
     pub nc: String,
     pub blocks: Vec<BlockInfo>,
+    /// Each motion block's text.
+    pub texts: Vec<String>,
     pub diags: Vec<Diagnostic>,
 }
 
@@ -17,6 +19,7 @@ impl Sink for Collect {
         if let Some(b) = b {
             self.diags.extend(b.diagnostics.iter().cloned());
             self.blocks.push(b.clone());
+            self.texts.push(text.to_string());
         }
         Ok(())
     }
@@ -27,6 +30,16 @@ impl Sink for Collect {
 }
 
 impl Collect {
+    /// The CL lines of the motion blocks that carry `word`.
+    pub fn lines_with(&self, word: &str) -> Vec<u32> {
+        self.blocks
+            .iter()
+            .zip(&self.texts)
+            .filter(|(_, t)| t.split_whitespace().any(|w| w == word))
+            .filter_map(|(b, _)| b.source_line)
+            .collect()
+    }
+
     /// The first diagnostic with `code` (the test fails without one).
     pub fn first(&self, code: Code) -> &Diagnostic {
         self.diags
