@@ -211,10 +211,10 @@ def main():
                 errors += d.get('code') == 'cutter_comp' and d.get('severity') == 'error'
         # The shared verifier reads no ROTABL (see the rotabl check below): kinepost's own replay there.
         rep = verify(a.shared, machines, mid, cl, nc, mode) if not f.endswith('.clt') else {'counts': {}}
-        ok = p.returncode == 0 and got == want and errors == 0 and rep['counts'].get('matched') == rep['counts'].get('cl_points')
+        comp_ok = p.returncode == 0 and got == want and errors == 0 and rep['counts'].get('matched') == rep['counts'].get('cl_points')
         print(f'cutcom {f:40s} {mid:12s} {mode:5s} G41/G42 x{len(got["on"])} (CL {len(want["on"])}) G40 x{len(got["off"])} '
-              f'(CL {len(want["off"])}) errors {errors} verifier failed={rep.get("failed")} ok={ok}')
-        if not ok:
+              f'(CL {len(want["off"])}) errors {errors} verifier failed={rep.get("failed")} ok={comp_ok}')
+        if not comp_ok:
             fails.append(f'cutcom {f} {mid} {mode}: exit {p.returncode}, on {got["on"][:5]} want {want["on"][:5]}, '
                          f'off {got["off"][:5]} want {want["off"][:5]}, {errors} errors')
 
