@@ -293,8 +293,9 @@ pub struct Formatter {
     /// Blocks start with `/`: the operator's block delete skips them (CL `OPSKIP/ON`).
     pub block_skip: bool,
     /// The origin of the work offset in force relative to the program's first (profile units):
-    /// X Y Z words are measured from it (`setups=work-offsets`).
-    shift: [f64; 3],
+    /// X Y Z words are measured from it (`setups=work-offsets`); 0 for the rotary words, so the
+    /// words' hot loop subtracts without a branch.
+    shift: [f64; 6],
 }
 
 /// The axis words' addresses as bytes, for the formatter's hot loop.
@@ -360,7 +361,7 @@ impl Formatter {
             program_number: 1000,
             units: "MM",
             block_skip: false,
-            shift: [0.0; 3],
+            shift: [0.0; 6],
         }
     }
 
@@ -665,7 +666,7 @@ impl Formatter {
     /// dwell, so only the position is written (it calls the cycle).
     pub fn canned(&mut self, c: &Canned, modal: bool) -> Vec<String> {
         let lin = self.fmt.linear;
-        let c = &c.measured_from(self.shift);
+        let c = &c.measured_from([self.shift[0], self.shift[1], self.shift[2]]);
         let mut out = Vec::new();
         let feed_r = round_to(c.feed, self.fmt.feed);
         match self.d.cycles {
@@ -893,13 +894,13 @@ impl Formatter {
     /// From here X Y Z words are measured from `shift` (another work offset's origin); every
     /// word is written again.
     pub fn set_shift(&mut self, shift: [f64; 3]) {
-        self.shift = shift;
+        self.shift[..3].copy_from_slice(&shift);
         self.reset_modal();
     }
 
     #[inline]
     fn shift_of(&self, axis_index: usize) -> f64 {
-        if axis_index < 3 { self.shift[axis_index] } else { 0.0 }
+        self.shift[axis_index]
     }
 
     /// Decimals of the word for axis slot `axis_index` (X Y Z A B C).

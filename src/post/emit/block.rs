@@ -42,7 +42,10 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         let prev = self.at;
         let (feed, time) = self.feed(&to, prev.as_ref(), pt, rapid, &mut diags);
         self.pose_diagnostics(&to, pt, rapid, inserted, &mut diags);
-        let comp = self.cutcom_words(&to, pt.line, !rapid && self.arc_words.is_some(), &mut diags)?;
+        let comp = match self.cutcom.idle() {
+            true => None,
+            false => self.cutcom_words(&to, pt.line, !rapid && self.arc_words.is_some(), &mut diags)?,
+        };
         // Each word is rounded once, for the line and for the replay.
         let rounded = self.f.round_words(words);
         self.replay(&to, &axes, &rounded, words, pt.line, &mut diags);

@@ -59,6 +59,12 @@ impl State {
         }
     }
 
+    /// Nothing asked and nothing on: the common block's one test.
+    #[inline]
+    pub(super) fn idle(&self) -> bool {
+        self.want.is_none() && self.on.is_none() && self.unsided.is_none()
+    }
+
     fn pending(&self) -> bool {
         match (self.want, self.on) {
             (None, None) => false,
