@@ -223,8 +223,8 @@ pub async fn submit(
 
 /// A job: state, progress, timings, and the summary once done.
 #[utoipa::path(get, path = "/v1/jobs/{id}", params(("id" = String, Path)),
-    responses((status = 200, body = JobView), (status = 404, body = super::error::Problem, content_type = "application/problem+json"),
-        (status = 503, body = super::error::Problem, content_type = "application/problem+json")),
+    responses((status = 200, description = "Success", body = JobView), (status = 404, description = "Not found", body = super::error::Problem, content_type = "application/problem+json"),
+        (status = 503, description = "Not ready or overloaded: retry later", body = super::error::Problem, content_type = "application/problem+json")),
     tag = "jobs")]
 pub async fn get_job(State(st): State<Arc<AppState>>, Path(id): Path<String>) -> Result<Json<JobView>, ApiError> {
     Ok(Json(queue(&st)?.store.get(job_id(&id)?).await?.into()))
@@ -232,8 +232,8 @@ pub async fn get_job(State(st): State<Arc<AppState>>, Path(id): Path<String>) ->
 
 /// Jobs, newest first, a page at a time.
 #[utoipa::path(get, path = "/v1/jobs", params(ListParams),
-    responses((status = 200, body = JobList), (status = 400, body = super::error::Problem, content_type = "application/problem+json"),
-        (status = 503, body = super::error::Problem, content_type = "application/problem+json")),
+    responses((status = 200, description = "Success", body = JobList), (status = 400, description = "A parameter is malformed: the problem document names it", body = super::error::Problem, content_type = "application/problem+json"),
+        (status = 503, description = "Not ready or overloaded: retry later", body = super::error::Problem, content_type = "application/problem+json")),
     tag = "jobs")]
 pub async fn list_jobs(State(st): State<Arc<AppState>>, ApiQuery(p): ApiQuery<ListParams>) -> Result<Json<JobList>, ApiError> {
     let state = match p.state.as_deref() {
@@ -261,8 +261,8 @@ pub async fn list_jobs(State(st): State<Arc<AppState>>, ApiQuery(p): ApiQuery<Li
 /// Cancels a queued or running job; removes a finished one and its files.
 #[utoipa::path(delete, path = "/v1/jobs/{id}", params(("id" = String, Path)),
     responses((status = 200, description = "Cancelled", body = JobView), (status = 204, description = "Finished job removed"),
-        (status = 404, body = super::error::Problem, content_type = "application/problem+json"),
-        (status = 503, body = super::error::Problem, content_type = "application/problem+json")),
+        (status = 404, description = "Not found", body = super::error::Problem, content_type = "application/problem+json"),
+        (status = 503, description = "Not ready or overloaded: retry later", body = super::error::Problem, content_type = "application/problem+json")),
     tag = "jobs")]
 pub async fn delete_job(State(st): State<Arc<AppState>>, Path(id): Path<String>) -> Result<Response, ApiError> {
     let q = queue(&st)?;
@@ -282,10 +282,10 @@ pub async fn delete_job(State(st): State<Arc<AppState>>, Path(id): Path<String>)
     responses((status = 200, description = "The NC program", content_type = "text/plain"),
         (status = 206, description = "Part of it (Range)", content_type = "text/plain"),
         (status = 304, description = "Not modified (If-None-Match)"),
-        (status = 404, body = super::error::Problem, content_type = "application/problem+json"),
+        (status = 404, description = "Not found", body = super::error::Problem, content_type = "application/problem+json"),
         (status = 409, description = "Not finished, or failed", body = super::error::Problem, content_type = "application/problem+json"),
         (status = 416, description = "Range not satisfiable"),
-        (status = 503, body = super::error::Problem, content_type = "application/problem+json")),
+        (status = 503, description = "Not ready or overloaded: retry later", body = super::error::Problem, content_type = "application/problem+json")),
     tag = "jobs")]
 pub async fn job_nc(st: State<Arc<AppState>>, Path(id): Path<String>, req: Request) -> Result<Response, ApiError> {
     output(st, id, Output::Nc, req).await
@@ -296,10 +296,10 @@ pub async fn job_nc(st: State<Arc<AppState>>, Path(id): Path<String>, req: Reque
     responses((status = 200, description = "One JSON object per line", content_type = "application/x-ndjson"),
         (status = 206, description = "Part of it (Range)", content_type = "application/x-ndjson"),
         (status = 304, description = "Not modified (If-None-Match)"),
-        (status = 404, body = super::error::Problem, content_type = "application/problem+json"),
+        (status = 404, description = "Not found", body = super::error::Problem, content_type = "application/problem+json"),
         (status = 409, description = "Not finished", body = super::error::Problem, content_type = "application/problem+json"),
         (status = 416, description = "Range not satisfiable"),
-        (status = 503, body = super::error::Problem, content_type = "application/problem+json")),
+        (status = 503, description = "Not ready or overloaded: retry later", body = super::error::Problem, content_type = "application/problem+json")),
     tag = "jobs")]
 pub async fn job_diagnostics(st: State<Arc<AppState>>, Path(id): Path<String>, req: Request) -> Result<Response, ApiError> {
     output(st, id, Output::Diagnostics, req).await
@@ -315,7 +315,7 @@ pub async fn job_diagnostics(st: State<Arc<AppState>>, Path(id): Path<String>, r
         (status = 304, description = "Not modified (If-None-Match)"),
         (status = 404, description = "No such job, or a job finished before previews existed", body = super::error::Problem, content_type = "application/problem+json"),
         (status = 409, description = "Not finished", body = super::error::Problem, content_type = "application/problem+json"),
-        (status = 503, body = super::error::Problem, content_type = "application/problem+json")),
+        (status = 503, description = "Not ready or overloaded: retry later", body = super::error::Problem, content_type = "application/problem+json")),
     tag = "jobs")]
 pub async fn job_preview(st: State<Arc<AppState>>, Path(id): Path<String>, req: Request) -> Result<Response, ApiError> {
     output(st, id, Output::Preview, req).await

@@ -117,7 +117,7 @@ impl From<&Current> for MachineDto {
 }
 
 /// Every machine profile, geometry included.
-#[utoipa::path(get, path = "/v1/machines", responses((status = 200, body = Vec<MachineDto>)), tag = "machines")]
+#[utoipa::path(get, path = "/v1/machines", responses((status = 200, description = "Success", body = Vec<MachineDto>)), tag = "machines")]
 pub(super) async fn list_machines(State(st): State<Arc<AppState>>) -> Json<Vec<MachineDto>> {
     Json(st.machines.list().iter().map(MachineDto::from).collect())
 }
@@ -145,7 +145,7 @@ pub(super) fn toml_response(status: StatusCode, text: String) -> Response {
             content((MachineDto = "application/json"), (String = "application/toml")),
             headers(("ETag" = String, description = "The version, e.g. \"haas-umc750-v3\""))),
         (status = 304, description = "Not modified (If-None-Match)"),
-        (status = 404, body = Problem, content_type = "application/problem+json")),
+        (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json")),
     tag = "machines"
 )]
 pub(super) async fn get_machine(
@@ -284,12 +284,12 @@ fn written(status: StatusCode, c: &Current) -> Response {
 #[utoipa::path(post, path = "/v1/machines",
     request_body(description = "The profile, as in `machines/*.toml`, or the same document as JSON",
         content((String = "application/toml"), (Object = "application/json"))),
-    responses((status = 201, body = MachineDto, headers(("ETag" = String), ("Location" = String))),
-        (status = 401, body = Problem, content_type = "application/problem+json"),
+    responses((status = 201, description = "Created", body = MachineDto, headers(("ETag" = String), ("Location" = String))),
+        (status = 401, description = "No admin token given", body = Problem, content_type = "application/problem+json"),
         (status = 403, description = "Writes are off (no admin token configured)", body = Problem, content_type = "application/problem+json"),
         (status = 409, description = "The id exists", body = Problem, content_type = "application/problem+json"),
-        (status = 413, body = Problem, content_type = "application/problem+json"),
-        (status = 415, body = Problem, content_type = "application/problem+json"),
+        (status = 413, description = "The body or a field is too large", body = Problem, content_type = "application/problem+json"),
+        (status = 415, description = "Unsupported content type", body = Problem, content_type = "application/problem+json"),
         (status = 422, description = "Invalid profile: `key` names what to fix", body = Problem, content_type = "application/problem+json"),
         (status = 507, description = "The store's disk is full: nothing written (Retry-After)", body = Problem, content_type = "application/problem+json")),
     security(("admin" = [])),
@@ -309,12 +309,12 @@ pub(super) async fn create_machine(State(st): State<Arc<AppState>>, req: Request
         content((String = "application/toml"), (Object = "application/json"))),
     responses((status = 200, description = "Replaced: a new version", body = MachineDto, headers(("ETag" = String))),
         (status = 201, description = "Created", body = MachineDto, headers(("ETag" = String), ("Location" = String))),
-        (status = 401, body = Problem, content_type = "application/problem+json"),
-        (status = 403, body = Problem, content_type = "application/problem+json"),
+        (status = 401, description = "No admin token given", body = Problem, content_type = "application/problem+json"),
+        (status = 403, description = "The admin token is wrong", body = Problem, content_type = "application/problem+json"),
         (status = 412, description = "If-Match names another version", body = Problem, content_type = "application/problem+json"),
-        (status = 413, body = Problem, content_type = "application/problem+json"),
-        (status = 415, body = Problem, content_type = "application/problem+json"),
-        (status = 422, body = Problem, content_type = "application/problem+json"),
+        (status = 413, description = "The body or a field is too large", body = Problem, content_type = "application/problem+json"),
+        (status = 415, description = "Unsupported content type", body = Problem, content_type = "application/problem+json"),
+        (status = 422, description = "Read and refused: the problem document says why", body = Problem, content_type = "application/problem+json"),
         (status = 507, description = "The store's disk is full: nothing written (Retry-After)", body = Problem, content_type = "application/problem+json")),
     security(("admin" = [])),
     tag = "machines")]
@@ -335,10 +335,10 @@ pub(super) async fn put_machine(
 #[utoipa::path(delete, path = "/v1/machines/{id}", params(("id" = String, Path),
         ("If-Match" = Option<String>, Header, description = "Delete only this version")),
     responses((status = 204, description = "Deleted"),
-        (status = 401, body = Problem, content_type = "application/problem+json"),
-        (status = 403, body = Problem, content_type = "application/problem+json"),
-        (status = 404, body = Problem, content_type = "application/problem+json"),
-        (status = 412, body = Problem, content_type = "application/problem+json"),
+        (status = 401, description = "No admin token given", body = Problem, content_type = "application/problem+json"),
+        (status = 403, description = "The admin token is wrong", body = Problem, content_type = "application/problem+json"),
+        (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json"),
+        (status = 412, description = "If-Match names another version", body = Problem, content_type = "application/problem+json"),
         (status = 507, description = "The store's disk is full: nothing written (Retry-After)", body = Problem, content_type = "application/problem+json")),
     security(("admin" = [])),
     tag = "machines")]
@@ -375,7 +375,7 @@ pub struct VersionsDto {
 
 /// A profile's history: every version, who made it (file or API) and when.
 #[utoipa::path(get, path = "/v1/machines/{id}/versions", params(("id" = String, Path)),
-    responses((status = 200, body = VersionsDto), (status = 404, body = Problem, content_type = "application/problem+json")),
+    responses((status = 200, description = "Success", body = VersionsDto), (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json")),
     tag = "machines")]
 pub(super) async fn list_versions(
     State(st): State<Arc<AppState>>,
@@ -411,7 +411,7 @@ pub(super) async fn versions_of<T: Kind>(shelf: &Shelf<T>, id: String) -> Result
 
 /// One version's TOML, exactly as written: what a job that used it ran with.
 #[utoipa::path(get, path = "/v1/machines/{id}/versions/{version}", params(("id" = String, Path), ("version" = i64, Path)),
-    responses((status = 200, body = String, content_type = "application/toml"),
+    responses((status = 200, description = "Success", body = String, content_type = "application/toml"),
         (status = 404, description = "No such version, or a deletion", body = Problem, content_type = "application/problem+json")),
     tag = "machines")]
 pub(super) async fn get_version(

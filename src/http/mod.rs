@@ -395,7 +395,8 @@ pub fn app(state: Arc<AppState>) -> axum::Router {
             .max_age(Duration::from_secs(600))
     };
     let api = api
-        .merge(utoipa_swagger_ui::SwaggerUi::new("/docs"))
+        // The UI loads the document this service serves at /openapi.json (its own route).
+        .merge(utoipa_swagger_ui::SwaggerUi::new("/docs").config(utoipa_swagger_ui::Config::new(["/openapi.json"])))
         .layer(tower_http::compression::CompressionLayer::new())
         .layer(tower_http::timeout::TimeoutLayer::with_status_code(
             StatusCode::REQUEST_TIMEOUT,
@@ -549,7 +550,7 @@ pub struct DialectDto {
 }
 
 /// The NC dialects; a post request may name any, the profile's `controller` is the default.
-#[utoipa::path(get, path = "/v1/dialects", responses((status = 200, body = Vec<DialectDto>)), tag = "post")]
+#[utoipa::path(get, path = "/v1/dialects", responses((status = 200, description = "Success", body = Vec<DialectDto>)), tag = "post")]
 async fn list_dialects(State(st): State<Arc<AppState>>) -> Json<Vec<DialectDto>> {
     Json(
         crate::nc::ALL
@@ -588,7 +589,7 @@ async fn healthz() -> &'static str {
 }
 
 /// Ready: machines loaded, the data directory writable and the job store answering.
-#[utoipa::path(get, path = "/readyz", responses((status = 200, description = "ready"), (status = 503, body = Problem, content_type = "application/problem+json")), tag = "ops")]
+#[utoipa::path(get, path = "/readyz", responses((status = 200, description = "ready"), (status = 503, description = "Not ready or overloaded: retry later", body = Problem, content_type = "application/problem+json")), tag = "ops")]
 async fn readyz(State(st): State<Arc<AppState>>) -> Result<Response, ApiError> {
     if st.machines.is_empty() {
         return Err(ApiError::Busy("no machine profiles loaded".into()));

@@ -132,12 +132,12 @@ pub(super) async fn get_tools(
         content((String = "application/toml"), (Object = "application/json"))),
     responses((status = 200, description = "Replaced: a new version", body = ToolTableDto, headers(("ETag" = String))),
         (status = 201, description = "Created", body = ToolTableDto, headers(("ETag" = String), ("Location" = String))),
-        (status = 401, body = Problem, content_type = "application/problem+json"),
-        (status = 403, body = Problem, content_type = "application/problem+json"),
+        (status = 401, description = "No admin token given", body = Problem, content_type = "application/problem+json"),
+        (status = 403, description = "The admin token is wrong", body = Problem, content_type = "application/problem+json"),
         (status = 404, description = "No such machine", body = Problem, content_type = "application/problem+json"),
         (status = 412, description = "If-Match names another version", body = Problem, content_type = "application/problem+json"),
-        (status = 413, body = Problem, content_type = "application/problem+json"),
-        (status = 415, body = Problem, content_type = "application/problem+json"),
+        (status = 413, description = "The body or a field is too large", body = Problem, content_type = "application/problem+json"),
+        (status = 415, description = "Unsupported content type", body = Problem, content_type = "application/problem+json"),
         (status = 422, description = "Invalid table: `key` names the entry to fix", body = Problem, content_type = "application/problem+json"),
         (status = 507, description = "The store's disk is full: nothing written (Retry-After)", body = Problem, content_type = "application/problem+json")),
     security(("admin" = [])),
@@ -175,10 +175,10 @@ pub(super) async fn put_tools(
 #[utoipa::path(delete, path = "/v1/machines/{id}/tools", params(("id" = String, Path),
         ("If-Match" = Option<String>, Header, description = "Delete only this version")),
     responses((status = 204, description = "Deleted"),
-        (status = 401, body = Problem, content_type = "application/problem+json"),
-        (status = 403, body = Problem, content_type = "application/problem+json"),
-        (status = 404, body = Problem, content_type = "application/problem+json"),
-        (status = 412, body = Problem, content_type = "application/problem+json"),
+        (status = 401, description = "No admin token given", body = Problem, content_type = "application/problem+json"),
+        (status = 403, description = "The admin token is wrong", body = Problem, content_type = "application/problem+json"),
+        (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json"),
+        (status = 412, description = "If-Match names another version", body = Problem, content_type = "application/problem+json"),
         (status = 507, description = "The store's disk is full: nothing written (Retry-After)", body = Problem, content_type = "application/problem+json")),
     security(("admin" = [])),
     tag = "machines")]
@@ -199,7 +199,7 @@ pub(super) async fn delete_tools(
 
 /// A tool table's history: every version, who made it (file or API) and when.
 #[utoipa::path(get, path = "/v1/machines/{id}/tools/versions", params(("id" = String, Path)),
-    responses((status = 200, body = VersionsDto), (status = 404, body = Problem, content_type = "application/problem+json")),
+    responses((status = 200, description = "Success", body = VersionsDto), (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json")),
     tag = "machines")]
 pub(super) async fn list_tool_versions(
     State(st): State<Arc<AppState>>,
@@ -213,7 +213,7 @@ pub(super) async fn list_tool_versions(
 
 /// One version's TOML, exactly as written: what a job that used it ran with.
 #[utoipa::path(get, path = "/v1/machines/{id}/tools/versions/{version}", params(("id" = String, Path), ("version" = i64, Path)),
-    responses((status = 200, body = String, content_type = "application/toml"),
+    responses((status = 200, description = "Success", body = String, content_type = "application/toml"),
         (status = 404, description = "No such version, or a deletion", body = Problem, content_type = "application/problem+json")),
     tag = "machines")]
 pub(super) async fn get_tool_version(
