@@ -41,6 +41,11 @@ pub struct JobView {
     /// The node (replica) that runs or ran it.
     pub node: Option<String>,
     pub progress: JobProgress,
+    /// The settings the job was posted with, as they were given (the form's and the API's
+    /// names: `mode`, `dialect`, `cycles` …), its own tool table aside: what a link to the job
+    /// shows, and what posting again with them repeats.
+    #[schema(value_type = Object)]
+    pub settings: serde_json::Value,
     /// The engine's summary, when the job succeeded.
     #[schema(value_type = Option<Object>)]
     pub summary: Option<serde_json::Value>,
@@ -79,7 +84,12 @@ impl From<Job> for JobView {
             0.0
         };
         let base = format!("/v1/jobs/{}", j.id);
+        let mut settings = serde_json::to_value(&j.settings).unwrap_or_default();
+        if let Some(o) = settings.as_object_mut() {
+            o.retain(|k, v| !v.is_null() && !matches!(k.as_str(), "tool_table" | "machine_tools_version"));
+        }
         JobView {
+            settings,
             links: JobLinks {
                 nc: (j.state == JobState::Succeeded).then(|| format!("{base}/nc")),
                 diagnostics: matches!(j.state, JobState::Succeeded | JobState::Failed).then(|| format!("{base}/diagnostics")),

@@ -47,6 +47,17 @@ try {
   check(/\/\?job=[0-9a-f]{32}$/.test(jobUrl), `the result has its own URL: ${jobUrl}`);
   const summary = await page.textContent('#summary');
   check(summary.includes('FK replay') && summary.includes('C rotary') && summary.includes('travel 3856.6'), 'summary shows FK replay and rotary travel');
+  // While a job runs, or when it failed, the button is hidden: `hidden` must win over .button.
+  const hiddenShows = await page.evaluate(() => {
+    const a = document.createElement('a');
+    a.className = 'button';
+    a.hidden = true;
+    document.body.appendChild(a);
+    const d = getComputedStyle(a).display;
+    a.remove();
+    return d;
+  });
+  check(hiddenShows === 'none', `a hidden button is not shown (display ${hiddenShows})`);
   const [download] = await Promise.all([page.waitForEvent('download'), page.click('#download')]);
   const file = path.join(shots, download.suggestedFilename());
   await download.saveAs(file);
@@ -98,6 +109,10 @@ try {
   await other.waitForSelector('#status.ok, #status.warn', { timeout: 30000 });
   check((await other.textContent('#status')).includes('blocks from 348 CL points'), 'the job link shows the same result');
   check(await other.$eval('#machine', (s) => s.value) === 'haas-umc750', 'and the job\'s machine');
+  const posted = await other.evaluate(() => ['mode', 'spindle_speed', 'dialect'].map((k) => document.getElementById(k).value));
+  check(posted.join(' ') === 'tcp 9000 ', `and the settings it was posted with, to post again: ${posted.join(' ')}`);
+  const dialects = await other.$$eval('#dialect option', (o) => o.map((x) => x.value).join(' '));
+  check(dialects === ' fanuc haas siemens heidenhain linuxcnc', `every dialect the service knows: ${dialects}`);
   await other.close();
 
   // A machine the pose cannot be reached on: each unreachable pose listed with its CL line.

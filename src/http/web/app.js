@@ -26,6 +26,30 @@ async function loadMachines() {
   showMachine();
 }
 
+/** Every dialect the service knows, after the machine's own default. */
+async function loadDialects() {
+  const r = await fetch('/v1/dialects');
+  const sel = $('dialect');
+  for (const d of await r.json()) {
+    if (sel.querySelector(`option[value="${d.name}"]`)) continue;
+    const o = document.createElement('option');
+    o.value = d.name;
+    o.textContent = d.title;
+    sel.appendChild(o);
+  }
+}
+
+/** The form shows the settings a job was posted with: a link opens the job as it was posted,
+ *  and posting again repeats them (a TCP job showed "Joint"). */
+function showSettings(s) {
+  if (!s) return;
+  $('mode').value = s.mode || 'joint';
+  for (const k of ['dialect', 'cycles', 'planes', 'work_coordinates', 'tool_length', 'work_offset', 'spindle_speed']) {
+    const el = $(k);
+    if (el) el.value = s[k] === undefined ? '' : String(s[k]);
+  }
+}
+
 function showMachine() {
   const m = machines.find((x) => x.id === $('machine').value);
   if (m) $('machine-info').textContent = `${m.kinematics}, ${m.units}, ${m.controller}; axes ${m.linear.map((l) => l.name).join('')}${m.rotary.map((r) => r.name).join('')}`;
@@ -96,6 +120,7 @@ async function showJob(id) {
     $('machine').value = job.machine;
     showMachine();
   }
+  showSettings(job.settings);
   const s = job.summary;
   if (job.state === 'succeeded') {
     const name = (job.filename || 'program').replace(/\.[^.]*$/, '') + '.nc';
@@ -221,4 +246,5 @@ drop.addEventListener('dragover', (e) => { e.preventDefault(); drop.classList.ad
 drop.addEventListener('dragleave', () => drop.classList.remove('over'));
 drop.addEventListener('drop', (e) => { e.preventDefault(); drop.classList.remove('over'); if (e.dataTransfer.files[0]) setFile(e.dataTransfer.files[0]); });
 window.addEventListener('popstate', fromUrl);
-loadMachines().then(fromUrl);
+// Both lists before a job's settings are shown in them.
+Promise.all([loadMachines(), loadDialects()]).then(fromUrl, fail);
