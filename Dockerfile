@@ -23,8 +23,9 @@ USER kinepost
 WORKDIR /var/lib/kinepost
 VOLUME ["/var/lib/kinepost/data"]
 EXPOSE 8080
-# No curl in the slim image: bash's /dev/tcp asks /healthz.
+# No curl in the slim image: bash's /dev/tcp asks /healthz on the port KINEPOST_BIND names (a
+# wildcard address is asked on loopback).
 HEALTHCHECK --interval=15s --timeout=3s --start-period=5s --retries=3 \
-  CMD ["bash", "-c", "exec 3<>/dev/tcp/127.0.0.1/8080 && printf 'GET /healthz HTTP/1.0\\r\\n\\r\\n' >&3 && grep -q '^ok' <&3"]
+  CMD ["bash", "-c", "h=${KINEPOST_BIND%:*}; p=${KINEPOST_BIND##*:}; case $h in 0.0.0.0|'[::]'|'') h=127.0.0.1;; esac; h=${h#[}; h=${h%]}; exec 3<>/dev/tcp/$h/$p && printf 'GET /healthz HTTP/1.0\\r\\n\\r\\n' >&3 && grep -q '^ok' <&3"]
 ENTRYPOINT ["kinepost"]
 CMD ["serve"]

@@ -420,3 +420,63 @@ fn a_closed_pipe_ends_the_output_without_a_panic() {
     let out = child.wait_with_output().unwrap();
     assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
 }
+
+/// `--log-format json` writes nothing but JSON lines (a plain "listening on" line broke every
+/// log shipper), and a log that is no terminal carries no colour codes.
+#[test]
+fn the_service_log_is_one_format_and_plain_in_a_file() {
+    use std::io::{BufRead, BufReader};
+    for format in ["json", "text"] {
+        let data = std::env::temp_dir().join(format!("kinepost-log-{format}-{}", std::process::id()));
+        let mut child = Command::new(env!("CARGO_BIN_EXE_kinepost"))
+            .args(["serve", "--bind", "127.0.0.1:0", "--log-format", format, "--data-dir", data.to_str().unwrap()])
+            .env("KINEPOST_MACHINES", concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        let mut err = BufReader::new(child.stderr.take().unwrap());
+        let mut first = String::new();
+        err.read_line(&mut first).unwrap();
+        Command::new("kill").args(["-TERM", &child.id().to_string()]).status().unwrap();
+        child.wait().unwrap();
+        let mut lines = vec![first];
+        lines.extend(err.lines().map(Result::unwrap));
+        assert!(lines[0].contains("listening on http://127.0.0.1:"), "{format}: {lines:?}");
+        for l in lines.iter().filter(|l| !l.trim().is_empty()) {
+            assert!(!l.contains('\u{1b}'), "{format}: colour codes in a file: {l:?}");
+            if format == "json" {
+                assert!(serde_json::from_str::<Value>(l).is_ok(), "not JSON: {l:?}");
+            }
+        }
+        let _ = std::fs::remove_dir_all(&data);
+    }
+}
+
+/// The image's HEALTHCHECK asks the port `KINEPOST_BIND` names (it asked 8080 whatever the
+/// service listened on): the Dockerfile's own command, run by bash against a real server.
+#[test]
+fn the_images_health_check_follows_the_bind_address() {
+    use std::io::{BufRead, BufReader};
+    let dockerfile = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/Dockerfile")).unwrap();
+    let cmd = dockerfile.split("HEALTHCHECK").nth(1).unwrap().lines().find(|l| l.trim_start().starts_with("CMD [")).unwrap();
+    let args: Vec<String> = serde_json::from_str(&cmd[cmd.find('[').unwrap()..]).unwrap();
+    assert_eq!(args[..2], ["bash", "-c"]);
+    let data = std::env::temp_dir().join(format!("kinepost-health-{}", std::process::id()));
+    let mut child = Command::new(env!("CARGO_BIN_EXE_kinepost"))
+        .args(["serve", "--bind", "127.0.0.1:0", "--data-dir", data.to_str().unwrap()])
+        .env("KINEPOST_MACHINES", concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut line = String::new();
+    BufReader::new(child.stderr.take().unwrap()).read_line(&mut line).unwrap();
+    let port = line.split("listening on http://127.0.0.1:").nth(1).unwrap().split(|c: char| !c.is_ascii_digit()).next().unwrap().to_string();
+    let health = |bind: &str| Command::new("bash").args(["-c", &args[2]]).env("KINEPOST_BIND", bind).status().unwrap().success();
+    let (wild, lo) = (health(&format!("0.0.0.0:{port}")), health(&format!("127.0.0.1:{port}")));
+    let elsewhere = health("0.0.0.0:1");
+    child.kill().unwrap();
+    child.wait().unwrap();
+    let _ = std::fs::remove_dir_all(&data);
+    assert!(wild && lo, "healthy on its own port: {wild} {lo}");
+    assert!(!elsewhere, "and not where nothing listens");
+}

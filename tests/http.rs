@@ -60,6 +60,8 @@ async fn machines_health_metrics_and_docs() {
         "{m}"
     );
     assert!(m.contains("kinepost_streams_in_flight 0"));
+    // The queue's series are there before the first job, at 0.
+    assert!(m.contains("kinepost_jobs{state=\"queued\"} 0") && m.contains("kinepost_jobs{state=\"failed\"} 0"), "{m}");
 }
 
 #[tokio::test]

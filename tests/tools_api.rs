@@ -82,8 +82,10 @@ async fn tool_tables_round_trip_on_sqlite() {
 }
 
 #[tokio::test]
+#[ignore = "needs PostgreSQL: KINEPOST_TEST_DATABASE_URL=postgres://… cargo test -- --ignored"]
 async fn tool_tables_round_trip_on_postgres() {
     let Some((url, admin, name)) = postgres().await else {
+        assert!(std::env::var("KINEPOST_REQUIRE_POSTGRES").is_err(), "KINEPOST_REQUIRE_POSTGRES is set but KINEPOST_TEST_DATABASE_URL is not");
         eprintln!("SKIPPED: set KINEPOST_TEST_DATABASE_URL=postgres://… to run on PostgreSQL");
         return;
     };

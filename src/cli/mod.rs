@@ -317,9 +317,10 @@ pub struct ServeArgs {
     /// Address to listen on.
     #[arg(long, env = "KINEPOST_BIND", default_value = "127.0.0.1:8080")]
     pub bind: String,
-    /// Where the service keeps its data (jobs, spool).
-    #[arg(long, env = "KINEPOST_DATA_DIR", default_value = "data")]
-    pub data_dir: PathBuf,
+    /// Where the service keeps its data (jobs, spool); default `$XDG_DATA_HOME/kinepost`, else
+    /// `~/.local/share/kinepost` (not the working directory: a checkout grew by a job's spool).
+    #[arg(long, env = "KINEPOST_DATA_DIR")]
+    pub data_dir: Option<PathBuf>,
     /// Largest upload in bytes (streamed, not buffered).
     #[arg(long, env = "KINEPOST_MAX_UPLOAD", default_value_t = 4 << 30)]
     pub max_upload: u64,
@@ -627,13 +628,22 @@ fn seconds(flag: &str, v: f64, min: f64, max: f64, unit: f64) -> Result<std::tim
     }
 }
 
+/// The user's data directory (XDG), else `./data` where there is no home.
+fn default_data_dir() -> PathBuf {
+    let xdg = std::env::var_os("XDG_DATA_HOME").filter(|d| !d.is_empty()).map(PathBuf::from);
+    let home = std::env::var_os("HOME").filter(|d| !d.is_empty()).map(|h| PathBuf::from(h).join(".local/share"));
+    xdg.or(home).map_or_else(|| PathBuf::from("data"), |d| d.join("kinepost"))
+}
+
 fn serve(cli: &Cli, a: &ServeArgs) -> Result<(), String> {
     if a.admin_token.as_deref().is_some_and(|t| !t.is_empty() && t.trim().is_empty()) {
         return Err("KINEPOST_ADMIN_TOKEN is only whitespace: give a real token, or none to keep profile writes off".into());
     }
     let filter =
         tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
-    let builder = tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr);
+    // Colours only for a terminal: a log file kept the escape codes.
+    let ansi = std::io::IsTerminal::is_terminal(&std::io::stderr());
+    let builder = tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).with_ansi(ansi);
     match a.log_format.as_str() {
         "json" => builder.json().init(),
         "text" => builder.init(),
@@ -642,7 +652,7 @@ fn serve(cli: &Cli, a: &ServeArgs) -> Result<(), String> {
     let cfg = kinepost::http::Config {
         bind: a.bind.clone(),
         machines: cli.machines.clone().unwrap_or_else(machines::default_dir),
-        data_dir: a.data_dir.clone(),
+        data_dir: a.data_dir.clone().unwrap_or_else(default_data_dir),
         max_upload: a.max_upload,
         request_timeout: std::time::Duration::from_secs(a.request_timeout),
         max_streams: a.max_streams.max(1),

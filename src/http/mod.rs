@@ -204,8 +204,10 @@ impl Metrics {
         }
     }
 
-    /// The text format; `jobs`: jobs by state in the store (queue depth), when there is one.
-    pub fn render(&self, jobs: &[(crate::jobs::State, u64)]) -> String {
+    /// The text format; `jobs`: jobs by state in the store (queue depth), when there is one
+    /// (every state, 0 included: a series that appears only with the first job breaks alerts
+    /// and dashboards).
+    pub fn render(&self, jobs: Option<&[(crate::jobs::State, u64)]>) -> String {
         use std::fmt::Write;
         let mut o = String::new();
         o.push_str("# HELP kinepost_http_requests_total HTTP requests by route and status.\n# TYPE kinepost_http_requests_total counter\n");
@@ -240,7 +242,7 @@ impl Metrics {
         );
         o.push_str("# HELP kinepost_post_duration_seconds Duration of completed posts.\n# TYPE kinepost_post_duration_seconds histogram\n");
         self.posts.render(&mut o, "kinepost_post_duration_seconds", "");
-        if !jobs.is_empty() {
+        if let Some(jobs) = jobs {
             o.push_str("# HELP kinepost_jobs Jobs in the store by state (queued: the queue depth; all replicas).\n# TYPE kinepost_jobs gauge\n");
             for st in crate::jobs::State::ALL {
                 let n = jobs.iter().find(|(s, _)| *s == st).map_or(0, |(_, n)| *n);
@@ -617,12 +619,12 @@ async fn readyz(State(st): State<Arc<AppState>>) -> Result<Response, ApiError> {
 #[utoipa::path(get, path = "/metrics", responses((status = 200, description = "Prometheus text format", content_type = "text/plain")), tag = "ops")]
 async fn metrics_route(State(st): State<Arc<AppState>>) -> impl IntoResponse {
     let jobs = match &st.jobs {
-        Some(q) => q.store.counts().await.unwrap_or_default(),
-        None => Vec::new(),
+        Some(q) => q.store.counts().await.ok(),
+        None => None,
     };
     (
         [(header::CONTENT_TYPE, "text/plain; version=0.0.4")],
-        st.metrics.render(&jobs),
+        st.metrics.render(jobs.as_deref()),
     )
 }
 
@@ -646,8 +648,8 @@ pub async fn serve(mut cfg: Config) -> Result<(), String> {
         .await
         .map_err(|e| format!("bind {}: {e}", cfg.bind))?;
     let addr = listener.local_addr().map_err(|e| e.to_string())?;
-    tracing::info!(%addr, machines = library.len(), "kinepost listening");
-    eprintln!("kinepost: listening on http://{addr} ({} machines)", library.len());
+    // One line, in the log's own format (a plain line broke a JSON log).
+    tracing::info!(machines = library.len(), "kinepost listening on http://{addr}");
     let metrics = Arc::new(Metrics::default());
     let m = metrics.clone();
     queue.observe(Box::new(move |outcome, secs| m.record_job(outcome, secs)));

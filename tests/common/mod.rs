@@ -27,15 +27,25 @@ pub async fn server(cfg: Config) -> String {
 
 static NEXT: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
 
+/// This test process's directory for its servers' data, removed when the process exits (the
+/// servers live as long as the process: a run left hundreds of these behind).
+fn scratch() -> std::path::PathBuf {
+    static ONCE: std::sync::Once = std::sync::Once::new();
+    extern "C" fn remove() {
+        let _ = std::fs::remove_dir_all(std::env::temp_dir().join(format!("kinepost-http-{}", std::process::id())));
+    }
+    ONCE.call_once(|| {
+        // SAFETY: registers a plain function with no captures to run at exit.
+        unsafe { libc::atexit(remove) };
+    });
+    std::env::temp_dir().join(format!("kinepost-http-{}", std::process::id()))
+}
+
 pub fn cfg() -> Config {
     Config {
         machines: concat!(env!("CARGO_MANIFEST_DIR"), "/machines").into(),
         // One data directory per server: each has its own job store.
-        data_dir: std::env::temp_dir().join(format!(
-            "kinepost-http-{}-{}",
-            std::process::id(),
-            NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed)
-        )),
+        data_dir: scratch().join(NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed).to_string()),
         ..Config::default()
     }
 }
@@ -72,7 +82,8 @@ fn spawn_serving(mut cmd: std::process::Command, data: &std::path::Path, extra: 
         line.clear();
         assert!(err.read_line(&mut line).unwrap() > 0, "server exited early");
         if let Some(rest) = line.split("listening on ").nth(1) {
-            break rest.split_whitespace().next().unwrap().to_string();
+            // A text line (`… listening on http://… machines=10`) or a JSON one (`…","machines"…`).
+            break rest.split(|c: char| c.is_whitespace() || c == '"').next().unwrap().to_string();
         }
     };
     std::thread::spawn(move || for _ in err.lines() {});
