@@ -126,6 +126,38 @@ try {
   const cl = await page.textContent('#cl-line');
   check(/^CL line \d+: GOTO\//.test(cl), `a row opens its CL line: ${cl.slice(0, 60)}`);
 
+  // A phone: nothing wider than the screen (the error table here, the plots on the first job),
+  // plot labels readable, units on the plots; then dark mode, as the device asks.
+  await page.setViewportSize({ width: 390, height: 844 });
+  const wideErrors = await page.evaluate(() => document.documentElement.scrollWidth);
+  check(wideErrors <= 390, `the form with a file and a job's error table fit a 390 px phone (page ${wideErrors} px wide)`);
+  await page.setViewportSize({ width: 1280, height: 900 });
+  const phone = await browser.newPage({ viewport: { width: 390, height: 844 } });
+  await phone.goto(jobUrl);
+  await phone.waitForSelector('#plots svg.plot', { timeout: 30000 });
+  const wide = await phone.evaluate(() => document.documentElement.scrollWidth);
+  check(wide <= 390, `a result fits a 390 px phone (page ${wide} px wide)`);
+  const tick = await phone.$eval('#plots svg.plot text.tick', (t) => t.getBoundingClientRect().height);
+  check(tick >= 9, `plot labels readable on a phone (${tick.toFixed(1)} px)`);
+  const xplot = await phone.$eval('#plots svg.plot[data-axis="X"]', (s) => [...s.querySelectorAll('text')].map((t) => t.textContent));
+  check(xplot.includes('inch'), `the X plot says its unit: ${xplot.join(' | ')}`);
+  await phone.screenshot({ path: path.join(shots, 'phone.png'), fullPage: true });
+  await phone.emulateMedia({ colorScheme: 'dark' });
+  const bg = await phone.evaluate(() => getComputedStyle(document.documentElement).backgroundColor);
+  check(bg === 'rgb(18, 20, 23)', `dark mode follows the device (${bg})`);
+  await phone.waitForTimeout(200);
+  const dark3d = await phone.evaluate(() => {
+    const c = document.querySelector('#view3d canvas');
+    const t = document.createElement('canvas');
+    [t.width, t.height] = [c.width, c.height];
+    const g = t.getContext('2d');
+    g.drawImage(c, 0, 0);
+    return Array.from(g.getImageData(2, 2, 1, 1).data.slice(0, 3));
+  });
+  check(dark3d.every((v) => v < 80), `and so does the 3D view's background (${dark3d})`);
+  await phone.screenshot({ path: path.join(shots, 'dark.png'), fullPage: true });
+  await phone.close();
+
   // A bad request shows the server's problem detail.
   await page.fill('#work_offset', '1,2');
   await page.evaluate(() => document.getElementById('work_offset').removeAttribute('pattern'));

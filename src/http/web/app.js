@@ -239,6 +239,12 @@ function fromUrl() {
 
 $('machine').addEventListener('change', showMachine);
 $('xaxis').addEventListener('change', drawPlots);
+// The plots are drawn at the width they are shown at: again when that changes.
+let plotWidth = 0;
+new ResizeObserver(() => {
+  const w = $('plots').clientWidth;
+  if (w && Math.abs(w - plotWidth) > 8) { plotWidth = w; drawPlots(); }
+}).observe($('plots'));
 $('file').addEventListener('change', () => $('file').files[0] && ($('drop-text').textContent = $('file').files[0].name));
 $('post-form').addEventListener('submit', submit);
 const drop = $('drop');

@@ -42,7 +42,8 @@ export function view3d(el, p, list, onPick) {
   }
   renderer.setPixelRatio(window.devicePixelRatio || 1);
   renderer.setSize(w, h);
-  renderer.setClearColor(0xffffff);
+  // The page's own background (dark mode).
+  renderer.setClearColor(new THREE.Color(getComputedStyle(el).backgroundColor || '#fff'));
   el.appendChild(renderer.domElement);
 
   const scene = new THREE.Scene();
@@ -124,6 +125,21 @@ export function view3d(el, p, list, onPick) {
   const render = () => renderer.render(scene, camera);
   controls.addEventListener('change', render);
   render();
+  // The view follows its box (a phone turned, a window resized): it was drawn once at the width
+  // it had, and a page opened narrow then widened, or the reverse, overflowed.
+  const resized = new ResizeObserver(() => {
+    const [cw, ch] = [el.clientWidth, el.clientHeight];
+    if (!cw || !ch) return;
+    renderer.setSize(cw, ch);
+    camera.aspect = cw / ch;
+    camera.updateProjectionMatrix();
+    render();
+  });
+  resized.observe(el);
+  // Dark mode switched while the view is open: the page's background again.
+  const scheme = window.matchMedia('(prefers-color-scheme: dark)');
+  const recolour = () => { renderer.setClearColor(new THREE.Color(getComputedStyle(el).backgroundColor || '#fff')); render(); };
+  scheme.addEventListener('change', recolour);
 
   const screenOf = (tip) => {
     const v = new THREE.Vector3(...tip).project(camera);
@@ -161,6 +177,8 @@ export function view3d(el, p, list, onPick) {
       return list[i] && list[i].tip ? screenOf(list[i].tip) : null;
     },
     dispose() {
+      resized.disconnect();
+      scheme.removeEventListener('change', recolour);
       controls.dispose();
       renderer.dispose();
     },
@@ -176,7 +194,9 @@ export function plots(el, p, list, x, onPick) {
   el.replaceChildren();
   const pts = p.points;
   if (!pts.length) return;
-  const W = 900;
+  // Drawn at the width it is shown at, so text stays its size on a phone (a 900-wide drawing
+  // shrunk to 390 px made the labels 5 px).
+  const W = Math.max(320, Math.round(el.clientWidth || 900));
   const H = 110;
   const L = 70;
   const R = 10;
@@ -217,14 +237,17 @@ export function plots(el, p, list, x, onPick) {
     }
     node('line', { x1: L, x2: L, y1: 8, y2: H - 16, class: 'frame' }, svg);
     node('line', { x1: L, x2: W - R, y1: H - 16, y2: H - 16, class: 'frame' }, svg);
+    const unit = a.kind === 'rotary' ? '°' : p.units;
     const label = node('text', { x: 4, y: 22, class: 'name' }, svg);
     label.textContent = a.name;
+    node('text', { x: 4, y: 40, class: 'tick' }, svg).textContent = unit;
+    const digits = a.kind === 'rotary' ? 1 : 2;
     for (const v of [Math.max(...vals), Math.min(...vals)]) {
       const t = node('text', { x: L - 4, y: sy(v) + 4, class: 'tick', 'text-anchor': 'end' }, svg);
-      t.textContent = v.toFixed(a.kind === 'rotary' ? 1 : 2);
+      t.textContent = v.toLocaleString(undefined, { minimumFractionDigits: digits, maximumFractionDigits: digits });
     }
     const end = node('text', { x: W - R, y: H - 3, class: 'tick', 'text-anchor': 'end' }, svg);
-    end.textContent = x === 't' ? `${(x1 / 60).toFixed(1)} min` : `block ${x1}`;
+    end.textContent = x === 't' ? `${(x1 / 60).toLocaleString(undefined, { maximumFractionDigits: 1 })} min` : `block ${x1.toLocaleString()}`;
     let d = '';
     pts.forEach((q, i) => { d += `${i ? 'L' : 'M'}${sx(xs[i]).toFixed(1)} ${sy(vals[i]).toFixed(1)}`; });
     node('path', { d, class: 'trace' }, svg);
