@@ -122,7 +122,7 @@ pub(super) async fn list_machines(State(st): State<Arc<AppState>>) -> Json<Vec<M
     Json(st.machines.list().iter().map(MachineDto::from).collect())
 }
 
-fn etag_header(c: &Current) -> HeaderValue {
+pub(super) fn etag_header<T: Kind>(c: &Current<T>) -> HeaderValue {
     HeaderValue::from_str(&c.etag()).unwrap_or(HeaderValue::from_static("\"\""))
 }
 
@@ -271,13 +271,19 @@ pub(super) async fn toml_body<D: serde::de::DeserializeOwned + Serialize>(req: R
     toml::to_string(&doc).map_err(|e| ApiError::Internal(format!("{what} as TOML: {e}")))
 }
 
-fn written(status: StatusCode, c: &Current) -> Response {
-    let mut r = (status, Json(MachineDto::from(c))).into_response();
+/// A version just written (a profile, a tool table): its document, its ETag, where it is read.
+pub(super) fn written<T: Kind>(status: StatusCode, c: &Current<T>, body: impl Serialize, location: &str) -> Response {
+    let mut r = (status, Json(body)).into_response();
     r.headers_mut().insert(header::ETAG, etag_header(c));
-    if let Ok(v) = HeaderValue::from_str(&format!("/v1/machines/{}", c.item.machine.id)) {
+    if let Ok(v) = HeaderValue::from_str(location) {
         r.headers_mut().insert(header::LOCATION, v);
     }
     r
+}
+
+/// [`written`] for a machine profile.
+fn profile_written(status: StatusCode, c: &Current) -> Response {
+    written(status, c, MachineDto::from(c), &format!("/v1/machines/{}", c.item.machine.id))
 }
 
 /// Adds a machine profile: validated by the same loader as the files (errors name the key).
@@ -299,7 +305,7 @@ pub(super) async fn create_machine(State(st): State<Arc<AppState>>, req: Request
     let text = profile_text(req).await?;
     let (c, _) = st.machines.put(&text, None, Expect::Absent).await?;
     tracing::info!(machine = %c.item.machine.id, version = c.version, "machine profile created");
-    Ok(written(StatusCode::CREATED, &c))
+    Ok(profile_written(StatusCode::CREATED, &c))
 }
 
 /// Replaces (or creates) a machine profile; with `If-Match`, only if it is still that version.
@@ -328,7 +334,7 @@ pub(super) async fn put_machine(
     let text = profile_text(req).await?;
     let (c, created) = st.machines.put(&text, Some(&id), expect).await?;
     tracing::info!(machine = %id, version = c.version, "machine profile written");
-    Ok(written(if created { StatusCode::CREATED } else { StatusCode::OK }, &c))
+    Ok(profile_written(if created { StatusCode::CREATED } else { StatusCode::OK }, &c))
 }
 
 /// Deletes a machine profile (a version marking the deletion; jobs already queued keep theirs).

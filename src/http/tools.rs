@@ -4,13 +4,15 @@
 
 use super::AppState;
 use super::error::{ApiError, Problem};
-use super::machines::{VersionsDto, authorize, expectation_of, toml_body, toml_response, version_toml, versions_of, wants_toml};
+use super::machines::{
+    VersionsDto, authorize, etag_header, expectation_of, toml_body, toml_response, version_toml, versions_of, wants_toml, written,
+};
 use crate::machines::Current;
 use crate::machines::tools::{ToolTable, ToolTableDoc};
 use crate::text::quote;
 use axum::Json;
 use axum::extract::{Path, Request, State};
-use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
+use axum::http::{HeaderMap, StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use serde::Serialize;
 use std::sync::Arc;
@@ -69,10 +71,6 @@ impl From<&Current<ToolTable>> for ToolTableDto {
                 .collect(),
         }
     }
-}
-
-fn etag_header(c: &Current<ToolTable>) -> HeaderValue {
-    HeaderValue::from_str(&c.etag()).unwrap_or(HeaderValue::from_static("\"\""))
 }
 
 /// The machine must exist: a table for no profile would never be used.
@@ -158,16 +156,8 @@ pub(super) async fn put_tools(
     let text = toml_body::<ToolTableDoc>(req, "tool table").await.map_err(table_err)?;
     let (c, created) = st.machines.tools.put(&text, Some(&id), expect).await.map_err(|e| table_err(e.into()))?;
     tracing::info!(machine = %id, version = c.version, "tool table written");
-    let mut r = (
-        if created { StatusCode::CREATED } else { StatusCode::OK },
-        Json(ToolTableDto::from(&c)),
-    )
-        .into_response();
-    r.headers_mut().insert(header::ETAG, etag_header(&c));
-    if let Ok(v) = HeaderValue::from_str(&format!("/v1/machines/{id}/tools")) {
-        r.headers_mut().insert(header::LOCATION, v);
-    }
-    Ok(r)
+    let status = if created { StatusCode::CREATED } else { StatusCode::OK };
+    Ok(written(status, &c, ToolTableDto::from(&c), &format!("/v1/machines/{id}/tools")))
 }
 
 /// Deletes a machine's tool table (a version marking the deletion): posts go back to the CL's
