@@ -6,9 +6,9 @@ mod common;
 
 use common::collect::Collect;
 use kinepost::diag::{Code, Diagnostic, Severity};
-use kinepost::kinematics::{Machine, Setup};
+use kinepost::kinematics::Machine;
 use kinepost::machines::Library;
-use kinepost::post::verify::{VerifyOptions, verify};
+use kinepost::post::verify::verify;
 use kinepost::post::{self, Mode, Options};
 use std::path::Path;
 
@@ -40,16 +40,7 @@ fn post(m: &Machine, cl: &str, dialect: &str, mode: Mode, planes: bool) -> Colle
 
 /// `kinepost verify` reads the compensated program back as the path the CL gave.
 fn verifies(m: &Machine, cl: &str, nc: &str, mode: Mode) {
-    let o = VerifyOptions {
-        mode,
-        setup: Setup::new(m.default_tool_length, Default::default()),
-        tolerance: 0.01,
-        angle_tolerance_deg: 0.01,
-        cl_units: None,
-        cl_tool_length: true,
-        tool_table: None,
-    };
-    let r = verify(cl.as_bytes(), nc.as_bytes(), m, &o).unwrap();
+    let r = verify(cl.as_bytes(), nc.as_bytes(), m, &common::verify::options(m, mode)).unwrap();
     assert!(r.ok && r.matched == r.cl_points, "{r:?}\n{nc}");
 }
 

@@ -5,9 +5,9 @@ mod common;
 
 use common::collect::Collect;
 use kinepost::diag::{Code, Severity};
-use kinepost::kinematics::{Machine, Setup, Vec3};
+use kinepost::kinematics::{Machine, Vec3};
 use kinepost::machines::Library;
-use kinepost::post::verify::{VerifyOptions, verify};
+use kinepost::post::verify::verify;
 use kinepost::post::{self, Mode, Options};
 
 fn machine(id: &str) -> Machine {
@@ -29,16 +29,7 @@ fn post(m: &Machine, cl: &str, mode: Mode) -> Collect {
 }
 
 fn verified(m: &Machine, cl: &str, nc: &str, mode: Mode) -> kinepost::post::verify::Report {
-    let o = VerifyOptions {
-        mode,
-        setup: Setup::new(m.default_tool_length, Vec3::zeros()),
-        tolerance: 0.01,
-        angle_tolerance_deg: 0.01,
-        cl_units: None,
-        cl_tool_length: true,
-        tool_table: None,
-    };
-    verify(cl.as_bytes(), nc.as_bytes(), m, &o).unwrap()
+    verify(cl.as_bytes(), nc.as_bytes(), m, &common::verify::options(m, mode)).unwrap()
 }
 
 /// The second operation's MCS is the first's moved 100 mm along its X and turned 90° about its
