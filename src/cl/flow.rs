@@ -109,14 +109,16 @@ pub(super) fn preselect(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record
         st.bad(diags, st.rest_col, "SELCTL: expected a tool number".into());
         return None;
     };
+    preselected(st, a, diags)
+}
+
+/// The tool `SELCTL` or `SELECT/TOOL` readies, from its argument.
+fn preselected(st: &Stmt, a: &Arg, diags: &mut Vec<Diagnostic>) -> Option<Record> {
     match a.text.trim().trim_end_matches('.').parse::<u32>() {
         Ok(n) => Some(Record::Preselect(n)),
         Err(_) => {
-            st.bad(
-                diags,
-                a.col,
-                format!("SELCTL: expected a tool number, found {:?}", a.text.trim()),
-            );
+            let msg = format!("{}: expected a tool number, found {:?}", st.major, a.text.trim());
+            st.bad(diags, a.col, msg);
             None
         }
     }
@@ -153,13 +155,7 @@ pub(super) fn function(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record>
 /// `SELECT/TOOL,n` (NX, SOLIDWORKS CAM): `SELCTL/n` in other words.
 pub(super) fn select(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
     match (st.args.first().map(Arg::word).as_deref(), st.args.get(1)) {
-        (Some("TOOL"), Some(a)) => match a.text.trim().trim_end_matches('.').parse::<u32>() {
-            Ok(n) => Some(Record::Preselect(n)),
-            Err(_) => {
-                st.bad(diags, a.col, format!("SELECT: expected a tool number, found {:?}", a.text.trim()));
-                None
-            }
-        },
+        (Some("TOOL"), Some(a)) => preselected(st, a, diags),
         _ => {
             st.bad(diags, st.rest_col, "SELECT: expected TOOL and a tool number".into());
             None
