@@ -5,6 +5,9 @@
 
 use crate::kinematics::Units;
 
+/// The work coordinate systems a program may select (G54–G59), in order.
+pub const WCS_CODES: [&str; 6] = ["G54", "G55", "G56", "G57", "G58", "G59"];
+
 #[derive(Clone, Debug, PartialEq)]
 pub struct NcBlock {
     pub line: u32,
@@ -474,8 +477,7 @@ impl<R: std::io::BufRead> NcReader<R> {
             490 => self.tcp = false,
             280 | 300 | 530 => w.machine_coords = true,
             540 | 550 | 560 | 570 | 580 | 590 => {
-                const CODES: [&str; 6] = ["G54", "G55", "G56", "G57", "G58", "G59"];
-                self.wcs = Some(CODES[((v * 10.0).round() as usize - 540) / 10]);
+                self.wcs = Some(WCS_CODES[((v * 10.0).round() as usize - 540) / 10]);
             }
             682 => w.plane_def = true,
             690 | 2550 => self.plane = None,

@@ -7,11 +7,8 @@ use super::source::{HolePart, Item, MotionPt, ProgEvent, Source};
 use super::setups::WorkOffsets;
 use super::tools::Lengths;
 use super::{Mode, seg_dist};
-
-/// The work coordinate systems an NC program may select, in order.
-const WCS_CODES: [&str; 6] = ["G54", "G55", "G56", "G57", "G58", "G59"];
 use crate::kinematics::{Joints, Machine, Setup, Units, Vec3, angle_between, fk};
-use crate::nc::read::{NcBlock, NcReader};
+use crate::nc::read::{NcBlock, NcReader, WCS_CODES};
 use serde::Serialize;
 use std::collections::VecDeque;
 use std::io::BufRead;
@@ -251,7 +248,8 @@ impl<N: BufRead> Replay<'_, N> {
             if self.ahead[k].0.wcs == Some(code) {
                 let mut b = self.ahead[k].0.clone();
                 self.shift_block(&mut b);
-                self.ahead[k] = (b.clone(), block_pose(self.m, &b, self.o, &self.setup));
+                let p = block_pose(self.m, &b, self.o, &self.setup);
+                self.ahead[k] = (b, p);
             }
         }
     }
@@ -303,12 +301,11 @@ impl<N: BufRead> Replay<'_, N> {
         if self.nc_done || self.ahead.len() >= LOOKAHEAD {
             return Ok(false);
         }
-        let Some(b) = self.reader.next_block()? else {
+        let Some(mut b) = self.reader.next_block()? else {
             self.nc_done = true;
             return Ok(false);
         };
         self.rep.nc_blocks += 1;
-        let mut b = b;
         if self.offsets.is_none()
             && let Some(first) = b.wcs
         {
