@@ -19,32 +19,27 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             return Ok(self.out(&c)?);
         };
         let picked = offsets.pick(shift, turned);
-        let (first, name) = (offsets.first(), self.o.dialect.name);
-        let i = match picked {
-            Ok(i) => i,
-            Err(why) => {
-                let msg = match why {
-                    Refused::Turned => format!(
-                        "setups=work-offsets: this operation's MCS is turned against the first, and a work offset on {name} holds no rotation: its points are written in {first}, taken into the first MCS"
-                    ),
-                    Refused::Full => format!(
-                        "setups=work-offsets: every work offset of {name} is in use: this operation's points are written in {first}, taken into the first MCS"
-                    ),
-                };
-                self.note(Diagnostic::new(Code::CoordinateSystem, Severity::Error, Some(line), msg))?;
-                let c = self.f.comment(taken).to_string();
-                self.out(&c)?;
-                0
-            }
-        };
+        // Refused: the first offset, the points taken into its frame.
+        let i = picked.unwrap_or(0);
+        let (first, code, s) = (offsets.first(), offsets.code(i), offsets.shift(i));
+        if let Err(why) = picked {
+            let name = self.o.dialect.name;
+            let msg = match why {
+                Refused::Turned => format!(
+                    "setups=work-offsets: this operation's MCS is turned against the first, and a work offset on {name} holds no rotation: its points are written in {first}, taken into the first MCS"
+                ),
+                Refused::Full => format!(
+                    "setups=work-offsets: every work offset of {name} is in use: this operation's points are written in {first}, taken into the first MCS"
+                ),
+            };
+            self.note(Diagnostic::new(Code::CoordinateSystem, Severity::Error, Some(line), msg))?;
+            let c = self.f.comment(taken).to_string();
+            self.out(&c)?;
+        }
         if i == self.offset_at {
             return Ok(());
         }
         self.offset_at = i;
-        let Some(offsets) = self.offsets.as_ref() else {
-            return Ok(());
-        };
-        let (code, s) = (offsets.code(i), offsets.shift(i));
         self.f.set_shift(s.into());
         let l = self.f.words(code).to_string();
         self.out(&l)?;
