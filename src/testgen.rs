@@ -17,7 +17,7 @@ pub fn write_path(m: &Machine, points: usize, seed: u64, tool_length: f64, out: 
     writeln!(out, "PARTNO/GENERATED PATH FOR {}", m.id.to_uppercase())?;
     writeln!(out, "UNITS/{}", units.0)?;
     writeln!(out, "LOADTL/1,LENGTH,{tool_length}")?;
-    writeln!(out, "SPINDL/12000,RPM,CLW")?;
+    writeln!(out, "SPINDL/6000,RPM,CLW")?;
     writeln!(out, "COOLNT/FLOOD")?;
     let ph = |k: u64| {
         ((seed.wrapping_mul(6364136223846793005).wrapping_add(k * 1442695040888963407)) >> 11) as f64 / (1u64 << 53) as f64

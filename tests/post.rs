@@ -1048,6 +1048,32 @@ fn rapids_that_turn_rotaries_retract_first_and_turn_alone() {
     assert!(sink.nc.contains("(RETRACT)") && sink.nc.contains("(ROTARY REPOSITION)"));
 }
 
+/// Two rapids in a row that each turn the rotaries climbed to the top of Z twice: the second
+/// starts at a CL rapid point in the air, lifts along the tool axis, turns there and comes down,
+/// and both rapid points are still reached.
+#[test]
+fn consecutive_rapids_that_turn_rotaries_climb_to_the_top_of_z_once() {
+    let m = machine("spinner-u5-620");
+    let (s30, c30) = (30f64.to_radians().sin(), 30f64.to_radians().cos());
+    let cl = format!(
+        "UNITS/MM\nFEDRAT/500,MMPM\nGOTO/0,0,10,0,0,1\nGOTO/10,0,10,0,0,1\nRAPID\nGOTO/20,5,60,{s30},0,{c30}\n\
+         RAPID\nGOTO/20,5,60,0,{s30},{c30}\nGOTO/25,5,58,0,{s30},{c30}\n"
+    );
+    let o = fanuc(&m, Mode::Joint);
+    let (sink, s) = run(&m, cl.as_bytes(), &o);
+    assert_eq!(s.errors, 0, "{:?}", sink.diags);
+    let climbs = sink.nc.lines().filter(|l| l.contains("(RETRACT Z)")).count();
+    assert_eq!(climbs, 1, "one climb to the top of Z:\n{}", sink.nc);
+    let lift = sink.nc.lines().position(|l| l.contains("(RETRACT)")).expect("a lift along the tool axis");
+    let turn = sink.nc.lines().nth(lift + 1).unwrap();
+    assert!(turn.contains("ROTARY REPOSITION") && turn.contains('C'), "turned at clearance: {turn}");
+    replay_matches(&m, &cl, &sink.nc, Mode::Joint, &Setup::new(m.default_tool_length, Vec3::zeros()), 1e-3);
+    // A cut between them: the next rotary rapid climbs again.
+    let cut = cl.replace("\nRAPID\nGOTO/20,5,60,0,", &format!("\nGOTO/21,5,60,{s30},0,{c30}\nRAPID\nGOTO/20,5,60,0,"));
+    let (sink, _) = run(&m, cut.as_bytes(), &o);
+    assert_eq!(sink.nc.lines().filter(|l| l.contains("(RETRACT Z)")).count(), 2, "{}", sink.nc);
+}
+
 #[test]
 fn clamped_rotaries_unlock_before_they_turn_and_lock_after_positioning() {
     let lib = Library::load_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap();
@@ -2488,6 +2514,39 @@ fn hostile_numbers_are_written_within_range_or_told() {
                 assert!(e.is_some(), "{rec} {v}: no error on line 4: {:?}\n{}", sink.diags, sink.nc);
             }
         }
+    }
+}
+
+/// The profile's spindle range bounds S: a speed above it is an error naming its line and the
+/// machine's maximum is written; `spindle_speed` beyond it is refused where options are made.
+#[test]
+fn spindle_speeds_stay_within_the_profiles_range() {
+    let lib = Library::load_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap();
+    for p in lib.iter() {
+        let (lo, hi) = p.spindle_range();
+        assert!(p.doc.spindle.is_some() && hi < post::MAX_SPINDLE_SPEED, "{}: every shipped profile states its spindle", p.doc.id);
+        let o = post::Settings::default().profile_options(p, None).unwrap();
+        let cl = format!(
+            "UNITS/MM\nLOADTL/1\nSPINDL/{}\nFEDRAT/100\nGOTO/10,20,30,0,0,1\nSPINDL/{}\nGOTO/12,20,30,0,0,1\nFINI\n",
+            hi,
+            hi * 1.5
+        );
+        let (sink, _) = run(&p.machine, cl.as_bytes(), &o);
+        let errs: Vec<_> = sink.diags.iter().filter(|d| d.code == Code::WordRange).collect();
+        assert!(errs.len() == 1 && errs[0].line == Some(6) && errs[0].severity == Severity::Error, "{}: {errs:?}", p.doc.id);
+        assert!(errs[0].message.contains("spindle maximum"), "{}", errs[0].message);
+        let s_words: Vec<f64> = sink
+            .nc
+            .split_whitespace()
+            .filter_map(|w| w.strip_prefix('S').and_then(|v| v.parse().ok()))
+            .collect();
+        assert!(s_words.iter().all(|&s| (lo..=hi).contains(&s)), "{}: {s_words:?}", p.doc.id);
+        let too_fast = post::Settings {
+            spindle_speed: Some(hi + 1.0),
+            ..Default::default()
+        };
+        let e = too_fast.profile_options(p, None).unwrap_err();
+        assert!(e.contains("spindle_speed") && e.contains(&p.doc.id), "{e}");
     }
 }
 

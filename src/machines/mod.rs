@@ -56,6 +56,8 @@ pub struct ProfileDoc {
     pub rotary: Vec<RotaryDoc>,
     #[serde(default)]
     pub tool: Option<ToolDoc>,
+    #[serde(default)]
+    pub spindle: Option<SpindleDoc>,
 }
 
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
@@ -102,6 +104,15 @@ pub struct AngleErrorDoc {
     pub range: [f64; 2],
 }
 
+/// What the spindle turns at: an S outside it is an alarm or a different cut, never a word.
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct SpindleDoc {
+    #[serde(default)]
+    pub min_rpm: Option<f64>,
+    pub max_rpm: f64,
+}
+
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct ToolDoc {
@@ -117,6 +128,13 @@ impl Profile {
             out[i] = r.clamp.as_ref().map(|[lock, unlock]| (lock.clone(), unlock.clone()));
         }
         out
+    }
+
+    /// The spindle's speeds in RPM, `[1, MAX_SPINDLE_SPEED]` where the profile does not say.
+    pub fn spindle_range(&self) -> (f64, f64) {
+        let s = self.doc.spindle.as_ref();
+        let min = s.and_then(|s| s.min_rpm).unwrap_or(1.0);
+        (min, s.map_or(crate::post::MAX_SPINDLE_SPEED, |s| s.max_rpm))
     }
 }
 
@@ -223,6 +241,9 @@ pub fn parse_profile(text: &str, file: &str, stem: Option<&str>) -> Result<Profi
                 .map(|e| AngleError::new(e.coefficients.clone(), (e.range[0], e.range[1]))),
         });
     }
+    if let Some(s) = &doc.spindle {
+        check_spindle(s).map_err(|(key, problem)| invalid(key, problem))?;
+    }
     if let Some(c) = &doc.controller
         && crate::nc::dialect(c).is_none()
     {
@@ -252,6 +273,21 @@ pub fn parse_profile(text: &str, file: &str, stem: Option<&str>) -> Result<Profi
         other => invalid("", other.to_string()),
     })?;
     Ok(Profile { machine, doc })
+}
+
+/// The spindle's range, or the key that is wrong and why.
+fn check_spindle(s: &SpindleDoc) -> Result<(), (&'static str, String)> {
+    let top = crate::post::MAX_SPINDLE_SPEED;
+    if !(s.max_rpm.is_finite() && (1.0..=top).contains(&s.max_rpm)) {
+        return Err(("spindle.max_rpm", format!("{} is not from 1 to {top}", s.max_rpm)));
+    }
+    match s.min_rpm {
+        Some(m) if !(m.is_finite() && (1.0..=s.max_rpm).contains(&m)) => Err((
+            "spindle.min_rpm",
+            format!("{m} is not from 1 to max_rpm {}", s.max_rpm),
+        )),
+        _ => Ok(()),
+    }
 }
 
 fn one_line(e: &toml::de::Error) -> String {

@@ -67,6 +67,9 @@ pub struct Options {
     /// CLSF listings carry no SPINDL: its post takes the speed from the operation). `None`: the
     /// CL's own, and a cut with none is a `spindle_stopped` warning.
     pub spindle_speed: Option<f64>,
+    /// The machine's spindle speeds in RPM (the profile's `[spindle]`): an S outside them is an
+    /// error where the CL asks for it.
+    pub spindle_range: (f64, f64),
     /// What the run may cost: set by whoever runs the engine for others (the server, the CLI's
     /// flags), never by a request.
     pub budget: Budget,
@@ -143,6 +146,7 @@ impl Options {
             singular_cone: 2f64.to_radians(),
             singular_tolerance: 0.0,
             clamps: Default::default(),
+            spindle_range: (1.0, MAX_SPINDLE_SPEED),
             header: Vec::new(),
             canned_cycles: false,
             tilted_planes: false,
@@ -236,6 +240,13 @@ impl Settings {
     ) -> Result<Options, String> {
         let mut o = self.options(&p.machine)?;
         o.clamps = p.clamps();
+        o.spindle_range = p.spindle_range();
+        if let Some(s) = o.spindle_speed
+            && !(o.spindle_range.0..=o.spindle_range.1).contains(&s)
+        {
+            let (lo, hi) = o.spindle_range;
+            return Err(format!("spindle_speed {s}: {}'s spindle turns from {lo} to {hi} RPM", p.doc.id));
+        }
         if o.tool_table.is_none()
             && let Some((t, label)) = standing
         {

@@ -13,6 +13,7 @@ use std::io::BufRead;
 
 mod frames;
 mod moves;
+mod spindle;
 
 /// Events read ahead before the first motion is planned: to find the units the CL starts in,
 /// and to tell CL from what is not.
@@ -194,6 +195,8 @@ pub struct Source<R> {
     pub canned_cycles: bool,
     /// The largest feed per minute the control's F word takes, profile units.
     pub feed_max: f64,
+    /// The machine's spindle speeds, RPM (`Options::spindle_range`).
+    pub spindle_range: (f64, f64),
     ended: bool,
     /// The line of an `END`/`FINI` not yet followed by motion.
     end_line: Option<u32>,
@@ -341,6 +344,7 @@ impl<R: BufRead> Source<R> {
             mcs: None,
             canned_cycles: false,
             feed_max: f64::INFINITY,
+            spindle_range: (1.0, super::MAX_SPINDLE_SPEED),
             ended: false,
             end_line: None,
             comp_turns: None,
@@ -456,36 +460,6 @@ impl<R: BufRead> Source<R> {
         self.out.push_back(Item::Event(ProgEvent::Diag(d)));
     }
 
-    /// A surface speed at the cutter's diameter, as RPM (a mill's spindle word is RPM; NX's
-    /// posts convert the same way). Without a diameter it stays a surface speed, which the
-    /// engine writes as S with a warning.
-    fn spindle_rpm(&mut self, c: SpindleCmd, line: u32) -> SpindleCmd {
-        let SpindleCmd::Surface {
-            speed,
-            clockwise,
-            metric,
-        } = c
-        else {
-            return c;
-        };
-        let Some(d) = self.diameter_mm.filter(|_| !self.turning) else {
-            return c;
-        };
-        // Metres or feet a minute, in mm, over the circumference.
-        let per_min_mm = speed * if metric { 1000.0 } else { 304.8 };
-        let rpm = per_min_mm / (std::f64::consts::PI * d);
-        self.diag(
-            Code::SurfaceSpeed,
-            Severity::Info,
-            line,
-            format!(
-                "surface speed {speed} {} at the cutter's diameter {}: {rpm:.0} RPM",
-                if metric { "m/min" } else { "ft/min" },
-                fmt_len(d, self.cl_units)
-            ),
-        );
-        SpindleCmd::Rpm { speed: rpm, clockwise }
-    }
 
     fn set_axis(&mut self, a: [f64; 3], line: u32) -> bool {
         let v = Vec3::from(a);
@@ -566,37 +540,6 @@ impl<R: BufRead> Source<R> {
         self.feed = Some((v, unit));
     }
 
-    /// SPINDL: a speed that turns (not S0) and that a spindle can (not S9223372036854775807).
-    fn spindle(&mut self, c: SpindleCmd, line: u32) {
-        let mut c = self.spindle_rpm(c, line);
-        if let SpindleCmd::Rpm { speed, .. } | SpindleCmd::Surface { speed, .. } = &mut c {
-            if speed.is_nan() || speed.round() < 1.0 {
-                // S0 starts a spindle that does not turn, and the next feed drives a standing tool
-                // into the part (CATIA's tap demo: `SPINDL/0.3980,RPM`): an error, and the
-                // spindle stops (a cut after it is told as one with the spindle standing).
-                self.diag(
-                    Code::SpindleSpeed,
-                    Severity::Error,
-                    line,
-                    format!("spindle speed {speed} rounds to S0: the spindle would not turn (it is stopped, no S0 written)"),
-                );
-                c = SpindleCmd::Off;
-            } else if *speed > super::MAX_SPINDLE_SPEED {
-                // Bounded where it is told: the S written and any feed per revolution take it.
-                self.diag(
-                    Code::WordRange,
-                    Severity::Error,
-                    line,
-                    format!(
-                        "spindle speed {speed:e} is beyond any spindle: written S{}",
-                        super::MAX_SPINDLE_SPEED
-                    ),
-                );
-                *speed = super::MAX_SPINDLE_SPEED;
-            }
-        }
-        self.out.push_back(Item::Event(ProgEvent::Spindle(c)));
-    }
 
     /// One record: a plain move comes back (to go after whatever the record queued), everything
     /// else is queued here.

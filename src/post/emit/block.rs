@@ -21,6 +21,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         inserted: bool,
         comment: Option<&str>,
     ) -> Result<(), Error> {
+        self.positioned = false;
         self.cancel_cycle()?;
         if self.tilt.is_some() && self.plane_at(&to.joints.rotary).is_none() {
             self.leave_plane(true)?;

@@ -136,6 +136,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             }
         };
         self.at = Some(at);
+        self.positioned = false;
         self.canned_block(&pt, &h, cb, at, modal)
     }
 

@@ -58,6 +58,9 @@ pub(super) struct Emitter<'a, S: Sink + ?Sized> {
     pub(super) at: Option<At>,
     /// A tool change since the last block: the machine is not at `at` any more.
     pub(super) tool_changed: bool,
+    /// The machine stands at a CL rapid point that positioning brought it to, in the air where
+    /// the CAM put it: a rapid from there that turns rotaries need not climb the whole Z again.
+    pub(super) positioned: bool,
     /// Halvings left to the CL segment being linearized (see [`MAX_SEGMENT_SPLITS`]).
     pub(super) split_budget: u32,
     /// The CL line of the last point outside travel: blocks inserted for it say nothing more.
@@ -177,6 +180,7 @@ impl<'a, S: Sink + ?Sized> Emitter<'a, S> {
             setup,
             at: None,
             tool_changed: false,
+            positioned: false,
             split_budget: 0,
             outside_line: None,
             lift_notes: Vec::new(),

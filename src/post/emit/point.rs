@@ -181,12 +181,14 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         };
         // After a tool change the machine stands where the change left it, not at the last
         // block: the next move, feed or not, positions as a rapid that turns rotaries does.
+        let chained = std::mem::take(&mut self.positioned) && !self.tool_changed;
         if let Some(prev) = &self.at
             && (self.tool_changed
                 || pt.rapid
                     && (0..self.m.rotaries.len()).any(|i| (joints.rotary[i] - prev.joints.rotary[i]).abs() > 1f64.to_radians()))
         {
-            self.safe_rapid(*prev, target, &pt, diags)?;
+            self.safe_rapid(*prev, target, &pt, diags, chained)?;
+            self.positioned = pt.rapid;
             return Ok(());
         }
         match self.at {
@@ -222,7 +224,9 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             _ => {}
         }
         if self.at.is_none() && !self.m.rotaries.is_empty() {
-            return self.approach(target, &pt, diags);
+            self.approach(target, &pt, diags)?;
+            self.positioned = pt.rapid;
+            return Ok(());
         }
         self.block(target, &pt, pt.rapid || self.at.is_none(), diags, pt.inserted, None)?;
         Ok(())

@@ -124,17 +124,28 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
 
     /// A rapid that turns the rotaries: never together with the linears near the part. Joint
     /// mode: machine Z to the top of its travel, rotaries alone, then X Y, then down. TCP mode
-    /// (or no Z axis): lift along the tool axis, turn at clearance, approach.
-    pub(super) fn safe_rapid(&mut self, prev: At, to: At, pt: &MotionPt, diags: Vec<Diagnostic>) -> Result<(), Error> {
+    /// (or no Z axis), or `chained` to a positioning that climbed already (the machine stands
+    /// at a CL rapid point in the air): lift along the tool axis, turn at clearance, approach.
+    pub(super) fn safe_rapid(
+        &mut self,
+        prev: At,
+        to: At,
+        pt: &MotionPt,
+        diags: Vec<Diagnostic>,
+        chained: bool,
+    ) -> Result<(), Error> {
         // The rotaries turn: out of a tilted plane first, so the retract reads as one.
         self.leave_plane(true)?;
-        let up = self.above(prev);
-        let over = self.above(to);
-        if self.z_top().is_none() {
+        if self.z_top().is_none() || chained {
+            let (up, over) = (self.lifted(prev, self.o.clearance), self.lifted(to, self.o.clearance));
             self.block(up, pt, true, diags, true, Some("RETRACT"))?;
             self.block(over, pt, true, Vec::new(), true, Some("ROTARY REPOSITION"))?;
+            if chained {
+                self.lock_all()?; // as after the climb it stands for
+            }
             return self.descend(to, pt);
         }
+        let (up, over) = (self.above(prev), self.above(to));
         // Turned at the top, still over the old X Y; then over the new one, then down.
         let mut joints = up.joints;
         joints.rotary = to.joints.rotary;
