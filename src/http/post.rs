@@ -18,6 +18,7 @@ use axum::response::{IntoResponse, Response};
 use bytes::Bytes;
 use futures_util::StreamExt;
 use serde::Deserialize;
+use std::io::Read;
 use std::sync::Arc;
 use tokio::sync::{mpsc, oneshot};
 use tokio_util::io::{StreamReader, SyncIoBridge};
@@ -26,6 +27,8 @@ use tokio_util::io::{StreamReader, SyncIoBridge};
 const PRELUDE: usize = 16 * 1024;
 /// Chunk size of the streamed output.
 const CHUNK: usize = 32 * 1024;
+/// Most of an upload read after the engine stopped early (beyond it the connection may reset).
+const DRAIN_MAX: u64 = 64 << 20;
 
 /// Query (or multipart form) parameters of `POST /v1/post`.
 #[derive(Clone, Debug, Default, Deserialize, utoipa::IntoParams, utoipa::ToSchema)]
@@ -329,9 +332,9 @@ pub async fn post_cl(
             };
             let _ = sink.record(&Record::Header(h));
         }
-        let input = std::io::BufReader::with_capacity(64 * 1024, reader);
+        let mut input = std::io::BufReader::with_capacity(64 * 1024, reader);
         let t0 = std::time::Instant::now();
-        match post::post(input, &profile.machine, &opts, &mut sink) {
+        match post::post(&mut input, &profile.machine, &opts, &mut sink) {
             Ok(s) => {
                 metrics.record_post(&s, t0.elapsed().as_secs_f64());
                 let _ = sink.send(true);
@@ -341,6 +344,11 @@ pub async fn post_cl(
                 sink.fail(engine_error(e), body);
             }
         }
+        // The response ends whole; then the upload the engine stopped reading (strict mode, a
+        // budget) is read to its end, else closing on unread bytes resets the connection and
+        // the client can lose the response's last records.
+        drop(sink);
+        let _ = std::io::copy(&mut (&mut input).take(DRAIN_MAX), &mut std::io::sink());
     });
     let first = match rx.recv().await {
         Some(Msg::Fail(e)) => return Err(e),
