@@ -65,6 +65,103 @@ async fn machines_health_metrics_and_docs() {
 }
 
 #[tokio::test]
+async fn metrics_are_valid_openmetrics_with_every_series_from_the_start() {
+    let base = server(cfg()).await;
+    let c = reqwest::Client::new();
+    let r = c.get(format!("{base}/metrics")).send().await.unwrap();
+    let ctype = r.headers()["content-type"].to_str().unwrap().to_string();
+    assert!(ctype.starts_with("application/openmetrics-text; version=1.0.0"), "{ctype}");
+    let m = r.text().await.unwrap();
+    check_exposition(&m);
+    let mut start = vec![
+        "kinepost_cl_points_total 0".to_string(),
+        "kinepost_blocks_total 0".into(),
+        "kinepost_streams_in_flight 0".into(),
+        "kinepost_post_duration_seconds_count 0".into(),
+        "kinepost_post_duration_seconds_bucket{le=\"+Inf\"} 0".into(),
+    ];
+    for st in ["queued", "running", "succeeded", "failed", "cancelled"] {
+        start.push(format!("kinepost_jobs{{state=\"{st}\"}} 0"));
+    }
+    for outcome in ["succeeded", "failed", "cancelled"] {
+        start.push(format!("kinepost_job_duration_seconds_count{{outcome=\"{outcome}\"}} 0"));
+        start.push(format!("kinepost_job_duration_seconds_bucket{{le=\"+Inf\",outcome=\"{outcome}\"}} 0"));
+    }
+    for line in &start {
+        assert!(m.lines().any(|l| l == line), "no `{line}` at start in\n{m}");
+    }
+    // The first scrape is counted once it is answered.
+    let m = c.get(format!("{base}/metrics")).text_ok().await;
+    check_exposition(&m);
+    assert!(m.contains("kinepost_http_requests_total{route=\"/metrics\",status=\"200\"} 1\n"), "{m}");
+}
+
+/// An OpenMetrics text exposition: comments (HELP, TYPE, UNIT) and samples, each sample in a
+/// family a TYPE line declared before it, ended by one `# EOF`.
+fn check_exposition(text: &str) {
+    let body = text.strip_suffix("# EOF\n").unwrap_or_else(|| panic!("no final # EOF in\n{text}"));
+    let mut families = Vec::new();
+    for line in body.lines() {
+        if let Some(decl) = line.strip_prefix("# TYPE ") {
+            let (name, kind) = decl.split_once(' ').unwrap_or_else(|| panic!("bad `{line}`"));
+            assert!(["counter", "gauge", "histogram"].contains(&kind), "`{line}`");
+            families.push(name.to_string());
+        } else if line.starts_with("# HELP ") || line.starts_with("# UNIT ") {
+            continue;
+        } else {
+            let name = sample_name(line).unwrap_or_else(|| panic!("not a comment or a sample: `{line}`"));
+            let family = ["_total", "_bucket", "_sum", "_count"]
+                .iter()
+                .find_map(|s| name.strip_suffix(s).filter(|f| families.iter().any(|x| x == f)))
+                .unwrap_or(name);
+            assert!(families.iter().any(|f| f == family), "`{line}` before its # TYPE");
+        }
+    }
+}
+
+/// The metric name of a sample line `name{key="value",…} number`, if the line is one.
+fn sample_name(line: &str) -> Option<&str> {
+    let end = line.find(|c: char| !(c.is_ascii_alphanumeric() || c == '_' || c == ':'))?;
+    let (name, rest) = line.split_at(end);
+    if name.is_empty() || name.starts_with(|c: char| c.is_ascii_digit()) {
+        return None;
+    }
+    let rest = match rest.strip_prefix('{') {
+        Some(labels) => after_labels(labels)?,
+        None => rest,
+    };
+    let value = rest.strip_prefix(' ')?;
+    let number = value.parse::<f64>().is_ok() && !value.contains(|c: char| c.is_ascii_alphabetic() && c != 'e');
+    (number || ["+Inf", "-Inf", "NaN"].contains(&value)).then_some(name)
+}
+
+/// What follows a label set's closing brace: each label `key="value"` (escapes in the value),
+/// separated by commas.
+fn after_labels(mut s: &str) -> Option<&str> {
+    loop {
+        let (key, value) = s.split_once("=\"")?;
+        if key.is_empty() || !key.chars().all(|c| c.is_ascii_alphanumeric() || c == '_') {
+            return None;
+        }
+        let mut chars = value.char_indices();
+        let close = loop {
+            match chars.next()? {
+                (_, '\\') => {
+                    chars.next()?;
+                }
+                (i, '"') => break i,
+                _ => {}
+            }
+        };
+        s = &value[close + 1..];
+        if let Some(rest) = s.strip_prefix('}') {
+            return Some(rest);
+        }
+        s = s.strip_prefix(',')?;
+    }
+}
+
+#[tokio::test]
 async fn the_served_openapi_document_is_the_checked_in_one() {
     let path = concat!(env!("CARGO_MANIFEST_DIR"), "/openapi/openapi.json");
     let generated = openapi_json();

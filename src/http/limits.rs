@@ -11,7 +11,6 @@ use axum::response::{IntoResponse, Response};
 use bytes::Bytes;
 use futures_util::StreamExt;
 use std::sync::Arc;
-use std::sync::atomic::Ordering;
 use std::time::Duration;
 
 /// A post stream's place among `--max-streams`. It is counted before the check, so concurrent
@@ -21,14 +20,14 @@ pub(super) struct StreamSlot(Arc<Metrics>);
 
 impl Drop for StreamSlot {
     fn drop(&mut self) {
-        self.0.streams.fetch_sub(1, Ordering::AcqRel);
+        self.0.stream_ended();
     }
 }
 
 /// Streams beyond the limit are refused at once (503 + Retry-After), never queued into memory.
 /// The slot travels to the handler in the request's extensions.
 pub(super) async fn admit_stream(State(st): State<Arc<AppState>>, mut req: Request, next: Next) -> Response {
-    let before = st.metrics.streams.fetch_add(1, Ordering::AcqRel);
+    let before = st.metrics.stream_started();
     let slot = Arc::new(StreamSlot(st.metrics.clone()));
     if before as usize >= st.config.max_streams {
         return ApiError::Busy(format!("{} post streams running", st.config.max_streams)).into_response();

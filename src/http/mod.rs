@@ -8,26 +8,27 @@ mod jobs;
 mod limits;
 mod machine_ops;
 mod machines;
+mod metrics;
 mod post;
 mod server;
 mod tools;
 
 pub use error::{ApiError, ApiJson, Problem};
+pub use metrics::Metrics;
 pub use post::PostParams;
 pub use server::{connection_budget, run};
 
 use crate::machines::Library;
 use axum::Json;
-use axum::extract::{MatchedPath, Path, Request, State};
+use axum::extract::{Path, Request, State};
 use axum::http::{HeaderName, HeaderValue, Method, StatusCode, header};
-use axum::middleware::{self, Next};
+use axum::middleware;
 use axum::response::{IntoResponse, Response};
 use axum::routing::{get, post as post_route};
 use serde::Serialize;
-use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::{Arc, Mutex};
+use std::sync::Arc;
 use std::time::Duration;
 use tower_http::cors::{AllowOrigin, CorsLayer};
 use tower_http::request_id::{MakeRequestId, PropagateRequestIdLayer, RequestId, SetRequestIdLayer};
@@ -129,136 +130,6 @@ impl Default for Config {
     }
 }
 
-/// Counters for `/metrics`, rendered in the Prometheus text format.
-#[derive(Default)]
-pub struct Metrics {
-    requests: Mutex<BTreeMap<(String, u16), u64>>,
-    pub streams: AtomicU64,
-    cl_points: AtomicU64,
-    blocks: AtomicU64,
-    posts: Histogram,
-    /// Job run durations by outcome (succeeded, failed, cancelled).
-    jobs: Mutex<BTreeMap<&'static str, Histogram>>,
-}
-
-const BUCKETS: [f64; 10] = [0.01, 0.05, 0.1, 0.5, 1.0, 5.0, 30.0, 300.0, 1800.0, 7200.0];
-
-/// A Prometheus histogram of seconds: cumulative bucket counts, sum, count.
-#[derive(Default)]
-struct Histogram {
-    count: AtomicU64,
-    micros: AtomicU64,
-    buckets: [AtomicU64; BUCKETS.len()],
-}
-
-impl Histogram {
-    fn record(&self, secs: f64) {
-        self.count.fetch_add(1, Ordering::Relaxed);
-        self.micros.fetch_add((secs.max(0.0) * 1e6) as u64, Ordering::Relaxed);
-        for (b, limit) in self.buckets.iter().zip(BUCKETS) {
-            if secs <= limit {
-                b.fetch_add(1, Ordering::Relaxed);
-            }
-        }
-    }
-
-    fn render(&self, o: &mut String, name: &str, labels: &str) {
-        use std::fmt::Write;
-        let sep = if labels.is_empty() { "" } else { "," };
-        for (b, limit) in self.buckets.iter().zip(BUCKETS) {
-            let _ = writeln!(
-                o,
-                "{name}_bucket{{{labels}{sep}le=\"{limit}\"}} {}",
-                b.load(Ordering::Relaxed)
-            );
-        }
-        let n = self.count.load(Ordering::Relaxed);
-        let _ = writeln!(o, "{name}_bucket{{{labels}{sep}le=\"+Inf\"}} {n}");
-        let braces = if labels.is_empty() {
-            String::new()
-        } else {
-            format!("{{{labels}}}")
-        };
-        let _ = writeln!(o, "{name}_sum{braces} {}", self.micros.load(Ordering::Relaxed) as f64 / 1e6);
-        let _ = writeln!(o, "{name}_count{braces} {n}");
-    }
-}
-
-impl Metrics {
-    fn record_request(&self, route: &str, status: u16) {
-        if let Ok(mut m) = self.requests.lock() {
-            *m.entry((route.to_string(), status)).or_default() += 1;
-        }
-    }
-
-    pub fn record_post(&self, s: &crate::post::Summary, secs: f64) {
-        self.cl_points.fetch_add(s.cl_points, Ordering::Relaxed);
-        self.blocks.fetch_add(s.blocks, Ordering::Relaxed);
-        self.posts.record(secs);
-    }
-
-    /// A job run ended (`outcome`: its state), after `secs` of running.
-    pub fn record_job(&self, outcome: &'static str, secs: f64) {
-        if let Ok(mut m) = self.jobs.lock() {
-            m.entry(outcome).or_default().record(secs);
-        }
-    }
-
-    /// The text format; `jobs`: jobs by state in the store (queue depth), when there is one
-    /// (every state, 0 included: a series that appears only with the first job breaks alerts
-    /// and dashboards).
-    pub fn render(&self, jobs: Option<&[(crate::jobs::State, u64)]>) -> String {
-        use std::fmt::Write;
-        let mut o = String::new();
-        o.push_str("# HELP kinepost_http_requests_total HTTP requests by route and status.\n# TYPE kinepost_http_requests_total counter\n");
-        if let Ok(m) = self.requests.lock() {
-            for ((route, status), n) in m.iter() {
-                let _ = writeln!(o, "kinepost_http_requests_total{{route=\"{route}\",status=\"{status}\"}} {n}");
-            }
-        }
-        let g = |o: &mut String, name: &str, kind: &str, help: &str, v: u64| {
-            let _ = writeln!(o, "# HELP {name} {help}\n# TYPE {name} {kind}\n{name} {v}");
-        };
-        g(
-            &mut o,
-            "kinepost_cl_points_total",
-            "counter",
-            "CL points post-processed.",
-            self.cl_points.load(Ordering::Relaxed),
-        );
-        g(
-            &mut o,
-            "kinepost_blocks_total",
-            "counter",
-            "NC blocks written.",
-            self.blocks.load(Ordering::Relaxed),
-        );
-        g(
-            &mut o,
-            "kinepost_streams_in_flight",
-            "gauge",
-            "Post streams running now.",
-            self.streams.load(Ordering::Relaxed),
-        );
-        o.push_str("# HELP kinepost_post_duration_seconds Duration of completed posts.\n# TYPE kinepost_post_duration_seconds histogram\n");
-        self.posts.render(&mut o, "kinepost_post_duration_seconds", "");
-        if let Some(jobs) = jobs {
-            o.push_str("# HELP kinepost_jobs Jobs in the store by state (queued: the queue depth; all replicas).\n# TYPE kinepost_jobs gauge\n");
-            for st in crate::jobs::State::ALL {
-                let n = jobs.iter().find(|(s, _)| *s == st).map_or(0, |(_, n)| *n);
-                let _ = writeln!(o, "kinepost_jobs{{state=\"{st}\"}} {n}");
-            }
-        }
-        o.push_str("# HELP kinepost_job_duration_seconds Job runs ended on this node, by outcome.\n# TYPE kinepost_job_duration_seconds histogram\n");
-        if let Ok(m) = self.jobs.lock() {
-            for (outcome, h) in m.iter() {
-                h.render(&mut o, "kinepost_job_duration_seconds", &format!("outcome=\"{outcome}\""));
-            }
-        }
-        o
-    }
-}
-
 pub struct AppState {
     /// The live machine library (profile files, then API versions).
     pub machines: Arc<crate::machines::Catalog>,
@@ -274,7 +145,7 @@ pub struct AppState {
     paths(post::post_cl, machines::list_machines, machines::get_machine, machines::create_machine, machines::put_machine,
         machines::delete_machine, machines::list_versions, machines::get_version, tools::get_tools, tools::put_tools,
         tools::delete_tools, tools::list_tool_versions, tools::get_tool_version, list_dialects, machine_ops::fk_route, machine_ops::ik_route,
-        machine_ops::validate_pose, machine_ops::angle_error_fit, machine_ops::calibrate, healthz, readyz, metrics_route,
+        machine_ops::validate_pose, machine_ops::angle_error_fit, machine_ops::calibrate, healthz, readyz, metrics::metrics_route,
         jobs::submit, jobs::list_jobs, jobs::get_job, jobs::delete_job, jobs::job_nc, jobs::job_diagnostics, jobs::job_preview),
     components(schemas(Problem, machines::MachineDto, machines::LinearDto, machines::RotaryDto, machines::AngleErrorDto,
         machines::VersionsDto, machines::VersionDto, tools::ToolTableDto, tools::ToolDto, tools::HolderDto, DialectDto, PostParams, machine_ops::FkRequest,
@@ -367,7 +238,7 @@ pub fn app(state: Arc<AppState>) -> axum::Router {
         .route("/v1/jobs/{id}/preview", get(jobs::job_preview))
         .route("/healthz", get(healthz))
         .route("/readyz", get(readyz))
-        .route("/metrics", get(metrics_route))
+        .route("/metrics", get(metrics::metrics_route))
         .route(
             "/openapi.json",
             get(|| async { ([(header::CONTENT_TYPE, "application/json")], openapi_json()) }),
@@ -407,7 +278,7 @@ pub fn app(state: Arc<AppState>) -> axum::Router {
         .layer(middleware::map_response_with_state(state.clone(), bare_problem));
     streaming
         .merge(api)
-        .layer(middleware::from_fn_with_state(state.clone(), count_requests))
+        .layer(middleware::from_fn_with_state(state.clone(), metrics::count_requests))
         .layer(cors)
         .layer(TraceLayer::new_for_http().make_span_with(|req: &Request| {
             let id = req.headers().get("x-request-id").and_then(|v| v.to_str().ok()).unwrap_or("-");
@@ -516,17 +387,6 @@ where
     }
 }
 
-/// Requests by route and status, for `/metrics`.
-async fn count_requests(State(st): State<Arc<AppState>>, req: Request, next: Next) -> Response {
-    let route = req
-        .extensions()
-        .get::<MatchedPath>()
-        .map_or("unmatched".to_string(), |p| p.as_str().to_string());
-    let resp = next.run(req).await;
-    st.metrics.record_request(&route, resp.status().as_u16());
-    resp
-}
-
 /// A controller dialect and its words for the things that differ between controls.
 #[derive(Serialize, utoipa::ToSchema)]
 pub struct DialectDto {
@@ -613,19 +473,6 @@ async fn readyz(State(st): State<Arc<AppState>>) -> Result<Response, ApiError> {
         .as_ref()
         .map_or(String::new(), |q| format!(", node {}", q.store.node()));
     Ok((StatusCode::OK, format!("ready: {} machines{node}", st.machines.len())).into_response())
-}
-
-/// Prometheus metrics.
-#[utoipa::path(get, path = "/metrics", responses((status = 200, description = "Prometheus text format", content_type = "text/plain")), tag = "ops")]
-async fn metrics_route(State(st): State<Arc<AppState>>) -> impl IntoResponse {
-    let jobs = match &st.jobs {
-        Some(q) => q.store.counts().await.ok(),
-        None => None,
-    };
-    (
-        [(header::CONTENT_TYPE, "text/plain; version=0.0.4")],
-        st.metrics.render(jobs.as_deref()),
-    )
 }
 
 /// Loads the library and binds; runs until SIGINT/SIGTERM, then lets streams in flight finish.
