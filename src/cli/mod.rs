@@ -500,6 +500,12 @@ pub struct PostArgs {
     /// G55 …, the program listing where to set each).
     #[arg(long)]
     pub setups: Option<String>,
+    /// Where positioning retracts to before the rotaries turn, at a tool change and at the end:
+    /// machine-z (joint mode's default: the top of Z travel), axis:D (D along the tool axis;
+    /// TCP mode's default is the clearance) or plane:Z (along the tool axis up to z = Z in the
+    /// part frame); the profile's [policy] retract where not given.
+    #[arg(long, allow_hyphen_values = true)]
+    pub retract: Option<String>,
     /// Spindle speed (RPM, clockwise) for a tool the CL starts no spindle for before its first
     /// move (NX CLSF listings carry no SPINDL); the CL's own SPINDL and SPINDL/OFF win.
     #[arg(long, allow_hyphen_values = true)]
@@ -842,6 +848,7 @@ fn post_cmd(
         work_coordinates: a.work_coordinates.clone(),
         setups: a.setups.clone(),
         spindle_speed: a.spindle_speed,
+        retract: a.retract.clone(),
         tool_table: match &a.tool_table {
             // Read and checked here, so that an error names the file.
             Some(f) => {

@@ -79,6 +79,10 @@ pub struct PostParams {
     /// Spindle speed (RPM, clockwise, 1 to 200000) for a tool the CL starts no spindle for
     /// before its first move (NX CLSF carries no SPINDL); the CL's SPINDL and SPINDL/OFF win.
     pub spindle_speed: Option<f64>,
+    /// Where positioning retracts to: `machine-z` (joint mode's default: the top of Z travel),
+    /// `axis:D` (along the tool axis; TCP mode's default is the clearance) or `plane:Z` (along
+    /// the tool axis up to z = Z in the part frame); the profile's default where absent.
+    pub retract: Option<String>,
 }
 
 impl PostParams {
@@ -102,6 +106,7 @@ impl PostParams {
             work_coordinates: self.work_coordinates.clone(),
             setups: self.setups.clone(),
             spindle_speed: self.spindle_speed,
+            retract: self.retract.clone(),
         }
     }
 
@@ -140,6 +145,7 @@ impl PostParams {
             "planes" => self.planes = Some(v).filter(|s| !s.is_empty()),
             "work_coordinates" => self.work_coordinates = Some(v).filter(|s| !s.is_empty()),
             "setups" => self.setups = Some(v).filter(|s| !s.is_empty()),
+            "retract" => self.retract = Some(v).filter(|s| !s.is_empty()),
             "spindle_speed" => self.spindle_speed = if v.trim().is_empty() { None } else { Some(num(&v)?) },
             other => {
                 return Err(ApiError::BadParameter(format!(

@@ -58,6 +58,17 @@ pub struct ProfileDoc {
     pub tool: Option<ToolDoc>,
     #[serde(default)]
     pub spindle: Option<SpindleDoc>,
+    #[serde(default)]
+    pub policy: Option<PolicyDoc>,
+}
+
+/// How the shop wants this machine to move where the CL does not say: a job may override each.
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct PolicyDoc {
+    /// `machine-z`, `axis:D` or `plane:Z` (`post::Retract`).
+    #[serde(default)]
+    pub retract: Option<String>,
 }
 
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
@@ -240,6 +251,9 @@ pub fn parse_profile(text: &str, file: &str, stem: Option<&str>) -> Result<Profi
                 .as_ref()
                 .map(|e| AngleError::new(e.coefficients.clone(), (e.range[0], e.range[1]))),
         });
+    }
+    if let Some(r) = doc.policy.as_ref().and_then(|p| p.retract.as_deref()) {
+        crate::post::Retract::parse(r).map_err(|e| invalid("policy.retract", e))?;
     }
     if let Some(s) = &doc.spindle {
         check_spindle(s).map_err(|(key, problem)| invalid(key, problem))?;

@@ -12,6 +12,7 @@ mod budget;
 mod emit;
 mod lookahead;
 mod plan;
+mod policy;
 mod settings;
 pub mod setups;
 mod sink;
@@ -20,6 +21,7 @@ pub mod tools;
 pub mod verify;
 
 pub use emit::linearize::{NONLINEAR_SAMPLES, seg_dist};
+pub use policy::Retract;
 pub use settings::{Budget, MAX_SPINDLE_SPEED, Mode, Options, Settings, parse_triple};
 pub use sink::{AxisStats, AxisWords, BlockInfo, Sink, Summary, TextSink, ToolUse};
 pub use tools::LengthFrom;

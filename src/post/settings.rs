@@ -38,6 +38,8 @@ pub struct Options {
     pub max_rotary_step: f64,
     /// Retract distance along the tool axis for unwinds and repositions (profile units).
     pub clearance: f64,
+    /// Where positioning retracts to (`Retract::resolve`).
+    pub retract: super::Retract,
     /// Cone (radians) around a singular direction within which blocks are marked `singular`.
     pub singular_cone: f64,
     /// Orientation tolerance (radians) the free rotary may use near a singular direction: 0 is
@@ -143,6 +145,7 @@ impl Options {
             cl_units: None,
             max_rotary_step: 10f64.to_radians(),
             clearance: if mm { 50.0 } else { 2.0 },
+            retract: super::Retract::MachineZ,
             singular_cone: 2f64.to_radians(),
             singular_tolerance: 0.0,
             clamps: Default::default(),
@@ -227,6 +230,10 @@ pub struct Settings {
     /// move (NX's CLSF listings carry no SPINDL); the CL's own SPINDL, and SPINDL/OFF, win.
     #[serde(default)]
     pub spindle_speed: Option<f64>,
+    /// Where positioning retracts to: `machine-z`, `axis:D` or `plane:Z` (`Retract::parse`);
+    /// the profile's `[policy] retract`, else the mode's own, where absent.
+    #[serde(default)]
+    pub retract: Option<String>,
 }
 
 impl Settings {
@@ -240,6 +247,8 @@ impl Settings {
     ) -> Result<Options, String> {
         let mut o = self.options(&p.machine)?;
         o.clamps = p.clamps();
+        let profile_retract = p.doc.policy.as_ref().and_then(|d| d.retract.as_deref());
+        o.retract = super::Retract::resolve(self.retract.as_deref(), profile_retract, o.mode, o.clearance)?;
         o.spindle_range = p.spindle_range();
         if let Some(s) = o.spindle_speed
             && !(o.spindle_range.0..=o.spindle_range.1).contains(&s)
@@ -268,6 +277,7 @@ impl Settings {
             Some("tcp") => Mode::Tcp,
             Some(x) => return Err(format!("mode {}: expected joint or tcp", quote(x))),
         };
+        o.retract = super::Retract::resolve(self.retract.as_deref(), None, o.mode, o.clearance)?;
         if let Some(l) = self.tool_length {
             if !(l >= 0.0 && crate::kinematics::coordinate_ok(l)) {
                 return Err(format!(

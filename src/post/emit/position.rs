@@ -1,16 +1,17 @@
-//! Positioning: retracts (to the top of Z, or along the tool axis within travel), approaches,
-//! rapids that turn rotaries, repositions and unwinds, and the rotary clamps around them.
+//! Positioning: retracts (as `Options::retract` says: the top of Z, along the tool axis, or up
+//! to a plane, within travel), approaches, rapids that turn rotaries, repositions and unwinds,
+//! and the rotary clamps around them.
 
 use super::singular::rotary_offset;
 use super::{At, Emitter};
 use crate::diag::{Code, Diagnostic, Severity};
 use crate::kinematics::{self, IkOptions, Joints, Pose, Vec3, fk, ik_into};
 use crate::post::plan::wrap;
-use crate::post::{Error, Mode, MotionPt, Sink};
+use crate::post::{Error, Mode, MotionPt, Retract, Sink};
 
 impl<S: Sink + ?Sized> Emitter<'_, S> {
-    /// `a` out of the way: joint mode at the top of Z travel (same X Y and rotaries), TCP or a
-    /// machine without Z the clearance along the tool axis.
+    /// `a` out of the way, as the retract policy says: at the top of Z travel (same X Y and
+    /// rotaries), else along the tool axis (`clear_of`).
     pub(super) fn above(&mut self, a: At) -> At {
         match self.z_top() {
             Some(zmax) => {
@@ -22,15 +23,27 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                     ..a
                 }
             }
-            None => self.lifted(a, self.o.clearance),
+            None => self.clear_of(a),
         }
     }
 
-    /// The top of Z travel, where joint-mode positioning turns the rotaries (none in TCP mode,
-    /// where X Y Z are the tip, or on a machine without Z).
+    /// The top of Z travel, where positioning turns the rotaries under `retract=machine-z`
+    /// (none in TCP mode, where X Y Z are the tip, or on a machine without Z).
     pub(super) fn z_top(&self) -> Option<f64> {
         let zmax = self.m.linears[2].as_ref().map(|l| l.max);
-        zmax.filter(|_| self.o.mode == Mode::Joint)
+        zmax.filter(|_| self.o.mode == Mode::Joint && self.o.retract == Retract::MachineZ)
+    }
+
+    /// `a` lifted along its tool axis: by the policy's distance, up to its plane (not down: a
+    /// point above the plane stays), or by the clearance where the policy is the top of Z. A
+    /// tool axis within 6° of horizontal never reaches a plane: the clearance then.
+    pub(super) fn clear_of(&mut self, a: At) -> At {
+        let d = match self.o.retract {
+            Retract::Axis(d) => d,
+            Retract::Plane(z) if a.pose.axis.z > 0.1 => ((z - a.pose.tip.z) / a.pose.axis.z).max(0.0),
+            _ => self.o.clearance,
+        };
+        self.lifted(a, d)
     }
 
     /// Up and away from the part before a tool change and at the program's end, whatever the
@@ -122,24 +135,26 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         None
     }
 
-    /// A rapid that turns the rotaries: never together with the linears near the part. Joint
-    /// mode: machine Z to the top of its travel, rotaries alone, then X Y, then down. TCP mode
-    /// (or no Z axis), or `chained` to a positioning that climbed already (the machine stands
-    /// at a CL rapid point in the air): lift along the tool axis, turn at clearance, approach.
+    /// A rapid that turns the rotaries: never together with the linears near the part. At the
+    /// top of Z (`retract=machine-z`): machine Z up, rotaries alone, then X Y, then down. Else,
+    /// or `chained` to a positioning that climbed already (the machine stands at a CL rapid
+    /// point in the air): lift along the tool axis (`clear_of`), turn there, approach.
     pub(super) fn safe_rapid(
         &mut self,
         prev: At,
         to: At,
         pt: &MotionPt,
-        diags: Vec<Diagnostic>,
+        mut diags: Vec<Diagnostic>,
         chained: bool,
     ) -> Result<(), Error> {
         // The rotaries turn: out of a tilted plane first, so the retract reads as one.
         self.leave_plane(true)?;
         if self.z_top().is_none() || chained {
-            let (up, over) = (self.lifted(prev, self.o.clearance), self.lifted(to, self.o.clearance));
-            self.block(up, pt, true, diags, true, Some("RETRACT"))?;
-            self.block(over, pt, true, Vec::new(), true, Some("ROTARY REPOSITION"))?;
+            let (up, over) = (self.clear_of(prev), self.clear_of(to));
+            if up.joints != prev.joints {
+                self.block(up, pt, true, std::mem::take(&mut diags), true, Some("RETRACT"))?;
+            }
+            self.block(over, pt, true, diags, true, Some("ROTARY REPOSITION"))?;
             if chained {
                 self.lock_all()?; // as after the climb it stands for
             }
@@ -171,19 +186,22 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         } else {
             ""
         };
+        let r1 = self.clear_of(prev);
+        let r2 = self.clear_of(to);
         let d = Diagnostic::new(
             code,
             Severity::Warning,
             Some(pt.line),
             format!(
-                "{word}: retract {} along the tool axis, turn, re-approach{why}",
-                self.o.clearance
+                "{word}: retract {:.3} along the tool axis, turn, re-approach{why}",
+                (r1.pose.tip - prev.pose.tip).norm()
             ),
         );
-        let r1 = self.lifted(prev, self.o.clearance);
-        let r2 = self.lifted(to, self.o.clearance);
-        self.block(r1, pt, true, vec![d], true, Some(&format!("RETRACT {word}")))?;
-        self.block(r2, pt, true, Vec::new(), true, Some(word))?;
+        let mut diags = vec![d];
+        if r1.joints != prev.joints {
+            self.block(r1, pt, true, std::mem::take(&mut diags), true, Some(&format!("RETRACT {word}")))?;
+        }
+        self.block(r2, pt, true, diags, true, Some(word))?;
         self.block(to, pt, false, Vec::new(), pt.inserted, None)?;
         Ok(())
     }

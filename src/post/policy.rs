@@ -1,0 +1,59 @@
+//! Motion policies: how the shop wants the machine to move where the CL does not say, a profile
+//! default that a job may override.
+
+use super::Mode;
+
+/// Where positioning takes the tool before the rotaries turn, at a tool change and at the
+/// program's end.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Retract {
+    /// Machine Z to the top of its travel (joint mode): the farthest from the part there is.
+    MachineZ,
+    /// This far along the tool axis (or less where the travel ends first).
+    Axis(f64),
+    /// Along the tool axis up to the plane z = this in the part frame: a fixture or a second
+    /// part above the work stays clear of a rotary turning under it, and no time is spent
+    /// climbing higher.
+    Plane(f64),
+}
+
+impl Retract {
+    /// `machine-z`, `axis:D` or `plane:Z` (the machine's units); the error says what is wrong.
+    pub fn parse(text: &str) -> Result<Retract, String> {
+        let number = |v: &str| {
+            v.trim()
+                .parse::<f64>()
+                .ok()
+                .filter(|x| crate::kinematics::coordinate_ok(*x))
+                .ok_or_else(|| format!("retract {text:?}: {v:?} is not a number"))
+        };
+        match text.trim().split_once(':') {
+            None if text.trim() == "machine-z" => Ok(Retract::MachineZ),
+            Some(("axis", d)) => match number(d)? {
+                d if d > 0.0 => Ok(Retract::Axis(d)),
+                _ => Err(format!("retract {text:?}: the distance along the tool axis must be positive")),
+            },
+            Some(("plane", z)) => Ok(Retract::Plane(number(z)?)),
+            _ => Err(format!("retract {text:?}: expected machine-z, axis:D or plane:Z")),
+        }
+    }
+
+    /// The policy in force: the job's, else the profile's, else the mode's own (the top of Z in
+    /// joint mode; `clearance` along the tool axis in TCP mode, where X Y Z are the tip). A job
+    /// that asks for the top of Z in TCP mode is refused; a profile's default yields to the mode.
+    pub fn resolve(job: Option<&str>, profile: Option<&str>, mode: Mode, clearance: f64) -> Result<Retract, String> {
+        let by_mode = match mode {
+            Mode::Joint => Retract::MachineZ,
+            Mode::Tcp => Retract::Axis(clearance),
+        };
+        match (job.map(Retract::parse).transpose()?, profile.map(Retract::parse).transpose()?) {
+            (Some(Retract::MachineZ), _) if mode == Mode::Tcp => Err(
+                "retract machine-z: in TCP mode X Y Z are the tip, not the machine's Z; use axis:D or plane:Z".into(),
+            ),
+            (Some(r), _) => Ok(r),
+            (None, Some(Retract::MachineZ)) => Ok(by_mode),
+            (None, Some(r)) => Ok(r),
+            (None, None) => Ok(by_mode),
+        }
+    }
+}

@@ -1,0 +1,123 @@
+//! Motion policies: where positioning retracts to (`retract`), a profile default that a job
+//! overrides, validated where options are made.
+
+mod common;
+
+use common::collect::Collect;
+use kinepost::machines::{Library, parse_profile};
+use kinepost::post::{self, Mode, Retract, Settings};
+use std::path::Path;
+
+fn library() -> Library {
+    Library::load_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap()
+}
+
+/// A cut, two rapids that each turn the rotaries, a tool change, a cut: every kind of
+/// repositioning the emitter makes.
+fn program() -> String {
+    let (s, c) = (30f64.to_radians().sin(), 30f64.to_radians().cos());
+    format!(
+        "UNITS/MM\nLOADTL/1\nSPINDL/3000\nFEDRAT/500,MMPM\nGOTO/0,0,10,0,0,1\nGOTO/10,0,10,0,0,1\n\
+         RAPID\nGOTO/20,5,60,{s},0,{c}\nRAPID\nGOTO/20,5,60,0,{s},{c}\nGOTO/25,5,40,0,{s},{c}\n\
+         LOADTL/2\nSPINDL/3000\nRAPID\nGOTO/0,0,30,0,0,1\nGOTO/5,0,20,0,0,1\nFINI\n"
+    )
+}
+
+fn post_with(id: &str, s: Settings) -> Collect {
+    let lib = library();
+    let p = lib.get(id).unwrap();
+    let o = s.profile_options(&p, None).unwrap();
+    let mut sink = Collect::default();
+    post::post(program().as_bytes(), &p.machine, &o, &mut sink).unwrap();
+    sink
+}
+
+fn with_retract(mode: &str, retract: &str) -> Settings {
+    Settings {
+        mode: Some(mode.into()),
+        retract: Some(retract.into()),
+        ..Default::default()
+    }
+}
+
+#[test]
+fn retract_to_a_plane_keeps_every_repositioning_under_it() {
+    for mode in ["joint", "tcp"] {
+        let sink = post_with("spinner-u5-620", with_retract(mode, "plane:100"));
+        let top = sink.blocks.iter().map(|b| b.tip[2]).fold(f64::MIN, f64::max);
+        assert!(top <= 100.0 + 1e-3, "{mode}: a block at z = {top}:\n{}", sink.nc);
+        // The plane is where it turns: retracts reach it, not only stay under it.
+        let at_plane = sink
+            .blocks
+            .iter()
+            .zip(&sink.texts)
+            .filter(|(b, t)| t.contains("RETRACT") && (b.tip[2] - 100.0).abs() < 1e-3)
+            .count();
+        assert!(at_plane >= 2, "{mode}: {at_plane} retracts at the plane:\n{}", sink.nc);
+        assert!(!sink.nc.contains("RETRACT Z"), "{mode}: no climb to the top of Z");
+    }
+}
+
+#[test]
+fn retract_along_the_axis_lifts_by_its_distance() {
+    let sink = post_with("spinner-u5-620", with_retract("joint", "axis:25"));
+    assert!(!sink.nc.contains("RETRACT Z"), "{}", sink.nc);
+    let lifts: Vec<f64> = sink
+        .blocks
+        .windows(2)
+        .zip(sink.texts.iter().skip(1))
+        .filter(|(_, t)| t.contains("(RETRACT)"))
+        .map(|(w, _)| (0..3).map(|i| (w[1].tip[i] - w[0].tip[i]).powi(2)).sum::<f64>().sqrt())
+        .collect();
+    assert!(!lifts.is_empty() && lifts.iter().all(|d| (d - 25.0).abs() < 1e-3), "{lifts:?}\n{}", sink.nc);
+}
+
+#[test]
+fn the_default_is_the_modes_own_and_the_top_of_z_in_joint_mode() {
+    let sink = post_with("spinner-u5-620", Settings::default());
+    assert!(sink.nc.contains("RETRACT Z"), "{}", sink.nc);
+    let lib = library();
+    let p = lib.get("spinner-u5-620").unwrap();
+    let tcp = Settings {
+        mode: Some("tcp".into()),
+        ..Default::default()
+    };
+    let o = tcp.profile_options(&p, None).unwrap();
+    assert_eq!(o.retract, Retract::Axis(o.clearance));
+}
+
+#[test]
+fn a_profile_states_its_default_and_a_job_overrides_it() {
+    let text = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/machines/spinner-u5-620.toml")).unwrap();
+    let shop = format!("{text}\n[policy]\nretract = \"plane:120\"\n");
+    let p = parse_profile(&shop, "shop.toml", None).unwrap();
+    let o = Settings::default().profile_options(&p, None).unwrap();
+    assert_eq!(o.retract, Retract::Plane(120.0));
+    let o = with_retract("joint", "machine-z").profile_options(&p, None).unwrap();
+    assert_eq!(o.retract, Retract::MachineZ);
+    // A profile's machine-z yields to TCP mode; a job's is refused there.
+    let mz = parse_profile(&format!("{text}\n[policy]\nretract = \"machine-z\"\n"), "mz.toml", None).unwrap();
+    let tcp = Settings {
+        mode: Some("tcp".into()),
+        ..Default::default()
+    };
+    assert!(matches!(tcp.profile_options(&mz, None).unwrap().retract, Retract::Axis(_)));
+    let e = with_retract("tcp", "machine-z").profile_options(&mz, None).unwrap_err();
+    assert!(e.contains("TCP"), "{e}");
+    let bad = parse_profile(&format!("{text}\n[policy]\nretract = \"up\"\n"), "bad.toml", None).unwrap_err();
+    assert!(bad.to_string().contains("policy.retract"), "{bad}");
+}
+
+#[test]
+fn bad_retracts_are_refused_naming_the_setting() {
+    let lib = library();
+    let m = &lib.get("spinner-u5-620").unwrap().machine;
+    for bad in ["up", "axis:", "axis:-5", "axis:0", "plane:x", "plane:NaN", "plane:1e300", "machine-z:1"] {
+        let e = with_retract("joint", bad).options(m).unwrap_err();
+        assert!(e.starts_with("retract"), "{bad}: {e}");
+    }
+    for (good, want) in [("machine-z", Retract::MachineZ), ("axis:5", Retract::Axis(5.0)), ("plane:-20", Retract::Plane(-20.0))] {
+        assert_eq!(with_retract("joint", good).options(m).unwrap().retract, want);
+    }
+    assert_eq!(Settings::default().options(m).unwrap().mode, Mode::Joint);
+}
