@@ -121,3 +121,41 @@ fn bad_retracts_are_refused_naming_the_setting() {
     }
     assert_eq!(Settings::default().options(m).unwrap().mode, Mode::Joint);
 }
+
+/// A tilted run both trunnion branches can cut (B = ±20° with C half a turn apart): `prefer`
+/// decides the side, every B word of it, and the path is the same either way.
+#[test]
+fn prefer_keeps_a_rotary_on_the_side_asked_for() {
+    let tilt = 20f64.to_radians();
+    let mut cl = String::from("UNITS/MM\nLOADTL/1\nSPINDL/3000\nFEDRAT/800,MMPM\n");
+    for k in 0..=60 {
+        let az = (k as f64 * 1.5).to_radians();
+        let (i, j, kk) = (tilt.sin() * az.cos(), tilt.sin() * az.sin(), tilt.cos());
+        cl.push_str(&format!("GOTO/{:.3},{:.3},20,{i:.7},{j:.7},{kk:.7}\n", 30.0 * az.cos(), 30.0 * az.sin()));
+    }
+    cl.push_str("FINI\n");
+    let lib = library();
+    let p = lib.get("spinner-u5-620").unwrap();
+    for (side, sign) in [("B-", -1.0), ("B+", 1.0)] {
+        let s = Settings {
+            prefer: Some(side.into()),
+            ..Default::default()
+        };
+        let o = s.profile_options(&p, None).unwrap();
+        let mut sink = Collect::default();
+        let sum = post::post(cl.as_bytes(), &p.machine, &o, &mut sink).unwrap();
+        assert_eq!(sum.errors, 0, "{side}: {:?}", sink.diags);
+        let bs: Vec<f64> = sink.blocks.iter().filter_map(|b| b.joints.0[4]).collect();
+        assert!(bs.len() > 30, "{side}: {} B words", bs.len());
+        assert!(bs.iter().all(|b| b * sign >= -1e-9), "{side}: {bs:?}");
+        assert!(bs.iter().any(|b| b * sign > 19.0), "{side}: tilted to its side: {bs:?}");
+    }
+    // A rotary the machine lacks, or no sign: refused naming the setting.
+    for bad in ["A-", "B", "B*", "BB-"] {
+        let s = Settings {
+            prefer: Some(bad.into()),
+            ..Default::default()
+        };
+        assert!(s.profile_options(&p, None).unwrap_err().starts_with("prefer"), "{bad}");
+    }
+}

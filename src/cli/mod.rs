@@ -506,6 +506,11 @@ pub struct PostArgs {
     /// part frame); the profile's [policy] retract where not given.
     #[arg(long, allow_hyphen_values = true)]
     pub retract: Option<String>,
+    /// A rotary's side the planner keeps to where both IK branches can cut a run: B- or A+ (a
+    /// preference: never a branch change inside a cut); the profile's [policy] prefer where not
+    /// given.
+    #[arg(long, allow_hyphen_values = true)]
+    pub prefer: Option<String>,
     /// Spindle speed (RPM, clockwise) for a tool the CL starts no spindle for before its first
     /// move (NX CLSF listings carry no SPINDL); the CL's own SPINDL and SPINDL/OFF win.
     #[arg(long, allow_hyphen_values = true)]
@@ -849,6 +854,7 @@ fn post_cmd(
         setups: a.setups.clone(),
         spindle_speed: a.spindle_speed,
         retract: a.retract.clone(),
+        prefer: a.prefer.clone(),
         tool_table: match &a.tool_table {
             // Read and checked here, so that an error names the file.
             Some(f) => {

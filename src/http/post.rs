@@ -83,6 +83,9 @@ pub struct PostParams {
     /// `axis:D` (along the tool axis; TCP mode's default is the clearance) or `plane:Z` (along
     /// the tool axis up to z = Z in the part frame); the profile's default where absent.
     pub retract: Option<String>,
+    /// A rotary's side the planner keeps to where both IK branches can cut a run: `B-`, `A+`;
+    /// the profile's default where absent.
+    pub prefer: Option<String>,
 }
 
 impl PostParams {
@@ -107,6 +110,7 @@ impl PostParams {
             setups: self.setups.clone(),
             spindle_speed: self.spindle_speed,
             retract: self.retract.clone(),
+            prefer: self.prefer.clone(),
         }
     }
 
@@ -146,6 +150,7 @@ impl PostParams {
             "work_coordinates" => self.work_coordinates = Some(v).filter(|s| !s.is_empty()),
             "setups" => self.setups = Some(v).filter(|s| !s.is_empty()),
             "retract" => self.retract = Some(v).filter(|s| !s.is_empty()),
+            "prefer" => self.prefer = Some(v).filter(|s| !s.is_empty()),
             "spindle_speed" => self.spindle_speed = if v.trim().is_empty() { None } else { Some(num(&v)?) },
             other => {
                 return Err(ApiError::BadParameter(format!(

@@ -69,6 +69,9 @@ pub struct PolicyDoc {
     /// `machine-z`, `axis:D` or `plane:Z` (`post::Retract`).
     #[serde(default)]
     pub retract: Option<String>,
+    /// A rotary's side where both IK branches can cut: `B-`, `A+` (`post::Prefer`).
+    #[serde(default)]
+    pub prefer: Option<String>,
 }
 
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
@@ -286,6 +289,9 @@ pub fn parse_profile(text: &str, file: &str, stem: Option<&str>) -> Result<Profi
         kinematics::Error::Profile { key, problem } => invalid(&key, problem),
         other => invalid("", other.to_string()),
     })?;
+    if let Some(side) = doc.policy.as_ref().and_then(|p| p.prefer.as_deref()) {
+        crate::post::Prefer::parse(side, &machine).map_err(|e| invalid("policy.prefer", e))?;
+    }
     Ok(Profile { machine, doc })
 }
 

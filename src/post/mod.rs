@@ -21,7 +21,7 @@ pub mod tools;
 pub mod verify;
 
 pub use emit::linearize::{NONLINEAR_SAMPLES, seg_dist};
-pub use policy::Retract;
+pub use policy::{Prefer, Retract};
 pub use settings::{Budget, MAX_SPINDLE_SPEED, Mode, Options, Settings, parse_triple};
 pub use sink::{AxisStats, AxisWords, BlockInfo, Sink, Summary, TextSink, ToolUse};
 pub use tools::LengthFrom;
@@ -85,7 +85,7 @@ fn run<R: BufRead, S: Sink + ?Sized>(
     let setup = Setup::new(lengths.length, o.work_offset);
     let mut e = Emitter::new(m, o, sink, setup, &src);
     e.program_start()?;
-    let mut planner = Planner::new(m, setup);
+    let mut planner = Planner::new(m, setup, o.prefer);
     let mut pending: VecDeque<Out> = VecDeque::new();
     let mut failed: Option<Error> = None;
     loop {

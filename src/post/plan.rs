@@ -7,6 +7,7 @@
 //! `WINDOW` points, all but the last `KEEP` are committed along the best path and those are
 //! re-rooted on what was committed. Memory is O(WINDOW · candidates), whatever the file's length.
 
+use super::Prefer;
 use super::source::{MotionPt, ProgEvent};
 pub use crate::kinematics::wrap;
 use crate::kinematics::{IkOptions, Machine, Setup, Solution, Solutions, Vec3, WINDINGS, ik_into, tool_axis};
@@ -26,6 +27,10 @@ const BRANCH_PENALTY: f64 = 3600.0;
 const UNWIND_PENALTY: f64 = 3600.0;
 /// Cost of a candidate outside travel: taken only when nothing else exists.
 const INFEASIBLE: f64 = 1e9;
+/// Cost of a point on the side `Options::prefer` does not want: a window of them (`WINDOW`)
+/// still costs less than a branch change, so a preference picks the branch a run starts on and
+/// never makes the planner leave one inside a cut.
+const PREFER_PENALTY: f64 = BRANCH_PENALTY / (WINDOW as f64 + 128.0);
 
 #[derive(Clone, Copy, Debug)]
 pub struct Cand {
@@ -256,10 +261,19 @@ struct PlanAxes {
     /// places the tip at any free angle (three linears). A chain missing one (three rotaries)
     /// has only some, and the candidate must stay the solution the planner's IK found.
     inherit: bool,
+    prefer: Option<Prefer>,
 }
 
 impl PlanAxes {
-    fn new(m: &Machine) -> PlanAxes {
+    /// `PREFER_PENALTY` for a candidate on the side not preferred.
+    fn off_side(&self, c: &Cand) -> f64 {
+        match self.prefer {
+            Some(p) if c.sol.joints.rotary[p.rotary] * p.sign < -1e-9 => PREFER_PENALTY,
+            _ => 0.0,
+        }
+    }
+
+    fn new(m: &Machine, prefer: Option<Prefer>) -> PlanAxes {
         let mut unbounded = [false; 3];
         for (u, r) in unbounded.iter_mut().zip(&m.rotaries) {
             *u = r.limits.is_none();
@@ -268,6 +282,7 @@ impl PlanAxes {
             n: m.rotaries.len().min(3),
             unbounded,
             inherit: m.linears.iter().all(|l| l.is_some()),
+            prefer,
         }
     }
 }
@@ -373,7 +388,7 @@ fn relax(
                 };
             }
         }
-        cost[b] = best;
+        cost[b] = best + axes.off_side(cb);
         back[b] = arg;
     }
     // A singular candidate's free rotary stands where the move into it left it (the emitter
@@ -504,7 +519,7 @@ fn two(v: &mut [Column], k: Option<usize>, i: usize) -> (Option<&Column>, &mut C
 }
 
 impl<'m> Planner<'m> {
-    pub fn new(m: &'m Machine, setup: Setup) -> Planner<'m> {
+    pub fn new(m: &'m Machine, setup: Setup, prefer: Option<Prefer>) -> Planner<'m> {
         Planner {
             m,
             setup,
@@ -517,7 +532,7 @@ impl<'m> Planner<'m> {
             buf: Solutions::new(),
             opt: IkOptions::default(),
             fold: FoldMemo::new(m),
-            axes: PlanAxes::new(m),
+            axes: PlanAxes::new(m, prefer),
         }
     }
 

@@ -57,3 +57,34 @@ impl Retract {
         }
     }
 }
+
+/// One rotary's side where both IK branches can cut a run (`B-`, `A+`): a trunnion tilted away
+/// from the operator, a head kept on the side its cable likes. A preference, never a reason to
+/// change branch inside a cut (`plan::PREFER_PENALTY`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Prefer {
+    /// The rotary's index in chain order.
+    pub rotary: usize,
+    /// +1 or −1.
+    pub sign: f64,
+}
+
+impl Prefer {
+    /// A rotary of `m` by name and a sign: `B-`, `A+`.
+    pub fn parse(text: &str, m: &crate::kinematics::Machine) -> Result<Prefer, String> {
+        let t = text.trim();
+        let mut chars = t.chars();
+        let (Some(name), Some(sign), None) = (chars.next(), chars.next(), chars.next()) else {
+            return Err(format!("prefer {t:?}: expected a rotary and a sign, as B- or A+"));
+        };
+        let sign = match sign {
+            '+' => 1.0,
+            '-' => -1.0,
+            _ => return Err(format!("prefer {t:?}: the sign is + or -")),
+        };
+        let rotary = m
+            .rotary_index(name.to_ascii_uppercase())
+            .ok_or_else(|| format!("prefer {t:?}: {} has no rotary {name}", m.id))?;
+        Ok(Prefer { rotary, sign })
+    }
+}

@@ -40,6 +40,8 @@ pub struct Options {
     pub clearance: f64,
     /// Where positioning retracts to (`Retract::resolve`).
     pub retract: super::Retract,
+    /// The side of one rotary the planner keeps to where both branches can cut.
+    pub prefer: Option<super::Prefer>,
     /// Cone (radians) around a singular direction within which blocks are marked `singular`.
     pub singular_cone: f64,
     /// Orientation tolerance (radians) the free rotary may use near a singular direction: 0 is
@@ -146,6 +148,7 @@ impl Options {
             max_rotary_step: 10f64.to_radians(),
             clearance: if mm { 50.0 } else { 2.0 },
             retract: super::Retract::MachineZ,
+            prefer: None,
             singular_cone: 2f64.to_radians(),
             singular_tolerance: 0.0,
             clamps: Default::default(),
@@ -234,6 +237,10 @@ pub struct Settings {
     /// the profile's `[policy] retract`, else the mode's own, where absent.
     #[serde(default)]
     pub retract: Option<String>,
+    /// A rotary's side where both IK branches can cut: `B-`, `A+` (`Prefer::parse`); the
+    /// profile's `[policy] prefer` where absent.
+    #[serde(default)]
+    pub prefer: Option<String>,
 }
 
 impl Settings {
@@ -249,6 +256,11 @@ impl Settings {
         o.clamps = p.clamps();
         let profile_retract = p.doc.policy.as_ref().and_then(|d| d.retract.as_deref());
         o.retract = super::Retract::resolve(self.retract.as_deref(), profile_retract, o.mode, o.clearance)?;
+        if o.prefer.is_none()
+            && let Some(side) = p.doc.policy.as_ref().and_then(|d| d.prefer.as_deref())
+        {
+            o.prefer = Some(super::Prefer::parse(side, &p.machine)?);
+        }
         o.spindle_range = p.spindle_range();
         if let Some(s) = o.spindle_speed
             && !(o.spindle_range.0..=o.spindle_range.1).contains(&s)
@@ -278,6 +290,9 @@ impl Settings {
             Some(x) => return Err(format!("mode {}: expected joint or tcp", quote(x))),
         };
         o.retract = super::Retract::resolve(self.retract.as_deref(), None, o.mode, o.clearance)?;
+        if let Some(p) = self.prefer.as_deref().filter(|p| !p.trim().is_empty()) {
+            o.prefer = Some(super::Prefer::parse(p, m)?);
+        }
         if let Some(l) = self.tool_length {
             if !(l >= 0.0 && crate::kinematics::coordinate_ok(l)) {
                 return Err(format!(
