@@ -1,5 +1,6 @@
 # kinepost service image: multi-stage build, small runtime, non-root, health-checked.
-# Machines are baked in at /opt/kinepost/machines; mount another library over it to change them.
+# Machines and dialects are baked in at /opt/kinepost/{machines,dialects}; mount another library
+# over either to change them.
 FROM rust:1.95-bookworm AS build
 WORKDIR /src
 COPY Cargo.toml Cargo.lock ./
@@ -7,6 +8,7 @@ COPY .cargo .cargo
 COPY src src
 COPY benches benches
 COPY machines machines
+COPY dialects dialects
 RUN cargo build --release --locked --bin kinepost
 
 FROM debian:bookworm-slim
@@ -15,7 +17,9 @@ RUN useradd --system --uid 10001 --home-dir /var/lib/kinepost --create-home kine
     && chown kinepost /var/lib/kinepost/data /var/lib/kinepost/spool
 COPY --from=build /src/target/release/kinepost /usr/local/bin/kinepost
 COPY machines /opt/kinepost/machines
+COPY dialects /opt/kinepost/dialects
 ENV KINEPOST_MACHINES=/opt/kinepost/machines \
+    KINEPOST_DIALECTS=/opt/kinepost/dialects \
     KINEPOST_BIND=0.0.0.0:8080 \
     KINEPOST_DATA_DIR=/var/lib/kinepost/data \
     KINEPOST_LOG_FORMAT=json

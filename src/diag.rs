@@ -54,6 +54,9 @@ pub enum Code {
     UnknownWord,
     /// Cutter radius compensation (`CUTCOM`): what it is taken to mean, or why it is not written.
     CutterComp,
+    /// A dialect's template for a program event failed to render (out of fuel, a filter on the
+    /// wrong kind of value): nothing written for the event.
+    Template,
 }
 
 impl Code {
@@ -92,6 +95,7 @@ impl Code {
             Code::CoordinateSystem => "coordinate_system",
             Code::UnknownWord => "unknown_word",
             Code::CutterComp => "cutter_comp",
+            Code::Template => "template",
         }
     }
 }

@@ -716,7 +716,7 @@ fn random_holes(id: &str, seed: &[f64]) -> Result<(), proptest::test_runner::Tes
     cl += "END\nFINI\n";
     let post_with = |canned: bool| {
         let mut o = Options::new(m);
-        o.dialect = &kinepost::nc::FANUC;
+        o.dialect = kinepost::nc::dialect("fanuc").unwrap();
         o.canned_cycles = canned;
         let mut sink = Collect::default();
         let sum = post::post(cl.as_bytes(), m, &o, &mut sink).unwrap();

@@ -31,7 +31,7 @@ fn run(m: &Machine, cl: &[u8], o: &Options) -> (Collect, Summary) {
 fn fanuc(m: &Machine, mode: Mode) -> Options {
     let mut o = Options::new(m);
     o.mode = mode;
-    o.dialect = &kinepost::nc::FANUC;
+    o.dialect = kinepost::nc::dialect("fanuc").unwrap();
     o
 }
 
@@ -872,7 +872,7 @@ fn nx_arcs_turn_the_way_the_nx_post_cuts_them() {
     );
     // Heidenhain: the same arc as CC + C. From X-10.7283 Y6.7913 (180° about the centre) to
     // X-10.4331 Y6.4961 (270°) counter-clockwise (DR+): through the lower-left quarter, as NX cut.
-    o.dialect = &kinepost::nc::HEIDENHAIN;
+    o.dialect = kinepost::nc::dialect("heidenhain").unwrap();
     let (sink, _) = run(&m, &cl, &o);
     let lines: Vec<&str> = sink.nc.lines().collect();
     let k = lines
@@ -1690,10 +1690,10 @@ fn the_cls_tool_lengths_are_stated_and_verify_follows_them() {
             cl.push('\n');
         }
         let said = |l: f64| format!("TOOL LENGTH {l:.*} FROM THE CL", if m.units == Units::Mm { 3 } else { 4 });
-        for dialect in [&kinepost::nc::FANUC, &kinepost::nc::SIEMENS] {
+        for dialect in [kinepost::nc::dialect("fanuc").unwrap(), kinepost::nc::dialect("siemens").unwrap()] {
             for mode in [Mode::Joint, Mode::Tcp] {
                 let mut o = fanuc(&m, mode);
-                o.dialect = dialect;
+                o.dialect = dialect.clone();
                 let (sink, s) = run(&m, cl.as_bytes(), &o);
                 assert!(sink.nc.contains("UNTIL THE CL SETS ONE"), "{id}: {}", sink.nc);
                 assert!(
@@ -1749,7 +1749,7 @@ fn verify_reads_heidenhain_conversational() {
             for mode in [Mode::Joint, Mode::Tcp] {
                 let mut o = Options::new(&m);
                 o.mode = mode;
-                o.dialect = &kinepost::nc::HEIDENHAIN;
+                o.dialect = kinepost::nc::dialect("heidenhain").unwrap();
                 let (sink, s) = run(&m, &cl, &o);
                 let r = kinepost::post::verify::verify(&cl[..], sink.nc.as_bytes(), &m, &verify_options(&m, &o)).unwrap();
                 assert!(r.ok && r.matched == s.cl_points, "{id} {file} {mode:?}: {r:?}");

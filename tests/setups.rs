@@ -22,7 +22,7 @@ fn data(name: &str) -> String {
 fn post(m: &Machine, cl: &str, mode: Mode) -> Collect {
     let mut o = Options::new(m);
     o.mode = mode;
-    o.dialect = &kinepost::nc::FANUC;
+    o.dialect = kinepost::nc::dialect("fanuc").unwrap();
     let mut sink = Collect::default();
     post::post(cl.as_bytes(), m, &o, &mut sink).unwrap();
     sink

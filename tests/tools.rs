@@ -62,7 +62,7 @@ holder = { diameter = 1.5, length = 2.5 }
 
 fn post_with(p: &Profile, s: &Settings, cl: &str) -> (Collect, Summary, Options) {
     let mut o = s.profile_options(p, None).unwrap();
-    o.dialect = &kinepost::nc::FANUC;
+    o.dialect = kinepost::nc::dialect("fanuc").unwrap();
     let mut sink = Collect::default();
     let sum = post::post(cl.as_bytes(), &p.machine, &o, &mut sink).unwrap();
     (sink, sum, o)

@@ -49,7 +49,7 @@ fn path(mid: &str) -> String {
 fn post(cl: &str) -> Collect {
     let m = machine("dmg-dmc75v");
     let mut o = Options::new(&m);
-    o.dialect = &kinepost::nc::FANUC;
+    o.dialect = kinepost::nc::dialect("fanuc").unwrap();
     let mut sink = Collect::default();
     post::post(cl.as_bytes(), &m, &o, &mut sink).unwrap();
     sink

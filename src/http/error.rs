@@ -52,6 +52,9 @@ pub enum ApiError {
     /// A tool table the loader refused: `key` names the entry to fix.
     #[error("{message}")]
     BadToolTable { message: String, key: Option<String> },
+    /// A dialect its loader refused (a key, a template and its line).
+    #[error("{0}")]
+    BadDialect(String),
     #[error("{0}")]
     Unauthorized(String),
     #[error("{0}")]
@@ -117,6 +120,7 @@ impl ApiError {
             ApiError::Internal(_) => (StatusCode::INTERNAL_SERVER_ERROR, "internal", "Internal error"),
             ApiError::BadProfile { .. } => (StatusCode::UNPROCESSABLE_ENTITY, "bad-profile", "Invalid machine profile"),
             ApiError::BadToolTable { .. } => (StatusCode::UNPROCESSABLE_ENTITY, "bad-tool-table", "Invalid tool table"),
+            ApiError::BadDialect(_) => (StatusCode::UNPROCESSABLE_ENTITY, "bad-dialect", "Invalid dialect"),
             ApiError::Unauthorized(_) => (StatusCode::UNAUTHORIZED, "unauthorized", "Unauthorized"),
             ApiError::Forbidden(_) => (StatusCode::FORBIDDEN, "forbidden", "Forbidden"),
             ApiError::PreconditionFailed(_) => (StatusCode::PRECONDITION_FAILED, "precondition-failed", "Precondition failed"),

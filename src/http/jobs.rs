@@ -29,6 +29,9 @@ pub struct JobView {
     /// /v1/machines/{id}/tools/versions`); absent when the machine had none or the job brought
     /// its own (`own_tool_table`).
     pub tool_table_version: Option<i64>,
+    /// The version of the dialect the job is written in (the one it named, else the profile's
+    /// controller), as it was when the job was accepted.
+    pub dialect_version: Option<i64>,
     /// The job brought its own `tool_table`.
     pub own_tool_table: bool,
     pub filename: Option<String>,
@@ -86,7 +89,7 @@ impl From<Job> for JobView {
         let base = format!("/v1/jobs/{}", j.id);
         let mut settings = serde_json::to_value(&j.settings).unwrap_or_default();
         if let Some(o) = settings.as_object_mut() {
-            o.retain(|k, v| !v.is_null() && !matches!(k.as_str(), "tool_table" | "machine_tools_version"));
+            o.retain(|k, v| !v.is_null() && !matches!(k.as_str(), "tool_table" | "machine_tools_version" | "dialect_version"));
         }
         JobView {
             settings,
@@ -101,6 +104,7 @@ impl From<Job> for JobView {
             machine: j.machine,
             machine_version: j.machine_version,
             tool_table_version: j.settings.machine_tools_version,
+            dialect_version: j.settings.dialect_version,
             own_tool_table: j.settings.tool_table.is_some(),
             filename: j.filename,
             idempotency_key: j.idempotency_key,
@@ -220,7 +224,11 @@ pub async fn submit(
         // The machine's table as it is now, whatever is written to it before the job runs.
         settings.machine_tools_version = st.machines.tools.get(&current.id).ok().map(|c| c.version);
     }
-    settings.profile_options(&current.item, standing).map_err(ApiError::BadParameter)?;
+    let dialect = settings.dialect.clone().unwrap_or_else(|| current.item.machine.controller.clone());
+    settings.dialect_version = st.machines.dialects.get(&dialect).ok().map(|c| c.version);
+    settings
+        .profile_options_with(&current.item, standing, &|id| st.machines.dialect(id))
+        .map_err(ApiError::BadParameter)?;
     let input = StreamReader::new(body.into_data_stream().map(|r| r.map_err(std::io::Error::other)));
     let (job, _created) = q.submit(settings, current.version, filename, key, client, input).await?;
     let location = format!("/v1/jobs/{}", job.id);

@@ -3,6 +3,7 @@
 //! testable without a socket; `serve()` binds it and shuts down gracefully, finishing streams
 //! in flight.
 
+mod dialects;
 mod error;
 mod jobs;
 mod limits;
@@ -19,13 +20,11 @@ pub use post::PostParams;
 pub use server::{connection_budget, run};
 
 use crate::machines::Library;
-use axum::Json;
 use axum::extract::{Path, Request, State};
 use axum::http::{HeaderName, HeaderValue, Method, StatusCode, header};
 use axum::middleware;
 use axum::response::{IntoResponse, Response};
 use axum::routing::{get, post as post_route};
-use serde::Serialize;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
@@ -40,6 +39,8 @@ use utoipa::OpenApi;
 pub struct Config {
     pub bind: String,
     pub machines: PathBuf,
+    /// The shop's dialect files beside the built-ins (`--dialects`, `KINEPOST_DIALECTS`).
+    pub dialects: PathBuf,
     pub data_dir: PathBuf,
     /// Largest upload accepted (bytes): files are streamed, not buffered, so this can be large.
     pub max_upload: u64,
@@ -105,6 +106,7 @@ impl Default for Config {
         Config {
             bind: "127.0.0.1:8080".into(),
             machines: crate::machines::default_dir(),
+            dialects: crate::machines::dialects::default_dir(),
             data_dir: PathBuf::from("data"),
             max_upload: 4 << 30,
             request_timeout: Duration::from_secs(30),
@@ -144,16 +146,17 @@ pub struct AppState {
     info(title = "kinepost", description = "5-axis CNC postprocessor: CL data in, verified NC out, for any machine profile."),
     paths(post::post_cl, machines::list_machines, machines::get_machine, machines::create_machine, machines::put_machine,
         machines::delete_machine, machines::list_versions, machines::get_version, tools::get_tools, tools::put_tools,
-        tools::delete_tools, tools::list_tool_versions, tools::get_tool_version, list_dialects, machine_ops::fk_route, machine_ops::ik_route,
+        tools::delete_tools, tools::list_tool_versions, tools::get_tool_version, dialects::list_dialects,
+        dialects::get_dialect, dialects::create_dialect, dialects::put_dialect, dialects::delete_dialect, dialects::list_dialect_versions, dialects::get_dialect_version, machine_ops::fk_route, machine_ops::ik_route,
         machine_ops::validate_pose, machine_ops::angle_error_fit, machine_ops::calibrate, healthz, readyz, metrics::metrics_route,
         jobs::submit, jobs::list_jobs, jobs::get_job, jobs::delete_job, jobs::job_nc, jobs::job_diagnostics, jobs::job_preview),
     components(schemas(Problem, machines::MachineDto, machines::LinearDto, machines::RotaryDto, machines::AngleErrorDto,
-        machines::VersionsDto, machines::VersionDto, tools::ToolTableDto, tools::ToolDto, tools::HolderDto, DialectDto, PostParams, machine_ops::FkRequest,
+        machines::VersionsDto, machines::VersionDto, tools::ToolTableDto, tools::ToolDto, tools::HolderDto, dialects::DialectDto, PostParams, machine_ops::FkRequest,
         machine_ops::PoseDto, machine_ops::PoseRequest, machine_ops::ReachDto, machine_ops::AngleFitRequest, machine_ops::FitDto,
         machine_ops::AngleFitResponse, machine_ops::MeasurementDto, machine_ops::CalibrateRequest, machine_ops::CalibrateResponse,
         jobs::JobView, jobs::JobProgress, jobs::JobLinks, jobs::JobList)),
     modifiers(&AdminToken),
-    tags((name = "post", description = "Post-processing"), (name = "machines", description = "Machine profiles"), (name = "jobs", description = "Background jobs for large toolpaths"), (name = "ops", description = "Health and metrics"))
+    tags((name = "post", description = "Post-processing"), (name = "machines", description = "Machine profiles"), (name = "dialects", description = "NC dialects: the built-ins and the shop's own"), (name = "jobs", description = "Background jobs for large toolpaths"), (name = "ops", description = "Health and metrics"))
 )]
 pub struct ApiDoc;
 
@@ -214,7 +217,13 @@ pub fn app(state: Arc<AppState>) -> axum::Router {
         .route("/v1/jobs/{id}/diagnostics", get(jobs::job_diagnostics));
     let api = axum::Router::new()
         .route("/v1/machines", get(machines::list_machines).post(machines::create_machine))
-        .route("/v1/dialects", get(list_dialects))
+        .route("/v1/dialects", get(dialects::list_dialects).post(dialects::create_dialect))
+        .route(
+            "/v1/dialects/{id}",
+            get(dialects::get_dialect).put(dialects::put_dialect).delete(dialects::delete_dialect),
+        )
+        .route("/v1/dialects/{id}/versions", get(dialects::list_dialect_versions))
+        .route("/v1/dialects/{id}/versions/{version}", get(dialects::get_dialect_version))
         .route(
             "/v1/machines/{id}",
             get(machines::get_machine)
@@ -387,62 +396,6 @@ where
     }
 }
 
-/// A controller dialect and its words for the things that differ between controls.
-#[derive(Serialize, utoipa::ToSchema)]
-pub struct DialectDto {
-    pub name: String,
-    pub title: String,
-    /// `word_address` or `conversational`.
-    pub style: String,
-    pub tcp_on: String,
-    pub tcp_off: String,
-    /// The inverse-time feed word, if the control has one.
-    pub inverse_time: Option<String>,
-    pub tool_change: Vec<String>,
-    /// Machines whose profile names this dialect as their controller (their default).
-    pub default_for: Vec<String>,
-    /// How drilling cycles are written with `cycles=canned`.
-    pub canned_cycles: String,
-    /// How 3+2 work is written with `planes=tilted`.
-    pub tilted_planes: String,
-    /// The work coordinate systems a program can select (`work_coordinates`); the first is the
-    /// default. Empty: the program selects none (the control's preset).
-    pub work_coordinates: Vec<String>,
-    pub notes: String,
-}
-
-/// The NC dialects; a post request may name any, the profile's `controller` is the default.
-#[utoipa::path(get, path = "/v1/dialects", responses((status = 200, description = "Success", body = Vec<DialectDto>)), tag = "post")]
-async fn list_dialects(State(st): State<Arc<AppState>>) -> Json<Vec<DialectDto>> {
-    Json(
-        crate::nc::ALL
-            .iter()
-            .map(|d| DialectDto {
-                name: d.name.into(),
-                title: d.title.into(),
-                style: match d.style {
-                    crate::nc::Style::WordAddress => "word_address".into(),
-                    crate::nc::Style::Conversational => "conversational".into(),
-                },
-                tcp_on: d.tcp_on.into(),
-                tcp_off: d.tcp_off.into(),
-                inverse_time: d.inverse_time.map(str::to_string),
-                tool_change: d.tool_change.iter().map(|s| s.to_string()).collect(),
-                default_for: st
-                    .machines
-                    .list()
-                    .iter()
-                    .filter(|c| c.item.machine.controller == d.name)
-                    .map(|c| c.item.machine.id.clone())
-                    .collect(),
-                canned_cycles: d.cycles.describe().into(),
-                tilted_planes: d.planes.describe().into(),
-                work_coordinates: d.work_coordinates.iter().map(|s| s.to_string()).collect(),
-                notes: d.notes.into(),
-            })
-            .collect(),
-    )
-}
 
 /// Alive.
 #[utoipa::path(get, path = "/healthz", responses((status = 200, description = "ok")), tag = "ops")]
@@ -477,7 +430,9 @@ async fn readyz(State(st): State<Arc<AppState>>) -> Result<Response, ApiError> {
 
 /// Loads the library and binds; runs until SIGINT/SIGTERM, then lets streams in flight finish.
 pub async fn serve(mut cfg: Config) -> Result<(), String> {
-    let library = Library::load_dir(&cfg.machines).map_err(|e| e.to_string())?;
+    let library = Library::load_dir(&cfg.machines)
+        .and_then(|l| l.with_dialects(&cfg.dialects))
+        .map_err(|e| e.to_string())?;
     std::fs::create_dir_all(&cfg.data_dir).map_err(|e| format!("{}: {e}", cfg.data_dir.display()))?;
     let fit = connection_budget(cfg.max_connections);
     if fit < cfg.max_connections {

@@ -97,6 +97,7 @@ impl PostParams {
             tool_length: self.tool_length,
             tool_table: self.tool_table.clone(),
             machine_tools_version: None,
+            dialect_version: None,
             work_offset: self.work_offset.clone(),
             tolerance: self.tolerance,
             sequence_numbers: self.sequence_numbers,
@@ -190,7 +191,7 @@ struct ChannelSink {
     ndjson: bool,
     started: bool,
     /// Whose comment syntax the text stream's closing error is written in.
-    dialect: &'static crate::nc::Dialect,
+    dialect: Arc<crate::nc::Dialect>,
 }
 
 impl ChannelSink {
@@ -312,7 +313,10 @@ pub async fn post_cl(
     let (params, filename, body) = upload(&st, query, req).await?;
     let profile = params.profile(&st)?.item;
     let standing = super::tools::standing(&st, &profile.machine.id);
-    let mut opts = params.settings().profile_options(&profile, standing).map_err(ApiError::BadParameter)?;
+    let mut opts = params
+        .settings()
+        .profile_options_with(&profile, standing, &|id| st.machines.dialect(id))
+        .map_err(ApiError::BadParameter)?;
     opts.budget = st.config.post_budget;
     opts.header.push(format!("DATE {} UTC", crate::output::utc_now()));
     if let Some(f) = &filename {
@@ -331,14 +335,14 @@ pub async fn post_cl(
             buf: Vec::with_capacity(PRELUDE + 4096),
             ndjson,
             started: false,
-            dialect: opts.dialect,
+            dialect: opts.dialect.clone(),
         };
         if with_header {
             let h = Header {
                 machine: &profile.machine.id,
                 units: profile.machine.units.as_str(),
                 mode: opts.mode,
-                dialect: opts.dialect.name,
+                dialect: &opts.dialect.name,
                 tolerance: opts.tolerance,
             };
             let _ = sink.record(&Record::Header(h));

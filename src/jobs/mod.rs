@@ -264,11 +264,21 @@ impl Queue {
             },
             None => Ok(None),
         };
+        // And the dialect's version, where the job recorded one (the built-ins else).
+        let dialect = match (&profile, job.settings.dialect_version) {
+            (Ok(p), Some(v)) => {
+                let id = job.settings.dialect.clone().unwrap_or_else(|| p.machine.controller.clone());
+                self.machines.dialects.version(&id, v).await.map(Some).map_err(|e| format!("dialect {id:?} version {v}: {e}"))
+            }
+            _ => Ok(None),
+        };
         let task = {
             let (job, cancel, progress) = (job.clone(), cancel.clone(), progress.clone());
             let spool = self.store.spool().to_path_buf();
             let budget = self.config.budget;
-            tokio::task::spawn_blocking(move || execute(profile?, tools?, &spool, &job, budget, &cancel, &progress))
+            tokio::task::spawn_blocking(move || {
+                execute(profile?, tools?, dialect?, &spool, &job, budget, &cancel, &progress)
+            })
         };
         tokio::pin!(task);
         let result = loop {
@@ -380,6 +390,7 @@ impl Sink for JobSink<'_> {
 fn execute(
     profile: Arc<Profile>,
     tools: Option<(Arc<crate::machines::tools::ToolTable>, String)>,
+    dialect: Option<Arc<crate::nc::Dialect>>,
     spool: &std::path::Path,
     job: &Job,
     budget: post::Budget,
@@ -387,7 +398,10 @@ fn execute(
     progress: &Arc<Progress>,
 ) -> Result<Summary, String> {
     let paths = store::Paths::new(spool, &job.id, job.attempts);
-    let mut opts = job.settings.profile_options(&profile, tools)?;
+    let mut opts = job.settings.profile_options_with(&profile, tools, &|id| match &dialect {
+        Some(d) if d.name == id => Some(d.clone()),
+        _ => crate::nc::dialect(id),
+    })?;
     opts.budget = budget;
     opts.header.push(format!("JOB {}", job.id));
     if let Some(f) = &job.filename {

@@ -9,6 +9,7 @@
 
 use super::tools::{TABLE_SUFFIX, ToolTable, parse_tool_table};
 use super::{Error, Library, Profile, parse_profile};
+use crate::nc::Dialect;
 use sqlx::AnyPool;
 use sqlx::Row;
 use std::collections::{BTreeMap, HashMap};
@@ -51,6 +52,27 @@ pub trait Kind: Send + Sync + Sized + 'static {
     fn parse(text: &str, file: &str, id: Option<&str>) -> Result<(String, Self), Error>;
     /// The library's files of this kind, by id.
     fn files(lib: &Library) -> Vec<(String, Arc<Self>)>;
+    /// The text of the library's file `id` of this kind.
+    fn file_text(lib: &Library, id: &str) -> std::io::Result<String> {
+        super::read_text(&lib.dir.join(format!("{id}{}", Self::SUFFIX)))
+    }
+}
+
+impl Kind for Dialect {
+    const TABLE: &'static str = "dialect_versions";
+    const SUFFIX: &'static str = ".toml";
+    const ETAG: &'static str = "-dialect-v";
+    const WHAT: &'static str = "dialect";
+    fn parse(text: &str, file: &str, id: Option<&str>) -> Result<(String, Self), Error> {
+        let d = super::dialects::parse(text, file, id)?;
+        Ok((d.name.clone(), d))
+    }
+    fn files(lib: &Library) -> Vec<(String, Arc<Self>)> {
+        lib.dialects.iter().map(|d| (d.name.clone(), d.clone())).collect()
+    }
+    fn file_text(lib: &Library, id: &str) -> std::io::Result<String> {
+        lib.dialects.file_text(id)
+    }
 }
 
 impl Kind for Profile {
@@ -140,6 +162,7 @@ pub enum Expect {
 pub struct Catalog {
     profiles: Shelf<Profile>,
     pub tools: Shelf<ToolTable>,
+    pub dialects: Shelf<Dialect>,
 }
 
 impl std::ops::Deref for Catalog {
@@ -155,6 +178,7 @@ impl Catalog {
         Arc::new(Catalog {
             profiles: Shelf::files_only(files),
             tools: Shelf::files_only(files),
+            dialects: Shelf::files_only(files),
         })
     }
 
@@ -162,14 +186,22 @@ impl Catalog {
     pub async fn open(files: &Library, db: AnyPool) -> Result<Arc<Catalog>, Error> {
         Ok(Arc::new(Catalog {
             profiles: Shelf::open(files, db.clone()).await?,
-            tools: Shelf::open(files, db).await?,
+            tools: Shelf::open(files, db.clone()).await?,
+            dialects: Shelf::open(files, db).await?,
         }))
     }
 
     /// Re-reads both shelves' current versions from the store.
     pub async fn refresh(&self) -> Result<(), Error> {
         self.profiles.refresh().await?;
-        self.tools.refresh().await
+        self.tools.refresh().await?;
+        self.dialects.refresh().await
+    }
+
+    /// A dialect by id as a post resolves it: its current version (a job's recorded one goes
+    /// through [`Shelf::version`]).
+    pub fn dialect(&self, id: &str) -> Option<Arc<Dialect>> {
+        self.dialects.get(id).ok().map(|c| c.item)
     }
 }
 
@@ -257,9 +289,8 @@ impl<T: Kind> Shelf<T> {
         sqlx::query(sqlx::AssertSqlSafe(schema(T::TABLE))).execute(&db).await.map_err(db_err)?;
         for (id, _) in T::files(files) {
             let id = &id;
-            let path = files.dir.join(format!("{id}{}", T::SUFFIX));
-            let text = &tokio::fs::read_to_string(&path).await.map_err(|source| Error::Io {
-                path: path.display().to_string(),
+            let text = &T::file_text(files, id).map_err(|source| Error::Io {
+                path: format!("{}{}", id, T::SUFFIX),
                 source,
             })?;
             let last = sqlx::query(sql::<T>("SELECT version, toml, source FROM {table} WHERE id = $1 ORDER BY version DESC LIMIT 1"))

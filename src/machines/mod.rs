@@ -11,6 +11,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 pub mod catalog;
+pub mod dialects;
 pub mod tools;
 pub use catalog::{Catalog, Current, Expect, Kind, Shelf};
 
@@ -352,6 +353,8 @@ pub struct Library {
     profiles: BTreeMap<String, Arc<Profile>>,
     tools: BTreeMap<String, Arc<tools::ToolTable>>,
     pub dir: PathBuf,
+    /// The dialects posts are written in: the built-ins and a directory's files.
+    pub dialects: dialects::Dialects,
 }
 
 impl Library {
@@ -391,7 +394,14 @@ impl Library {
             profiles,
             tools: tables,
             dir: dir.to_path_buf(),
+            dialects: dialects::Dialects::default(),
         })
+    }
+
+    /// The same library with the dialect files of `dir` beside the built-ins.
+    pub fn with_dialects(mut self, dir: &Path) -> Result<Library, Error> {
+        self.dialects = dialects::Dialects::load_dir(dir)?;
+        Ok(self)
     }
 
     /// Machine `id`'s standing tool table, if its file is there.

@@ -2,19 +2,24 @@
 //! events (tool change, spindle, motion blocks …); a [`Formatter`] turns each into text lines in
 //! its dialect, suppressing modal words, and keeps no more state than a controller would.
 
+mod dialect;
 mod dialects;
+pub mod templates;
 mod number;
 pub mod plane;
 pub mod read;
 
-pub use dialects::{ALL, DIALECTS, FANUC, HAAS, HEIDENHAIN, LINUXCNC, Risk, SIEMENS, dialect, function_risk};
-pub use number::{round_to, write_fixed};
+pub use dialect::{Dialect, Frame, MAX_DIALECT_BYTES, Sequence, WordFormat, parse_dialect};
+pub use dialects::{BUILTIN_FILES, DIALECTS, Risk, builtins, dialect, function_risk};
+pub use number::{restyle, round_to, write_fixed};
 pub use plane::Planes;
 
 use crate::kinematics::Units;
+use std::sync::Arc;
 
 /// How a control's blocks are put together.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
 pub enum Style {
     /// ISO word address: `N10 G1 X1.000 Y2.000 F500.0 (comment)`.
     WordAddress,
@@ -26,7 +31,8 @@ pub enum Style {
 /// What a control's words take. Beyond it a word is an error naming its CL line (and written at
 /// the bound where that is the safe side: a slower feed, a shorter dwell), never a number that
 /// rounds to zero or wraps.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct Ranges {
     /// Largest programmed feed per minute, mm/min (an inch program's: this over 25.4).
     pub feed_mm: f64,
@@ -39,82 +45,9 @@ pub struct Ranges {
     pub dwell_s: f64,
 }
 
-/// A controller's words for the same things. Only data: adding a dialect is a value.
-/// Templates: `{n}` program number, `{n4}`/`{n5}` zero-padded, `{UNITS}` MM|INCH, `{t}` tool,
-/// `{s}` spindle speed.
-#[derive(Clone, Debug)]
-pub struct Dialect {
-    pub name: &'static str,
-    pub title: &'static str,
-    pub style: Style,
-    /// Comment delimiters: `(` `)` or `;` and nothing.
-    pub comment: (&'static str, &'static str),
-    /// Program start and end lines, and whether each takes a block number.
-    pub begin: &'static [(&'static str, bool)],
-    pub end: &'static [(&'static str, bool)],
-    pub units_mm: &'static str,
-    pub units_inch: &'static str,
-    pub safe_start: &'static str,
-    /// The work coordinate systems a program can select (the first is the default, written on
-    /// the safe-start line); none where the control takes its datum otherwise (a TNC's preset).
-    pub work_coordinates: &'static [&'static str],
-    pub rapid: &'static str,
-    pub feed: &'static str,
-    pub feed_per_min: &'static str,
-    /// Inverse-time feed word (G93); `None`: the control has none, and a move with rotaries gets
-    /// the combined machine-axis feed (units and degrees per minute) that gives the same time.
-    pub inverse_time: Option<&'static str>,
-    /// The numbers its words take.
-    pub ranges: Ranges,
-    pub tool_change: &'static [&'static str],
-    /// The next tool readied in the magazine while this one cuts (CL `SELCTL`).
-    pub tool_preselect: &'static str,
-    pub length_comp: &'static str,
-    pub tcp_on: &'static str,
-    pub tcp_off: &'static str,
-    /// Spindle to the machine's Z home in machine coordinates, compensation off (`G53 G0 Z0`,
-    /// where machine Z0 is the top of travel, as on every Haas): what a TCP program leaves the
-    /// part with before a tool change and at the end, where its X Y Z (tip coordinates) cannot
-    /// name the top of Z. Empty where the control's machine zero is not known to be the top.
-    pub machine_z_up: &'static str,
-    pub spindle: &'static str,
-    pub spindle_cw: &'static str,
-    pub spindle_ccw: &'static str,
-    pub spindle_off: &'static str,
-    pub coolant_flood: &'static str,
-    pub coolant_mist: &'static str,
-    pub coolant_through: &'static str,
-    pub coolant_off: &'static str,
-    /// Program stop and optional stop (CL `STOP`, `OPSTOP`).
-    pub stop: &'static str,
-    pub optional_stop: &'static str,
-    /// Cutter radius compensation (CL `CUTCOM`) left, right and off, in the working plane (G17);
-    /// `{t}` is the offset register. Started and ended on a straight move.
-    pub cutcom: [&'static str; 3],
-    /// The same for simultaneous 5-axis motion in TCP mode (3D tool-side compensation: the
-    /// offset across the tool axis and the path), where the control has it.
-    pub cutcom_3d: Option<[&'static str; 3]>,
-    /// Where the control takes the compensation radius from: what the header tells the operator
-    /// to set to the wear (tool centre path) or the full radius (contour).
-    pub cutcom_radius: &'static str,
-    /// G codes a CL's `PREFUN` may pass through: they set only how the control moves (exact
-    /// stop, continuous path, look-ahead); any other could change coordinates, units, plane,
-    /// compensation or motion under the program's own words.
-    pub harmless_g: &'static [&'static str],
-    /// The M codes the control knows, as ranges; `None`: any (a machine builder adds its own,
-    /// as on Fanuc and Haas controls). A code outside them stops the program where it is read.
-    pub m_codes: Option<&'static [(u32, u32)]>,
-    /// N numbers are optional (a job option) on word-address controls.
-    pub block_numbers: bool,
-    /// How the control writes canned drilling cycles.
-    pub cycles: Cycles,
-    /// How the control tilts the working plane (3+2).
-    pub planes: Planes,
-    pub notes: &'static str,
-}
-
 /// Canned drilling cycle families.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Deserialize)]
+#[serde(tag = "kind", rename_all = "lowercase", deny_unknown_fields)]
 pub enum Cycles {
     /// `G98/G99 G81|G82|G83 X Y Z R [Q] [P] F`, modal until `G80`; dwell `P` in milliseconds
     /// (Fanuc) or seconds (Haas, LinuxCNC).
@@ -239,6 +172,21 @@ impl Formats {
         0.5 * 10f64.powi(-(self.rotary as i32))
     }
 
+    /// The formats of `d` in units `u`: the defaults below, where the dialect says nothing.
+    pub fn for_dialect(d: &Dialect, u: Units) -> Formats {
+        let mut f = Formats::for_units(u);
+        let w = d.format;
+        let (linear, feed) = match u {
+            Units::Mm => (w.linear_mm, w.feed_mm),
+            Units::Inch => (w.linear_inch, w.feed_inch),
+        };
+        f.linear = linear.unwrap_or(f.linear);
+        f.feed = feed.unwrap_or(f.feed);
+        f.rotary = w.rotary.unwrap_or(f.rotary);
+        f.inverse_feed = w.inverse_time.unwrap_or(f.inverse_feed);
+        f
+    }
+
     pub fn for_units(u: Units) -> Formats {
         match u {
             Units::Mm => Formats {
@@ -277,11 +225,14 @@ pub enum FeedMode {
 
 /// Formats lines of one program; keeps the modal state to suppress repeated words.
 pub struct Formatter {
-    pub d: &'static Dialect,
+    pub d: Arc<Dialect>,
     pub fmt: Formats,
     /// Next block number, when blocks are numbered: N5, N10 … (word address, optional) or
-    /// 0, 1, 2 … on every line (conversational).
+    /// 0, 1, 2 … on every line (conversational), unless the dialect says otherwise.
     sequence: Option<u32>,
+    step: u32,
+    /// The dialect writes numbers otherwise than the defaults (no trailing or leading zeros).
+    restyle: bool,
     motion: Option<Motion>,
     feed_mode: Option<FeedMode>,
     feed: Option<i64>,
@@ -290,6 +241,8 @@ pub struct Formatter {
     buf: String,
     program_number: u32,
     units: &'static str,
+    /// The job's tolerance, for the dialect's blending word.
+    pub tolerance: f64,
     /// Blocks start with `/`: the operator's block delete skips them (CL `OPSKIP/ON`).
     pub block_skip: bool,
     /// The origin of the work offset in force relative to the program's first (profile units):
@@ -315,26 +268,38 @@ pub const AXIS_LETTERS: [char; 6] = {
 /// `text` as one comment in `d`'s syntax, appended to `buf`: nothing in it can end the comment
 /// early or open another (parentheses, `;`, control characters), at most 120 characters.
 fn push_comment(buf: &mut String, d: &Dialect, text: &str) {
-    buf.push_str(d.comment.0);
-    for c in text.chars().take(120) {
+    let room = match d.line_length {
+        0 => 120,
+        n => n.saturating_sub(buf.len() + d.comment.0.len() + d.comment.1.len()).min(120),
+    };
+    buf.push_str(&d.comment.0);
+    for c in text.chars().take(room) {
         buf.push(if c == ')' || c == '(' || c == ';' || c.is_control() {
             ' '
         } else {
             c.to_ascii_uppercase()
         });
     }
-    buf.push_str(d.comment.1);
+    buf.push_str(&d.comment.1);
 }
 
 impl Dialect {
     /// Whether the control knows `word` (a whole word such as `M13`); words other than M codes
     /// are not judged here.
     pub fn knows(&self, word: &str) -> bool {
-        let Some(ranges) = self.m_codes else { return true };
+        let Some(ranges) = &self.m_codes else { return true };
         match word.strip_prefix('M').map(str::parse::<u32>) {
             Some(Ok(n)) => ranges.iter().any(|(lo, hi)| (*lo..=*hi).contains(&n)),
             Some(Err(_)) => false,
             None => true,
+        }
+    }
+
+    /// The word that puts the control in feed mode `mode` (empty: none needed or none there).
+    pub fn feed_mode_word(&self, mode: FeedMode) -> &str {
+        match mode {
+            FeedMode::PerMinute => &self.feed_per_min,
+            FeedMode::InverseTime => self.inverse_time.as_deref().unwrap_or(&self.feed_per_min),
         }
     }
 
@@ -347,12 +312,20 @@ impl Dialect {
 }
 
 impl Formatter {
-    pub fn new(d: &'static Dialect, fmt: Formats, sequence_numbers: bool) -> Formatter {
+    pub fn new(d: Arc<Dialect>, fmt: Formats, sequence_numbers: bool) -> Formatter {
         let numbered = d.style == Style::Conversational || (sequence_numbers && d.block_numbers);
+        let seq = d.sequence.unwrap_or(match d.style {
+            Style::Conversational => Sequence { start: 0, step: 1, width: 0 },
+            Style::WordAddress => Sequence { start: 5, step: 5, width: 0 },
+        });
+        let restyle = !d.format.trailing_zeros || !d.format.leading_zero;
         Formatter {
             d,
             fmt,
-            sequence: numbered.then_some(0),
+            sequence: numbered.then_some(seq.start),
+            step: seq.step,
+            restyle,
+            tolerance: 0.0,
             motion: None,
             feed_mode: None,
             feed: None,
@@ -375,14 +348,16 @@ impl Formatter {
             self.buf.push('/');
         }
         if let Some(n) = self.sequence.as_mut() {
-            if self.d.style == Style::Conversational {
-                self.buf.push_str(itoa::Buffer::new().format(*n));
-                *n += 1;
-            } else {
-                *n += 5;
+            if self.d.style == Style::WordAddress {
                 self.buf.push('N');
-                self.buf.push_str(itoa::Buffer::new().format(*n));
             }
+            let digits = itoa::Buffer::new().format(*n).to_string();
+            let width = self.d.sequence.map_or(0, |s| s.width as usize);
+            for _ in digits.len()..width {
+                self.buf.push('0');
+            }
+            self.buf.push_str(&digits);
+            *n = n.saturating_add(self.step);
             self.buf.push(' ');
         }
     }
@@ -396,10 +371,29 @@ impl Formatter {
             ("{UNITS}", self.units.to_string()),
             ("{t}", t.to_string()),
             ("{s}", s.to_string()),
+            ("{tol}", format!("{:.*}", self.fmt.linear as usize, self.tolerance)),
         ] {
             out = out.replace(k, &v);
         }
         out
+    }
+
+    /// Lines go out as written: no number restyled, no length to check (every built-in).
+    pub fn plain(&self) -> bool {
+        !self.restyle && self.d.line_length == 0
+    }
+
+    /// A line as the dialect's number format wants it, and whether it is longer than the
+    /// control reads.
+    pub fn finish<'a>(&self, line: &'a str) -> (std::borrow::Cow<'a, str>, bool) {
+        let text: std::borrow::Cow<'a, str> = if self.restyle {
+            let f = self.d.format;
+            restyle(line, &self.d.comment.0, f.trailing_zeros, f.leading_zero).into()
+        } else {
+            line.into()
+        };
+        let long = self.d.line_length > 0 && text.len() > self.d.line_length;
+        (text, long)
     }
 
     /// A comment line; characters the dialect cannot hold in a comment are replaced. Numbered
@@ -410,7 +404,7 @@ impl Formatter {
         } else {
             self.buf.clear();
         }
-        push_comment(&mut self.buf, self.d, text);
+        push_comment(&mut self.buf, &self.d, text);
         &self.buf
     }
 
@@ -439,23 +433,25 @@ impl Formatter {
             Units::Inch => "INCH",
         };
         let mut out = Vec::new();
-        for (t, numbered) in self.d.begin {
-            let text = self.fill(t, 0, 0);
-            out.push(if *numbered { self.words(&text).to_string() } else { text });
+        let d = self.d.clone();
+        for f in &d.begin {
+            let text = self.fill(&f.text, 0, 0);
+            out.push(if f.numbered { self.words(&text).to_string() } else { text });
         }
         for c in comments {
             out.push(self.comment(c).to_string());
         }
         let u = match units {
-            Units::Mm => self.d.units_mm,
-            Units::Inch => self.d.units_inch,
+            Units::Mm => &d.units_mm,
+            Units::Inch => &d.units_inch,
         };
         let start = match wcs {
-            Some(w) if self.d.safe_start.is_empty() => w.to_string(),
-            Some(w) => format!("{} {w}", self.d.safe_start),
-            None => self.d.safe_start.to_string(),
+            Some(w) if d.safe_start.is_empty() => w.to_string(),
+            Some(w) => format!("{} {w}", d.safe_start),
+            None => d.safe_start.to_string(),
         };
-        for w in [u, &start] {
+        let blend = self.fill(&d.blend, 0, 0);
+        for w in [u, &start, &blend] {
             if !w.is_empty() {
                 out.push(self.words(w).to_string());
             }
@@ -465,19 +461,31 @@ impl Formatter {
 
     /// Program end: spindle and coolant off, compensation off (then, `z_up`, the spindle to
     /// machine Z home), the dialect's closing lines.
-    pub fn footer(&mut self, z_up: bool) -> Vec<String> {
+    /// `tcp_off`: lines in place of the dialect's TCP-off word (its template's).
+    pub fn footer(&mut self, z_up: bool, tcp_off: Option<Vec<String>>) -> Vec<String> {
         // The program's end runs whatever the block delete switch says.
         self.block_skip = false;
         let mut out = Vec::new();
-        let up = if z_up { self.d.machine_z_up } else { "" };
-        for w in [self.d.spindle_off, self.d.coolant_off, self.d.tcp_off, up] {
+        let d = self.d.clone();
+        let up = if z_up { d.machine_z_up.as_str() } else { "" };
+        let off = tcp_off.unwrap_or_else(|| vec![d.tcp_off.clone()]);
+        let words = [d.spindle_off.as_str(), &d.coolant_off].into_iter().chain(off.iter().map(String::as_str)).chain([up]);
+        for w in words {
             if !w.is_empty() {
                 out.push(self.words(w).to_string());
             }
         }
-        for (t, numbered) in self.d.end {
-            let text = self.fill(t, 0, 0);
-            out.push(if *numbered { self.words(&text).to_string() } else { text });
+        out.extend(self.closing());
+        out
+    }
+
+    /// The dialect's closing lines (`M30`, `%`).
+    pub fn closing(&mut self) -> Vec<String> {
+        let d = self.d.clone();
+        let mut out = Vec::new();
+        for f in &d.end {
+            let text = self.fill(&f.text, 0, 0);
+            out.push(if f.numbered { self.words(&text).to_string() } else { text });
         }
         out
     }
@@ -511,9 +519,9 @@ impl Formatter {
                 .push_str(if matches!(motion, Motion::Arc { .. }) { "C " } else { "L " });
         } else if let Some((mode, _)) = feed
             && motion != Motion::Rapid
-            && let Some(w) = self.switch_feed_mode(mode)
+            && let Some(d) = self.switch_feed_mode(mode)
         {
-            self.buf.push_str(w);
+            self.buf.push_str(d.feed_mode_word(mode));
             self.buf.push(' ');
         }
         let mut moved = false;
@@ -524,10 +532,11 @@ impl Formatter {
             let dec = self.decimals(i);
             // An ISO arc names its end point whole; a Heidenhain `C` only the plane's (a Z
             // there would ask for a helix).
-            if (force && i < if conv { 2 } else { 3 }) || self.axes[i] != Some(r) {
+            let changed = (force && i < if conv { 2 } else { 3 }) || self.axes[i] != Some(r);
+            if changed || !self.d.format.modal {
                 self.axes[i] = Some(r);
                 number::write_word(&mut self.buf, AXIS_ADDRESSES[i], conv, r, dec);
-                moved = true;
+                moved |= changed;
             }
         }
         if !moved {
@@ -547,13 +556,13 @@ impl Formatter {
         }
         if conv {
             if motion == Motion::Rapid {
-                self.buf.push_str(self.d.rapid);
+                self.buf.push_str(&self.d.rapid);
                 self.buf.push(' ');
             }
         } else if self.motion != Some(motion) {
             let w = match motion {
-                Motion::Rapid => self.d.rapid,
-                Motion::Feed => self.d.feed,
+                Motion::Rapid => self.d.rapid.as_str(),
+                Motion::Feed => self.d.feed.as_str(),
                 Motion::Arc { ccw: true } => "G3",
                 Motion::Arc { ccw: false } => "G2",
             };
@@ -588,26 +597,22 @@ impl Formatter {
         }
         if let Some(c) = comment {
             self.buf.push(' ');
-            self.buf.push_str(self.d.comment.0);
+            self.buf.push_str(&self.d.comment.0);
             self.buf.push_str(c);
-            self.buf.push_str(self.d.comment.1);
+            self.buf.push_str(&self.d.comment.1);
         }
         Some(&self.buf)
     }
 
     /// The word that switches the feed mode to `mode`, when it is not on already (the modal F is
     /// forgotten then: it means another thing now). `None` also where the control has no word.
-    fn switch_feed_mode(&mut self, mode: FeedMode) -> Option<&'static str> {
+    fn switch_feed_mode(&mut self, mode: FeedMode) -> Option<Arc<Dialect>> {
         if self.feed_mode == Some(mode) {
             return None;
         }
         self.feed_mode = Some(mode);
         self.feed = None;
-        let w = match mode {
-            FeedMode::PerMinute => self.d.feed_per_min,
-            FeedMode::InverseTime => self.d.inverse_time.unwrap_or(self.d.feed_per_min),
-        };
-        (!w.is_empty()).then_some(w)
+        (!self.d.feed_mode_word(mode).is_empty()).then(|| self.d.clone())
     }
 
     fn number(&mut self, v: f64, dec: u32, signed: bool) {
@@ -673,8 +678,8 @@ impl Formatter {
             Cycles::Iso { dwell_ms } => {
                 self.start();
                 if !modal {
-                    if let Some(w) = self.switch_feed_mode(FeedMode::PerMinute) {
-                        self.buf.push_str(w);
+                    if let Some(d) = self.switch_feed_mode(FeedMode::PerMinute) {
+                        self.buf.push_str(d.feed_mode_word(FeedMode::PerMinute));
                         self.buf.push(' ');
                     }
                     // G98 returns to the level the cycle started from, G99 to the R plane.
@@ -709,8 +714,8 @@ impl Formatter {
             Cycles::Siemens => {
                 if !modal {
                     let mut f = String::new();
-                    if let Some(w) = self.switch_feed_mode(FeedMode::PerMinute) {
-                        f.push_str(w);
+                    if let Some(d) = self.switch_feed_mode(FeedMode::PerMinute) {
+                        f.push_str(d.feed_mode_word(FeedMode::PerMinute));
                         f.push(' ');
                     }
                     if self.feed != Some(feed_r) {

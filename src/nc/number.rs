@@ -256,3 +256,42 @@ mod tests {
         }
     }
 }
+
+/// Rewrites the numbers of a written line's address words as a dialect without trailing zeros
+/// (`X1.5`, `X1.`) or leading zeros (`X.5`, `X-.5`) wants them. Comments (from `open` on) and
+/// words without a decimal point (`N10`, `M3`, `G1`) stay as they are; so do G and M codes with
+/// one (`G43.4`).
+pub fn restyle(line: &str, open: &str, trailing: bool, leading: bool) -> String {
+    let (code, comment) = match line.find(open).filter(|_| !open.is_empty()) {
+        Some(i) => line.split_at(i),
+        None => (line, ""),
+    };
+    let mut out = String::with_capacity(line.len());
+    for (k, token) in code.split(' ').enumerate() {
+        if k > 0 {
+            out.push(' ');
+        }
+        out.push_str(&restyle_word(token, trailing, leading));
+    }
+    out.push_str(comment);
+    out
+}
+
+fn restyle_word(token: &str, trailing: bool, leading: bool) -> std::borrow::Cow<'_, str> {
+    let mut chars = token.chars();
+    let Some(address) = chars.next().filter(|c| c.is_ascii_uppercase() && !matches!(c, 'G' | 'M' | 'N' | 'O' | 'T' | 'H' | 'D')) else {
+        return token.into();
+    };
+    let rest = chars.as_str();
+    let (sign, digits) = match rest.strip_prefix(['+', '-']) {
+        Some(d) => (&rest[..1], d),
+        None => ("", rest),
+    };
+    let Some((int, frac)) = digits.split_once('.') else { return token.into() };
+    if !int.bytes().all(|b| b.is_ascii_digit()) || !frac.bytes().all(|b| b.is_ascii_digit()) || int.is_empty() {
+        return token.into();
+    }
+    let frac = if trailing { frac } else { frac.trim_end_matches('0') };
+    let int = if !leading && int == "0" { "" } else { int };
+    format!("{address}{sign}{int}.{frac}").into()
+}

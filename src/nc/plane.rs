@@ -10,7 +10,8 @@ use nalgebra::{Matrix3, Rotation3, Vector3};
 /// How a control tilts the working plane. kinepost positions the rotaries itself before the
 /// plane, so a control that picks its own solution (G53.1, TURN, CYCLE800's direction) finds
 /// the tool already there and moves nothing.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
 pub enum Planes {
     /// `G68.2 X0 Y0 Z0 I J K` (Euler angles Z, X', Z'') then `G53.1`; `G69` cancels.
     Fanuc,

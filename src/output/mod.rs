@@ -10,23 +10,7 @@ pub use ndjson::{ErrorBody, FileSink, Header, Record};
 use crate::kinematics;
 use serde_json::{Map, Value, json};
 
-/// `YYYY-MM-DD HH:MM` of the system clock, UTC (civil-from-days, no calendar crate needed).
-pub fn utc_now() -> String {
-    let secs = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map_or(0, |d| d.as_secs()) as i64;
-    let (days, rem) = (secs.div_euclid(86_400), secs.rem_euclid(86_400));
-    let z = days + 719_468;
-    let era = z.div_euclid(146_097);
-    let doe = z - era * 146_097;
-    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
-    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
-    let mp = (5 * doy + 2) / 153;
-    let d = doy - (153 * mp + 2) / 5 + 1;
-    let m = if mp < 10 { mp + 3 } else { mp - 9 };
-    let y = yoe + era * 400 + (m <= 2) as i64;
-    format!("{y:04}-{m:02}-{d:02} {:02}:{:02}", rem / 3600, rem % 3600 / 60)
-}
+pub use crate::text::utc_now;
 
 /// One solution as the CLI and the API show it: axis words, branch, flags. Rotary words are those
 /// of the actual angle in (−180°, 180°]; they are never wrapped themselves, because angle-error

@@ -79,7 +79,7 @@ fn run<R: BufRead, S: Sink + ?Sized>(
 ) -> Result<Summary, Error> {
     let mut src = Source::new(input, m.units, o.cl_units, o.strict)?;
     src.canned_cycles = o.canned_cycles;
-    src.feed_max = emit::feed_max(o.dialect, m.units, crate::nc::FeedMode::PerMinute);
+    src.feed_max = emit::feed_max(&o.dialect, m.units, crate::nc::FeedMode::PerMinute);
     src.spindle_range = o.spindle_range;
     let mut lengths = tools::Lengths::new(m.units, o.tool_length, o.tool_table.as_deref(), m.default_tool_length);
     let setup = Setup::new(lengths.length, o.work_offset);

@@ -20,7 +20,7 @@ pub enum Mode {
 #[derive(Clone, Debug)]
 pub struct Options {
     pub mode: Mode,
-    pub dialect: &'static Dialect,
+    pub dialect: Arc<Dialect>,
     /// Profile units; overrides the CL file's, the tool table's and the profile's default.
     pub tool_length: Option<f64>,
     /// Lengths per tool number (the job's table, else the machine's): `post::tools` weighs them.
@@ -135,7 +135,7 @@ impl Options {
         let mm = m.units == Units::Mm;
         Options {
             mode: Mode::Joint,
-            dialect: crate::nc::dialect(&m.controller).unwrap_or(&crate::nc::FANUC),
+            dialect: crate::nc::dialect(&m.controller).unwrap_or_else(|| crate::nc::builtins()[0].clone()),
             tool_length: None,
             tool_table: None,
             tool_table_label: String::new(),
@@ -166,7 +166,7 @@ impl Options {
     /// The work coordinate word the program writes, if any.
     pub fn wcs_word(&self) -> Option<&str> {
         match self.work_coordinates.as_deref() {
-            None => self.dialect.work_coordinates.first().copied(),
+            None => self.dialect.work_coordinates.first().map(String::as_str),
             Some("none") => None,
             Some(w) => Some(w),
         }
@@ -195,6 +195,10 @@ pub struct Settings {
     /// its own).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub machine_tools_version: Option<i64>,
+    /// Set by the service when it accepts a job, never by a request: the version of the dialect
+    /// the job is written in (the one named, else the profile's controller).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub dialect_version: Option<i64>,
     /// Work offset `x,y,z` in profile units.
     pub work_offset: Option<String>,
     /// Chord tolerance in profile units (default 0.01 mm / 0.0004 in, at most 1 mm / 0.04 in):
@@ -252,7 +256,18 @@ impl Settings {
         p: &crate::machines::Profile,
         standing: Option<(Arc<ToolTable>, String)>,
     ) -> Result<Options, String> {
-        let mut o = self.options(&p.machine)?;
+        self.profile_options_with(p, standing, &crate::nc::dialect)
+    }
+
+    /// [`Settings::profile_options`] with the dialects `dialects` finds by id (the service's
+    /// current ones, a job's recorded version, a `--dialects` directory's).
+    pub fn profile_options_with(
+        &self,
+        p: &crate::machines::Profile,
+        standing: Option<(Arc<ToolTable>, String)>,
+        dialects: &dyn Fn(&str) -> Option<Arc<Dialect>>,
+    ) -> Result<Options, String> {
+        let mut o = self.options_with(&p.machine, dialects)?;
         o.clamps = p.clamps();
         let profile_retract = p.doc.policy.as_ref().and_then(|d| d.retract.as_deref());
         o.retract = super::Retract::resolve(self.retract.as_deref(), profile_retract, o.mode, o.clearance)?;
@@ -279,11 +294,24 @@ impl Settings {
 
     /// Validated options for machine `m`; the error names the setting.
     pub fn options(&self, m: &Machine) -> Result<Options, String> {
+        self.options_with(m, &crate::nc::dialect)
+    }
+
+    /// [`Settings::options`] with the dialects `dialects` finds by id.
+    pub fn options_with(&self, m: &Machine, dialects: &dyn Fn(&str) -> Option<Arc<Dialect>>) -> Result<Options, String> {
         let mut o = Options::new(m);
-        if let Some(d) = &self.dialect {
-            o.dialect = crate::nc::dialect(d)
-                .ok_or_else(|| format!("dialect {}: known dialects are {:?}", quote(d), crate::nc::DIALECTS))?;
-        }
+        let name = self.dialect.as_deref().filter(|d| !d.is_empty()).unwrap_or(&m.controller);
+        o.dialect = match dialects(name) {
+            Some(d) => d,
+            None if self.dialect.is_none() => o.dialect,
+            None => {
+                return Err(format!(
+                    "dialect {}: no such dialect (the built-ins are {}; GET /v1/dialects lists a service's)",
+                    quote(name),
+                    crate::nc::DIALECTS.join(", ")
+                ));
+            }
+        };
         o.mode = match self.mode.as_deref() {
             None | Some("joint") => Mode::Joint,
             Some("tcp") => Mode::Tcp,
@@ -318,7 +346,7 @@ impl Settings {
             }
             // Finer than the X Y Z words can say, every block's rounding alone would be an
             // FK-replay error: two units of the word's last digit is the least that works.
-            let least = 2.0 / 10f64.powi(crate::nc::Formats::for_units(m.units).linear as i32);
+            let least = 2.0 / 10f64.powi(crate::nc::Formats::for_dialect(&o.dialect, m.units).linear as i32);
             if t < least * (1.0 - 1e-9) {
                 return Err(format!(
                     "tolerance {t} {unit} is finer than the X Y Z words can hold; the smallest that works is {least} {unit}"
@@ -362,11 +390,11 @@ impl Settings {
             Some(x) => return Err(format!("planes {}: expected positioning or tilted", quote(x))),
         };
         if let Some(w) = self.work_coordinates.as_deref().map(str::trim).filter(|w| !w.is_empty()) {
-            let known = o.dialect.work_coordinates;
+            let known = o.dialect.work_coordinates.clone();
             let w = w.to_ascii_uppercase();
             if w == "NONE" {
                 o.work_coordinates = Some("none".into());
-            } else if known.contains(&w.as_str()) {
+            } else if known.contains(&w) {
                 o.work_coordinates = Some(w);
             } else if known.is_empty() {
                 return Err(format!(

@@ -14,7 +14,7 @@ const SAME: f64 = 1e-6;
 #[derive(Clone, Debug)]
 pub struct WorkOffsets {
     /// The dialect's codes from the program's first on (`G54`, `G55` …).
-    codes: &'static [&'static str],
+    codes: Vec<String>,
     shifts: Vec<Vec3>,
 }
 
@@ -29,10 +29,10 @@ pub enum Refused {
 
 impl WorkOffsets {
     /// `first`: the code the program selects; the rest follow it in `codes`.
-    pub fn new(codes: &'static [&'static str], first: &str) -> WorkOffsets {
-        let at = codes.iter().position(|c| *c == first).unwrap_or(0);
+    pub fn new(codes: &[String], first: &str) -> WorkOffsets {
+        let at = codes.iter().position(|c| c == first).unwrap_or(0);
         WorkOffsets {
-            codes: &codes[at..],
+            codes: codes[at..].to_vec(),
             shifts: vec![Vec3::zeros()],
         }
     }
@@ -52,8 +52,8 @@ impl WorkOffsets {
         Ok(self.shifts.len() - 1)
     }
 
-    pub fn code(&self, i: usize) -> &'static str {
-        self.codes[i]
+    pub fn code(&self, i: usize) -> &str {
+        &self.codes[i]
     }
 
     pub fn shift(&self, i: usize) -> Vec3 {
@@ -62,16 +62,16 @@ impl WorkOffsets {
 
     /// The index of `code`, if the program has used it.
     pub fn index_of(&self, code: &str) -> Option<usize> {
-        self.codes.iter().position(|c| *c == code).filter(|i| *i < self.shifts.len())
+        self.codes.iter().position(|c| c == code).filter(|i| *i < self.shifts.len())
     }
 
     /// Each offset after the first with its origin from the first: what the operator sets.
-    pub fn listing(&self) -> impl Iterator<Item = (&'static str, Vec3)> + '_ {
-        self.shifts.iter().enumerate().skip(1).map(|(i, s)| (self.codes[i], *s))
+    pub fn listing(&self) -> impl Iterator<Item = (&str, Vec3)> + '_ {
+        self.shifts.iter().enumerate().skip(1).map(|(i, s)| (self.codes[i].as_str(), *s))
     }
 
-    pub fn first(&self) -> &'static str {
-        self.codes[0]
+    pub fn first(&self) -> &str {
+        &self.codes[0]
     }
 }
 
@@ -85,13 +85,13 @@ pub(crate) fn offset_text(code: &str, first: &str, s: Vec3, dec: usize) -> Strin
 /// where it is selected, and before its end.
 pub fn header_lines<R: BufRead>(cl: R, m: &Machine, o: &Options) -> Result<Vec<String>, super::source::Error> {
     let first = o.wcs_word().unwrap_or("");
-    let mut offsets = WorkOffsets::new(o.dialect.work_coordinates, first);
+    let mut offsets = WorkOffsets::new(&o.dialect.work_coordinates, first);
     let mut src = Source::new(cl, m.units, o.cl_units, false)?;
     while let Some(item) = src.next_item()? {
         if let Item::Event(ProgEvent::Setup { shift, turned, .. }) = item {
             let _ = offsets.pick(shift, turned);
         }
     }
-    let dec = crate::nc::Formats::for_units(m.units).linear as usize;
+    let dec = crate::nc::Formats::for_dialect(&o.dialect, m.units).linear as usize;
     Ok(offsets.listing().map(|(code, s)| offset_text(code, offsets.first(), s, dec)).collect())
 }

@@ -243,9 +243,9 @@ impl<N: BufRead> Replay<'_, N> {
         if i <= known {
             return;
         }
-        let code = offsets.code(i);
+        let code = offsets.code(i).to_string();
         for k in 0..self.ahead.len() {
-            if self.ahead[k].0.wcs == Some(code) {
+            if self.ahead[k].0.wcs == Some(code.as_str()) {
                 let mut b = self.ahead[k].0.clone();
                 self.shift_block(&mut b);
                 let p = block_pose(self.m, &b, self.o, &self.setup);
@@ -309,7 +309,7 @@ impl<N: BufRead> Replay<'_, N> {
         if self.offsets.is_none()
             && let Some(first) = b.wcs
         {
-            self.offsets = Some(WorkOffsets::new(&WCS_CODES, first));
+            self.offsets = Some(WorkOffsets::new(&WCS_CODES.map(String::from), first));
         }
         self.shift_block(&mut b);
         let p = block_pose(self.m, &b, self.o, &self.setup);

@@ -9,7 +9,7 @@ use kinepost::machines::Library;
 use std::sync::Arc;
 
 pub async fn server(cfg: Config) -> String {
-    let library = Library::load_dir(&cfg.machines).unwrap();
+    let library = Library::load_dir(&cfg.machines).unwrap().with_dialects(&cfg.dialects).unwrap();
     let (queue, machines) = kinepost::jobs::Queue::start(cfg.jobs(), &library).await.unwrap();
     let metrics = Arc::new(Metrics::default());
     let m = metrics.clone();

@@ -81,6 +81,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         self.tool_changed = false;
         self.last_line = pt.line;
         let comp_words = comp.as_ref().map_or("", |c| c.0.as_str());
+        let plain = self.f.plain();
         match self.f.motion(motion, &rounded, feed, extra, comp_words, comment) {
             Some(text) => {
                 if let Some((_, now)) = comp {
@@ -99,7 +100,12 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                     axis: to.pose.axis.into(),
                     time_s: time * 60.0,
                 };
-                self.sink.line(text, Some(&info))?;
+                if plain {
+                    self.sink.line(text, Some(&info))?;
+                } else {
+                    let text = text.to_string();
+                    self.line(&text, Some(&info))?;
+                }
             }
             None => {
                 for d in diags {

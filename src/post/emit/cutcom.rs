@@ -28,10 +28,10 @@ struct Want {
 }
 
 /// Compensation the NC has on, and the words that end it.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 pub(in crate::post) struct Active {
     want: Want,
-    off: &'static str,
+    off: String,
 }
 
 #[derive(Debug, Default)]
@@ -66,7 +66,7 @@ impl State {
     }
 
     fn pending(&self) -> bool {
-        match (self.want, self.on) {
+        match (self.want, &self.on) {
             (None, None) => false,
             (Some(w), Some(a)) => w.side != a.want.side || w.register != a.want.register,
             _ => true,
@@ -138,7 +138,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
 
     /// What the path is and what the control's radius must hold for it.
     fn meaning(&self, centre: bool) -> String {
-        let r = self.o.dialect.cutcom_radius;
+        let r = self.o.dialect.cutcom_radius.clone();
         if centre {
             format!("TOOL CENTRE PATH: {r} = WEAR ONLY")
         } else {
@@ -164,10 +164,10 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         if !self.cutcom.pending() {
             return Ok(None);
         }
-        let off = self.cutcom.on.map(|a| (a.off.to_string(), None));
+        let off = self.cutcom.on.as_ref().map(|a| (a.off.clone(), None));
         if arc {
             if !std::mem::replace(&mut self.cutcom.arc_told, true) {
-                let (what, at) = match (self.cutcom.want, self.cutcom.on) {
+                let (what, at) = match (self.cutcom.want, self.cutcom.on.as_ref()) {
                     (Some(w), _) => ("start", w.line),
                     (None, a) => ("end", a.map_or(line, |a| a.want.line)),
                 };
@@ -187,9 +187,9 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                 return Ok(off);
             }
         };
-        let d = self.o.dialect;
+        let d = self.o.dialect.clone();
         let register = w.register.unwrap_or(self.tool.unwrap_or(1));
-        let template = words[if w.side == Side::Left { 0 } else { 1 }];
+        let template = words[if w.side == Side::Left { 0 } else { 1 }].clone();
         if template.contains("{t}") && register > d.ranges.register {
             let msg = format!(
                 "CUTCOM/{}: offset {register} is beyond what {} takes (at most {}): not written",
@@ -210,16 +210,16 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         }
         self.say_path(w.line)?;
         let text = template.replace("{t}", &register.to_string());
-        Ok(Some((text, Some(Active { want: w, off: words[2] }))))
+        Ok(Some((text, Some(Active { want: w, off: words[2].clone() }))))
     }
 
     /// The dialect's words (left, right, off) that compensate across the tool at `to`, with the
     /// sides swapped where the plane faces the tool the other way; or why none does.
-    fn comp_frame(&mut self, to: &At, w: &Want) -> Result<[&'static str; 3], String> {
-        let d = self.o.dialect;
+    fn comp_frame(&mut self, to: &At, w: &Want) -> Result<[String; 3], String> {
+        let d = self.o.dialect.clone();
         let tcp = self.o.mode == Mode::Tcp;
         if let Some(l) = w.turns {
-            return match (tcp, d.cutcom_3d) {
+            return match (tcp, d.cutcom_3d.clone()) {
                 (true, Some(words)) => Ok(words),
                 (true, None) => Err(format!(
                     "the tool axis turns under it (line {l}) and {} has no 3D cutter compensation",
@@ -236,13 +236,13 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             None => (self.machine_normal(to)?, "machine's X-Y plane"),
         };
         let c = normal.dot(&to.pose.axis);
-        let mut words = d.cutcom;
+        let mut words = d.cutcom.clone();
         if c <= -ALONG {
             // The control's left, seen from its +Z, is the CL's right, seen from the tool.
             words.swap(0, 1);
             return Ok(words);
         }
-        match (c >= ALONG, tcp, d.cutcom_3d) {
+        match (c >= ALONG, tcp, d.cutcom_3d.clone()) {
             (true, ..) => Ok(words),
             (false, true, Some(words)) => Ok(words),
             (false, true, None) => Err(format!(
@@ -313,7 +313,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
     /// ends it with `R0` on the next move (the retract), which in a tilted plane comes too late.
     pub(super) fn cutcom_end(&mut self, what: &str) -> std::io::Result<()> {
         (self.cutcom.want, self.cutcom.unsided) = (None, None);
-        let Some(a) = self.cutcom.on else { return Ok(()) };
+        let Some(a) = self.cutcom.on.clone() else { return Ok(()) };
         let msg = format!(
             "cutter compensation (CUTCOM at line {}) is still on at {what}: the CL has no CUTCOM/OFF before it; ended there",
             a.want.line
@@ -326,7 +326,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         };
         self.note(Diagnostic::new(Code::CutterComp, severity, Some(a.want.line), msg))?;
         if !conversational {
-            let l = self.f.words(a.off).to_string();
+            let l = self.f.words(&a.off).to_string();
             self.out(&l)?;
             self.cutcom.on = None;
         }

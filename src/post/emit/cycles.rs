@@ -218,7 +218,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             axis: u.into(),
             time_s: time * 60.0,
         };
-        self.sink.line(call, Some(&info))?;
+        self.line(call, Some(&info))?;
         self.cycle_on = Some(cb);
         self.in_hole = true;
         Ok(())

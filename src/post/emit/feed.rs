@@ -86,7 +86,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                 if t <= 0.0 {
                     t = 1e-6;
                 }
-                feed = Some(match (self.o.dialect.inverse_time, prev) {
+                feed = Some(match (self.o.dialect.inverse_time.as_deref(), prev) {
                     (Some(_), _) | (None, None) => (FeedMode::InverseTime, 1.0 / t),
                     // No inverse time on this control: the feed along the combined machine axes
                     // (units and degrees) that takes the same time.
@@ -140,7 +140,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         // Beyond the word's range: the control's largest F, the slower side (it overflowed
         // to F0). A FEDRAT beyond it was an error where the CL said it; a short move at a
         // fast feed in inverse time is only slowed (told once a run of such blocks).
-        let max = feed_max(self.o.dialect, self.m.units, *mode);
+        let max = feed_max(&self.o.dialect, self.m.units, *mode);
         let beyond = v.is_nan() || *v > max;
         if beyond {
             if !std::mem::replace(&mut self.range_run, true) {

@@ -29,6 +29,7 @@ mod position;
 mod program;
 mod setups;
 mod singular;
+mod templates;
 
 use super::{AxisStats, Error, Options, Sink, Source, Summary};
 use crate::diag::{Code, Diagnostic, Severity};
@@ -80,6 +81,11 @@ pub(super) struct Emitter<'a, S: Sink + ?Sized> {
     /// Where the tool length in force came from.
     pub(super) length_from: crate::post::tools::LengthFrom,
     pub(super) tool: Option<u32>,
+    /// The tool `SELCTL` readied, and the CL's operation in progress: what templates see.
+    pub(super) next_tool: Option<u32>,
+    pub(super) operation: Option<String>,
+    /// The next compensation on is a tool's first move (the `first_move` template).
+    pub(super) first_move_due: bool,
     /// The tool's length offset register where the CL names one other than its number.
     pub(super) adjust: Option<u32>,
     pub(super) comp_on: bool,
@@ -102,7 +108,7 @@ pub(super) struct Emitter<'a, S: Sink + ?Sized> {
     /// The coolant word the CL has on (APT's COOLNT is modal too), and the tool change that
     /// turned it off (M9 before M6: coolant, through-spindle above all, sprays into an open
     /// spindle and the changer) until the next tool's first move turns it on again.
-    pub(super) coolant: Option<&'static str>,
+    pub(super) coolant: Option<String>,
     pub(super) coolant_restore: Option<u32>,
     /// The CL line of a program stop that halted the spindle, or the coolant, not yet restarted.
     pub(super) stopped_spindle: Option<u32>,
@@ -171,12 +177,14 @@ impl<'a, S: Sink + ?Sized> Emitter<'a, S> {
         setup: Setup,
         src: &Source<R>,
     ) -> Self {
-        let formats = Formats::for_units(m.units);
+        let formats = Formats::for_dialect(&o.dialect, m.units);
+        let mut f = Formatter::new(o.dialect.clone(), formats, o.sequence_numbers);
+        f.tolerance = o.tolerance;
         Emitter {
             m,
             o,
             sink,
-            f: Formatter::new(o.dialect, formats, o.sequence_numbers),
+            f,
             setup,
             at: None,
             tool_changed: false,
@@ -187,6 +195,9 @@ impl<'a, S: Sink + ?Sized> Emitter<'a, S> {
             split_told: false,
             last_line: 0,
             standing: formats.half_linear(),
+            next_tool: None,
+            first_move_due: true,
+            operation: None,
             tool: None,
             adjust: None,
             comp_on: false,
@@ -220,7 +231,7 @@ impl<'a, S: Sink + ?Sized> Emitter<'a, S> {
             plane: "G17",
             offsets: o
                 .setup_offsets
-                .then(|| crate::post::setups::WorkOffsets::new(o.dialect.work_coordinates, o.wcs_word().unwrap_or(""))),
+                .then(|| crate::post::setups::WorkOffsets::new(&o.dialect.work_coordinates, o.wcs_word().unwrap_or(""))),
             offset_at: 0,
             clamp_unknown: [false; 3],
             exact_prev: None,
@@ -277,7 +288,24 @@ impl<'a, S: Sink + ?Sized> Emitter<'a, S> {
     }
 
     pub(super) fn out(&mut self, text: &str) -> std::io::Result<()> {
-        self.sink.line(text, None)
+        self.line(text, None)
+    }
+
+    /// Every line goes out here: in the dialect's number format, and told when it is longer
+    /// than the control reads.
+    pub(super) fn line(&mut self, text: &str, info: Option<&crate::post::BlockInfo>) -> std::io::Result<()> {
+        let (text, long) = self.f.finish(text);
+        // The error's own comment line is cut to fit: never told again.
+        if long && info.is_some() {
+            let n = self.o.dialect.line_length;
+            self.note(Diagnostic::new(
+                Code::LineTooLong,
+                Severity::Error,
+                info.and_then(|i| i.source_line),
+                format!("a line of {} characters, longer than the {n} {} reads: {:.60}", text.len(), self.o.dialect.name, text),
+            ))?;
+        }
+        self.sink.line(&text, info)
     }
 
     pub(in crate::post) fn note(&mut self, d: Diagnostic) -> std::io::Result<()> {

@@ -65,6 +65,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             axis: at.pose.axis,
         });
         self.sum.tilted_planes += 1;
+        self.template("plane_on", Some(self.last_line))?;
         self.ensure_comp(self.last_line)
     }
 
@@ -78,6 +79,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         self.tilt = None;
         self.cancel_cycle()?;
         self.comp_cancel()?;
+        self.template("plane_off", Some(self.last_line))?;
         if let Some(l) = self.f.plane_off() {
             self.out(&l)?;
         }
@@ -87,9 +89,9 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
     /// Length compensation off (word-address controls with a G43-style word) around a plane
     /// change, which redefines the direction it applies in.
     pub(super) fn comp_cancel(&mut self) -> std::io::Result<()> {
-        let d = self.o.dialect;
+        let d = self.o.dialect.clone();
         if self.comp_on && !d.length_comp.is_empty() && d.style == crate::nc::Style::WordAddress {
-            if let Some(l) = self.f.line(d.tcp_off, self.tool.unwrap_or(1), 0) {
+            if let Some(l) = self.f.line(&d.tcp_off, self.tool.unwrap_or(1), 0) {
                 self.out(&l)?;
             }
             self.comp_on = false;

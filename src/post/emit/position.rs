@@ -302,7 +302,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                 && !self.locked[i]
                 && !self.clamp_unknown[i]
             {
-                let (open, close) = self.o.dialect.comment;
+                let (open, close) = self.o.dialect.comment.clone();
                 let l = format!(
                     "{} {open}{} LOCK{close}",
                     self.f.words(&lock.clone()),
@@ -325,7 +325,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                 && !self.clamp_unknown[i]
                 && (to.rotary[i] - from[i]).abs() > 1e-12
             {
-                let (open, close) = self.o.dialect.comment;
+                let (open, close) = self.o.dialect.comment.clone();
                 let l = format!(
                     "{} {open}{} UNLOCK{close}",
                     self.f.words(&unlock.clone()),
@@ -343,7 +343,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
     pub(super) fn unknown_clamps(&mut self) -> std::io::Result<()> {
         for i in 0..self.m.rotaries.len() {
             let Some((lock, unlock)) = &self.o.clamps[i] else { continue };
-            let d = self.o.dialect;
+            let d = self.o.dialect.clone();
             let bad: Vec<&str> = [lock, unlock].into_iter().map(String::as_str).filter(|w| !d.knows(w)).collect();
             if bad.is_empty() {
                 continue;

@@ -52,6 +52,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         for l in self.f.header(self.o.program_number, self.m.units, &lines, self.o.wcs_word()) {
             self.out(&l)?;
         }
+        self.template("program_start", None)?;
         self.unknown_clamps()
     }
 
@@ -104,9 +105,18 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         // TCP: X Y Z are the tip, and the retract above went the clearance along the tool axis;
         // machine Z home takes the spindle clear of the part whatever comes next.
         let z_up = self.o.mode == Mode::Tcp && self.at.is_some();
+        if self.operation.is_some() {
+            self.template("operation_end", None)?;
+        }
+        self.template("program_end", None)?;
+        // The template's TCP off in place of the dialect's word, in the footer's order.
+        let tcp_off = match self.o.mode == Mode::Tcp && self.o.dialect.templates.has("tcp_off") {
+            true => Some(self.rendered("tcp_off")?),
+            false => None,
+        };
         let c = self.f.comment(&self.outcome()).to_string();
         self.out(&c)?;
-        for l in self.f.footer(z_up) {
+        for l in self.f.footer(z_up, tcp_off) {
             self.out(&l)?;
         }
         Ok(())
@@ -142,8 +152,13 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                 self.out(&c)?;
             }
             ProgEvent::Operation(name) => {
+                if self.operation.is_some() {
+                    self.template("operation_end", None)?;
+                }
                 let c = self.f.comment(&format!("OPERATION {name}")).to_string();
                 self.out(&c)?;
+                self.operation = Some(name);
+                self.template("operation_start", None)?;
             }
             ProgEvent::Dwell { dwell, line } => self.dwell(dwell, line)?,
             ProgEvent::Stop { optional, line } => self.program_stop(optional, line)?,
@@ -161,7 +176,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
 
     /// A tool change: retract, compensation and coolant off, the dialect's change lines.
     fn tool_change(&mut self, number: u32, adjust: Option<u32>, line: u32) -> Result<(), Error> {
-        let d = self.o.dialect;
+        let d = self.o.dialect.clone();
         // No safe side for a tool number: written as the CL says, and an error.
         let (tmax, hmax) = (d.ranges.tool, d.ranges.register);
         if adjust == Some(0) {
@@ -205,13 +220,14 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         self.leave_plane(false)?;
         self.retract_up()?;
         if self.comp_on {
-            if let Some(l) = self.f.line(d.tcp_off, number, 0) {
+            let templated = self.o.mode == Mode::Tcp && self.template("tcp_off", Some(line))?;
+            if !templated && let Some(l) = self.f.line(&d.tcp_off, number, 0) {
                 self.out(&l)?;
             }
             self.comp_on = false;
             // TCP: the retract went the clearance along the tool axis (see `program_end`).
             if self.o.mode == Mode::Tcp
-                && let Some(l) = self.f.line(d.machine_z_up, number, 0)
+                && let Some(l) = self.f.line(&d.machine_z_up, number, 0)
             {
                 self.out(&l)?;
             }
@@ -219,7 +235,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         if self.coolant.is_some()
             && self.coolant_restore.is_none()
             && !self.coolant_deferred
-            && let Some(l) = self.f.line(d.coolant_off, number, 0)
+            && let Some(l) = self.f.line(&d.coolant_off, number, 0)
         {
             self.out(&l)?;
             self.coolant_restore = Some(line);
@@ -230,15 +246,20 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         };
         let c = self.f.comment(&c).to_string();
         self.out(&c)?;
-        for t in d.tool_change {
-            if let Some(l) = self.f.line(t, number, 0) {
-                self.out(&l)?;
+        if !self.template_with("tool_change", Some(line), |v| {
+            v.set("tool", number);
+        })? {
+            for t in &d.tool_change {
+                if let Some(l) = self.f.line(t, number, 0) {
+                    self.out(&l)?;
+                }
             }
         }
         self.f.reset_modal();
         self.tool = Some(number);
         self.adjust = adjust;
         self.tool_changed = true;
+        self.first_move_due = true;
         self.tool_line_due = true;
         if std::mem::take(&mut self.spindle_on) {
             self.spindle_restore = Some(line);
@@ -251,7 +272,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
 
     /// SPINDL: a speed and direction, or off.
     fn spindle(&mut self, c: SpindleCmd) -> Result<(), Error> {
-        let d = self.o.dialect;
+        let d = self.o.dialect.clone();
         let (speed, cw) = match c {
             SpindleCmd::Rpm { speed, clockwise } => (Some(speed), clockwise),
             SpindleCmd::Surface { speed, clockwise, .. } => {
@@ -272,7 +293,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         match speed {
             Some(v) => self.spindle_start(v, cw)?,
             None => {
-                if let Some(l) = self.f.line(d.spindle_off, self.tool.unwrap_or(1), 0) {
+                if let Some(l) = self.f.line(&d.spindle_off, self.tool.unwrap_or(1), 0) {
                     self.out(&l)?;
                 }
                 self.spindle_on = false;
@@ -283,18 +304,18 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
 
     /// COOLNT: its word, deferred before the first tool and move.
     fn coolant(&mut self, c: CoolantCmd) -> Result<(), Error> {
-        let d = self.o.dialect;
+        let d = self.o.dialect.clone();
         let w = match c {
-            CoolantCmd::Flood => d.coolant_flood,
-            CoolantCmd::Mist => d.coolant_mist,
-            CoolantCmd::Through => d.coolant_through,
-            CoolantCmd::Off => d.coolant_off,
+            CoolantCmd::Flood => d.coolant_flood.clone(),
+            CoolantCmd::Mist => d.coolant_mist.clone(),
+            CoolantCmd::Through => d.coolant_through.clone(),
+            CoolantCmd::Off => d.coolant_off.clone(),
         };
         let on = c != CoolantCmd::Off;
         // Nothing to cool before the first tool and move, and M6 would only stop it.
         let early = self.tool.is_none() && self.at.is_none();
         if !(early && (on || self.coolant_deferred))
-            && let Some(l) = self.f.line(w, 0, 0)
+            && let Some(l) = self.f.line(&w, 0, 0)
         {
             self.out(&l)?;
         }
@@ -309,8 +330,8 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
     /// spindle and coolant at either and do not start them on cycle start: unless the CL says
     /// otherwise first, the next move starts again what ran before.
     fn program_stop(&mut self, optional: bool, line: u32) -> Result<(), Error> {
-        let d = self.o.dialect;
-        if let Some(l) = self.f.line(if optional { d.optional_stop } else { d.stop }, 0, 0) {
+        let d = self.o.dialect.clone();
+        if let Some(l) = self.f.line(if optional { &d.optional_stop } else { &d.stop }, 0, 0) {
             self.out(&l)?;
         }
         self.stopped_spindle = (self.spindle_on && self.spindle_restore.is_none()).then_some(line);
@@ -323,7 +344,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
     /// mode) is an error and not written.
     fn function(&mut self, letter: char, code: &str, line: u32) -> Result<(), Error> {
         let word = format!("{letter}{code}");
-        let (severity, what) = match crate::nc::function_risk(self.o.dialect, letter, code) {
+        let (severity, what) = match crate::nc::function_risk(&self.o.dialect, letter, code) {
             crate::nc::Risk::Refused(why) => (Severity::Error, format!("{word} not written: {why}")),
             crate::nc::Risk::Untracked(why) => (Severity::Warning, format!("{word} written as the CL asks: {why}")),
             crate::nc::Risk::None => (Severity::Info, format!("{word} written as the CL asks")),
@@ -338,6 +359,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
 
     /// SELCTL: the next tool readied while this one cuts, within the tool word's range.
     fn preselect(&mut self, tool: u32, line: u32) -> Result<(), Error> {
+        self.next_tool = Some(tool);
         let max = self.o.dialect.ranges.tool;
         if tool > max {
             return self.note(Diagnostic::new(
@@ -348,7 +370,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             ))
             .map_err(Error::from);
         }
-        if let Some(l) = self.f.line(self.o.dialect.tool_preselect, tool, 0) {
+        if let Some(l) = self.f.line(&self.o.dialect.tool_preselect, tool, 0) {
             self.out(&l)?;
         }
         Ok(())
@@ -395,7 +417,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
 
     /// The coolant in force again, told at `line`: `why` it was off.
     fn restart_coolant(&mut self, line: u32, why: &str) -> std::io::Result<()> {
-        let Some(l) = self.coolant.and_then(|w| self.f.line(w, 0, 0)) else {
+        let Some(l) = self.coolant.clone().and_then(|w| self.f.line(&w, 0, 0)) else {
             return Ok(());
         };
         let msg = format!("{why} and the CL did not turn it on again: {l} restarted");
@@ -451,11 +473,11 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
 
     /// S and M3/M4 (TNC: a speed-only TOOL CALL, then the direction alone).
     pub(super) fn spindle_start(&mut self, speed: f64, cw: bool) -> std::io::Result<()> {
-        let d = self.o.dialect;
+        let d = self.o.dialect.clone();
         let (t, s) = (self.tool.unwrap_or(1), speed.round() as i64);
-        let dir = if cw { d.spindle_cw } else { d.spindle_ccw };
+        let dir = if cw { &d.spindle_cw } else { &d.spindle_ccw };
         if d.style == crate::nc::Style::Conversational {
-            for w in [d.spindle, dir] {
+            for w in [&d.spindle, dir] {
                 if let Some(l) = self.f.line(w, t, s) {
                     self.out(&l)?;
                 }
@@ -512,8 +534,8 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             self.spindle_start(v, true)?;
         }
         if std::mem::take(&mut self.coolant_deferred)
-            && let Some(w) = self.coolant
-            && let Some(l) = self.f.line(w, 0, 0)
+            && let Some(w) = self.coolant.clone()
+            && let Some(l) = self.f.line(&w, 0, 0)
         {
             self.out(&l)?;
         }
@@ -535,16 +557,20 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                 1
             }
         };
-        let d = self.o.dialect;
+        let d = self.o.dialect.clone();
         let w = match self.o.mode {
-            Mode::Joint => d.length_comp,
-            Mode::Tcp => d.tcp_on,
+            Mode::Joint => &d.length_comp,
+            Mode::Tcp => &d.tcp_on,
         };
         // The H word: the register the CL named, else the tool's own.
-        if let Some(l) = self.f.line(w, self.adjust.unwrap_or(t), 0) {
+        let templated = self.o.mode == Mode::Tcp && self.template("tcp_on", Some(line))?;
+        if !templated && let Some(l) = self.f.line(w, self.adjust.unwrap_or(t), 0) {
             self.out(&l)?;
         }
         self.comp_on = true;
+        if std::mem::take(&mut self.first_move_due) {
+            self.template("first_move", Some(line))?;
+        }
         Ok(())
     }
 

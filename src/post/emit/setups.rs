@@ -21,9 +21,9 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         let picked = offsets.pick(shift, turned);
         // Refused: the first offset, the points taken into its frame.
         let i = picked.unwrap_or(0);
-        let (first, code, s) = (offsets.first(), offsets.code(i), offsets.shift(i));
+        let (first, code, s) = (offsets.first().to_string(), offsets.code(i).to_string(), offsets.shift(i));
         if let Err(why) = picked {
-            let name = self.o.dialect.name;
+            let name = self.o.dialect.name.clone();
             let msg = match why {
                 Refused::Turned => format!(
                     "setups=work-offsets: this operation's MCS is turned against the first, and a work offset on {name} holds no rotation: its points are written in {first}, taken into the first MCS"
@@ -41,10 +41,10 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         }
         self.offset_at = i;
         self.f.set_shift(s.into());
-        let l = self.f.words(code).to_string();
+        let l = self.f.words(&code).to_string();
         self.out(&l)?;
         if i > 0 {
-            let c = self.f.comment(&offset_text(code, first, s, self.f.fmt.linear as usize)).to_string();
+            let c = self.f.comment(&offset_text(&code, &first, s, self.f.fmt.linear as usize)).to_string();
             self.out(&c)?;
         }
         Ok(())
