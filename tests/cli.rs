@@ -25,7 +25,7 @@ fn machines_lists_every_profile_with_its_facts() {
     let (code, out, _) = kinepost(&["machines", "--json"]);
     assert_eq!(code, 0);
     let rows: Vec<Value> = out.lines().map(json).collect();
-    assert_eq!(rows.len(), 10);
+    assert_eq!(rows.len(), 11);
     let haas = rows.iter().find(|r| r["id"] == "haas-umc750").unwrap();
     assert_eq!(haas["kinematics"], "table-table");
     assert_eq!(haas["controller"], "haas");

@@ -23,7 +23,7 @@ async fn machines_health_metrics_and_docs() {
         .json()
         .await
         .unwrap();
-    assert_eq!(list.len(), 10);
+    assert_eq!(list.len(), 11);
     let one: Value = c
         .get(format!("{base}/v1/machines/htm50200-horizontal"))
         .send()

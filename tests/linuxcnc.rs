@@ -28,6 +28,11 @@ fn rs274() -> Option<PathBuf> {
 /// `nc` through the interpreter in batch mode: `None` if it ran to the end with no message,
 /// else what it said. Tools 1–20 exist (a G41's register needs one), 2.54 mm across.
 fn interpret(rs274: &Path, dir: &Path, nc: &str) -> Option<String> {
+    interpret_with(rs274, dir, nc, None)
+}
+
+/// [`interpret`] with an INI file (`-i`): a configuration's remapped M codes.
+fn interpret_with(rs274: &Path, dir: &Path, nc: &str, ini: Option<&Path>) -> Option<String> {
     let table = dir.join("tools.tbl");
     if !table.exists() {
         let lines: String = (1..=20).map(|t| format!("T{t} P{t} D0.1 Z0 ;tool {t}\n")).collect();
@@ -35,7 +40,11 @@ fn interpret(rs274: &Path, dir: &Path, nc: &str) -> Option<String> {
     }
     let (prog, canon) = (dir.join("prog.ngc"), dir.join("canon.txt"));
     std::fs::write(&prog, nc).unwrap();
-    let out = Command::new(rs274)
+    let mut cmd = Command::new(rs274);
+    if let Some(ini) = ini {
+        cmd.arg("-i").arg(ini);
+    }
+    let out = cmd
         .arg("-t")
         .arg(&table)
         .arg("-g")
@@ -58,11 +67,13 @@ fn interpret(rs274: &Path, dir: &Path, nc: &str) -> Option<String> {
 }
 
 fn post_linuxcnc(cl: &[u8], machine: &str, extra: impl Fn(&mut Settings)) -> String {
-    let lib = Library::load_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/machines").as_ref()).unwrap();
+    let lib = Library::load_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/machines").as_ref())
+        .and_then(|l| l.with_dialects(concat!(env!("CARGO_MANIFEST_DIR"), "/dialects").as_ref()))
+        .unwrap();
     let p = lib.get(machine).unwrap();
     let mut s = Settings { dialect: Some("linuxcnc".into()), ..Default::default() };
     extra(&mut s);
-    let o = s.profile_options(&p, None).unwrap();
+    let o = s.profile_options_with(&p, None, &|id| lib.dialects.get(id)).unwrap();
     let mut sink = Collect::default();
     post::post(cl, &p.machine, &o, &mut sink).unwrap();
     sink.nc
@@ -87,6 +98,7 @@ fn linuxcnc_reads_every_program_to_its_end() {
         for mode in ["joint", "tcp"] {
             run(format!("{id} {mode}"), post_linuxcnc(&cl, id, |s| s.mode = Some(mode.into())));
         }
+        run(format!("{id} feed mode dpm"), post_linuxcnc(&cl, id, |s| s.feed_mode = Some("dpm".into())));
     }
     let data = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data");
     let files = ["nx_clsf_mech491_simple_mill_plane_mm.cls", "nx_clsf_mech491_variable_axis_inch_5ax.cls",
@@ -98,12 +110,81 @@ fn linuxcnc_reads_every_program_to_its_end() {
             ("tcp", |s| s.mode = Some("tcp".into())),
             ("canned cycles", |s| s.cycles = Some("canned".into())),
             ("work offsets", |s| s.setups = Some("work-offsets".into())),
+            ("feed mode dpm", |s| s.feed_mode = Some("dpm".into())),
         ] {
             run(format!("{f} haas-umc750 {what}"), post_linuxcnc(&cl, "haas-umc750", extra));
         }
     }
     let golden = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/golden/flow-linuxcnc-vmc-4axis-a.nc");
     run("the program-flow golden".into(), std::fs::read_to_string(golden).unwrap());
+    let _ = std::fs::remove_dir_all(&dir);
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+}
+
+/// LinuxCNC 2.9's xyzbc-trt kinematics, from its module's geometry: a part point `p` (the tip in
+/// TCP mode) stands at the joints `r + d + Ry(b)·(Rz(c)·(p − r) − d)`, `r` the rot point, `d` the
+/// x- and z-offsets; its tables turn by +b about +y and +c about +z (the module's note: the other
+/// way round from the conventional directions). The shipped profile is that machine: kinepost's
+/// FK gives the same part point for the same joints, on random joints.
+#[test]
+fn the_xyzbc_trt_profile_is_linuxcncs_trt_kinematics() {
+    use kinepost::kinematics::{self, Joints, Setup, Vec3};
+    use nalgebra::Rotation3;
+    let lib = Library::load_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/machines").as_ref()).unwrap();
+    let m = &lib.get("linuxcnc-xyzbc-trt").unwrap().machine;
+    let (r, d) = (Vec3::zeros(), Vec3::new(-20.0, 0.0, -15.0));
+    let mut seed = 7u64;
+    let mut next = |lo: f64, hi: f64| {
+        seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        lo + (hi - lo) * ((seed >> 11) as f64 / (1u64 << 53) as f64)
+    };
+    for _ in 0..500 {
+        let p = Vec3::new(next(-80.0, 80.0), next(-60.0, 60.0), next(-40.0, 60.0));
+        let (b, c) = (next(-100.0, 50.0), next(-720.0, 720.0));
+        let (rb, rc) = (Rotation3::from_axis_angle(&Vec3::y_axis(), b.to_radians()), Rotation3::from_axis_angle(&Vec3::z_axis(), c.to_radians()));
+        let joint = r + d + rb * (rc * (p - r) - d);
+        let j = Joints { linear: joint.into(), rotary: [b.to_radians(), c.to_radians(), 0.0] };
+        let pose = kinematics::fk(m, &j, &Setup { tool_length: 50.0, work_offset: Vec3::zeros() });
+        assert!((pose.tip - p).norm() < 1e-9, "B{b} C{c}: kinepost {} LinuxCNC {p}", pose.tip);
+        let axis = rc.inverse() * (rb.inverse() * Vec3::z());
+        assert!((pose.axis - axis).norm() < 1e-12, "B{b} C{c}");
+    }
+}
+
+/// Its programs in the switchkins dialect (M428 on, M429 off) read by LinuxCNC's interpreter
+/// with the sim configuration's remaps: every program to its end.
+#[test]
+fn xyzbc_trt_programs_run_with_switchkins() {
+    let Some(rs274) = rs274() else { return };
+    let dir = std::env::temp_dir().join(format!("kinepost-rs274-trt-{}", std::process::id()));
+    std::fs::create_dir_all(dir.join("subs")).unwrap();
+    for m in ["428", "429"] {
+        std::fs::write(dir.join("subs").join(format!("{m}remap.ngc")), format!("o<{m}remap> sub\no<{m}remap> endsub\nM2\n")).unwrap();
+    }
+    let ini = dir.join("trt.ini");
+    std::fs::write(
+        &ini,
+        format!(
+            "[RS274NGC]\nSUBROUTINE_PATH = {}\nREMAP = M428  modalgroup=10  ngc=428remap\nREMAP = M429  modalgroup=10  ngc=429remap\n",
+            dir.join("subs").display()
+        ),
+    )
+    .unwrap();
+    let lib = Library::load_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/machines").as_ref()).unwrap();
+    let m = &lib.get("linuxcnc-xyzbc-trt").unwrap().machine;
+    let mut cl = Vec::new();
+    kinepost::testgen::write_path(m, 200, 5, m.default_tool_length, &mut cl).unwrap();
+    let mut failures = Vec::new();
+    for mode in ["joint", "tcp"] {
+        let nc = post_linuxcnc(&cl, "linuxcnc-xyzbc-trt", |s| {
+            s.mode = Some(mode.into());
+            s.dialect = Some("linuxcnc-switchkins".into());
+        });
+        assert_eq!(nc.contains("M428"), mode == "tcp", "{nc}");
+        if let Some(e) = interpret_with(&rs274, &dir, &nc, Some(&ini)) {
+            failures.push(format!("{mode}: {e}"));
+        }
+    }
     let _ = std::fs::remove_dir_all(&dir);
     assert!(failures.is_empty(), "{}", failures.join("\n"));
 }

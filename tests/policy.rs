@@ -159,3 +159,82 @@ fn prefer_keeps_a_rotary_on_the_side_asked_for() {
         assert!(s.profile_options(&p, None).unwrap_err().starts_with("prefer"), "{bad}");
     }
 }
+
+/// A 5-axis cut on spinner-u5-620 whose tool axis swings as it goes, in LinuxCNC's dialect.
+fn swing() -> String {
+    let mut cl = String::from("UNITS/MM\nLOADTL/1\nSPINDL/3000\nFEDRAT/800,MMPM\n");
+    for k in 0..=40 {
+        let t = k as f64 / 40.0;
+        let (tilt, az) = ((10.0 + 20.0 * t).to_radians(), (60.0 * t).to_radians());
+        let (i, j, kk) = (tilt.sin() * az.cos(), tilt.sin() * az.sin(), tilt.cos());
+        cl.push_str(&format!("GOTO/{:.3},{:.3},20,{i:.7},{j:.7},{kk:.7}\n", 20.0 * t, 5.0 * t));
+    }
+    // The tool turning about a tip on the table's axis at a fixed tilt: only C moves.
+    for k in 0..=10 {
+        let az = (60.0 + 3.0 * k as f64).to_radians();
+        let tilt = 30f64.to_radians();
+        cl.push_str(&format!("GOTO/0,0,20,{:.7},{:.7},{:.7}\n", tilt.sin() * az.cos(), tilt.sin() * az.sin(), tilt.cos()));
+    }
+    cl.push_str("FINI\n");
+    cl
+}
+
+/// The F word of a block's text.
+fn f_word(text: &str) -> Option<f64> {
+    text.split(' ').find_map(|w| w.strip_prefix('F')?.parse().ok())
+}
+
+#[test]
+fn feed_mode_dpm_writes_no_inverse_time_and_keeps_each_blocks_time() {
+    let lib = library();
+    let p = lib.get("spinner-u5-620").unwrap();
+    let run = |mode: Option<&str>| {
+        let s = Settings {
+            dialect: Some("linuxcnc".into()),
+            feed_mode: mode.map(str::to_string),
+            ..Default::default()
+        };
+        let o = s.profile_options(&p, None).unwrap();
+        let mut sink = Collect::default();
+        let sum = post::post(swing().as_bytes(), &p.machine, &o, &mut sink).unwrap();
+        assert_eq!(sum.errors, 0, "{mode:?}: {:?}", sink.diags);
+        (sink, sum)
+    };
+    let (g93, sum93) = run(None);
+    assert!(g93.nc.contains("G93"), "inverse time by default:\n{}", g93.nc);
+    for (mode, rule) in [("dpm", "dpm"), ("combined", "combined")] {
+        let (sink, sum) = run(Some(mode));
+        assert!(!sink.nc.contains("G93"), "{mode}:\n{}", sink.nc);
+        // The same motion in the same time: each block's F over the path the control reads it
+        // along gives the block's time.
+        assert!((sum.cycle_time_s - sum93.cycle_time_s).abs() < 1e-6 * sum93.cycle_time_s.max(1.0), "{mode}");
+        let mut checked = (0, 0);
+        let mut prev: Option<&kinepost::post::BlockInfo> = None;
+        let mut f_modal = None;
+        for (b, t) in sink.blocks.iter().zip(&sink.texts) {
+            f_modal = f_word(t).or(f_modal);
+            if let (Some(a), false, Some(f)) = (prev, b.rapid, f_modal) {
+                let d = |i: usize| b.joints.0[i].unwrap_or(0.0) - a.joints.0[i].unwrap_or(0.0);
+                let lin = (d(0).powi(2) + d(1).powi(2) + d(2).powi(2)).sqrt();
+                let rot = (d(3).powi(2) + d(4).powi(2) + d(5).powi(2)).sqrt();
+                let path = match rule {
+                    "dpm" if lin > 5e-4 => lin,
+                    "dpm" => rot,
+                    _ => (lin * lin + rot * rot).sqrt(),
+                };
+                if rot > 1e-3 && b.time_s > 1e-3 {
+                    let want = path / (b.time_s / 60.0);
+                    assert!((f - want).abs() <= 0.06 + 2e-3 * want, "{mode}: F{f} where {want:.2} gives the block's time: {t}");
+                    if lin > 5e-4 { checked.0 += 1 } else { checked.1 += 1 }
+                }
+            }
+            prev = Some(b);
+        }
+        assert!(checked.0 > 20 && checked.1 >= 5, "{mode}: {checked:?} blocks checked (with and without linear motion)");
+    }
+    let s = Settings {
+        feed_mode: Some("per-tooth".into()),
+        ..Default::default()
+    };
+    assert!(s.profile_options(&p, None).unwrap_err().starts_with("feed_mode"));
+}

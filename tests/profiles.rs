@@ -180,7 +180,7 @@ fn a_directory_with_one_bad_profile_fails_to_load_naming_it() {
 #[test]
 fn shipped_profiles_load_and_an_unknown_id_is_named() {
     let lib = Library::load_dir(&machines::default_dir()).unwrap();
-    assert_eq!(lib.len(), 10);
+    assert_eq!(lib.len(), 11);
     assert!(lib.get("no-such").unwrap_err().to_string().contains("no-such"));
 }
 

@@ -335,6 +335,12 @@ pub struct PostArgs {
     /// given.
     #[arg(long, allow_hyphen_values = true)]
     pub prefer: Option<String>,
+    /// How a feed move that turns a rotary writes F: inverse-time (G93, the default where the
+    /// control has it), dpm (the linear feed, or degrees per minute when only rotaries move, as
+    /// LinuxCNC and Haas read G94) or combined (along the machine axes, units and degrees); the
+    /// profile's [policy] feed_mode where not given.
+    #[arg(long)]
+    pub feed_mode: Option<String>,
     /// Spindle speed (RPM, clockwise) for a tool the CL starts no spindle for before its first
     /// move (NX CLSF listings carry no SPINDL); the CL's own SPINDL and SPINDL/OFF win.
     #[arg(long, allow_hyphen_values = true)]
@@ -693,6 +699,7 @@ fn post_cmd(
         spindle_speed: a.spindle_speed,
         retract: a.retract.clone(),
         prefer: a.prefer.clone(),
+        feed_mode: a.feed_mode.clone(),
         tool_table: match &a.tool_table {
             // Read and checked here, so that an error names the file.
             Some(f) => {

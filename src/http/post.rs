@@ -86,6 +86,9 @@ pub struct PostParams {
     /// A rotary's side the planner keeps to where both IK branches can cut a run: `B-`, `A+`;
     /// the profile's default where absent.
     pub prefer: Option<String>,
+    /// How a feed move with rotaries writes F: `inverse-time`, `dpm` or `combined`; the
+    /// profile's `[policy] feed_mode`, else inverse time where the control has it.
+    pub feed_mode: Option<String>,
 }
 
 impl PostParams {
@@ -112,6 +115,7 @@ impl PostParams {
             spindle_speed: self.spindle_speed,
             retract: self.retract.clone(),
             prefer: self.prefer.clone(),
+            feed_mode: self.feed_mode.clone(),
         }
     }
 
@@ -152,6 +156,7 @@ impl PostParams {
             "setups" => self.setups = Some(v).filter(|s| !s.is_empty()),
             "retract" => self.retract = Some(v).filter(|s| !s.is_empty()),
             "prefer" => self.prefer = Some(v).filter(|s| !s.is_empty()),
+            "feed_mode" => self.feed_mode = Some(v).filter(|s| !s.is_empty()),
             "spindle_speed" => self.spindle_speed = if v.trim().is_empty() { None } else { Some(num(&v)?) },
             other => {
                 return Err(ApiError::BadParameter(format!(

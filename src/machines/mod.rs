@@ -73,6 +73,9 @@ pub struct PolicyDoc {
     /// A rotary's side where both IK branches can cut: `B-`, `A+` (`post::Prefer`).
     #[serde(default)]
     pub prefer: Option<String>,
+    /// `inverse-time`, `dpm` or `combined` (`post::RotaryFeed`).
+    #[serde(default)]
+    pub feed_mode: Option<String>,
 }
 
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]

@@ -88,3 +88,30 @@ impl Prefer {
         Ok(Prefer { rotary, sign })
     }
 }
+
+/// How a feed move that turns a rotary says its speed (`feed_mode`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum RotaryFeed {
+    /// `G93` inverse time: F is 1 / the block's minutes (the default where the control has it;
+    /// elsewhere the combined feed).
+    #[default]
+    InverseTime,
+    /// Feed per minute as LinuxCNC and Haas read it (NIST RS274): the linear axes' path when
+    /// they move, the rotaries' degrees per minute when only rotaries move.
+    DegreesPerMinute,
+    /// Feed per minute along the machine axes' combined path, units and degrees alike (a Fanuc
+    /// in `G94`, a TNC).
+    Combined,
+}
+
+impl RotaryFeed {
+    /// `inverse-time`, `dpm` or `combined`.
+    pub fn parse(text: &str) -> Result<RotaryFeed, String> {
+        match text.trim() {
+            "inverse-time" => Ok(RotaryFeed::InverseTime),
+            "dpm" => Ok(RotaryFeed::DegreesPerMinute),
+            "combined" => Ok(RotaryFeed::Combined),
+            t => Err(format!("feed_mode {t:?}: expected inverse-time, dpm or combined")),
+        }
+    }
+}

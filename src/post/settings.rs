@@ -42,6 +42,8 @@ pub struct Options {
     pub retract: super::Retract,
     /// The side of one rotary the planner keeps to where both branches can cut.
     pub prefer: Option<super::Prefer>,
+    /// How a feed move with rotaries says its speed (`RotaryFeed`).
+    pub rotary_feed: super::RotaryFeed,
     /// Cone (radians) around a singular direction within which blocks are marked `singular`.
     pub singular_cone: f64,
     /// Orientation tolerance (radians) the free rotary may use near a singular direction: 0 is
@@ -149,6 +151,7 @@ impl Options {
             clearance: if mm { 50.0 } else { 2.0 },
             retract: super::Retract::MachineZ,
             prefer: None,
+            rotary_feed: super::RotaryFeed::InverseTime,
             singular_cone: 2f64.to_radians(),
             singular_tolerance: 0.0,
             clamps: Default::default(),
@@ -245,6 +248,12 @@ pub struct Settings {
     /// profile's `[policy] prefer` where absent.
     #[serde(default)]
     pub prefer: Option<String>,
+    /// How a feed move that turns a rotary writes F: `inverse-time` (G93, the default where the
+    /// control has it), `dpm` (LinuxCNC's and Haas's per-minute rule: the linear axes' feed, or
+    /// degrees per minute when only rotaries move) or `combined` (along the machine axes,
+    /// units and degrees); the profile's `[policy] feed_mode` where absent.
+    #[serde(default)]
+    pub feed_mode: Option<String>,
 }
 
 impl Settings {
@@ -271,6 +280,11 @@ impl Settings {
         o.clamps = p.clamps();
         let profile_retract = p.doc.policy.as_ref().and_then(|d| d.retract.as_deref());
         o.retract = super::Retract::resolve(self.retract.as_deref(), profile_retract, o.mode, o.clearance)?;
+        if self.feed_mode.is_none()
+            && let Some(f) = p.doc.policy.as_ref().and_then(|d| d.feed_mode.as_deref())
+        {
+            o.rotary_feed = super::RotaryFeed::parse(f)?;
+        }
         if o.prefer.is_none()
             && let Some(side) = p.doc.policy.as_ref().and_then(|d| d.prefer.as_deref())
         {
@@ -318,6 +332,9 @@ impl Settings {
             Some(x) => return Err(format!("mode {}: expected joint or tcp", quote(x))),
         };
         o.retract = super::Retract::resolve(self.retract.as_deref(), None, o.mode, o.clearance)?;
+        if let Some(f) = self.feed_mode.as_deref().filter(|f| !f.trim().is_empty()) {
+            o.rotary_feed = super::RotaryFeed::parse(f)?;
+        }
         if let Some(p) = self.prefer.as_deref().filter(|p| !p.trim().is_empty()) {
             o.prefer = Some(super::Prefer::parse(p, m)?);
         }

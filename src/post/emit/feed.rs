@@ -6,7 +6,7 @@ use crate::cl::FeedUnit;
 use crate::diag::{Code, Diagnostic, Severity};
 use crate::kinematics::{self, Units};
 use crate::nc::{Dialect, FeedMode};
-use crate::post::{Mode, MotionPt, Sink};
+use crate::post::{Mode, MotionPt, RotaryFeed, Sink};
 
 impl<S: Sink + ?Sized> Emitter<'_, S> {
     /// The F word (per minute or inverse time) and the time (minutes) of a block to `to` from
@@ -86,11 +86,14 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                 if t <= 0.0 {
                     t = 1e-6;
                 }
-                feed = Some(match (self.o.dialect.inverse_time.as_deref(), prev) {
-                    (Some(_), _) | (None, None) => (FeedMode::InverseTime, 1.0 / t),
-                    // No inverse time on this control: the feed along the combined machine axes
-                    // (units and degrees) that takes the same time.
-                    (None, Some(p)) => (FeedMode::PerMinute, machine_len(p) / t),
+                let g93 = self.o.dialect.inverse_time.is_some();
+                feed = Some(match (self.o.rotary_feed, prev) {
+                    (RotaryFeed::InverseTime, _) if g93 => (FeedMode::InverseTime, 1.0 / t),
+                    (_, None) => (FeedMode::InverseTime, 1.0 / t),
+                    (RotaryFeed::DegreesPerMinute, Some(p)) => (FeedMode::PerMinute, self.dpm_len(p, to) / t),
+                    // No inverse time on this control, or the combined feed asked for: the feed
+                    // along the machine axes (units and degrees) that takes the same time.
+                    (_, Some(p)) => (FeedMode::PerMinute, machine_len(p) / t),
                 });
             } else {
                 let fz = if limited_axis.is_some() && t > 0.0 { len / t } else { f };
@@ -117,6 +120,19 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             time = self.rapid_time(p, to);
         }
         (feed, time)
+    }
+
+    /// The path F is read along in `dpm` (NIST RS274, LinuxCNC, Haas): the linear axes' when
+    /// their words change, else the rotaries' degrees.
+    fn dpm_len(&self, p: &At, to: &At) -> f64 {
+        let lin = (0..3).map(|i| (to.joints.linear[i] - p.joints.linear[i]).powi(2)).sum::<f64>().sqrt();
+        if lin >= self.f.fmt.half_linear() {
+            return lin;
+        }
+        (0..self.m.rotaries.len())
+            .map(|i| (to.joints.rotary[i] - p.joints.rotary[i]).to_degrees().powi(2))
+            .sum::<f64>()
+            .sqrt()
     }
 
     /// F within what the word carries: one that rounds to zero is the smallest (an alarm on every
