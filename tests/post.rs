@@ -710,6 +710,14 @@ fn a_bounded_rotary_unwinds_with_a_marked_retract() {
     assert!(sink.nc.contains("UNWIND"));
     let c = s.axes.get(&'C').unwrap();
     assert!(c.min >= -360.0 - 1e-9 && c.max <= 360.0 + 1e-9, "C within travel: {c:?}");
+    // The shop's policy unwind=rapids: the same unwind, still retracted, is an error.
+    let mut o = Options::new(&m);
+    o.unwind = kinepost::post::Unwind::AtRapids;
+    let (strict, s2) = run(&m, cl.as_bytes(), &o);
+    assert!(s2.errors >= 1 && strict.nc.contains("UNWIND") && strict.nc.contains("ERROR UNWIND"), "{}", strict.nc);
+    assert_eq!(strict.blocks.len(), sink.blocks.len(), "the same motion");
+    let bad = kinepost::post::Settings { unwind: Some("never".into()), ..Default::default() };
+    assert!(bad.options(&m).unwrap_err().starts_with("unwind"));
 }
 
 /// `turns` of a 30°-tilted tool axis swept about Z around a rising circle: every GOTO turns C by

@@ -341,6 +341,11 @@ pub struct PostArgs {
     /// profile's [policy] feed_mode where not given.
     #[arg(long)]
     pub feed_mode: Option<String>,
+    /// Where a bounded rotary may unwind: retract (in the cut too, retracting along the tool
+    /// axis) or rapids (one inside a cut is an error); the profile's [policy] unwind where not
+    /// given.
+    #[arg(long)]
+    pub unwind: Option<String>,
     /// Spindle speed (RPM, clockwise) for a tool the CL starts no spindle for before its first
     /// move (NX CLSF listings carry no SPINDL); the CL's own SPINDL and SPINDL/OFF win.
     #[arg(long, allow_hyphen_values = true)]
@@ -700,6 +705,7 @@ fn post_cmd(
         retract: a.retract.clone(),
         prefer: a.prefer.clone(),
         feed_mode: a.feed_mode.clone(),
+        unwind: a.unwind.clone(),
         tool_table: match &a.tool_table {
             // Read and checked here, so that an error names the file.
             Some(f) => {

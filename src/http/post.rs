@@ -89,6 +89,9 @@ pub struct PostParams {
     /// How a feed move with rotaries writes F: `inverse-time`, `dpm` or `combined`; the
     /// profile's `[policy] feed_mode`, else inverse time where the control has it.
     pub feed_mode: Option<String>,
+    /// Where a bounded rotary may unwind: `retract` (in the cut too) or `rapids` (one inside a
+    /// cut is an error); the profile's `[policy] unwind` where absent.
+    pub unwind: Option<String>,
 }
 
 impl PostParams {
@@ -116,6 +119,7 @@ impl PostParams {
             retract: self.retract.clone(),
             prefer: self.prefer.clone(),
             feed_mode: self.feed_mode.clone(),
+            unwind: self.unwind.clone(),
         }
     }
 
@@ -157,6 +161,7 @@ impl PostParams {
             "retract" => self.retract = Some(v).filter(|s| !s.is_empty()),
             "prefer" => self.prefer = Some(v).filter(|s| !s.is_empty()),
             "feed_mode" => self.feed_mode = Some(v).filter(|s| !s.is_empty()),
+            "unwind" => self.unwind = Some(v).filter(|s| !s.is_empty()),
             "spindle_speed" => self.spindle_speed = if v.trim().is_empty() { None } else { Some(num(&v)?) },
             other => {
                 return Err(ApiError::BadParameter(format!(

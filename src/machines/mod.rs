@@ -76,6 +76,9 @@ pub struct PolicyDoc {
     /// `inverse-time`, `dpm` or `combined` (`post::RotaryFeed`).
     #[serde(default)]
     pub feed_mode: Option<String>,
+    /// `retract` or `rapids` (`post::Unwind`).
+    #[serde(default)]
+    pub unwind: Option<String>,
 }
 
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]

@@ -21,7 +21,7 @@ pub mod tools;
 pub mod verify;
 
 pub use emit::linearize::{NONLINEAR_SAMPLES, seg_dist};
-pub use policy::{Prefer, Retract, RotaryFeed};
+pub use policy::{Prefer, Retract, RotaryFeed, Unwind};
 pub use settings::{Budget, MAX_SPINDLE_SPEED, Mode, Options, Settings, parse_triple};
 pub use sink::{AxisStats, AxisWords, BlockInfo, Sink, Summary, TextSink, ToolUse};
 pub use tools::LengthFrom;

@@ -115,3 +115,26 @@ impl RotaryFeed {
         }
     }
 }
+
+/// Where a bounded rotary may unwind (`unwind`): the planner puts every unwind it can at a
+/// repositioning move of the CL; this says what to make of one it cannot.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Unwind {
+    /// Inside a cut too, as a retract along the tool axis, a turn and a re-approach (a warning).
+    #[default]
+    RetractInCut,
+    /// Only at rapids: one inside a cut is still written as the retract (the part stays safe) but
+    /// is an error, so the program is not run as is.
+    AtRapids,
+}
+
+impl Unwind {
+    /// `retract` or `rapids`.
+    pub fn parse(text: &str) -> Result<Unwind, String> {
+        match text.trim() {
+            "retract" => Ok(Unwind::RetractInCut),
+            "rapids" => Ok(Unwind::AtRapids),
+            t => Err(format!("unwind {t:?}: expected retract (in the cut too) or rapids (only at rapids)")),
+        }
+    }
+}

@@ -44,6 +44,8 @@ pub struct Options {
     pub prefer: Option<super::Prefer>,
     /// How a feed move with rotaries says its speed (`RotaryFeed`).
     pub rotary_feed: super::RotaryFeed,
+    /// Where a bounded rotary may unwind (`Unwind`).
+    pub unwind: super::Unwind,
     /// Cone (radians) around a singular direction within which blocks are marked `singular`.
     pub singular_cone: f64,
     /// Orientation tolerance (radians) the free rotary may use near a singular direction: 0 is
@@ -152,6 +154,7 @@ impl Options {
             retract: super::Retract::MachineZ,
             prefer: None,
             rotary_feed: super::RotaryFeed::InverseTime,
+            unwind: super::Unwind::RetractInCut,
             singular_cone: 2f64.to_radians(),
             singular_tolerance: 0.0,
             clamps: Default::default(),
@@ -254,6 +257,11 @@ pub struct Settings {
     /// units and degrees); the profile's `[policy] feed_mode` where absent.
     #[serde(default)]
     pub feed_mode: Option<String>,
+    /// Where a bounded rotary may unwind: `retract` (in the cut too, retracting along the tool
+    /// axis; the default) or `rapids` (one inside a cut is an error); the profile's `[policy]
+    /// unwind` where absent.
+    #[serde(default)]
+    pub unwind: Option<String>,
 }
 
 impl Settings {
@@ -284,6 +292,11 @@ impl Settings {
             && let Some(f) = p.doc.policy.as_ref().and_then(|d| d.feed_mode.as_deref())
         {
             o.rotary_feed = super::RotaryFeed::parse(f)?;
+        }
+        if self.unwind.is_none()
+            && let Some(u) = p.doc.policy.as_ref().and_then(|d| d.unwind.as_deref())
+        {
+            o.unwind = super::Unwind::parse(u)?;
         }
         if o.prefer.is_none()
             && let Some(side) = p.doc.policy.as_ref().and_then(|d| d.prefer.as_deref())
@@ -334,6 +347,9 @@ impl Settings {
         o.retract = super::Retract::resolve(self.retract.as_deref(), None, o.mode, o.clearance)?;
         if let Some(f) = self.feed_mode.as_deref().filter(|f| !f.trim().is_empty()) {
             o.rotary_feed = super::RotaryFeed::parse(f)?;
+        }
+        if let Some(u) = self.unwind.as_deref().filter(|u| !u.trim().is_empty()) {
+            o.unwind = super::Unwind::parse(u)?;
         }
         if let Some(p) = self.prefer.as_deref().filter(|p| !p.trim().is_empty()) {
             o.prefer = Some(super::Prefer::parse(p, m)?);

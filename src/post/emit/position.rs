@@ -188,13 +188,16 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         };
         let r1 = self.clear_of(prev);
         let r2 = self.clear_of(to);
+        // The shop's policy may allow unwinds only where the CL repositions anyway.
+        let refused = unwind && self.o.unwind == crate::post::Unwind::AtRapids;
         let d = Diagnostic::new(
             code,
-            Severity::Warning,
+            if refused { Severity::Error } else { Severity::Warning },
             Some(pt.line),
             format!(
-                "{word}: retract {:.3} along the tool axis, turn, re-approach{why}",
-                (r1.pose.tip - prev.pose.tip).norm()
+                "{word}: retract {:.3} along the tool axis, turn, re-approach{why}{}",
+                (r1.pose.tip - prev.pose.tip).norm(),
+                if refused { " (unwind=rapids allows none inside a cut: written so the part is safe, check the toolpath)" } else { "" }
             ),
         );
         let mut diags = vec![d];
