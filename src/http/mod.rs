@@ -146,7 +146,8 @@ pub struct AppState {
         machines::delete_machine, machines::list_versions, machines::get_version, tools::get_tools, tools::put_tools,
         tools::delete_tools, tools::list_tool_versions, tools::get_tool_version, list_dialects, machine_ops::fk_route, machine_ops::ik_route,
         machine_ops::validate_pose, machine_ops::angle_error_fit, machine_ops::calibrate, healthz, readyz, metrics::metrics_route,
-        jobs::submit, jobs::list_jobs, jobs::get_job, jobs::delete_job, jobs::job_nc, jobs::job_diagnostics, jobs::job_preview),
+        jobs::submit, jobs::list_jobs, jobs::get_job, jobs::delete_job, jobs::job_nc, jobs::job_diagnostics, jobs::job_preview,
+        jobs::job_input, jobs::job_lines),
     components(schemas(Problem, machines::MachineDto, machines::LinearDto, machines::RotaryDto, machines::AngleErrorDto,
         machines::VersionsDto, machines::VersionDto, tools::ToolTableDto, tools::ToolDto, tools::HolderDto, DialectDto, PostParams, machine_ops::FkRequest,
         machine_ops::PoseDto, machine_ops::PoseRequest, machine_ops::ReachDto, machine_ops::AngleFitRequest, machine_ops::FitDto,
@@ -211,7 +212,9 @@ pub fn app(state: Arc<AppState>) -> axum::Router {
         )
         .route("/v1/jobs/{id}", get(jobs::get_job).delete(jobs::delete_job))
         .route("/v1/jobs/{id}/nc", get(jobs::job_nc))
-        .route("/v1/jobs/{id}/diagnostics", get(jobs::job_diagnostics));
+        .route("/v1/jobs/{id}/diagnostics", get(jobs::job_diagnostics))
+        .route("/v1/jobs/{id}/input", get(jobs::job_input))
+        .route("/v1/jobs/{id}/lines", get(jobs::job_lines));
     let api = axum::Router::new()
         .route("/v1/machines", get(machines::list_machines).post(machines::create_machine))
         .route("/v1/dialects", get(list_dialects))
