@@ -324,6 +324,7 @@ fn static_file(name: &str) -> Response {
         "app.js" => (include_str!("web/app.js"), "text/javascript; charset=utf-8"),
         "style.css" => (include_str!("web/style.css"), "text/css; charset=utf-8"),
         "view.js" => (include_str!("web/view.js"), "text/javascript; charset=utf-8"),
+        "ncview.js" => (include_str!("web/ncview.js"), "text/javascript; charset=utf-8"),
         _ => return (StatusCode::NOT_FOUND, "not found").into_response(),
     };
     ([(header::CONTENT_TYPE, ctype), (header::CACHE_CONTROL, "no-cache")], body).into_response()

@@ -16,8 +16,8 @@ pub use diagnostics::Diagnostics;
 pub use store::{Job, Output, State, Store, Submission};
 
 use crate::machines::{Catalog, Library, Profile};
-use crate::output::preview::{Caps, PreviewBuilder};
 use crate::output::linemap::LineMap;
+use crate::output::preview::{Caps, PreviewBuilder};
 use crate::output::{ErrorBody, FileSink, Record};
 use crate::post::{self, BlockInfo, Sink, Summary};
 use std::collections::HashMap;

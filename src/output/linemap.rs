@@ -54,13 +54,17 @@ impl<W: Write> LineMap<W> {
 
 fn block_flags(b: &BlockInfo) -> u32 {
     b.diagnostics.iter().fold(0, |f, d| {
-        f | match (d.severity, d.code) {
-            (Severity::Error, _) => ERROR,
-            (Severity::Warning, _) => WARNING,
-            (_, Code::Unwind) => UNWIND,
-            (_, Code::BranchChange) => BRANCH_CHANGE,
+        let severity = match d.severity {
+            Severity::Error => ERROR,
+            Severity::Warning => WARNING,
+            Severity::Info => 0,
+        };
+        let event = match d.code {
+            Code::Unwind => UNWIND,
+            Code::BranchChange => BRANCH_CHANGE,
             _ => 0,
-        }
+        };
+        f | severity | event
     })
 }
 
