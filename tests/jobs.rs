@@ -385,7 +385,7 @@ async fn finished_jobs_expire_with_their_files() {
             .filter(|e| e.file_name().to_string_lossy().starts_with(&id))
             .count()
     };
-    assert_eq!(files(), 4, "input, NC, NDJSON, preview");
+    assert_eq!(files(), 5, "input, NC, NDJSON, preview, line map");
     let t0 = Instant::now();
     while c.get(format!("{base}/v1/jobs/{id}")).status_ok().await != 404 {
         assert!(t0.elapsed() < Duration::from_secs(10), "the job outlived its retention");
@@ -493,7 +493,7 @@ async fn start_up_sweeps_the_spool_of_what_no_job_owns() {
     let (_server, base) = start(&data);
     // Answering at all means start-up (recovery, the sweep) is done.
     assert_eq!(c.get(format!("{base}/v1/jobs/{id}/nc")).status_ok().await, 200);
-    let mut kept: Vec<String> = ["cl", "nc", "ndjson", "preview.json"]
+    let mut kept: Vec<String> = ["cl", "nc", "ndjson", "preview.json", "lines"]
         .iter()
         .map(|x| format!("{id}.{x}"))
         .chain(["notes.txt".to_string(), format!("{e}.cl")])

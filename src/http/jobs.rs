@@ -75,6 +75,10 @@ pub struct JobLinks {
     pub nc: Option<String>,
     pub diagnostics: Option<String>,
     pub preview: Option<String>,
+    /// The CL data as uploaded.
+    pub input: String,
+    /// The NC program's line map (offsets, CL lines, flags), when it has succeeded.
+    pub lines: Option<String>,
 }
 
 impl From<Job> for JobView {
@@ -95,6 +99,8 @@ impl From<Job> for JobView {
             settings,
             links: JobLinks {
                 nc: (j.state == JobState::Succeeded).then(|| format!("{base}/nc")),
+                lines: (j.state == JobState::Succeeded).then(|| format!("{base}/lines")),
+                input: format!("{base}/input"),
                 diagnostics: matches!(j.state, JobState::Succeeded | JobState::Failed).then(|| format!("{base}/diagnostics")),
                 preview: matches!(j.state, JobState::Succeeded | JobState::Failed).then(|| format!("{base}/preview")),
                 this: base,
@@ -339,6 +345,38 @@ pub async fn job_preview(st: State<Arc<AppState>>, Path(id): Path<String>, req: 
     output(st, id, Output::Preview, req).await
 }
 
+/// The CL data the job was posted with, as it was uploaded (Range requests, ETag): what a viewer
+/// shows beside the NC. Every job has it until it is removed.
+#[utoipa::path(get, path = "/v1/jobs/{id}/input", params(("id" = String, Path)),
+    responses((status = 200, description = "The CL data", content_type = "text/plain"),
+        (status = 206, description = "Part of it (Range)", content_type = "text/plain"),
+        (status = 304, description = "Not modified (If-None-Match)"),
+        (status = 404, description = "Not found", body = super::error::Problem, content_type = "application/problem+json"),
+        (status = 416, description = "Range not satisfiable"),
+        (status = 503, description = "Not ready or overloaded: retry later", body = super::error::Problem, content_type = "application/problem+json")),
+    tag = "jobs")]
+pub async fn job_input(st: State<Arc<AppState>>, Path(id): Path<String>, req: Request) -> Result<Response, ApiError> {
+    output(st, id, Output::Input, req).await
+}
+
+/// The line map of a succeeded job's NC program (Range requests, ETag): 16 bytes per NC line,
+/// four little-endian unsigned 32-bit integers — the line's byte offset in the NC (low 32 bits,
+/// then high), the CL line it came from (0: none), and flags (1 error, 2 warning, 4 unwind,
+/// 8 branch change, 16 tool change). A viewer reads any line of the NC by its offsets with a
+/// Range request and links it to its CL line (`…/input`).
+#[utoipa::path(get, path = "/v1/jobs/{id}/lines", params(("id" = String, Path)),
+    responses((status = 200, description = "The line map", content_type = "application/octet-stream"),
+        (status = 206, description = "Part of it (Range)", content_type = "application/octet-stream"),
+        (status = 304, description = "Not modified (If-None-Match)"),
+        (status = 404, description = "No such job, or a job finished before line maps existed", body = super::error::Problem, content_type = "application/problem+json"),
+        (status = 409, description = "Not finished, or failed", body = super::error::Problem, content_type = "application/problem+json"),
+        (status = 416, description = "Range not satisfiable"),
+        (status = 503, description = "Not ready or overloaded: retry later", body = super::error::Problem, content_type = "application/problem+json")),
+    tag = "jobs")]
+pub async fn job_lines(st: State<Arc<AppState>>, Path(id): Path<String>, req: Request) -> Result<Response, ApiError> {
+    output(st, id, Output::Lines, req).await
+}
+
 async fn output(State(st): State<Arc<AppState>>, id: String, what: Output, req: Request) -> Result<Response, ApiError> {
     let q = queue(&st)?;
     let job = q.store.get(job_id(&id)?).await?;
@@ -346,10 +384,14 @@ async fn output(State(st): State<Arc<AppState>>, id: String, what: Output, req: 
         Output::Nc => ("the NC program", "n", "text/plain; charset=utf-8"),
         Output::Diagnostics => ("diagnostics", "d", "application/x-ndjson"),
         Output::Preview => ("a preview", "p", "application/json"),
+        Output::Lines => ("a line map", "l", "application/octet-stream"),
+        Output::Input => ("its input", "i", "text/plain"),
     };
+    let only_succeeded = matches!(what, Output::Nc | Output::Lines);
     let ready = match job.state {
+        _ if what == Output::Input => true,
         JobState::Succeeded => true,
-        JobState::Failed => what != Output::Nc,
+        JobState::Failed => !only_succeeded,
         _ => false,
     };
     if !ready {
@@ -357,7 +399,7 @@ async fn output(State(st): State<Arc<AppState>>, id: String, what: Output, req: 
             "job {} is {}: {name} only when it has {}",
             job.id,
             job.state,
-            if what == Output::Nc { "succeeded" } else { "finished" }
+            if only_succeeded { "succeeded" } else { "finished" }
         )));
     }
     let path = q.store.output_path(&job.id, what);
@@ -368,11 +410,13 @@ async fn output(State(st): State<Arc<AppState>>, id: String, what: Output, req: 
     }
     let (len, modified) = match tokio::fs::metadata(&path).await {
         Ok(m) => (m.len(), m.modified().ok()),
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound && what == Output::Preview => {
-            return Err(ApiError::NotFound(format!(
-                "job {} has no preview (it finished before previews were made)",
-                job.id
-            )));
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound && what != Output::Nc && what != Output::Diagnostics => {
+            let why = match what {
+                Output::Preview => "no preview (it finished before previews were made)",
+                Output::Lines => "no line map (it finished before line maps were made)",
+                _ => "no input left",
+            };
+            return Err(ApiError::NotFound(format!("job {} has {why}", job.id)));
         }
         Err(e) => return Err(ApiError::Internal(format!("job output: {e}"))),
     };

@@ -149,7 +149,8 @@ pub struct AppState {
         tools::delete_tools, tools::list_tool_versions, tools::get_tool_version, dialects::list_dialects,
         dialects::get_dialect, dialects::create_dialect, dialects::put_dialect, dialects::delete_dialect, dialects::list_dialect_versions, dialects::get_dialect_version, machine_ops::fk_route, machine_ops::ik_route,
         machine_ops::validate_pose, machine_ops::angle_error_fit, machine_ops::calibrate, healthz, readyz, metrics::metrics_route,
-        jobs::submit, jobs::list_jobs, jobs::get_job, jobs::delete_job, jobs::job_nc, jobs::job_diagnostics, jobs::job_preview),
+        jobs::submit, jobs::list_jobs, jobs::get_job, jobs::delete_job, jobs::job_nc, jobs::job_diagnostics, jobs::job_preview,
+        jobs::job_input, jobs::job_lines),
     components(schemas(Problem, machines::MachineDto, machines::LinearDto, machines::RotaryDto, machines::AngleErrorDto,
         machines::VersionsDto, machines::VersionDto, tools::ToolTableDto, tools::ToolDto, tools::HolderDto, dialects::DialectDto, PostParams, machine_ops::FkRequest,
         machine_ops::PoseDto, machine_ops::PoseRequest, machine_ops::ReachDto, machine_ops::AngleFitRequest, machine_ops::FitDto,
@@ -214,7 +215,9 @@ pub fn app(state: Arc<AppState>) -> axum::Router {
         )
         .route("/v1/jobs/{id}", get(jobs::get_job).delete(jobs::delete_job))
         .route("/v1/jobs/{id}/nc", get(jobs::job_nc))
-        .route("/v1/jobs/{id}/diagnostics", get(jobs::job_diagnostics));
+        .route("/v1/jobs/{id}/diagnostics", get(jobs::job_diagnostics))
+        .route("/v1/jobs/{id}/input", get(jobs::job_input))
+        .route("/v1/jobs/{id}/lines", get(jobs::job_lines));
     let api = axum::Router::new()
         .route("/v1/machines", get(machines::list_machines).post(machines::create_machine))
         .route("/v1/dialects", get(dialects::list_dialects).post(dialects::create_dialect))
@@ -330,6 +333,7 @@ fn static_file(name: &str) -> Response {
         "app.js" => (include_str!("web/app.js"), "text/javascript; charset=utf-8"),
         "style.css" => (include_str!("web/style.css"), "text/css; charset=utf-8"),
         "view.js" => (include_str!("web/view.js"), "text/javascript; charset=utf-8"),
+        "ncview.js" => (include_str!("web/ncview.js"), "text/javascript; charset=utf-8"),
         _ => return (StatusCode::NOT_FOUND, "not found").into_response(),
     };
     ([(header::CONTENT_TYPE, ctype), (header::CACHE_CONTROL, "no-cache")], body).into_response()

@@ -16,6 +16,7 @@ pub use diagnostics::Diagnostics;
 pub use store::{Job, Output, State, Store, Submission};
 
 use crate::machines::{Catalog, Library, Profile};
+use crate::output::linemap::LineMap;
 use crate::output::preview::{Caps, PreviewBuilder};
 use crate::output::{ErrorBody, FileSink, Record};
 use crate::post::{self, BlockInfo, Sink, Summary};
@@ -355,6 +356,7 @@ impl<R: Read> Read for Counting<R> {
 /// job is cancelled.
 struct JobSink<'a> {
     files: FileSink<std::fs::File, std::fs::File>,
+    lines: LineMap<std::io::BufWriter<std::fs::File>>,
     preview: PreviewBuilder,
     progress: &'a Progress,
     cancel: &'a AtomicBool,
@@ -370,6 +372,7 @@ impl Sink for JobSink<'_> {
         if let Some(b) = b {
             self.preview.block(text, b);
         }
+        self.lines.line(text, b)?;
         self.files.line(text, b)
     }
     fn diagnostic(&mut self, d: &crate::diag::Diagnostic) -> std::io::Result<()> {
@@ -423,8 +426,10 @@ fn execute(
     );
     let nc = std::fs::File::create(&paths.nc_tmp).map_err(io)?;
     let nd = std::fs::File::create(&paths.diag_tmp).map_err(io)?;
+    let lines = std::io::BufWriter::new(std::fs::File::create(&paths.lines_tmp).map_err(io)?);
     let mut sink = JobSink {
         files: FileSink::new(nc, Some(nd)),
+        lines: LineMap::new(lines),
         preview: PreviewBuilder::new(&profile.machine, opts.mode, Caps::default()),
         progress,
         cancel,
@@ -443,6 +448,8 @@ fn execute(
     };
     let (nc, nd) = sink.files.into_inner().map_err(io)?;
     nc.sync_all().map_err(io)?;
+    let lines = sink.lines.into_inner().into_inner().map_err(|e| io(e.into_error()))?;
+    lines.sync_all().map_err(io)?;
     if let Some(nd) = nd {
         nd.sync_all().map_err(io)?;
     }

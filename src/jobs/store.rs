@@ -124,6 +124,10 @@ pub enum Output {
     Diagnostics,
     /// The decimated path, joints and marks (`output::preview`) for display (finished jobs).
     Preview,
+    /// Each NC line's offset, CL line and flags (`output::linemap`; succeeded jobs).
+    Lines,
+    /// The CL data as it was uploaded (every job, until it is removed).
+    Input,
 }
 
 /// A job's files in the spool.
@@ -132,11 +136,13 @@ pub(super) struct Paths {
     pub nc: PathBuf,
     pub diag: PathBuf,
     pub preview: PathBuf,
+    pub lines: PathBuf,
     /// Where one run writes, before it publishes: a run cut off and its successor (perhaps on
     /// another replica) never write the same file.
     pub nc_tmp: PathBuf,
     pub diag_tmp: PathBuf,
     pub preview_tmp: PathBuf,
+    pub lines_tmp: PathBuf,
 }
 
 impl Paths {
@@ -146,9 +152,11 @@ impl Paths {
             nc: spool.join(format!("{id}.nc")),
             diag: spool.join(format!("{id}.ndjson")),
             preview: spool.join(format!("{id}.preview.json")),
+            lines: spool.join(format!("{id}.lines")),
             nc_tmp: spool.join(format!("{id}.nc.{attempt}.tmp")),
             diag_tmp: spool.join(format!("{id}.ndjson.{attempt}.tmp")),
             preview_tmp: spool.join(format!("{id}.preview.json.{attempt}.tmp")),
+            lines_tmp: spool.join(format!("{id}.lines.{attempt}.tmp")),
         }
     }
 }
@@ -630,6 +638,7 @@ impl Store {
         tokio::fs::rename(&p.nc_tmp, &p.nc).await?;
         tokio::fs::rename(&p.diag_tmp, &p.diag).await?;
         tokio::fs::rename(&p.preview_tmp, &p.preview).await?;
+        tokio::fs::rename(&p.lines_tmp, &p.lines).await?;
         sync_dir(&self.spool)?;
         let nc_bytes = tokio::fs::metadata(&p.nc).await?.len();
         sqlx::query(
@@ -656,6 +665,7 @@ impl Store {
         }
         let p = Paths::new(&self.spool, id, job.attempts);
         let _ = tokio::fs::remove_file(&p.nc_tmp).await;
+        let _ = tokio::fs::remove_file(&p.lines_tmp).await;
         let _ = tokio::fs::rename(&p.diag_tmp, &p.diag).await;
         let _ = tokio::fs::rename(&p.preview_tmp, &p.preview).await;
         // Before the row says failed, so that its diagnostics are never read unclosed.
@@ -715,7 +725,7 @@ impl Store {
     /// One run's temporaries.
     pub(super) fn remove_outputs(&self, job: &Job) {
         let p = Paths::new(&self.spool, &job.id, job.attempts);
-        for f in [&p.nc_tmp, &p.diag_tmp, &p.preview_tmp] {
+        for f in [&p.nc_tmp, &p.diag_tmp, &p.preview_tmp, &p.lines_tmp] {
             let _ = std::fs::remove_file(f);
         }
     }
@@ -782,6 +792,8 @@ impl Store {
             Output::Nc => p.nc,
             Output::Diagnostics => p.diag,
             Output::Preview => p.preview,
+            Output::Lines => p.lines,
+            Output::Input => p.input,
         }
     }
 }

@@ -1,7 +1,9 @@
 //! What the edges write besides NC text: the NDJSON records (one definition, used by the CLI,
-//! HTTP and jobs alike), the files a run writes, the preview, and the JSON of an IK solution.
+//! HTTP and jobs alike), the files a run writes, a job's line map, the preview, and the JSON of
+//! an IK solution.
 //! The engine knows none of it: it pushes blocks into a [`crate::post::Sink`].
 
+pub mod linemap;
 pub mod ndjson;
 pub mod preview;
 

@@ -1,6 +1,7 @@
 // The shop-floor form in a real headless Chromium: pick a machine, upload a corpus file through
 // the page as a job, check the downloaded NC, the summary, the 3D view, the plots, a marker click
-// and the shareable job link. Screenshots land in target/browser/. Needs a running kinepost (KINEPOST_URL) and
+// and the shareable job link, the program view (NC beside CL, a 1 M-line program scrolled,
+// linked lines, jumps, search) and Swagger UI. Screenshots land in target/browser/. Needs a running kinepost (KINEPOST_URL) and
 // Debian's chromium (CHROMIUM, default /usr/bin/chromium). Prints "N passed, M failed".
 import { chromium } from 'playwright-core';
 import { readFileSync, mkdirSync } from 'node:fs';
@@ -126,6 +127,74 @@ try {
   const cl = await page.textContent('#cl-line');
   check(/^CL line \d+: GOTO\//.test(cl), `a row opens its CL line: ${cl.slice(0, 60)}`);
 
+  // The program beside its CL: the next error is a block marked ERROR, linked to its CL line.
+  await page.waitForFunction(() => window.kinepostProgram, null, { timeout: 30000 });
+  await page.click('[data-next=error]');
+  await page.waitForSelector('#nc-pane .ln.sel.f-err');
+  const errRow = await page.$eval('#nc-pane .ln.sel', (r) => r.textContent);
+  const errState = await page.evaluate(() => window.kinepostProgram.state());
+  check(/ERROR/.test(errRow) && errState.flags & 1 && errState.clOf > 0, `next error: NC line ${errState.ncSel + 1} (${errRow.slice(0, 70)}), from CL line ${errState.clOf}`);
+  await page.waitForFunction((l) => document.querySelector(`#cl-pane .ln.sel[data-line="${l}"] .tx`)?.textContent.length > 0, errState.clOf - 1);
+  const errCl = await page.$eval('#cl-pane .ln.sel .tx', (t) => t.textContent);
+  check(/^GOTO\//.test(errCl), `and the CL pane shows CL line ${errState.clOf}: ${errCl.slice(0, 50)}`);
+
+  // A 1 M-line program: posted through the API, opened by its link; only the rows in sight are
+  // in the page while it scrolls to the end, and lines link both ways.
+  const big = ['PARTNO/ONE MILLION', 'UNITS/MM', 'LOADTL/1', 'SPINDL/8000,RPM,CLW', 'RAPID', 'GOTO/-100,-100,20', 'FEDRAT/2000,MMPM'];
+  for (let i = 0; i < 1000000; i++) {
+    if (i === 600000) big.push('LOADTL/2', 'SPINDL/9000,RPM,CLW');
+    const row = Math.floor(i / 2000);
+    const x = row % 2 ? 100 - (i % 2000) * 0.1 : -100 + (i % 2000) * 0.1;
+    big.push(`GOTO/${x.toFixed(3)},${(-100 + row * 0.4).toFixed(3)},${(Math.sin(i / 500) * 2).toFixed(4)}`);
+  }
+  big.push('SPINDL/OFF', 'END', 'FINI', '');
+  const bigJob = await (await fetch(`${base}/v1/jobs?machine=vmc-3axis`, { method: 'POST', headers: { 'content-type': 'text/plain' }, body: big.join('\n') })).json();
+  for (let t = 0; t < 600; t++) {
+    const j = await (await fetch(`${base}/v1/jobs/${bigJob.id}`)).json();
+    if (!['queued', 'running'].includes(j.state)) break;
+    await new Promise((res) => setTimeout(res, 200));
+  }
+  const opening = Date.now();
+  await page.goto(`${base}/?job=${bigJob.id}`);
+  await page.waitForFunction(() => window.kinepostProgram && document.querySelector('#nc-pane .ln .tx .t-gm'), null, { timeout: 60000 });
+  const openMs = Date.now() - opening;
+  const bigLines = await page.evaluate(() => window.kinepostProgram.state().lines);
+  check(bigLines > 1000000, `a ${bigLines.toLocaleString('en')}-line program opens in ${openMs} ms (line map and first rows in ${(await page.evaluate(() => window.kinepostProgram.state().openedMs)).toFixed(0)} ms)`);
+  await page.locator('#nc-pane').scrollIntoViewIfNeeded();
+  let most = 0;
+  for (let k = 1; k <= 20; k++) {
+    await page.evaluate((f) => { const e = document.getElementById('nc-pane'); e.scrollTop = (e.scrollHeight - e.clientHeight) * f; }, k / 20);
+    await page.waitForTimeout(40);
+    most = Math.max(most, await page.$$eval('#nc-pane .ln', (r) => r.length));
+  }
+  await page.waitForFunction(() => [...document.querySelectorAll('#nc-pane .ln .tx')].some((t) => /M30/.test(t.textContent)), null, { timeout: 10000 });
+  const last = await page.$$eval('#nc-pane .ln', (r) => Number(r[r.length - 1].dataset.line));
+  check(last === bigLines - 1 && most < 500, `scrolled to the end (line ${last + 1} shown, M30 in sight) with at most ${most} rows in the page`);
+  await page.evaluate(() => { const e = document.getElementById('nc-pane'); e.scrollTop = (e.scrollHeight - e.clientHeight) * 0.4; });
+  await page.waitForFunction(() => document.querySelectorAll('#nc-pane .ln .tx .t-ax').length > 5);
+  await page.locator('#nc-pane .ln').nth(6).click();
+  await page.waitForFunction(() => window.kinepostProgram.state().clDone, null, { timeout: 30000 });
+  const picked = await page.evaluate(() => window.kinepostProgram.state());
+  await page.waitForFunction((l) => document.querySelector(`#cl-pane .ln.sel[data-line="${l}"] .tx`)?.textContent.startsWith('GOTO/'), picked.clOf - 1, { timeout: 10000 });
+  const ncRow = await page.$eval('#nc-pane .ln.sel .tx', (t) => t.textContent);
+  const clRow = await page.$eval('#cl-pane .ln.sel .tx', (t) => t.textContent);
+  const clX = Number((clRow.match(/^GOTO\/(-?[\d.]+)/) || [])[1]);
+  const ncX = ncRow.match(/X(-?[\d.]+)/);
+  check(picked.clOf > 400000 && picked.clSel === picked.clOf - 1 && (!ncX || Math.abs(Number(ncX[1]) - clX) < 0.01), `NC line ${picked.ncSel + 1} (${ncRow}) → CL line ${picked.clOf} (${clRow})`);
+  await page.locator('#cl-pane .ln').nth(3).click();
+  const back = await page.evaluate(() => window.kinepostProgram.state());
+  const backNc = await page.$eval('#nc-pane .ln.sel .tx', (t) => t.textContent);
+  check(back.clOf === back.clSel + 1 && back.clSel !== picked.clSel && backNc.length > 0, `CL line ${back.clSel + 1} → NC line ${back.ncSel + 1} (${backNc})`);
+  await page.click('[data-next=tool]');
+  await page.waitForFunction(() => /M6/.test(document.querySelector('#nc-pane .ln.sel .tx')?.textContent || ''));
+  check((await page.$eval('#nc-pane .ln.sel .tx', (t) => t.textContent)).includes('T2'), `next tool change: ${await page.$eval('#nc-pane .ln.sel .tx', (t) => t.textContent)}`);
+  await page.fill('#nc-search', 'm30');
+  const searching = Date.now();
+  await page.click('#nc-find button');
+  await page.waitForFunction(() => /M30/.test(document.querySelector('#nc-pane .ln.sel .tx')?.textContent || ''), null, { timeout: 20000 });
+  check(true, `search finds M30 from line ${back.ncSel + 1} in ${Date.now() - searching} ms`);
+  await page.locator('#program').screenshot({ path: path.join(shots, 'nc-view.png') });
+
   // A phone: nothing wider than the screen (the error table here, the plots on the first job),
   // plot labels readable, units on the plots; then dark mode, as the device asks.
   await page.setViewportSize({ width: 390, height: 844 });
@@ -156,9 +225,19 @@ try {
   });
   check(dark3d.every((v) => v < 80), `and so does the 3D view's background (${dark3d})`);
   await phone.screenshot({ path: path.join(shots, 'dark.png'), fullPage: true });
+  await phone.locator('#program').screenshot({ path: path.join(shots, 'nc-phone-dark.png') });
   await phone.close();
 
-  // A bad request shows the server's problem detail.
+  // Swagger UI lists the operations, the new ones too.
+  const docs = await browser.newPage();
+  await docs.goto(base + '/docs/');
+  await docs.waitForSelector('.opblock-summary', { timeout: 30000 });
+  const ops = await docs.$$eval('.opblock-summary', (o) => o.map((e) => e.textContent));
+  check(ops.length >= 30 && ops.some((o) => o.includes('/v1/jobs/{id}/lines')) && ops.some((o) => o.includes('Submit CL data as a job')), `Swagger UI shows ${ops.length} operations, the job submission's summary among them`);
+  await docs.close();
+
+  // A bad request shows the server's problem detail (the page was opened by a link: no file yet).
+  await page.setInputFiles('#file', path.join(data, 'nx_clsf_mech491_variable_axis_inch_5ax.cls'));
   await page.fill('#work_offset', '1,2');
   await page.evaluate(() => document.getElementById('work_offset').removeAttribute('pattern'));
   await page.click('#go');

@@ -2,11 +2,13 @@
 // kinepost noticed. Plain JS modules, no build step; the same API as CAM plugins (/v1/jobs).
 // A result opens by URL (/?job=ID), so a link to it can be passed around the shop floor.
 import { markers, plots, view3d } from './view.js';
+import { programView } from './ncview.js';
 
 const $ = (id) => document.getElementById(id);
 let machines = [];
 let shown = null; // { id, preview, list, view }
 let token = 0; // the job on screen; a newer one stops the older's polling
+let program = null; // the program view (ncview.js) of the job on screen
 
 async function problem(r) {
   const p = await r.json().catch(() => ({ detail: r.statusText }));
@@ -98,6 +100,7 @@ async function showJob(id) {
   $('details').hidden = true;
   $('download').hidden = true;
   $('cl-line').hidden = true;
+  closeProgram();
   $('permalink').href = '/?job=' + id;
   $('permalink').textContent = location.origin + '/?job=' + id;
   const bar = $('progress');
@@ -146,6 +149,7 @@ async function showJob(id) {
     $('status').textContent = job.state === 'failed' ? `Stopped: ${job.error}` : 'Cancelled';
   }
   showSummary(s);
+  if (job.state === 'succeeded') openProgram(job, mine);
   if (!job.links.preview) return;
   const r = await fetch(job.links.preview);
   if (!r.ok) throw await problem(r);
@@ -153,6 +157,27 @@ async function showJob(id) {
   if (mine !== token) return;
   $('details').hidden = false;
   showPreview(id, preview);
+}
+
+function closeProgram() {
+  if (program) program.dispose();
+  program = null;
+  window.kinepostProgram = null;
+  $('program').hidden = true;
+}
+
+/** The NC beside its CL, read a screenful at a time (ncview.js). */
+async function openProgram(job, mine) {
+  $('program').hidden = false;
+  $('nc-where').textContent = 'Opening the program…';
+  try {
+    const view = await programView({ nc: $('nc-pane'), cl: $('cl-pane'), where: $('nc-where') }, job);
+    if (mine !== token) { view.dispose(); return; }
+    program = view;
+    window.kinepostProgram = view;
+  } catch (e) {
+    $('nc-where').textContent = e.message;
+  }
 }
 
 function showPreview(id, p) {
@@ -247,6 +272,8 @@ new ResizeObserver(() => {
 }).observe($('plots'));
 $('file').addEventListener('change', () => $('file').files[0] && ($('drop-text').textContent = $('file').files[0].name));
 $('post-form').addEventListener('submit', submit);
+for (const b of document.querySelectorAll('[data-next]')) b.addEventListener('click', () => program && program.next(b.dataset.next));
+$('nc-find').addEventListener('submit', (e) => { e.preventDefault(); if (program) program.find($('nc-search').value.trim()); });
 const drop = $('drop');
 drop.addEventListener('dragover', (e) => { e.preventDefault(); drop.classList.add('over'); });
 drop.addEventListener('dragleave', () => drop.classList.remove('over'));

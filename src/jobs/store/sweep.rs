@@ -24,7 +24,7 @@ pub(super) fn upload_name(id: &str, node: &str) -> String {
 enum Kind {
     /// `<id>.cl`
     Input,
-    /// `<id>.nc`, `<id>.ndjson`, `<id>.preview.json`
+    /// `<id>.nc`, `<id>.ndjson`, `<id>.preview.json`, `<id>.lines`
     Output,
     /// `<id>.<node>.cl.tmp` (`<id>.cl.tmp`, from before uploads named their node: `None`)
     Upload(Option<String>),
@@ -40,7 +40,7 @@ fn classify(name: &str) -> Option<(&str, Kind)> {
     }
     let kind = match rest {
         "cl" => Kind::Input,
-        "nc" | "ndjson" | "preview.json" => Kind::Output,
+        "nc" | "ndjson" | "preview.json" | "lines" => Kind::Output,
         "cl.tmp" => Kind::Upload(None),
         r => {
             let r = r.strip_suffix(".tmp")?;
@@ -48,7 +48,7 @@ fn classify(name: &str) -> Option<(&str, Kind)> {
                 Kind::Upload(Some(node.to_string()))
             } else {
                 let (out, attempt) = r.rsplit_once('.')?;
-                if !matches!(out, "nc" | "ndjson" | "preview.json") {
+                if !matches!(out, "nc" | "ndjson" | "preview.json" | "lines") {
                     return None;
                 }
                 Kind::RunTemp(attempt.parse().ok()?)
