@@ -222,7 +222,7 @@ async fn dialects_over_the_api_are_versioned_and_a_job_keeps_its_version() {
     assert_eq!(r.text().await.unwrap(), SHOP);
     let list = common::get_json(&c, &format!("{base}/v1/dialects")).await;
     let ids: Vec<&str> = list.as_array().unwrap().iter().filter_map(|d| d["name"].as_str()).collect();
-    assert_eq!(ids, ["fanuc", "haas", "siemens", "heidenhain", "linuxcnc", "shop"]);
+    assert_eq!(ids, ["fanuc", "haas", "siemens", "heidenhain", "linuxcnc", "linuxcnc-switchkins", "shop"]);
 
     // A bad template: 422 naming the event and its line; nothing written.
     let r = put(SHOP.replace("T{{ tool }} M6", "T{{ tool | nosuchfilter }} M6")).await.unwrap();
@@ -265,4 +265,38 @@ async fn dialects_over_the_api_are_versioned_and_a_job_keeps_its_version() {
         .await
         .unwrap();
     assert_eq!(r.status(), 400, "a deleted dialect is no longer there to post with");
+}
+
+#[test]
+fn a_dialect_names_its_clamp_words_and_its_block_delete() {
+    let lib = kinepost::machines::Library::load_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap();
+    let p = lib.get("haas-umc750").unwrap();
+    let d = r#"id = "haas-shop"
+extends = "haas"
+title = "Haas, our clamps"
+block_delete = "/1"
+[clamps]
+C = ["M82", "M83"]
+"#;
+    let d = std::sync::Arc::new(kinepost::machines::dialects::parse(d, "t.toml", None).unwrap());
+    let s = kinepost::post::Settings { dialect: Some("haas-shop".into()), ..Default::default() };
+    let o = s.profile_options_with(&p, None, &|id| (id == "haas-shop").then(|| d.clone())).unwrap();
+    let mut cl = String::from("UNITS/INCHES\nLOADTL/1\nSPINDL/RPM,3000,CLW\nFEDRAT/20\n");
+    for (k, (b, c)) in [(0.0f64, 0.0f64), (20.0, 40.0), (20.0, 40.0), (30.0, 90.0)].iter().enumerate() {
+        let (b, c) = (b.to_radians(), c.to_radians());
+        if k == 2 {
+            cl.push_str("OPSKIP/ON\n");
+        }
+        cl.push_str(&format!("GOTO/{},0,1,{:.7},{:.7},{:.7}\n", k, b.sin() * c.cos(), b.sin() * c.sin(), b.cos()));
+        if k == 2 {
+            cl.push_str("OPSKIP/OFF\n");
+        }
+    }
+    cl.push_str("FINI\n");
+    let mut sink = common::collect::Collect::default();
+    kinepost::post::post(cl.as_bytes(), &p.machine, &o, &mut sink).unwrap();
+    assert!(sink.nc.contains("M82") || sink.nc.contains("M83"), "the dialect's C clamp words:\n{}", sink.nc);
+    assert!(!sink.nc.contains("M10") && !sink.nc.contains("M11"), "not the profile's:\n{}", sink.nc);
+    assert!(sink.nc.contains("M12") || sink.nc.contains("M13"), "B keeps the profile's:\n{}", sink.nc);
+    assert!(sink.nc.lines().any(|l| l.starts_with("/1G")), "the block delete:\n{}", sink.nc);
 }

@@ -159,6 +159,10 @@ pub struct Dialect {
     /// controls; 0, 1, 2 … on conversational ones).
     #[serde(default)]
     pub sequence: Option<Sequence>,
+    /// The clamp words of a rotary by name, lock then unlock (`B = ["M10", "M11"]`): they replace
+    /// the profile's `clamp` for programs in this dialect.
+    #[serde(default)]
+    pub clamps: BTreeMap<String, [String; 2]>,
     /// The block-delete character (`/`).
     #[serde(default = "slash")]
     pub block_delete: String,
@@ -196,7 +200,7 @@ fn three_or_none<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Option<[Strin
 }
 
 /// Keys whose values are tables merged key by key when a dialect extends another.
-const MERGED_TABLES: [&str; 4] = ["ranges", "format", "sequence", "templates"];
+const MERGED_TABLES: [&str; 5] = ["ranges", "format", "sequence", "templates", "clamps"];
 
 /// The largest dialect file read.
 pub const MAX_DIALECT_BYTES: usize = 64 * 1024;
@@ -286,6 +290,9 @@ fn validate(d: &Dialect, file: &str, id: Option<&str>) -> Result<(), String> {
     let r = d.ranges;
     if !(r.feed_mm > 0.0 && r.feed_mm.is_finite() && r.inverse_time > 0.0 && r.inverse_time.is_finite() && r.dwell_s >= 0.0 && r.dwell_s.is_finite()) {
         return bad("ranges", "feeds must be positive and finite, the dwell finite".into());
+    }
+    if let Some(k) = d.clamps.keys().find(|k| !matches!(k.as_str(), "A" | "B" | "C")) {
+        return bad("clamps", format!("{k:?}: a rotary is A, B or C"));
     }
     let lines = d.begin.iter().chain(&d.end).map(|f| f.text.as_str());
     if let Some(l) = lines.chain(d.tool_change.iter().map(String::as_str)).find(|l| l.contains('\n')) {

@@ -345,7 +345,7 @@ impl Formatter {
     fn start(&mut self) {
         self.buf.clear();
         if self.block_skip {
-            self.buf.push('/');
+            self.buf.push_str(&self.d.block_delete);
         }
         if let Some(n) = self.sequence.as_mut() {
             if self.d.style == Style::WordAddress {

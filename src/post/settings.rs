@@ -286,6 +286,11 @@ impl Settings {
     ) -> Result<Options, String> {
         let mut o = self.options_with(&p.machine, dialects)?;
         o.clamps = p.clamps();
+        for (i, r) in p.machine.rotaries.iter().enumerate().take(3) {
+            if let Some([lock, unlock]) = o.dialect.clamps.get(&r.name.to_string()) {
+                o.clamps[i] = Some((lock.clone(), unlock.clone()));
+            }
+        }
         let profile_retract = p.doc.policy.as_ref().and_then(|d| d.retract.as_deref());
         o.retract = super::Retract::resolve(self.retract.as_deref(), profile_retract, o.mode, o.clearance)?;
         if self.feed_mode.is_none()
