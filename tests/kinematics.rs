@@ -17,7 +17,7 @@ fn machine(id: &str) -> Machine {
     lib().get(id).unwrap().machine.clone()
 }
 
-const IDS: [&str; 10] = [
+const IDS: [&str; 11] = [
     "spinner-u5-620",
     "mikron-ucp710",
     "fryer-5x-45",
@@ -28,6 +28,7 @@ const IDS: [&str; 10] = [
     "haas-umc750",
     "vmc-4axis-a",
     "vmc-3axis",
+    "linuxcnc-xyzbc-trt",
 ];
 
 #[test]
@@ -274,6 +275,7 @@ profile_props! {
     haas => "haas-umc750",
     vmc4 => "vmc-4axis-a",
     vmc3 => "vmc-3axis",
+    linuxcnc_trt => "linuxcnc-xyzbc-trt",
 }
 
 fn words(m: &Machine, lin: [f64; 3], rot: &[(char, f64)]) -> Joints {

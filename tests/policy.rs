@@ -150,8 +150,20 @@ fn prefer_keeps_a_rotary_on_the_side_asked_for() {
         assert!(bs.iter().all(|b| b * sign >= -1e-9), "{side}: {bs:?}");
         assert!(bs.iter().any(|b| b * sign > 19.0), "{side}: tilted to its side: {bs:?}");
     }
+    // A starting angle: the unbounded C table starts on the winding nearest it; with a side.
+    for (start, near) in [("C=360", 360.0), ("B+, C=-720", -720.0), ("C=0", 0.0)] {
+        let s = Settings {
+            prefer: Some(start.into()),
+            ..Default::default()
+        };
+        let o = s.profile_options(&p, None).unwrap();
+        let mut sink = Collect::default();
+        post::post(cl.as_bytes(), &p.machine, &o, &mut sink).unwrap();
+        let c0 = sink.blocks.iter().find_map(|b| b.joints.0[5]).unwrap();
+        assert!((c0 - near).abs() <= 180.0, "{start}: C starts at {c0}");
+    }
     // A rotary the machine lacks, or no sign: refused naming the setting.
-    for bad in ["A-", "B", "B*", "BB-"] {
+    for bad in ["A-", "B", "B*", "BB-", "B-, B+", "C=x", "C=1e9"] {
         let s = Settings {
             prefer: Some(bad.into()),
             ..Default::default()

@@ -268,7 +268,7 @@ impl PlanAxes {
     /// `PREFER_PENALTY` for a candidate on the side not preferred.
     fn off_side(&self, c: &Cand) -> f64 {
         match self.prefer {
-            Some(p) if c.sol.joints.rotary[p.rotary] * p.sign < -1e-9 => PREFER_PENALTY,
+            Some(p) if p.sign != 0.0 && c.sol.joints.rotary[p.rotary] * p.sign < -1e-9 => PREFER_PENALTY,
             _ => 0.0,
         }
     }
@@ -380,9 +380,12 @@ fn relax(
             None => {
                 best = match root {
                     Some((r, ua)) => transition_cost(m, axes, r, cb, rapid, ua, &pt.pose.axis),
-                    // First point of the program: prefer small angles, within travel.
+                    // First point of the program: angles near the preferred start (small ones
+                    // where none is), within travel.
                     None => {
-                        cb.sol.joints.rotary.iter().map(|a| a.abs().to_degrees()).sum::<f64>() * 1e-3
+                        let start = axes.prefer.map_or([None; 3], |p| p.start);
+                        let from = |i: usize, a: f64| (a - start[i].unwrap_or(0.0)).abs().to_degrees();
+                        cb.sol.joints.rotary.iter().enumerate().map(|(i, a)| from(i, *a)).sum::<f64>() * 1e-3
                             + if cb.feasible { 0.0 } else { INFEASIBLE }
                     }
                 };

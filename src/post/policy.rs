@@ -60,32 +60,45 @@ impl Retract {
 
 /// One rotary's side where both IK branches can cut a run (`B-`, `A+`): a trunnion tilted away
 /// from the operator, a head kept on the side its cable likes. A preference, never a reason to
-/// change branch inside a cut (`plan::PREFER_PENALTY`).
+/// change branch inside a cut (`plan::PREFER_PENALTY`). And the angles the program starts
+/// nearest (`C=180`: the winding of an unbounded table, the side of a tilt), where the first
+/// point leaves a choice.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Prefer {
     /// The rotary's index in chain order.
     pub rotary: usize,
-    /// +1 or −1.
+    /// +1 or −1; 0: no side preferred.
     pub sign: f64,
+    /// Radians, per rotary in chain order: where the first point's angles are sought.
+    pub start: [Option<f64>; 3],
 }
 
 impl Prefer {
-    /// A rotary of `m` by name and a sign: `B-`, `A+`.
+    /// Items separated by commas: a rotary of `m` and a sign (`B-`, `A+`; one at most), a rotary
+    /// and the angle the program starts nearest (`C=180`, degrees).
     pub fn parse(text: &str, m: &crate::kinematics::Machine) -> Result<Prefer, String> {
-        let t = text.trim();
-        let mut chars = t.chars();
-        let (Some(name), Some(sign), None) = (chars.next(), chars.next(), chars.next()) else {
-            return Err(format!("prefer {t:?}: expected a rotary and a sign, as B- or A+"));
-        };
-        let sign = match sign {
-            '+' => 1.0,
-            '-' => -1.0,
-            _ => return Err(format!("prefer {t:?}: the sign is + or -")),
-        };
-        let rotary = m
-            .rotary_index(name.to_ascii_uppercase())
-            .ok_or_else(|| format!("prefer {t:?}: {} has no rotary {name}", m.id))?;
-        Ok(Prefer { rotary, sign })
+        let mut p = Prefer { rotary: 0, sign: 0.0, start: [None; 3] };
+        for item in text.split(',').map(str::trim).filter(|i| !i.is_empty()) {
+            let mut chars = item.chars();
+            let name = chars.next().unwrap_or(' ');
+            let rotary = m
+                .rotary_index(name.to_ascii_uppercase())
+                .ok_or_else(|| format!("prefer {item:?}: {} has no rotary {name}", m.id))?;
+            match chars.as_str() {
+                "+" | "-" if p.sign != 0.0 => return Err(format!("prefer {text:?}: one side at most")),
+                "+" => (p.rotary, p.sign) = (rotary, 1.0),
+                "-" => (p.rotary, p.sign) = (rotary, -1.0),
+                rest => match rest.strip_prefix('=').map(|v| v.trim().parse::<f64>()) {
+                    Some(Ok(a)) if a.is_finite() && a.abs() <= 36_000.0 => p.start[rotary] = Some(a.to_radians()),
+                    _ => {
+                        return Err(format!(
+                            "prefer {item:?}: expected a rotary and a sign (B-, A+) or a starting angle in degrees (C=180)"
+                        ));
+                    }
+                },
+            }
+        }
+        Ok(p)
     }
 }
 

@@ -20,8 +20,10 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
     /// where the machine is.
     pub(super) fn resolve(&mut self, pose: &Pose, cand: &Cand, positioning: bool) -> Option<(Joints, [f64; 3], i8, Option<u8>)> {
         let mut sol = cand.sol;
+        // Before the first move, an unbounded rotary starts nearest the angle the shop prefers.
+        let start = self.o.prefer.map_or([None; 3], |p| p.start);
         if let Some(free) = sol.singular {
-            let prev = self.at.map_or(0.0, |a| a.actual[free]);
+            let prev = self.at.map(|a| a.actual[free]).or(start[free]).unwrap_or(0.0);
             // Positioning onto a singular point (the first move, after a tool change or a rapid)
             // turns the free rotary to where the cut after it needs it: held at the old angle,
             // it turned during that cut, the tool axis off the CL orientation by up to 11° (a
@@ -58,12 +60,14 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         }
         let mut joints = sol.joints;
         let mut actual = sol.actual;
-        if let Some(at) = self.at {
-            for (i, r) in self.m.rotaries.iter().enumerate() {
-                if r.limits.is_none() && sol.singular != Some(i) {
-                    actual[i] = at.actual[i] + wrap(sol.actual[i] - at.actual[i]);
-                    joints.rotary[i] = r.word(actual[i]);
-                }
+        for (i, r) in self.m.rotaries.iter().enumerate() {
+            let base = self.at.map(|a| a.actual[i]).or(start[i]);
+            if let Some(b) = base
+                && r.limits.is_none()
+                && sol.singular != Some(i)
+            {
+                actual[i] = b + wrap(sol.actual[i] - b);
+                joints.rotary[i] = r.word(actual[i]);
             }
         }
         for (i, r) in self.m.rotaries.iter().enumerate() {
