@@ -31,8 +31,13 @@ fn interpret(rs274: &Path, dir: &Path, nc: &str) -> Option<String> {
     interpret_with(rs274, dir, nc, None)
 }
 
+/// One interpreter at a time: two at once in this process crash now and then (killed by a
+/// signal, nothing said).
+static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
 /// [`interpret`] with an INI file (`-i`): a configuration's remapped M codes.
 fn interpret_with(rs274: &Path, dir: &Path, nc: &str, ini: Option<&Path>) -> Option<String> {
+    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     let table = dir.join("tools.tbl");
     if !table.exists() {
         let lines: String = (1..=20).map(|t| format!("T{t} P{t} D0.1 Z0 ;tool {t}\n")).collect();
