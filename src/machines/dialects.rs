@@ -42,16 +42,7 @@ impl Dialects {
         if !dir.is_dir() {
             return Ok(out);
         }
-        let rd = std::fs::read_dir(dir).map_err(|source| Error::Io {
-            path: dir.display().to_string(),
-            source,
-        })?;
-        let mut paths: Vec<PathBuf> = rd
-            .filter_map(|e| e.ok().map(|e| e.path()))
-            .filter(|p| p.extension().is_some_and(|x| x == "toml"))
-            .collect();
-        paths.sort();
-        for p in paths {
+        for p in super::toml_files(dir)? {
             let text = super::read_text(&p).map_err(|source| Error::Io {
                 path: p.display().to_string(),
                 source,

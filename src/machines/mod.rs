@@ -367,15 +367,7 @@ impl Library {
     /// Loads every profile; the first bad one fails the whole load (a server must not start with
     /// a library the operator believes complete).
     pub fn load_dir(dir: &Path) -> Result<Library, Error> {
-        let rd = std::fs::read_dir(dir).map_err(|source| Error::Io {
-            path: dir.display().to_string(),
-            source,
-        })?;
-        let mut paths: Vec<PathBuf> = rd
-            .filter_map(|e| e.ok().map(|e| e.path()))
-            .filter(|p| p.extension().is_some_and(|x| x == "toml"))
-            .collect();
-        paths.sort();
+        let paths = toml_files(dir)?;
         let is_table = |p: &Path| p.to_string_lossy().ends_with(tools::TABLE_SUFFIX);
         let mut profiles = BTreeMap::new();
         for p in paths.iter().filter(|p| !is_table(p)) {
@@ -430,6 +422,20 @@ impl Library {
     pub fn is_empty(&self) -> bool {
         self.profiles.is_empty()
     }
+}
+
+/// The `*.toml` files of `dir`, sorted.
+fn toml_files(dir: &Path) -> Result<Vec<PathBuf>, Error> {
+    let rd = std::fs::read_dir(dir).map_err(|source| Error::Io {
+        path: dir.display().to_string(),
+        source,
+    })?;
+    let mut paths: Vec<PathBuf> = rd
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|x| x == "toml"))
+        .collect();
+    paths.sort();
+    Ok(paths)
 }
 
 /// Where the shipped profiles live: `$KINEPOST_MACHINES`, else `machines/` in the working

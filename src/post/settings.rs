@@ -291,21 +291,16 @@ impl Settings {
                 o.clamps[i] = Some((lock.clone(), unlock.clone()));
             }
         }
-        let profile_retract = p.doc.policy.as_ref().and_then(|d| d.retract.as_deref());
-        o.retract = super::Retract::resolve(self.retract.as_deref(), profile_retract, o.mode, o.clearance)?;
-        if self.feed_mode.is_none()
-            && let Some(f) = p.doc.policy.as_ref().and_then(|d| d.feed_mode.as_deref())
-        {
+        // The profile's motion policies, where the job gives none.
+        let policy = |pick: fn(&crate::machines::PolicyDoc) -> &Option<String>| p.doc.policy.as_ref().and_then(|d| pick(d).as_deref());
+        o.retract = super::Retract::resolve(self.retract.as_deref(), policy(|d| &d.retract), o.mode, o.clearance)?;
+        if let (None, Some(f)) = (&self.feed_mode, policy(|d| &d.feed_mode)) {
             o.rotary_feed = super::RotaryFeed::parse(f)?;
         }
-        if self.unwind.is_none()
-            && let Some(u) = p.doc.policy.as_ref().and_then(|d| d.unwind.as_deref())
-        {
+        if let (None, Some(u)) = (&self.unwind, policy(|d| &d.unwind)) {
             o.unwind = super::Unwind::parse(u)?;
         }
-        if o.prefer.is_none()
-            && let Some(side) = p.doc.policy.as_ref().and_then(|d| d.prefer.as_deref())
-        {
+        if let (None, Some(side)) = (o.prefer, policy(|d| &d.prefer)) {
             o.prefer = Some(super::Prefer::parse(side, &p.machine)?);
         }
         o.spindle_range = p.spindle_range();
