@@ -527,13 +527,15 @@ impl Formatter {
         let mut moved = false;
         let motion_pos = self.buf.len();
         let force = matches!(motion, Motion::Arc { .. });
+        // Read once: the dialect is behind a pointer the word writer could alias.
+        let every_word = !self.d.format.modal;
         for (i, r) in words.iter().enumerate() {
             let Some(r) = *r else { continue };
             let dec = self.decimals(i);
             // An ISO arc names its end point whole; a Heidenhain `C` only the plane's (a Z
             // there would ask for a helix).
             let changed = (force && i < if conv { 2 } else { 3 }) || self.axes[i] != Some(r);
-            if changed || !self.d.format.modal {
+            if changed || every_word {
                 self.axes[i] = Some(r);
                 number::write_word(&mut self.buf, AXIS_ADDRESSES[i], conv, r, dec);
                 moved |= changed;
