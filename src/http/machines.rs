@@ -268,7 +268,11 @@ pub(super) async fn toml_body<D: serde::de::DeserializeOwned + Serialize>(req: R
         message: format!("request body: {e}"),
         key: None,
     })?;
-    toml::to_string(&doc).map_err(|e| ApiError::Internal(format!("{what} as TOML: {e}")))
+    // JSON that TOML cannot hold (a null, an array of mixed tables) is the client's to fix.
+    toml::to_string(&doc).map_err(|e| ApiError::BadProfile {
+        message: format!("request body: the {what} as TOML: {e}"),
+        key: None,
+    })
 }
 
 /// A version just written (a profile, a tool table): its document, its ETag, where it is read.
