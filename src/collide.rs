@@ -200,6 +200,9 @@ struct Placed {
     link: Link,
     shape: Box<dyn Shape>,
     local: Pose,
+    /// The bounding sphere in the link's coordinates: the cheap first test of a pair.
+    centre: Vector,
+    radius: f64,
 }
 
 /// The bodies of one post, built once, and the pairs that can touch.
@@ -214,6 +217,8 @@ pub struct World {
     step: f64,
     reach: f64,
     tool: Option<ToolShape>,
+    /// Scratch: each body's pose and box at the sample being checked (no allocation a block).
+    centres: Vec<Vector>,
     /// The block before was a rapid (or there was none): see [`World::stock_at_rapid`].
     prev_rapid: bool,
 }
@@ -252,6 +257,7 @@ impl World {
             reach: 0.0,
             tool: None,
             prev_rapid: true,
+            centres: Vec::new(),
         };
         for b in &g.bodies {
             w.add(&b.name, b.link, &b.solid, 0.0);
@@ -267,11 +273,14 @@ impl World {
 
     fn add(&mut self, name: &str, link: Link, s: &Solid, round: f64) {
         let (shape, local) = s.shape(round);
+        let sphere = shape.compute_local_bounding_sphere();
         self.step = self.step.min(s.smallest() / 2.0);
         self.reach = self.reach.max(s.reach());
         self.bodies.push(Placed {
             name: name.into(),
             link,
+            centre: local * sphere.center,
+            radius: sphere.radius,
             shape,
             local,
         });
@@ -368,7 +377,7 @@ impl World {
     /// into `out` (a pair already there keeps its deeper one).
     #[allow(clippy::too_many_arguments)]
     pub fn check_at(
-        &self,
+        &mut self,
         m: &Machine,
         linear: &[f64; 3],
         actual: &[f64; 3],
@@ -378,20 +387,26 @@ impl World {
         out: &mut Vec<Hit>,
     ) {
         let l = Self::links(m, linear, actual, tool_length, work_offset);
-        let poses: Vec<Pose> = self.bodies.iter().map(|b| Self::pose_of(&l, b.link) * b.local).collect();
-        let boxes: Vec<_> = self.bodies.iter().zip(&poses).map(|(b, p)| b.shape.compute_aabb(p)).collect();
+        self.centres.clear();
+        for b in &self.bodies {
+            self.centres.push(Self::pose_of(&l, b.link) * b.centre);
+        }
         for &(i, j, kind) in &self.pairs {
             if kind == 2 && !stock {
                 continue;
             }
             let margin = if kind == 0 { self.clearance } else { 0.0 };
-            let (a, b) = (&boxes[i], &boxes[j]);
-            let apart = (0..3).any(|k| a.mins[k] > b.maxs[k] + margin || b.mins[k] > a.maxs[k] + margin);
-            if apart {
+            let (bi, bj) = (&self.bodies[i], &self.bodies[j]);
+            let reach = bi.radius + bj.radius + margin;
+            if self.centres[i].distance_squared(self.centres[j]) > reach * reach {
                 continue;
             }
-            let (bi, bj) = (&self.bodies[i], &self.bodies[j]);
-            let Ok(Some(c)) = query::contact(&poses[i], bi.shape.as_ref(), &poses[j], bj.shape.as_ref(), margin) else {
+            let (pi, pj) = (Self::pose_of(&l, bi.link) * bi.local, Self::pose_of(&l, bj.link) * bj.local);
+            let (a, b) = (bi.shape.compute_aabb(&pi), bj.shape.compute_aabb(&pj));
+            if (0..3).any(|k| a.mins[k] > b.maxs[k] + margin || b.mins[k] > a.maxs[k] + margin) {
+                continue;
+            }
+            let Ok(Some(c)) = query::contact(&pi, bi.shape.as_ref(), &pj, bj.shape.as_ref(), margin) else {
                 continue;
             };
             if kind != 0 && c.dist > -self.cut_depth {
