@@ -57,6 +57,10 @@ pub enum Code {
     /// A dialect's template for a program event failed to render (out of fuel, a filter on the
     /// wrong kind of value): nothing written for the event.
     Template,
+    /// Two of the machine's bodies (the tool, the stock) overlap at a block or between blocks.
+    Collision,
+    /// Two bodies come closer than the collision clearance.
+    NearCollision,
 }
 
 impl Code {
@@ -73,6 +77,8 @@ impl Code {
             Code::LimitViolation => "limit_violation",
             Code::NearLimit => "near_limit",
             Code::Singular => "singular",
+            Code::Collision => "collision",
+            Code::NearCollision => "near_collision",
             Code::BranchChange => "branch_change",
             Code::Unwind => "unwind",
             Code::Linearized => "linearized",

@@ -1,6 +1,7 @@
 //! kinepost: a 5-axis CNC postprocessor. See ARCHITECTURE.md for the map.
 
 pub mod calib;
+pub mod collide;
 pub mod cl;
 pub mod diag;
 pub mod http;

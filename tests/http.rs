@@ -844,3 +844,24 @@ async fn a_request_over_its_time_is_a_problem_document() {
     let p: Value = r.json().await.unwrap();
     assert!(p["detail"].as_str().unwrap().contains("--request-timeout"), "{p}");
 }
+
+/// The collision check's fields: validated where every post option is, a bad one a 400 naming it.
+#[tokio::test]
+async fn collision_fields_are_taken_and_checked() {
+    let base = server(cfg()).await;
+    let c = reqwest::Client::new();
+    let cl = "UNITS/MM\nLOADTL/1\nSPINDL/1000\nGOTO/10,20,30,0,0,1\nFINI\n";
+    let post = |q: &str| {
+        c.post(format!("{base}/v1/post?machine=vmc-3axis{q}"))
+            .header("content-type", "text/plain")
+            .body(cl)
+    };
+    let nc = post("&stock=0,0,0,50,50,20&collision_clearance=3&collisions=on").text_ok().await;
+    assert!(nc.contains("M30"), "{nc}");
+    post("&collisions=off").text_ok().await;
+    for (q, key) in [("&collisions=maybe", "collisions"), ("&stock=1,2,3", "stock"), ("&collision_clearance=-1", "collision_clearance")] {
+        let r = post(q).send().await.unwrap();
+        assert_eq!(r.status(), 400, "{q}");
+        assert!(r.text().await.unwrap().contains(key), "{q}");
+    }
+}

@@ -346,6 +346,18 @@ pub struct PostArgs {
     /// given.
     #[arg(long)]
     pub unwind: Option<String>,
+    /// The collision check against the profile's bodies: on (the default) or off.
+    #[arg(long)]
+    pub collisions: Option<String>,
+    /// Bodies closer than this (profile units; default 2 mm / 0.08 in) are a near_collision.
+    #[arg(long)]
+    pub collision_clearance: Option<f64>,
+    /// The stock: a box x0,y0,z0,x1,y1,z1 in the CL's frame (profile units).
+    #[arg(long, allow_hyphen_values = true)]
+    pub stock: Option<String>,
+    /// Fixtures: boxes as the stock's, separated by ';'.
+    #[arg(long, allow_hyphen_values = true)]
+    pub fixtures: Option<String>,
     /// Spindle speed (RPM, clockwise) for a tool the CL starts no spindle for before its first
     /// move (NX CLSF listings carry no SPINDL); the CL's own SPINDL and SPINDL/OFF win.
     #[arg(long, allow_hyphen_values = true)]
@@ -706,6 +718,10 @@ fn post_cmd(
         prefer: a.prefer.clone(),
         feed_mode: a.feed_mode.clone(),
         unwind: a.unwind.clone(),
+        collisions: a.collisions.clone(),
+        collision_clearance: a.collision_clearance,
+        stock: a.stock.clone(),
+        fixtures: a.fixtures.clone(),
         tool_table: match &a.tool_table {
             // Read and checked here, so that an error names the file.
             Some(f) => {

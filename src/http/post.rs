@@ -92,6 +92,14 @@ pub struct PostParams {
     /// Where a bounded rotary may unwind: `retract` (in the cut too) or `rapids` (one inside a
     /// cut is an error); the profile's `[policy] unwind` where absent.
     pub unwind: Option<String>,
+    /// The collision check against the profile's bodies: `on` (default) or `off`.
+    pub collisions: Option<String>,
+    /// Bodies closer than this (profile units; default 2 mm / 0.08 in): `near_collision`.
+    pub collision_clearance: Option<f64>,
+    /// The stock: a box `x0,y0,z0,x1,y1,z1` in the CL's frame (profile units).
+    pub stock: Option<String>,
+    /// Fixtures: boxes as the stock's, separated by `;`.
+    pub fixtures: Option<String>,
 }
 
 impl PostParams {
@@ -120,6 +128,10 @@ impl PostParams {
             prefer: self.prefer.clone(),
             feed_mode: self.feed_mode.clone(),
             unwind: self.unwind.clone(),
+            collisions: self.collisions.clone(),
+            collision_clearance: self.collision_clearance,
+            stock: self.stock.clone(),
+            fixtures: self.fixtures.clone(),
         }
     }
 
@@ -162,6 +174,10 @@ impl PostParams {
             "prefer" => self.prefer = Some(v).filter(|s| !s.is_empty()),
             "feed_mode" => self.feed_mode = Some(v).filter(|s| !s.is_empty()),
             "unwind" => self.unwind = Some(v).filter(|s| !s.is_empty()),
+            "collisions" => self.collisions = Some(v).filter(|s| !s.is_empty()),
+            "collision_clearance" => self.collision_clearance = if v.trim().is_empty() { None } else { Some(num(&v)?) },
+            "stock" => self.stock = Some(v).filter(|s| !s.trim().is_empty()),
+            "fixtures" => self.fixtures = Some(v).filter(|s| !s.trim().is_empty()),
             "spindle_speed" => self.spindle_speed = if v.trim().is_empty() { None } else { Some(num(&v)?) },
             other => {
                 return Err(ApiError::BadParameter(format!(

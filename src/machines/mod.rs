@@ -61,6 +61,34 @@ pub struct ProfileDoc {
     pub spindle: Option<SpindleDoc>,
     #[serde(default)]
     pub policy: Option<PolicyDoc>,
+    /// The machine's bodies for the collision check (`collide`); none: nothing is checked.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub body: Vec<BodyDoc>,
+}
+
+/// One body of the machine: a box or a cylinder on a link, at home (`docs/machines.md`).
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct BodyDoc {
+    pub name: String,
+    /// `bed`, `table`, `ram`, `spindle` or a rotary's name.
+    pub on: String,
+    /// `[x0, y0, z0, x1, y1, z1]`: opposite corners.
+    #[serde(default, rename = "box", skip_serializing_if = "Option::is_none")]
+    pub box_: Option<[f64; 6]>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cylinder: Option<CylinderDoc>,
+    /// Where the numbers come from.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub source: Option<String>,
+}
+
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct CylinderDoc {
+    pub from: [f64; 3],
+    pub to: [f64; 3],
+    pub radius: f64,
 }
 
 /// How the shop wants this machine to move where the CL does not say: a job may override each.
@@ -149,6 +177,11 @@ impl Profile {
             out[i] = r.clamp.as_ref().map(|[lock, unlock]| (lock.clone(), unlock.clone()));
         }
         out
+    }
+
+    /// The machine's bodies, validated when the profile was loaded.
+    pub fn geometry(&self) -> crate::collide::Geometry {
+        geometry(&self.doc, &self.machine).unwrap_or_default()
     }
 
     /// The spindle's speeds in RPM, `[1, MAX_SPINDLE_SPEED]` where the profile does not say.
@@ -299,7 +332,43 @@ pub fn parse_profile(text: &str, file: &str, stem: Option<&str>) -> Result<Profi
     if let Some(side) = doc.policy.as_ref().and_then(|p| p.prefer.as_deref()) {
         crate::post::Prefer::parse(side, &machine).map_err(|e| invalid("policy.prefer", e))?;
     }
+    geometry(&doc, &machine).map_err(|(key, problem)| invalid(&key, problem))?;
     Ok(Profile { machine, doc })
+}
+
+/// The profile's `[[body]]` entries as bodies, or the key that is wrong and why.
+fn geometry(doc: &ProfileDoc, m: &Machine) -> Result<crate::collide::Geometry, (String, String)> {
+    use crate::collide::{Body, Link, Solid};
+    if doc.body.len() > crate::collide::MAX_BODIES {
+        return Err(("body".into(), format!("more than {} bodies", crate::collide::MAX_BODIES)));
+    }
+    let mut bodies = Vec::new();
+    for (i, b) in doc.body.iter().enumerate() {
+        let key = |k: &str| format!("body[{i}].{k}");
+        if b.name.is_empty() || b.name.len() > 64 || doc.body[..i].iter().any(|o| o.name == b.name) {
+            return Err((key("name"), format!("{} must be a unique name of 1 to 64 characters", quote(&b.name))));
+        }
+        let link = Link::parse(&b.on, m).map_err(|e| (key("on"), e))?;
+        let solid = match (&b.box_, &b.cylinder) {
+            (Some(c), None) => Solid::Box {
+                min: Vec3::new(c[0], c[1], c[2]),
+                max: Vec3::new(c[3], c[4], c[5]),
+            },
+            (None, Some(c)) => Solid::Cylinder {
+                from: Vec3::from(c.from),
+                to: Vec3::from(c.to),
+                radius: c.radius,
+            },
+            _ => return Err((key("box"), "give one shape: box or cylinder".into())),
+        };
+        solid.check().map_err(|e| (key(if b.box_.is_some() { "box" } else { "cylinder" }), e))?;
+        bodies.push(Body {
+            name: b.name.clone(),
+            link,
+            solid,
+        });
+    }
+    Ok(crate::collide::Geometry { bodies })
 }
 
 /// The spindle's range, or the key that is wrong and why.

@@ -81,6 +81,14 @@ pub struct Options {
     /// What the run may cost: set by whoever runs the engine for others (the server, the CLI's
     /// flags), never by a request.
     pub budget: Budget,
+    /// The machine's bodies to check every block against (`collide`); none: collisions are
+    /// not checked (switched off, or the profile gives no bodies).
+    pub geometry: Option<Arc<crate::collide::Geometry>>,
+    /// Bodies closer than this (profile units) are a `near_collision` warning.
+    pub collision_clearance: f64,
+    /// The job's stock and fixtures: boxes in W (the CL's frame), profile units.
+    pub stock: Vec<crate::collide::Solid>,
+    pub fixtures: Vec<crate::collide::Solid>,
 }
 
 /// What one post may cost, whatever its input: blocks written per CL byte read beyond a floor
@@ -166,6 +174,10 @@ impl Options {
             setup_offsets: false,
             spindle_speed: None,
             budget: Budget::default(),
+            geometry: None,
+            collision_clearance: if mm { 2.0 } else { 0.08 },
+            stock: Vec::new(),
+            fixtures: Vec::new(),
         }
     }
 
@@ -262,6 +274,19 @@ pub struct Settings {
     /// unwind` where absent.
     #[serde(default)]
     pub unwind: Option<String>,
+    /// The collision check: `on` (the default: every block, where the profile gives bodies) or
+    /// `off`.
+    #[serde(default)]
+    pub collisions: Option<String>,
+    /// Bodies closer than this (profile units; default 2 mm / 0.08 in) are a `near_collision`.
+    #[serde(default)]
+    pub collision_clearance: Option<f64>,
+    /// The stock, a box `x0,y0,z0,x1,y1,z1` in the CL's frame (profile units).
+    #[serde(default)]
+    pub stock: Option<String>,
+    /// Fixtures: boxes as the stock's, separated by `;`.
+    #[serde(default)]
+    pub fixtures: Option<String>,
 }
 
 impl Settings {
@@ -304,6 +329,10 @@ impl Settings {
             o.prefer = Some(super::Prefer::parse(side, &p.machine)?);
         }
         o.spindle_range = p.spindle_range();
+        if self.collisions.as_deref() != Some("off") {
+            let g = p.geometry();
+            o.geometry = (!g.bodies.is_empty()).then(|| Arc::new(g));
+        }
         if let Some(s) = o.spindle_speed
             && !(o.spindle_range.0..=o.spindle_range.1).contains(&s)
         {
@@ -458,8 +487,55 @@ impl Settings {
             }
             o.spindle_speed = Some(s);
         }
+        self.collision_options(&mut o)?;
         Ok(o)
     }
+
+    /// The collision check's settings: on or off, the clearance, the stock and fixtures.
+    fn collision_options(&self, o: &mut Options) -> Result<(), String> {
+        match self.collisions.as_deref().map(str::trim) {
+            None | Some("") | Some("on") | Some("off") => {}
+            Some(x) => return Err(format!("collisions {}: expected on or off", quote(x))),
+        }
+        if let Some(c) = self.collision_clearance {
+            if !(c.is_finite() && c >= 0.0 && crate::kinematics::coordinate_ok(c)) {
+                return Err("collision_clearance must be a length of 0 or more".into());
+            }
+            o.collision_clearance = c;
+        }
+        if let Some(s) = self.stock.as_deref().filter(|s| !s.trim().is_empty()) {
+            o.stock = vec![parse_box(s).map_err(|e| format!("stock: {e}"))?];
+        }
+        if let Some(f) = self.fixtures.as_deref().filter(|s| !s.trim().is_empty()) {
+            o.fixtures = f
+                .split(';')
+                .filter(|b| !b.trim().is_empty())
+                .map(|b| parse_box(b).map_err(|e| format!("fixtures: {e}")))
+                .collect::<Result<_, _>>()?;
+            if o.fixtures.len() > 16 {
+                return Err("fixtures: at most 16 boxes".into());
+            }
+        }
+        Ok(())
+    }
+}
+
+/// `x0,y0,z0,x1,y1,z1`: a box by two opposite corners.
+pub fn parse_box(s: &str) -> Result<crate::collide::Solid, String> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|p| p.trim().parse::<f64>().map_err(|_| format!("{} is not a number", quote(p))))
+        .collect::<Result<_, _>>()?;
+    let [x0, y0, z0, x1, y1, z1] = v.as_slice() else {
+        return Err(format!("expected six numbers x0,y0,z0,x1,y1,z1, got {}", quote(s)));
+    };
+    let (a, b) = (Vec3::new(*x0, *y0, *z0), Vec3::new(*x1, *y1, *z1));
+    let solid = crate::collide::Solid::Box {
+        min: a.inf(&b),
+        max: a.sup(&b),
+    };
+    solid.check()?;
+    Ok(solid)
 }
 
 /// `setups=work-offsets` needs offsets to select, and words measured from them.

@@ -43,6 +43,9 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         let prev = self.at;
         let (feed, time) = self.feed(&to, prev.as_ref(), pt, rapid, &mut diags);
         self.pose_diagnostics(&to, pt, rapid, inserted, &mut diags);
+        if self.world.is_some() {
+            self.collisions(prev.as_ref(), &to, rapid, pt.line, &mut diags);
+        }
         let comp = match self.cutcom.idle() {
             true => None,
             false => self.cutcom_words(&to, pt.line, !rapid && self.arc_words.is_some(), &mut diags)?,

@@ -14,9 +14,11 @@
 //! | tilted working planes | `planes.rs` |
 //! | the feed and the time of a block | `feed.rs` |
 //! | the block writer and its FK replay | `block.rs` |
+//! | the collision check of each block and the motion to it | `collide.rs` |
 
 mod arcs;
 mod block;
+mod collide;
 mod cutcom;
 mod cycles;
 pub(super) mod feed;
@@ -167,6 +169,8 @@ pub(super) struct Emitter<'a, S: Sink + ?Sized> {
     pub(super) clamp_unknown: [bool; 3],
     /// Cutter radius compensation: asked, on, and what the CL says its path is.
     pub(super) cutcom: cutcom::State,
+    /// The machine's bodies, the tool and the stock, when the collision check is on.
+    pub(super) world: Option<crate::collide::World>,
 }
 
 impl<'a, S: Sink + ?Sized> Emitter<'a, S> {
@@ -260,6 +264,9 @@ impl<'a, S: Sink + ?Sized> Emitter<'a, S> {
             range_run: false,
             clamp_run: false,
             cutcom: cutcom::State::new(src.stated_path()),
+            world: o.geometry.as_ref().map(|g| {
+                crate::collide::World::new(g, &o.stock, &o.fixtures, o.collision_clearance, o.tolerance.max(1e-3))
+            }),
         }
     }
 

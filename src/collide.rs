@@ -1,0 +1,452 @@
+//! The machine's bodies and the collision check of every posted block (issue 31).
+//!
+//! Pure like `kinematics`: no IO. The profile's `[[body]]` entries (read in `machines`) become a
+//! [`Geometry`]; a post builds one [`World`] from it, the tool and the job's stock, and asks it at
+//! each block (and between blocks, sampled) which bodies touch or come closer than the
+//! clearance. The distance queries are parry's (GJK/EPA on boxes and cylinders).
+//!
+//! Where a body sits, at home (every joint zero): bodies on the bed, the table and the table
+//! rotaries are given in M; bodies on the ram, the head rotaries and the spindle relative to the
+//! gauge point, as head pivots are (`machine-model.md`). Stock and fixtures are boxes in W.
+
+use crate::kinematics::{Machine, Mount, Vec3};
+use parry3d_f64::math::{Pose, Rotation, Vector};
+use parry3d_f64::query;
+use parry3d_f64::shape::{Cuboid, Cylinder, RoundShape, Shape};
+
+/// The most bodies a profile may give: a machine model, not a CAD assembly.
+pub const MAX_BODIES: usize = 64;
+/// The most samples of the motion between two blocks.
+const MAX_SAMPLES: usize = 64;
+
+/// What a body moves with.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Link {
+    /// Fixed in M.
+    Bed,
+    /// Turns with table rotary `i` (chain index) and the table rotaries before it.
+    TableRotary(usize),
+    /// The workpiece side: after every table rotary.
+    Table,
+    /// Moves with X Y Z.
+    Ram,
+    /// Turns with head rotary `i` and the head rotaries before it, and moves with X Y Z.
+    HeadRotary(usize),
+    /// After every head rotary.
+    Spindle,
+    /// The job's stock (W, turning with the table).
+    Stock,
+    /// The job's fixtures (W, turning with the table).
+    Fixture,
+    /// The tool's holder, on the spindle.
+    Holder,
+    /// The cutter, on the spindle.
+    Cutter,
+}
+
+impl Link {
+    /// Parses a profile's `on`: `bed`, `table`, `ram`, `spindle` or a rotary's name.
+    pub fn parse(on: &str, m: &Machine) -> Result<Link, String> {
+        Ok(match on {
+            "bed" => Link::Bed,
+            "table" => Link::Table,
+            "ram" => Link::Ram,
+            "spindle" => Link::Spindle,
+            _ => {
+                let i = m
+                    .rotaries
+                    .iter()
+                    .position(|r| r.name.to_string() == on)
+                    .ok_or_else(|| format!("{on:?} must be bed, table, ram, spindle or a rotary's name"))?;
+                match m.rotaries[i].mount {
+                    Mount::Table => Link::TableRotary(i),
+                    Mount::Head => Link::HeadRotary(i),
+                }
+            }
+        })
+    }
+
+    fn head_side(self) -> bool {
+        matches!(self, Link::Ram | Link::HeadRotary(_) | Link::Spindle | Link::Holder | Link::Cutter)
+    }
+}
+
+/// A body's shape, at home, in its link's coordinates (see the module's text).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Solid {
+    /// Opposite corners.
+    Box { min: Vec3, max: Vec3 },
+    /// The axis from `from` to `to`, and the radius.
+    Cylinder { from: Vec3, to: Vec3, radius: f64 },
+}
+
+impl Solid {
+    /// A box or cylinder of positive, finite size, or what is wrong with it.
+    pub fn check(&self) -> Result<(), String> {
+        let finite = |v: &Vec3| v.iter().all(|c| c.is_finite() && c.abs() <= crate::kinematics::MAX_COORD);
+        match self {
+            Solid::Box { min, max } => {
+                if !(finite(min) && finite(max)) || (0..3).any(|k| max[k] <= min[k]) {
+                    return Err("a box is [x0, y0, z0, x1, y1, z1], each max above its min".into());
+                }
+            }
+            Solid::Cylinder { from, to, radius } => {
+                if !(finite(from) && finite(to)) || (to - from).norm() <= 0.0 || !(*radius > 0.0 && radius.is_finite()) {
+                    return Err("a cylinder needs two distinct finite end points and a positive radius".into());
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Its smallest dimension.
+    fn smallest(&self) -> f64 {
+        match self {
+            Solid::Box { min, max } => (max - min).min(),
+            Solid::Cylinder { from, to, radius } => (2.0 * radius).min((to - from).norm()),
+        }
+    }
+
+    /// The farthest any of its points is from the origin of its link's coordinates.
+    fn reach(&self) -> f64 {
+        match self {
+            Solid::Box { min, max } => min.abs().sup(&max.abs()).norm(),
+            Solid::Cylinder { from, to, radius } => from.norm().max(to.norm()) + radius,
+        }
+    }
+
+    /// The parry shape and where it sits in the link's coordinates.
+    fn shape(&self, round: f64) -> (Box<dyn Shape>, Pose) {
+        match *self {
+            Solid::Box { min, max } => {
+                let half = (max - min) / 2.0;
+                let c = (max + min) / 2.0;
+                (Box::new(Cuboid::new(v(&half))), Pose::from_translation(v(&c)))
+            }
+            Solid::Cylinder { from, to, radius } => {
+                let d = to - from;
+                let c = (from + to) / 2.0;
+                let rot = Rotation::from_rotation_arc(Vector::Y, v(&d.normalize()));
+                let half = d.norm() / 2.0;
+                let shape: Box<dyn Shape> = if round > 0.0 {
+                    let r = round.min(radius).min(half);
+                    Box::new(RoundShape {
+                        inner_shape: Cylinder::new(half - r, radius - r),
+                        border_radius: r,
+                    })
+                } else {
+                    Box::new(Cylinder::new(half, radius))
+                };
+                (shape, Pose::from_parts(v(&c), rot))
+            }
+        }
+    }
+}
+
+fn v(p: &Vec3) -> Vector {
+    Vector::new(p.x, p.y, p.z)
+}
+
+/// A named body of the machine.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Body {
+    pub name: String,
+    pub link: Link,
+    pub solid: Solid,
+}
+
+/// The machine's bodies, validated (profile units).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Geometry {
+    pub bodies: Vec<Body>,
+}
+
+/// The tool as the check sees it (profile units): the cutter from the tip up, the holder from
+/// the gauge line down.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ToolShape {
+    pub length: f64,
+    pub diameter: f64,
+    pub corner_radius: f64,
+    pub holder_diameter: f64,
+    pub holder_length: f64,
+}
+
+impl ToolShape {
+    /// The cutter and holder the check assumes where nothing says (mm; scaled for inch).
+    pub fn default_for(length: f64, mm: bool) -> ToolShape {
+        let k = if mm { 1.0 } else { 1.0 / 25.4 };
+        ToolShape {
+            length,
+            diameter: 10.0 * k,
+            corner_radius: 0.0,
+            holder_diameter: 40.0 * k,
+            holder_length: 40.0 * k,
+        }
+    }
+}
+
+/// What the check found between two bodies at one pose.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Hit {
+    pub a: String,
+    pub b: String,
+    /// Negative: the depth they overlap by; else their distance (below the clearance).
+    pub dist: f64,
+}
+
+struct Placed {
+    name: String,
+    link: Link,
+    shape: Box<dyn Shape>,
+    local: Pose,
+    /// The bounding sphere in the link's coordinates: the cheap first test of a pair.
+    centre: Vector,
+    radius: f64,
+}
+
+/// The bodies of one post, built once, and the pairs that can touch.
+pub struct World {
+    bodies: Vec<Placed>,
+    /// (a, b, kind): kind 0 any contact, 1 the cutter (depth only), 2 the cutter against stock
+    /// (rapids only).
+    pairs: Vec<(usize, usize, u8)>,
+    clearance: f64,
+    /// The depth a cutter may cut into what it touches (the chord tolerance).
+    cut_depth: f64,
+    step: f64,
+    reach: f64,
+    tool: Option<ToolShape>,
+    /// Scratch: each body's pose and box at the sample being checked (no allocation a block).
+    centres: Vec<Vector>,
+    /// The block before was a rapid (or there was none): see [`World::stock_at_rapid`].
+    prev_rapid: bool,
+}
+
+impl std::fmt::Debug for World {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("World").field("bodies", &self.bodies.len()).finish()
+    }
+}
+
+/// The pose of every link at one set of joints (actual angles, radians).
+struct Links {
+    table: [Pose; 3],
+    table_all: Pose,
+    head: [Pose; 3],
+    ram: Pose,
+    spindle: Pose,
+    work: Pose,
+}
+
+fn turn(axis: &Vec3, pivot: &Vec3, angle: f64) -> Pose {
+    let r = Rotation::from_axis_angle(v(axis), angle);
+    let q = v(pivot);
+    Pose::from_parts(q - r * q, r)
+}
+
+impl World {
+    /// The bodies of `g`, the job's stock and fixture boxes (in W), checked with `clearance`.
+    pub fn new(g: &Geometry, stock: &[Solid], fixtures: &[Solid], clearance: f64, cut_depth: f64) -> World {
+        let mut w = World {
+            bodies: Vec::new(),
+            pairs: Vec::new(),
+            clearance,
+            cut_depth,
+            step: f64::INFINITY,
+            reach: 0.0,
+            tool: None,
+            prev_rapid: true,
+            centres: Vec::new(),
+        };
+        for b in &g.bodies {
+            w.add(&b.name, b.link, &b.solid, 0.0);
+        }
+        for s in stock {
+            w.add("stock", Link::Stock, s, 0.0);
+        }
+        for (i, s) in fixtures.iter().enumerate() {
+            w.add(&format!("fixture {}", i + 1), Link::Fixture, s, 0.0);
+        }
+        w
+    }
+
+    fn add(&mut self, name: &str, link: Link, s: &Solid, round: f64) {
+        let (shape, local) = s.shape(round);
+        let sphere = shape.compute_local_bounding_sphere();
+        self.step = self.step.min(s.smallest() / 2.0);
+        self.reach = self.reach.max(s.reach());
+        self.bodies.push(Placed {
+            name: name.into(),
+            link,
+            centre: local * sphere.center,
+            radius: sphere.radius,
+            shape,
+            local,
+        });
+    }
+
+    /// Whether the cutter is checked against the stock on this block: at rapids, except the
+    /// first rapid after a cut, which leaves the material along what the cut removed (the stock
+    /// is a box, not what is left of it).
+    pub fn stock_at_rapid(&mut self, rapid: bool) -> bool {
+        let check = rapid && self.prev_rapid;
+        self.prev_rapid = rapid;
+        check
+    }
+
+    /// Whether the profile gave any machine body (without one nothing is checked).
+    pub fn is_empty(&self) -> bool {
+        !self.bodies.iter().any(|b| !matches!(b.link, Link::Stock | Link::Fixture))
+    }
+
+    /// Puts the tool on the spindle (again, when it changed) and lists the pairs to check.
+    pub fn set_tool(&mut self, t: ToolShape) {
+        if self.tool == Some(t) {
+            return;
+        }
+        self.bodies.retain(|b| !matches!(b.link, Link::Holder | Link::Cutter));
+        let z = Vec3::z();
+        let stick = (t.length - t.holder_length).max(t.length * 0.2);
+        let holder = Solid::Cylinder {
+            from: -z * (t.length - stick).max(1e-3),
+            to: Vec3::zeros(),
+            radius: t.holder_diameter / 2.0,
+        };
+        let cutter = Solid::Cylinder {
+            from: -z * t.length,
+            to: -z * (t.length - stick),
+            radius: t.diameter / 2.0,
+        };
+        if t.holder_length > 0.0 && t.holder_diameter > 0.0 {
+            self.add("holder", Link::Holder, &holder, 0.0);
+        }
+        self.add("cutter", Link::Cutter, &cutter, t.corner_radius);
+        self.tool = Some(t);
+        self.pairs.clear();
+        for (i, a) in self.bodies.iter().enumerate() {
+            for (j, b) in self.bodies.iter().enumerate() {
+                if let Some(kind) = pair_kind(a.link, b.link) {
+                    self.pairs.push((i, j, kind));
+                }
+            }
+        }
+    }
+
+    fn links(m: &Machine, linear: &[f64; 3], actual: &[f64; 3], tool_length: f64, work_offset: &Vec3) -> Links {
+        let mut table = [Pose::IDENTITY; 3];
+        let mut head = [Pose::IDENTITY; 3];
+        let mut t = Pose::IDENTITY;
+        let mut h = Pose::from_translation(Vector::new(linear[0], linear[1], linear[2] + tool_length));
+        let ram = h;
+        for (i, r) in m.rotaries.iter().enumerate() {
+            match r.mount {
+                Mount::Table => {
+                    t = t * turn(&r.axis, &r.pivot, actual[i]);
+                    table[i] = t;
+                }
+                Mount::Head => {
+                    h = h * turn(&r.axis, &r.pivot, actual[i]);
+                    head[i] = h;
+                }
+            }
+        }
+        Links {
+            table,
+            table_all: t,
+            head,
+            ram,
+            spindle: h,
+            work: t * Pose::from_translation(v(work_offset)),
+        }
+    }
+
+    fn pose_of(l: &Links, link: Link) -> Pose {
+        match link {
+            Link::Bed => Pose::IDENTITY,
+            Link::TableRotary(i) => l.table[i],
+            Link::Table => l.table_all,
+            Link::Ram => l.ram,
+            Link::HeadRotary(i) => l.head[i],
+            Link::Spindle | Link::Holder | Link::Cutter => l.spindle,
+            Link::Stock | Link::Fixture => l.work,
+        }
+    }
+
+    /// Hits at one set of joints (linears; actual rotary angles, radians), the deepest per pair
+    /// into `out` (a pair already there keeps its deeper one).
+    #[allow(clippy::too_many_arguments)]
+    pub fn check_at(
+        &mut self,
+        m: &Machine,
+        linear: &[f64; 3],
+        actual: &[f64; 3],
+        tool_length: f64,
+        work_offset: &Vec3,
+        stock: bool,
+        out: &mut Vec<Hit>,
+    ) {
+        let l = Self::links(m, linear, actual, tool_length, work_offset);
+        self.centres.clear();
+        for b in &self.bodies {
+            self.centres.push(Self::pose_of(&l, b.link) * b.centre);
+        }
+        for &(i, j, kind) in &self.pairs {
+            if kind == 2 && !stock {
+                continue;
+            }
+            let margin = if kind == 0 { self.clearance } else { 0.0 };
+            let (bi, bj) = (&self.bodies[i], &self.bodies[j]);
+            let reach = bi.radius + bj.radius + margin;
+            if self.centres[i].distance_squared(self.centres[j]) > reach * reach {
+                continue;
+            }
+            let (pi, pj) = (Self::pose_of(&l, bi.link) * bi.local, Self::pose_of(&l, bj.link) * bj.local);
+            let (a, b) = (bi.shape.compute_aabb(&pi), bj.shape.compute_aabb(&pj));
+            if (0..3).any(|k| a.mins[k] > b.maxs[k] + margin || b.mins[k] > a.maxs[k] + margin) {
+                continue;
+            }
+            let Ok(Some(c)) = query::contact(&pi, bi.shape.as_ref(), &pj, bj.shape.as_ref(), margin) else {
+                continue;
+            };
+            if kind != 0 && c.dist > -self.cut_depth {
+                continue;
+            }
+            match out.iter_mut().find(|h| h.a == bi.name && h.b == bj.name) {
+                Some(h) => h.dist = h.dist.min(c.dist),
+                None => out.push(Hit {
+                    a: bi.name.clone(),
+                    b: bj.name.clone(),
+                    dist: c.dist,
+                }),
+            }
+        }
+    }
+
+    /// How many samples the motion between two joint sets needs so that no body moves more than
+    /// half its smallest size between them (at most [`MAX_SAMPLES`]).
+    pub fn samples(&self, m: &Machine, from: (&[f64; 3], &[f64; 3]), to: (&[f64; 3], &[f64; 3]), tool_length: f64) -> usize {
+        let lin = Vec3::from(*from.0) - Vec3::from(*to.0);
+        let reach = self.reach + Vec3::from(*to.0).norm() + tool_length;
+        let mut moved = lin.norm();
+        for i in 0..m.rotaries.len() {
+            moved += (from.1[i] - to.1[i]).abs() * (reach + m.rotaries[i].pivot.norm());
+        }
+        let n = (moved / self.step.max(1e-6)).ceil();
+        if n.is_finite() { (n as usize).clamp(1, MAX_SAMPLES) } else { MAX_SAMPLES }
+    }
+}
+
+/// Which pairs are checked: head-side bodies against the table side and the bed; the cutter
+/// only by its depth (and against stock only at rapid); the table side against the bed.
+fn pair_kind(a: Link, b: Link) -> Option<u8> {
+    let table_side = |l: Link| matches!(l, Link::TableRotary(_) | Link::Table | Link::Stock | Link::Fixture);
+    match (a, b) {
+        (Link::Cutter, Link::Stock) => Some(2),
+        (Link::Cutter, b) if table_side(b) || b == Link::Bed => Some(1),
+        (Link::Cutter, _) => None,
+        (a, b) if a.head_side() && (table_side(b) || b == Link::Bed) => Some(0),
+        (a, Link::Bed) if matches!(a, Link::TableRotary(_) | Link::Table) => Some(0),
+        _ => None,
+    }
+}
