@@ -199,7 +199,26 @@ async fn dialects_over_the_api_are_versioned_and_a_job_keeps_its_version() {
     let mut cfg = common::cfg();
     cfg.admin_token = Some(TOKEN.into());
     cfg.workers = 1;
-    let base = common::server(cfg).await;
+    round_trip(common::server(cfg).await).await;
+}
+
+#[tokio::test]
+#[ignore = "needs PostgreSQL: KINEPOST_TEST_DATABASE_URL=postgres://… cargo test -- --ignored"]
+async fn dialects_over_the_api_on_postgres() {
+    let Some((url, admin, name)) = common::postgres("dialects").await else {
+        assert!(std::env::var("KINEPOST_REQUIRE_POSTGRES").is_err(), "KINEPOST_REQUIRE_POSTGRES is set but KINEPOST_TEST_DATABASE_URL is not");
+        eprintln!("SKIPPED: set KINEPOST_TEST_DATABASE_URL=postgres://… to run on PostgreSQL");
+        return;
+    };
+    let mut cfg = common::cfg();
+    cfg.admin_token = Some(TOKEN.into());
+    cfg.workers = 1;
+    cfg.database_url = Some(url);
+    round_trip(common::server(cfg).await).await;
+    common::drop_postgres(&admin, &name).await;
+}
+
+async fn round_trip(base: String) {
     let c = reqwest::Client::new();
     let url = format!("{base}/v1/dialects/shop");
     let auth = format!("Bearer {TOKEN}");

@@ -610,7 +610,7 @@ async fn a_restarting_replica_sweeps_only_its_own_and_expired_spool_files() {
     // Answering at all means start-up (and its sweep) is done.
     assert_eq!(c.get(format!("{}/v1/jobs/{id}/nc", second.base)).status_ok().await, 200);
     let mut want: Vec<String> = kept.iter().map(|(n, _)| n.clone()).collect();
-    want.extend(["cl", "nc", "ndjson", "preview.json"].iter().map(|x| format!("{id}.{x}")));
+    want.extend(["cl", "lines", "nc", "ndjson", "preview.json"].iter().map(|x| format!("{id}.{x}")));
     want.sort();
     assert_eq!(common::spool_names(&spool), want);
     let _ = std::fs::remove_dir_all(&spool);

@@ -49,29 +49,6 @@ fn two_tools() -> String {
     )
 }
 
-/// A fresh PostgreSQL database for one test, when the environment names a server.
-async fn postgres() -> Option<(String, String, String)> {
-    use sqlx::Connection;
-    let admin = std::env::var("KINEPOST_TEST_DATABASE_URL").ok().filter(|u| !u.is_empty())?;
-    let name = format!("kinepost_tools_{}", std::process::id());
-    let mut c = sqlx::PgConnection::connect(&admin)
-        .await
-        .expect("connect to KINEPOST_TEST_DATABASE_URL");
-    for q in [format!("DROP DATABASE IF EXISTS {name}"), format!("CREATE DATABASE {name}")] {
-        sqlx::raw_sql(sqlx::AssertSqlSafe(q)).execute(&mut c).await.unwrap();
-    }
-    let base = admin.rsplit_once('/').map_or(admin.as_str(), |(b, _)| b);
-    Some((format!("{base}/{name}"), admin, name))
-}
-
-async fn drop_postgres(admin: &str, name: &str) {
-    use sqlx::Connection;
-    if let Ok(mut c) = sqlx::PgConnection::connect(admin).await {
-        let _ = sqlx::raw_sql(sqlx::AssertSqlSafe(format!("DROP DATABASE IF EXISTS {name} WITH (FORCE)")))
-            .execute(&mut c)
-            .await;
-    }
-}
 
 #[tokio::test]
 async fn tool_tables_round_trip_on_sqlite() {
@@ -84,7 +61,7 @@ async fn tool_tables_round_trip_on_sqlite() {
 #[tokio::test]
 #[ignore = "needs PostgreSQL: KINEPOST_TEST_DATABASE_URL=postgres://… cargo test -- --ignored"]
 async fn tool_tables_round_trip_on_postgres() {
-    let Some((url, admin, name)) = postgres().await else {
+    let Some((url, admin, name)) = common::postgres("tools").await else {
         assert!(std::env::var("KINEPOST_REQUIRE_POSTGRES").is_err(), "KINEPOST_REQUIRE_POSTGRES is set but KINEPOST_TEST_DATABASE_URL is not");
         eprintln!("SKIPPED: set KINEPOST_TEST_DATABASE_URL=postgres://… to run on PostgreSQL");
         return;
@@ -94,7 +71,7 @@ async fn tool_tables_round_trip_on_postgres() {
     cfg.workers = 1;
     cfg.database_url = Some(url);
     round_trip(&common::server(cfg).await).await;
-    drop_postgres(&admin, &name).await;
+    common::drop_postgres(&admin, &name).await;
 }
 
 async fn round_trip(base: &str) {

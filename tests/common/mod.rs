@@ -258,3 +258,27 @@ pub async fn node_of(c: &reqwest::Client, base: &str) -> String {
     let t = c.get(format!("{base}/readyz")).send().await.unwrap().text().await.unwrap();
     t.rsplit_once("node ").unwrap().1.trim().to_string()
 }
+
+/// A fresh PostgreSQL database for one test, when the environment names a server.
+pub async fn postgres(what: &str) -> Option<(String, String, String)> {
+    use sqlx::Connection;
+    let admin = std::env::var("KINEPOST_TEST_DATABASE_URL").ok().filter(|u| !u.is_empty())?;
+    let name = format!("kinepost_{what}_{}", std::process::id());
+    let mut c = sqlx::PgConnection::connect(&admin)
+        .await
+        .expect("connect to KINEPOST_TEST_DATABASE_URL");
+    for q in [format!("DROP DATABASE IF EXISTS {name}"), format!("CREATE DATABASE {name}")] {
+        sqlx::raw_sql(sqlx::AssertSqlSafe(q)).execute(&mut c).await.unwrap();
+    }
+    let base = admin.rsplit_once('/').map_or(admin.as_str(), |(b, _)| b);
+    Some((format!("{base}/{name}"), admin, name))
+}
+
+pub async fn drop_postgres(admin: &str, name: &str) {
+    use sqlx::Connection;
+    if let Ok(mut c) = sqlx::PgConnection::connect(admin).await {
+        let _ = sqlx::raw_sql(sqlx::AssertSqlSafe(format!("DROP DATABASE IF EXISTS {name} WITH (FORCE)")))
+            .execute(&mut c)
+            .await;
+    }
+}
