@@ -223,18 +223,21 @@ pub async fn submit(
         .map(|c| c.0.ip().to_string());
     let (params, filename, body) = upload(&st, query, req).await?;
     // Settings are checked now, so a job never fails for a typo hours later.
-    let current = params.profile(&st)?;
-    let mut settings = params.settings();
-    let standing = super::tools::standing(&st, &current.id);
-    if settings.tool_table.is_none() {
-        // The machine's table as it is now, whatever is written to it before the job runs.
-        settings.machine_tools_version = st.machines.tools.get(&current.id).ok().map(|c| c.version);
-    }
-    let dialect = settings.dialect.clone().unwrap_or_else(|| current.item.machine.controller.clone());
-    settings.dialect_version = st.machines.dialects.get(&dialect).ok().map(|c| c.version);
-    settings
-        .profile_options_with(&current.item, standing, &|id| st.machines.dialect(id))
-        .map_err(ApiError::BadParameter)?;
+    let checked = params.profile(&st).and_then(|current| {
+        let mut settings = params.settings();
+        let standing = super::tools::standing(&st, &current.id);
+        if settings.tool_table.is_none() {
+            // The machine's table as it is now, whatever is written to it before the job runs.
+            settings.machine_tools_version = st.machines.tools.get(&current.id).ok().map(|c| c.version);
+        }
+        let dialect = settings.dialect.clone().unwrap_or_else(|| current.item.machine.controller.clone());
+        settings.dialect_version = st.machines.dialects.get(&dialect).ok().map(|c| c.version);
+        settings
+            .profile_options_with(&current.item, standing, &|id| st.machines.dialect(id))
+            .map_err(ApiError::BadParameter)?;
+        Ok((current, settings))
+    });
+    let ((current, settings), body) = super::post::refuse_unread(checked, body).await?;
     let input = StreamReader::new(body.into_data_stream().map(|r| r.map_err(std::io::Error::other)));
     let (job, _created) = q.submit(settings, current.version, filename, key, client, input).await?;
     let location = format!("/v1/jobs/{}", job.id);

@@ -311,6 +311,29 @@ pub(super) fn upload_error(text: String) -> ApiError {
     }
 }
 
+/// A request refused after its head, its upload not read yet: the upload is read to its end
+/// first (at most `DRAIN_MAX`, ten seconds), else closing on unread bytes resets the connection
+/// and the client never reads the problem document. On success the body is handed back.
+pub(super) async fn refuse_unread<T>(checked: Result<T, ApiError>, body: Body) -> Result<(T, Body), ApiError> {
+    use http_body_util::BodyExt;
+    let e = match checked {
+        Ok(t) => return Ok((t, body)),
+        Err(e) => e,
+    };
+    let mut body = body;
+    let mut left = DRAIN_MAX;
+    let _ = tokio::time::timeout(std::time::Duration::from_secs(10), async {
+        while let Some(Ok(frame)) = body.frame().await {
+            left = left.saturating_sub(frame.data_ref().map_or(0, |d| d.len() as u64));
+            if left == 0 {
+                break;
+            }
+        }
+    })
+    .await;
+    Err(e)
+}
+
 /// Post-process the CL in the request body (raw, or the `file` part of a multipart form).
 #[utoipa::path(
     post,
@@ -337,12 +360,12 @@ pub async fn post_cl(
     let ndjson = wants_ndjson(req.headers())?;
     let slot = req.extensions_mut().remove::<Arc<limits::StreamSlot>>();
     let (params, filename, body) = upload(&st, query, req).await?;
-    let profile = params.profile(&st)?.item;
-    let standing = super::tools::standing(&st, &profile.machine.id);
-    let mut opts = params
-        .settings()
-        .profile_options_with(&profile, standing, &|id| st.machines.dialect(id))
-        .map_err(ApiError::BadParameter)?;
+    let checked = params.profile(&st).and_then(|c| {
+        let standing = super::tools::standing(&st, &c.id);
+        let opts = params.settings().profile_options_with(&c.item, standing, &|id| st.machines.dialect(id));
+        Ok((c.item, opts.map_err(ApiError::BadParameter)?))
+    });
+    let ((profile, mut opts), body) = refuse_unread(checked, body).await?;
     opts.budget = st.config.post_budget;
     opts.header.push(format!("DATE {} UTC", crate::output::utc_now()));
     if let Some(f) = &filename {

@@ -242,7 +242,7 @@ def test_machines_and_dialects(client):
     toml = client.machine("vmc-3axis")
     assert 'id = "vmc-3axis"' in toml and "[[linear]]" in toml
     names = {d["name"] for d in client.dialects()}
-    assert names == {"fanuc", "haas", "siemens", "heidenhain", "linuxcnc"}
+    assert {"fanuc", "haas", "siemens", "heidenhain", "linuxcnc"} <= names
 
 
 def test_fk_and_ik_agree(client):
