@@ -81,6 +81,18 @@ pub enum Solid {
 }
 
 impl Solid {
+    /// The same solid with every length times `k` (CL units into the profile's).
+    pub fn scaled(&self, k: f64) -> Solid {
+        match *self {
+            Solid::Box { min, max } => Solid::Box { min: min * k, max: max * k },
+            Solid::Cylinder { from, to, radius } => Solid::Cylinder {
+                from: from * k,
+                to: to * k,
+                radius: radius * k,
+            },
+        }
+    }
+
     /// A box or cylinder of positive, finite size, or what is wrong with it.
     pub fn check(&self) -> Result<(), String> {
         let finite = |v: &Vec3| v.iter().all(|c| c.is_finite() && c.abs() <= crate::kinematics::MAX_COORD);

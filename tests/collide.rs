@@ -9,11 +9,18 @@ use kinepost::diag::{Code, Diagnostic, Severity};
 use kinepost::machines::{Profile, parse_profile};
 use kinepost::post::{self, Settings, Summary};
 
-fn shipped(id: &str) -> String {
+fn shipped_file(id: &str) -> String {
     std::fs::read_to_string(format!("{}/machines/{id}.toml", env!("CARGO_MANIFEST_DIR"))).unwrap()
 }
 
-/// A shipped profile's kinematics with `bodies` (TOML `[[body]]` entries) added.
+/// A shipped profile's text without its geometry (the file ends with it).
+fn shipped(id: &str) -> String {
+    let text = shipped_file(id);
+    let cut = text.find("\n# Geometry for the collision check").or_else(|| text.find("\n[[body]]"));
+    text[..cut.unwrap_or(text.len())].to_string()
+}
+
+/// A shipped profile's kinematics with `bodies` (TOML `[[body]]` entries) in place of its own.
 fn profile(id: &str, bodies: &str) -> Profile {
     parse_profile(&format!("{}\n{bodies}", shipped(id)), id, None).unwrap()
 }
@@ -323,3 +330,197 @@ fn bad_bodies_and_settings_are_refused_naming_the_key() {
     }
 }
 
+
+// The shipped profiles' own geometry (machines/*.toml).
+
+fn library() -> kinepost::machines::Library {
+    kinepost::machines::Library::load_dir(std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap()
+}
+
+fn shipped_profile(id: &str) -> Profile {
+    parse_profile(&shipped_file(id), id, None).unwrap()
+}
+
+fn assert_clean(c: &Collect, what: &str) {
+    let found: Vec<_> = c.diags.iter().filter(|d| matches!(d.code, Code::Collision | Code::NearCollision)).collect();
+    assert!(found.is_empty(), "{what}: {} collisions or near ones, first {:#?}", found.len(), &found[..found.len().min(3)]);
+}
+
+/// Every shipped profile carries its machine's bodies, and the generated paths (the tool leaning
+/// at most 55°, the tip above the table) post without a collision or a near one, joint and TCP.
+#[test]
+fn every_shipped_profile_has_geometry_and_its_generated_path_is_clear() {
+    for p in library().iter() {
+        let m = &p.machine;
+        assert!(p.geometry().bodies.len() >= 3, "{}: no geometry", m.id);
+        let n = if m.rotaries.len() == 3 { 150 } else { 600 };
+        let mut cl = Vec::new();
+        kinepost::testgen::write_path(m, n, 5, m.default_tool_length, &mut cl).unwrap();
+        let text = String::from_utf8(cl).unwrap();
+        for mode in ["joint", "tcp"] {
+            let s = Settings { mode: Some(mode.into()), ..Default::default() };
+            let (c, sum) = run(p, &text, s);
+            let sum = sum.unwrap();
+            assert_clean(&c, &format!("{} {mode}", m.id));
+            assert_eq!(sum.errors, 0, "{} {mode}: {:?}", m.id, sum.counts);
+        }
+    }
+}
+
+/// Where a profile has a rotary table, its top face is W's default origin: a plunge 1 mm (0.04 in)
+/// below z = 0 at the table's centre is the cutter in the table, 5 mm (0.2 in) above is clear.
+/// The exceptions turn the part about a horizontal axis through the origin: no table top there.
+#[test]
+fn the_table_top_is_w_origin_on_every_rotary_table_profile() {
+    let turning = ["htm50200-horizontal", "vmc-4axis-a"];
+    let mut checked = 0;
+    for p in library().iter() {
+        let m = &p.machine;
+        if !m.rotaries.iter().any(|r| r.mount == kinepost::kinematics::Mount::Table) || turning.contains(&m.id.as_str()) {
+            continue;
+        }
+        let (units, k) = if m.units == kinepost::kinematics::Units::Mm { ("MM", 1.0) } else { ("INCHES", 0.04) };
+        let len = m.default_tool_length;
+        let (text, lines) = cl(units, len, &[(true, at([0.0, 0.0, 100.0 * k], UP)), (false, at([0.0, 0.0, 5.0 * k], UP)), (false, at([0.0, 0.0, -k], UP))]);
+        let (c, s) = run(p, &text, Settings::default());
+        s.unwrap();
+        let hit = |l: u32| hits(&c, Code::Collision).into_iter().filter(move |d| d.line == Some(l)).collect::<Vec<_>>();
+        assert!(hit(lines[1]).is_empty(), "{}: 5 above the table top {:#?}", m.id, hit(lines[1]));
+        let below = hit(lines[2]);
+        assert!(
+            below.iter().any(|d| d.message.starts_with("cutter and table") || d.message.starts_with("cutter and platter")),
+            "{}: 1 below the table top {below:#?}",
+            m.id
+        );
+        checked += 1;
+    }
+    assert_eq!(checked, 7, "the rotary-table profiles checked");
+}
+
+/// Crashes per machine kind on the shipped geometry, each found at its block naming the bodies.
+#[test]
+fn the_shipped_geometry_catches_each_kinds_crash() {
+    let side = [-1.0, 0.0, 0.0];
+    let cases: [(&str, &str, f64, Vec<(bool, [f64; 6])>, &str, &str); 5] = [
+        // Head-table: the swivel head swung level, 30 mm above the table.
+        ("dmg-dmc75v", "MM", 100.0, vec![(true, at([0.0, 0.0, 300.0], UP)), (true, at([0.0, 0.0, 300.0], side)), (false, at([0.0, 0.0, 30.0], side))], "b head", "table"),
+        // Head-head: the tool plunged into the fixed table (its top at z = -18 in).
+        ("fryer-5x-45", "INCHES", 3.0, vec![(true, at([0.0, 0.0, -10.0], UP)), (false, at([0.0, 0.0, -18.5], UP))], "cutter", "table"),
+        // Table-table: the holder into the table tilted 85°.
+        ("spinner-u5-620", "MM", 100.0, vec![(true, at([0.0, 0.0, 100.0], tilted(85.0))), (false, at([0.0, 0.0, 6.0], tilted(85.0)))], "holder", "table"),
+        // A 4th axis: the tool into its faceplate.
+        ("vmc-4axis-a", "MM", 100.0, vec![(true, at([-315.0, 0.0, 200.0], UP)), (false, at([-315.0, 0.0, 50.0], UP))], "cutter", "faceplate"),
+        // The turning axis: the tool into the faceplate at X's end.
+        ("htm50200-horizontal", "MM", 100.0, vec![(true, at([-1900.0, -1600.0, 50.0], UP)), (false, at([-2000.0, -1600.0, -100.0], UP))], "cutter", "faceplate"),
+    ];
+    for (id, units, len, pts, a, b) in cases {
+        let p = shipped_profile(id);
+        let (text, lines) = cl(units, len, &pts);
+        let (c, s) = run(&p, &text, Settings::default());
+        s.unwrap();
+        assert!(!hits(&c, Code::Collision).iter().any(|d| d.line == Some(lines[0])), "{id}: the start collides");
+        assert_hit(&c, *lines.last().unwrap(), a, b);
+    }
+}
+
+/// The cutter is the CL's where the tool table says nothing: `TLDATA/MILL,50,…` is a Ø50 cutter,
+/// which touches a fixture the default Ø10 passes 10 mm from.
+#[test]
+fn the_cutter_is_the_cls_tldata() {
+    let p = shipped_profile("spinner-u5-620");
+    let base = "PARTNO/T\nUNITS/MM\nLOADTL/1,LENGTH,100\nSPINDL/6000,RPM,CLW\nFEDRAT/500,MMPM\nRAPID\nGOTO/0,0,100,0,0,1\nGOTO/0,0,20,0,0,1\nSPINDL/OFF\nFINI\n";
+    let fixture = Settings { fixtures: Some("10,-50,0,60,50,50".into()), ..Default::default() };
+    let (c, s) = run(&p, base, fixture.clone());
+    s.unwrap();
+    assert!(hits(&c, Code::Collision).is_empty(), "the default Ø10 cutter: {:#?}", hits(&c, Code::Collision));
+    let wide = base.replace("LOADTL/1,LENGTH,100\n", "TLDATA/MILL,50.0000,5.0000,100.0000,0.0000,0.0000\nLOADTL/1,LENGTH,100\n");
+    let (c, s) = run(&p, &wide, fixture);
+    s.unwrap();
+    assert!(hits(&c, Code::Collision).iter().any(|d| d.message.starts_with("cutter and fixture")), "{:#?}", c.diags);
+}
+
+/// The stock is in the CL's units: a CL in inches on a mm machine gives its stock in inches.
+#[test]
+fn the_stock_is_in_the_cls_units() {
+    let p = shipped_profile("spinner-u5-620");
+    let text = "PARTNO/T\nUNITS/INCHES\nLOADTL/1,LENGTH,4\nSPINDL/6000,RPM,CLW\nFEDRAT/20,IPM\nRAPID\nGOTO/0,0,4,0,0,1\nRAPID\nGOTO/0,0,1,0,0,1\nSPINDL/OFF\nFINI\n";
+    let stock = |s: &str| Settings { stock: Some(s.into()), ..Default::default() };
+    // 2 in high: the rapid to 1 in is inside it; read as mm it would be 2 mm high and clear.
+    let (c, s) = run(&p, text, stock("-2,-2,0,2,2,2"));
+    s.unwrap();
+    assert!(hits(&c, Code::Collision).iter().any(|d| d.message.starts_with("cutter and stock")), "{:#?}", c.diags);
+    let (c, s) = run(&p, text, stock("-2,-2,0,2,2,0.5"));
+    s.unwrap();
+    assert!(hits(&c, Code::Collision).is_empty(), "{:#?}", hits(&c, Code::Collision));
+}
+
+/// The corpus files with a stock that fits them (their feed moves' extent, up to below their
+/// lowest rapid) post on shipped machines without a collision or a near one. Each sits where a
+/// shop would set it: the Creo files cut below their z = 0 (the part's top), so their stock
+/// reaches down to the table 30 mm below; NX's project2 lays the tool flat 0.5 in above its z = 0,
+/// so the inch parts stand on a 3 in riser (no stock below their z = 0); its holder, flat, passes
+/// within the box of its own feed moves (it cuts walls from the side), so no box is its stock.
+#[test]
+fn the_corpus_with_fitting_stock_is_clear() {
+    // (file, machine, work offset's z: the part's z = 0 above the table top, the stock's floor)
+    let cases = [
+        ("nx_clsf_mech491_variable_axis_inch_5ax.cls", "haas-umc750", 3.0, 0.0),
+        ("nx_clsf_mech491_contour_chamfer_inch_5ax.cls", "haas-umc750", 3.0, 0.0),
+        ("nx_clsf_mech491_project2_inch_5ax.cls", "haas-umc750", 3.0, 0.0),
+        ("nx_clsf_mech491_simple_mill_plane_mm.cls", "spinner-u5-620", 0.0, 0.0),
+        ("nx_clsf_mech491_simple_mill_plane_zig_mm.cls", "mikron-ucp710", 0.0, 0.0),
+        ("creo8_ncl_schruppen_roughing_mm.ncl", "spinner-u5-620", 30.0, -30.0),
+        ("creo8_ncl_profilfraesen_profile_mm.ncl", "dmg-dmc75v", 30.0, -30.0),
+        ("creo8_ncl_bohren_drill_mm.ncl", "vmc-3axis", 30.0, -30.0),
+    ];
+    for (file, id, lift, floor) in cases {
+        let text = std::fs::read_to_string(format!("{}/tests/data/{file}", env!("CARGO_MANIFEST_DIR"))).unwrap();
+        let stock = if file.contains("project2") { String::new() } else { fitting_stock(&text, floor) };
+        let p = shipped_profile(id);
+        // The 3-axis machine's table top is at z = -150: the part sits on it.
+        let table = if id == "vmc-3axis" { -150.0 } else { 0.0 };
+        for mode in ["joint", "tcp"] {
+            if mode == "tcp" && p.machine.rotaries.is_empty() {
+                continue;
+            }
+            let s = Settings {
+                mode: Some(mode.into()),
+                stock: Some(stock.clone()),
+                work_offset: Some(format!("0,0,{}", table + lift)),
+                ..Default::default()
+            };
+            let (c, sum) = run(&p, &text, s);
+            sum.unwrap_or_else(|e| panic!("{file} on {id} {mode}: {e}"));
+            assert_clean(&c, &format!("{file} on {id} {mode} with stock {stock}"));
+        }
+    }
+}
+
+/// The box of a CL's feed moves, from `floor` (the table top, in the CL's frame) up to just below
+/// its lowest rapid point, as `x0,y0,z0,x1,y1,z1`.
+fn fitting_stock(text: &str, floor: f64) -> String {
+    let (mut lo, mut hi, mut rapid_low, mut rapid) = ([f64::MAX; 3], [f64::MIN; 3], f64::MAX, false);
+    for line in text.lines() {
+        let l = line.trim().to_ascii_uppercase().replace(' ', "");
+        if l.starts_with("RAPID") {
+            rapid = true;
+        } else if let Some(rest) = l.strip_prefix("GOTO/") {
+            let v: Vec<f64> = rest.split(',').take(3).filter_map(|s| s.parse().ok()).collect();
+            if v.len() == 3 {
+                if rapid {
+                    rapid_low = rapid_low.min(v[2]);
+                } else {
+                    for i in 0..3 {
+                        lo[i] = lo[i].min(v[i]);
+                        hi[i] = hi[i].max(v[i]);
+                    }
+                }
+            }
+            rapid = false;
+        }
+    }
+    let top = (rapid_low - 0.5).min(hi[2]).max(floor + 0.5);
+    // A drilled row has no width: the stock is a little wider than the holes' centres.
+    let pad = |i: usize| 0.02 * (hi[i] - lo[i]) + 0.01;
+    format!("{},{},{floor},{},{},{top}", lo[0] - pad(0), lo[1] - pad(1), hi[0] + pad(0), hi[1] + pad(1))
+}

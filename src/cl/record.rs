@@ -104,6 +104,8 @@ pub enum Record {
     },
     ToolData {
         diameter: Option<f64>,
+        /// The cutter's corner radius (`TLDATA/MILL,d,r,…`, `CUTTER/d,r`).
+        corner_radius: Option<f64>,
         length: Option<f64>,
         /// `TURN` (a lathe tool: its diameter is no cutting diameter) or `MILL`/`DRILL` in
         /// `TLDATA`/`TOOLNO`; `None` where the record does not say (CUTTER).
@@ -572,6 +574,7 @@ fn tool_data(st: &Stmt) -> Record {
             let turning = tool_kind(args);
             Record::ToolData {
                 diameter: nums.first().copied().filter(|_| turning != Some(true)),
+                corner_radius: nums.get(1).copied().filter(|_| turning != Some(true)),
                 length: nums.get(2).copied().filter(|l| *l > 0.0 && turning != Some(true)),
                 turning,
             }
@@ -580,17 +583,20 @@ fn tool_data(st: &Stmt) -> Record {
         // CATIA's lathe output says of its tools.
         "TURRET" => Record::ToolData {
             diameter: None,
+            corner_radius: None,
             length: None,
             turning: Some(true),
         },
         // TOOLNO/number,TURN,… (CATIA): only what kind of tool it is.
         "TOOLNO" => Record::ToolData {
             diameter: None,
+            corner_radius: None,
             length: None,
             turning: tool_kind(args),
         },
         _ => Record::ToolData {
             diameter: args.first().and_then(|a| num(a.text)),
+            corner_radius: args.get(1).and_then(|a| num(a.text)),
             length: None,
             turning: None,
         },

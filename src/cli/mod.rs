@@ -352,7 +352,7 @@ pub struct PostArgs {
     /// Bodies closer than this (profile units; default 2 mm / 0.08 in) are a near_collision.
     #[arg(long)]
     pub collision_clearance: Option<f64>,
-    /// The stock: a box x0,y0,z0,x1,y1,z1 in the CL's frame (profile units).
+    /// The stock: a box x0,y0,z0,x1,y1,z1 in the CL's frame and units.
     #[arg(long, allow_hyphen_values = true)]
     pub stock: Option<String>,
     /// Fixtures: boxes as the stock's, separated by ';'.

@@ -96,7 +96,7 @@ pub struct PostParams {
     pub collisions: Option<String>,
     /// Bodies closer than this (profile units; default 2 mm / 0.08 in): `near_collision`.
     pub collision_clearance: Option<f64>,
-    /// The stock: a box `x0,y0,z0,x1,y1,z1` in the CL's frame (profile units).
+    /// The stock: a box `x0,y0,z0,x1,y1,z1` in the CL's frame and units.
     pub stock: Option<String>,
     /// Fixtures: boxes as the stock's, separated by `;`.
     pub fixtures: Option<String>,

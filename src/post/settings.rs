@@ -86,7 +86,7 @@ pub struct Options {
     pub geometry: Option<Arc<crate::collide::Geometry>>,
     /// Bodies closer than this (profile units) are a `near_collision` warning.
     pub collision_clearance: f64,
-    /// The job's stock and fixtures: boxes in W (the CL's frame), profile units.
+    /// The job's stock and fixtures: boxes in W (the CL's frame), the CL's units.
     pub stock: Vec<crate::collide::Solid>,
     pub fixtures: Vec<crate::collide::Solid>,
 }
@@ -281,7 +281,7 @@ pub struct Settings {
     /// Bodies closer than this (profile units; default 2 mm / 0.08 in) are a `near_collision`.
     #[serde(default)]
     pub collision_clearance: Option<f64>,
-    /// The stock, a box `x0,y0,z0,x1,y1,z1` in the CL's frame (profile units).
+    /// The stock, a box `x0,y0,z0,x1,y1,z1` in the CL's frame and units.
     #[serde(default)]
     pub stock: Option<String>,
     /// Fixtures: boxes as the stock's, separated by `;`.

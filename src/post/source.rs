@@ -85,6 +85,12 @@ pub enum ProgEvent {
         adjust: Option<u32>,
         line: u32,
     },
+    /// The cutter the CL describes (`TLDATA`, `CUTTER`): diameter and corner radius, profile
+    /// units; the collision check's tool where the tool table does not say.
+    Cutter {
+        diameter: f64,
+        corner_radius: f64,
+    },
     /// A tool length the CL gives (profile units), at `line`.
     ToolLength {
         length: f64,
@@ -573,6 +579,7 @@ impl<R: BufRead> Source<R> {
             }
             Record::ToolData {
                 diameter,
+                corner_radius,
                 length,
                 turning,
             } => {
@@ -581,6 +588,11 @@ impl<R: BufRead> Source<R> {
                 }
                 if let Some(d) = diameter.filter(|d| d.is_finite() && *d > 0.0) {
                     self.diameter_mm = Some(d * self.cl_units.factor_to(Units::Mm));
+                    let r = corner_radius.filter(|r| r.is_finite() && *r >= 0.0 && *r <= d / 2.0).unwrap_or(0.0);
+                    self.out.push_back(Item::Event(ProgEvent::Cutter {
+                        diameter: d * self.scale,
+                        corner_radius: r * self.scale,
+                    }));
                 }
                 self.tool_length(length, line);
             }

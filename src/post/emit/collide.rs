@@ -46,10 +46,13 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
     }
 
     /// The tool in the spindle: the tool table's diameter, corner radius and holder where it
-    /// gives them, else the defaults; the length in force.
+    /// gives them, else the cutter the CL describes, else the defaults; the length in force.
     fn tool_shape(&self) -> ToolShape {
         let mm = self.m.units == Units::Mm;
         let mut s = ToolShape::default_for(self.setup.tool_length, mm);
+        if let Some((d, r)) = self.cl_cutter {
+            (s.diameter, s.corner_radius) = (d, r);
+        }
         let Some(table) = self.o.tool_table.as_ref() else { return s };
         let Some(t) = self.tool.and_then(|n| table.get(n)) else { return s };
         let k = table.units.factor_to(self.m.units);

@@ -83,6 +83,8 @@ pub(super) struct Emitter<'a, S: Sink + ?Sized> {
     /// Where the tool length in force came from.
     pub(super) length_from: crate::post::tools::LengthFrom,
     pub(super) tool: Option<u32>,
+    /// The cutter the CL last described (diameter, corner radius; profile units).
+    pub(super) cl_cutter: Option<(f64, f64)>,
     /// The tool `SELCTL` readied, and the CL's operation in progress: what templates see.
     pub(super) next_tool: Option<u32>,
     pub(super) operation: Option<String>,
@@ -203,6 +205,7 @@ impl<'a, S: Sink + ?Sized> Emitter<'a, S> {
             first_move_due: true,
             operation: None,
             tool: None,
+            cl_cutter: None,
             adjust: None,
             comp_on: false,
             rpm: None,
@@ -265,7 +268,10 @@ impl<'a, S: Sink + ?Sized> Emitter<'a, S> {
             clamp_run: false,
             cutcom: cutcom::State::new(src.stated_path()),
             world: o.geometry.as_ref().map(|g| {
-                crate::collide::World::new(g, &o.stock, &o.fixtures, o.collision_clearance, o.tolerance.max(1e-3))
+                // The job gives stock and fixtures in the CL's units, known once the reader has
+                // looked ahead.
+                let k = |v: &[crate::collide::Solid]| v.iter().map(|s| s.scaled(src.scale)).collect::<Vec<_>>();
+                crate::collide::World::new(g, &k(&o.stock), &k(&o.fixtures), o.collision_clearance, o.tolerance.max(1e-3))
             }),
         }
     }

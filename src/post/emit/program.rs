@@ -125,12 +125,18 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
     pub(in crate::post) fn event(&mut self, ev: ProgEvent) -> Result<(), Error> {
         if !matches!(
             ev,
-            ProgEvent::Comment(_) | ProgEvent::Operation(_) | ProgEvent::Diag(_) | ProgEvent::End | ProgEvent::PathMeaning { .. }
+            ProgEvent::Comment(_)
+                | ProgEvent::Operation(_)
+                | ProgEvent::Diag(_)
+                | ProgEvent::End
+                | ProgEvent::PathMeaning { .. }
+                | ProgEvent::Cutter { .. }
         ) {
             self.cancel_cycle()?;
         }
         match ev {
             ProgEvent::Tool { number, adjust, line } => self.tool_change(number, adjust, line)?,
+            ProgEvent::Cutter { diameter, corner_radius } => self.cl_cutter = Some((diameter, corner_radius)),
             ProgEvent::ToolLength { length: l, .. } => {
                 // Only when the job fixed the length (else `tool_length`, before planning).
                 if (l - self.setup.tool_length).abs() > self.f.fmt.half_linear() {
