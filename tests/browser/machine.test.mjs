@@ -8,7 +8,7 @@
 // (KINEPOST_URL) with an admin token (KINEPOST_ADMIN_TOKEN, default ci-fuzz: profiles with bodies
 // are written over the API where the shipped ones have none) and Debian's chromium.
 import { chromium } from 'playwright-core';
-import { mkdirSync } from 'node:fs';
+import { mkdirSync, readFileSync } from 'node:fs';
 import { fileURLToPath } from 'node:url';
 import path from 'node:path';
 
@@ -180,6 +180,25 @@ try {
     const red = await page.evaluate(() => /touching/.test(document.getElementById('sim-where').textContent));
     check(st3.n === hit.n && red, `${k.kind}: the machine stands at block ${hit.n}, the bodies touching in red`);
     await page.locator('#machine3d').screenshot({ path: path.join(shots, `machine-${k.kind}-collision.png`) });
+  }
+
+  // A profile without bodies: a schematic moves with the slider, and the page says so.
+  const haas = await (await fetch(`${base}/v1/machines/haas-umc750`)).json();
+  if (!haas.bodies.length) {
+    const text = readFileSync(path.join(here, '..', 'data', 'nx_clsf_mech491_variable_axis_inch_5ax.cls'), 'utf8');
+    const j = await job('haas-umc750', text, '&mode=tcp');
+    await page.goto(`${base}/?job=${j.id}`);
+    await page.waitForFunction(() => window.kinepostSim && window.kinepostSim.state(), null, { timeout: 60000 });
+    await page.locator('#machine3d').scrollIntoViewIfNeeded();
+    const a = await machinePixels(page);
+    await slide(page, '#sim-slider', Math.floor((await page.evaluate(() => window.kinepostSim.frames.length)) / 2));
+    const b = await machinePixels(page);
+    const note = await page.textContent('#machine-note');
+    const st = await page.evaluate(() => window.kinepostSim.state());
+    check(st.schematic && /schematic/.test(note) && a.sig !== b.sig && b.n > 3000, `haas-umc750 (no bodies, TCP): a schematic moves with the slider, the page says so (${note.slice(0, 70)}…)`);
+    await page.locator('#machine3d').screenshot({ path: path.join(shots, 'machine-schematic.png') });
+  } else {
+    check(true, 'haas-umc750 has bodies now: no schematic to show');
   }
 
   // Play runs the program; pause stops it.

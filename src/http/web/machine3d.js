@@ -133,7 +133,7 @@ export function stage(el, scene, frame) {
   const centre = frame.getCenter(new THREE.Vector3());
   const camera = new THREE.PerspectiveCamera(40, w / h, diag / 1000, diag * 100);
   camera.up.set(0, 0, 1);
-  camera.position.copy(centre).add(new THREE.Vector3(1.0, -1.5, 0.8).multiplyScalar(diag * 0.9));
+  camera.position.copy(centre).add(new THREE.Vector3(1.0, -1.5, 0.8).multiplyScalar(diag * 0.6));
   const controls = new OrbitControls(camera, renderer.domElement);
   controls.target.copy(centre);
   controls.screenSpacePanning = true;
