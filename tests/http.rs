@@ -632,6 +632,10 @@ async fn busy_cors_gzip_and_the_web_page() {
     urls.extend(
         [
             "/static/view.js",
+            "/static/kin.js",
+            "/static/machine3d.js",
+            "/static/simulate.js",
+            "/static/check.js",
             "/static/vendor/three/three.core.js",
             "/static/vendor/three/LICENSE",
         ]
@@ -649,6 +653,13 @@ async fn busy_cors_gzip_and_the_web_page() {
         );
     }
     assert!(!html.contains("http://") && !html.contains("https://"));
+    // The machine check page, linked from the form, loads the same modules.
+    assert!(html.contains("/machine-check.html"));
+    let check = c.get(format!("{base}/machine-check.html")).send().await.unwrap();
+    assert!(check.headers()["content-type"].to_str().unwrap().starts_with("text/html"));
+    let check = check.text().await.unwrap();
+    assert!(check.contains("/static/check.js") && check.contains(r#"<script type="importmap">"#));
+    assert!(!check.contains("http://") && !check.contains("https://"));
     assert_eq!(
         c.get(format!("{base}/static/secret.toml")).send().await.unwrap().status(),
         404

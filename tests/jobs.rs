@@ -363,6 +363,95 @@ async fn a_preview_draws_the_decimated_path_its_joints_and_every_warning() {
     );
 }
 
+/// A profile with bodies (tests/collide.rs's Spinner), alone in a library directory.
+fn library_with_bodies(name: &str) -> std::path::PathBuf {
+    let dir = std::env::temp_dir().join(format!("kinepost-jobs-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let toml = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/machines/spinner-u5-620.toml")).unwrap();
+    let toml = if toml.contains("[[body]]") {
+        toml
+    } else {
+        toml + r#"
+[[body]]
+name = "table"
+on = "C"
+cylinder = { from = [0.0, 0.0, -60.0], to = [0.0, 0.0, 0.0], radius = 300.0 }
+[[body]]
+name = "cradle"
+on = "B"
+box = [-320.0, -340.0, -160.0, 320.0, 340.0, -80.0]
+[[body]]
+name = "spindle housing"
+on = "spindle"
+cylinder = { from = [0.0, 0.0, 5.0], to = [0.0, 0.0, 300.0], radius = 90.0 }
+"#
+    };
+    std::fs::write(dir.join("spinner-u5-620.toml"), toml).unwrap();
+    dir
+}
+
+/// The preview carries what the page needs to run the program on the machine: the chain, the
+/// bodies, the tool, the stock, and the bodies each collision names.
+#[tokio::test]
+async fn a_preview_carries_the_machine_the_tool_the_stock_and_each_collisions_bodies() {
+    let mut cfg = common::cfg();
+    cfg.machines = library_with_bodies("scene");
+    let base = common::server(cfg).await;
+    let c = reqwest::Client::new();
+    // tests/collide.rs's crash: the tool plunged into the table (line 9), the holder into the
+    // table tilted 85° (line 13).
+    let cl = "PARTNO/COLLIDE\nUNITS/MM\nLOADTL/1,LENGTH,100\nSPINDL/6000,RPM,CLW\nFEDRAT/500,MMPM\nRAPID\nGOTO/0,0,100,0,0,1\nGOTO/0,0,20,0,0,1\nGOTO/0,0,-5,0,0,1\nRAPID\nGOTO/0,0,100,0,0,1\nRAPID\nGOTO/0,0,100,0.996195,0,0.087156\nGOTO/0,0,6,0.996195,0,0.087156\nSPINDL/OFF\nFINI\n";
+    let r = c
+        .post(format!("{base}/v1/jobs?machine=spinner-u5-620&stock=-50,-50,0,50,50,40&work_offset=1,2,-3"))
+        .body(cl)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 202);
+    let id = r.json::<Value>().await.unwrap()["id"].as_str().unwrap().to_string();
+    common::wait_job(&c, &base, &id, "succeeded", Duration::from_secs(60)).await;
+    let p: Value = common::get_json(&c, &format!("{base}/v1/jobs/{id}/preview")).await;
+    let m = &p["machine"];
+    assert_eq!(m["id"], "spinner-u5-620");
+    assert_eq!(m["kinematics"], "table-table");
+    let rot: Vec<&str> = m["rotary"].as_array().unwrap().iter().map(|r| r["name"].as_str().unwrap()).collect();
+    assert_eq!(rot, ["B", "C"]);
+    for r in m["rotary"].as_array().unwrap() {
+        assert_eq!(r["on"], "table");
+        let a: Vec<f64> = r["axis"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
+        assert!((a.iter().map(|v| v * v).sum::<f64>() - 1.0).abs() < 1e-12, "a unit axis: {a:?}");
+    }
+    let bodies = m["bodies"].as_array().unwrap();
+    let table = bodies.iter().find(|b| b["name"] == "table").expect("the table body");
+    assert_eq!(table["on"], "C");
+    assert_eq!(table["cylinder"]["radius"], 300.0);
+    assert!(bodies.iter().any(|b| b["on"] == "B" && b["box"].is_array()));
+    assert_eq!(p["work_offset"], serde_json::json!([1.0, 2.0, -3.0]));
+    assert_eq!(p["stock"], serde_json::json!([[-50.0, -50.0, 0.0, 50.0, 50.0, 40.0]]));
+    let tools = p["tools"].as_array().unwrap();
+    assert_eq!(tools.len(), 1, "{tools:?}");
+    assert_eq!(tools[0]["n"], 1);
+    assert_eq!(tools[0]["length"], 100.0);
+    assert_eq!(tools[0]["diameter"], 10.0, "the default cutter");
+    assert_eq!(tools[0]["holder_diameter"], 40.0);
+    // Each collision's mark names its bodies and depth, at the CL line the crash is on.
+    let marks = p["marks"].as_array().unwrap();
+    let contact = |line: u64, a: &str, b: &str| {
+        marks.iter().any(|mk| {
+            mk["line"] == line
+                && mk["contacts"].as_array().is_some_and(|cs| {
+                    cs.iter().any(|c| c["code"] == "collision" && c["a"] == a && c["b"] == b && c["depth"].as_f64().unwrap() > 0.0)
+                })
+        })
+    };
+    assert!(contact(9, "cutter", "table"), "{marks:#?}");
+    assert!(contact(14, "holder", "table"), "{marks:#?}");
+    // The machine list carries the bodies too, in the same form.
+    let list: Value = common::get_json(&c, &format!("{base}/v1/machines/spinner-u5-620")).await;
+    assert_eq!(list["bodies"], m["bodies"]);
+}
+
 #[tokio::test]
 async fn finished_jobs_expire_with_their_files() {
     let mut cfg = common::cfg();

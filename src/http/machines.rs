@@ -28,6 +28,9 @@ pub struct MachineDto {
     pub linear: Vec<LinearDto>,
     pub rotary: Vec<RotaryDto>,
     pub default_tool_length: f64,
+    /// The machine's bodies (`[[body]]`), each on its link, at home: what the collision check
+    /// and the machine view use. Empty where the profile gives none.
+    pub bodies: Vec<crate::output::model::ModelBody>,
     /// This profile's version: each write over the API makes a new one (`…/versions`).
     pub version: i64,
     /// `file` (the library directory) or `api`.
@@ -112,6 +115,7 @@ impl From<&Current> for MachineDto {
                 })
                 .collect(),
             default_tool_length: p.machine.default_tool_length,
+            bodies: crate::output::model::bodies(&p.machine, &p.geometry()),
         }
     }
 }

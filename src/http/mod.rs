@@ -256,6 +256,7 @@ pub fn app(state: Arc<AppState>) -> axum::Router {
             get(|| async { ([(header::CONTENT_TYPE, "application/json")], openapi_json()) }),
         )
         .route("/", get(|| async { static_file("index.html") }))
+        .route("/machine-check.html", get(|| async { static_file("machine-check.html") }))
         .route("/static/{file}", get(|Path(f): Path<String>| async move { static_file(&f) }))
         .route(
             "/static/vendor/three/{file}",
@@ -334,6 +335,11 @@ fn static_file(name: &str) -> Response {
         "style.css" => (include_str!("web/style.css"), "text/css; charset=utf-8"),
         "view.js" => (include_str!("web/view.js"), "text/javascript; charset=utf-8"),
         "ncview.js" => (include_str!("web/ncview.js"), "text/javascript; charset=utf-8"),
+        "kin.js" => (include_str!("web/kin.js"), "text/javascript; charset=utf-8"),
+        "machine3d.js" => (include_str!("web/machine3d.js"), "text/javascript; charset=utf-8"),
+        "simulate.js" => (include_str!("web/simulate.js"), "text/javascript; charset=utf-8"),
+        "check.js" => (include_str!("web/check.js"), "text/javascript; charset=utf-8"),
+        "machine-check.html" => (include_str!("web/machine-check.html"), "text/html; charset=utf-8"),
         _ => return (StatusCode::NOT_FOUND, "not found").into_response(),
     };
     ([(header::CONTENT_TYPE, ctype), (header::CACHE_CONTROL, "no-cache")], body).into_response()

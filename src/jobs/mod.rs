@@ -386,6 +386,9 @@ impl Sink for JobSink<'_> {
     fn summary(&mut self, s: &Summary) -> std::io::Result<()> {
         self.files.summary(s)
     }
+    fn tool(&mut self, first_block: u64, t: &crate::collide::ToolShape) {
+        self.preview.tool(first_block, t)
+    }
 }
 
 /// One job on a blocking thread: spool input → `.tmp` outputs, fsynced. The error is the
@@ -430,7 +433,13 @@ fn execute(
     let mut sink = JobSink {
         files: FileSink::new(nc, Some(nd)),
         lines: LineMap::new(lines),
-        preview: PreviewBuilder::new(&profile.machine, opts.mode, Caps::default()),
+        preview: PreviewBuilder::new(&profile.machine, opts.mode, Caps::default()).with_scene(
+            &profile.machine,
+            &profile.geometry(),
+            opts.work_offset.into(),
+            &opts.stock,
+            &opts.fixtures,
+        ),
         progress,
         cancel,
     };

@@ -4,6 +4,7 @@
 //! The engine knows none of it: it pushes blocks into a [`crate::post::Sink`].
 
 pub mod linemap;
+pub mod model;
 pub mod ndjson;
 pub mod preview;
 

@@ -2,6 +2,8 @@
 //! block that deserves a look. Built block by block beside the NC (memory bounded by its caps, not
 //! by the program), finished with one pass over the CL source to quote the lines it points at.
 
+use super::model::{MachineModel, solid};
+use crate::collide::{Geometry, Solid, ToolShape};
 use crate::diag::{Code, Diagnostic, Severity};
 use crate::kinematics::{Machine, Pose};
 use crate::post::{BlockInfo, Mode, Summary};
@@ -63,6 +65,35 @@ pub struct Mark {
     pub cl: Option<String>,
     #[schema(value_type = Vec<Object>)]
     pub diagnostics: Vec<Diagnostic>,
+    /// The bodies its `collision` and `near_collision` diagnostics name, and how deep or close.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub contacts: Vec<Contact>,
+}
+
+/// Two bodies that overlap (`collision`: `depth`) or come closer than the clearance
+/// (`near_collision`: `distance`) at a block or on the way to it (profile units).
+#[derive(Clone, Debug, Serialize, utoipa::ToSchema)]
+pub struct Contact {
+    /// `collision` or `near_collision`.
+    pub code: String,
+    pub a: String,
+    pub b: String,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub depth: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub distance: Option<f64>,
+}
+
+/// The tool in the spindle from block `n` on: the length in force, the cutter and the holder as
+/// the collision check sees them (profile units).
+#[derive(Clone, Debug, Serialize, utoipa::ToSchema)]
+pub struct PreviewTool {
+    pub n: u64,
+    pub length: f64,
+    pub diameter: f64,
+    pub corner_radius: f64,
+    pub holder_diameter: f64,
+    pub holder_length: f64,
 }
 
 /// A warning not attached to a block (the reader's, an unreachable pose's), with its CL line and,
@@ -78,7 +109,8 @@ pub struct Note {
 
 #[derive(Clone, Debug, Serialize, utoipa::ToSchema)]
 pub struct Preview {
-    pub machine: String,
+    /// The machine: its chain (each link's pose from the joints, as FK computes it) and bodies.
+    pub machine: MachineModel,
     #[schema(value_type = String, example = "joint")]
     pub mode: Mode,
     pub units: &'static str,
@@ -94,6 +126,13 @@ pub struct Preview {
     pub notes: Vec<Note>,
     pub notes_dropped: u64,
     pub cycle_time_s: f64,
+    /// The work offset of the post (W's origin in M at home, profile units).
+    pub work_offset: [f64; 3],
+    /// The job's stock and fixtures: boxes `[x0, y0, z0, x1, y1, z1]` in W (profile units).
+    pub stock: Vec<[f64; 6]>,
+    pub fixtures: Vec<[f64; 6]>,
+    /// Each tool as it comes into the spindle (at most 1000).
+    pub tools: Vec<PreviewTool>,
 }
 
 /// What a block leaves for the preview before it is known whether it is kept.
@@ -119,7 +158,11 @@ pub struct PreviewBuilder {
     caps: Caps,
     /// (index into the 6 axis words, axis) in output order.
     axes: Vec<(usize, PreviewAxis)>,
-    machine: String,
+    machine: MachineModel,
+    work_offset: [f64; 3],
+    stock: Vec<[f64; 6]>,
+    fixtures: Vec<[f64; 6]>,
+    tools: Vec<PreviewTool>,
     mode: Mode,
     units: &'static str,
     seq: u64,
@@ -178,7 +221,11 @@ impl PreviewBuilder {
                 ..caps
             },
             axes,
-            machine: m.id.clone(),
+            machine: MachineModel::new(m, &Geometry::default()),
+            work_offset: [0.0; 3],
+            stock: Vec::new(),
+            fixtures: Vec::new(),
+            tools: Vec::new(),
             mode,
             units: match m.units {
                 crate::kinematics::Units::Mm => "mm",
@@ -196,6 +243,67 @@ impl PreviewBuilder {
             notes: Vec::new(),
             notes_dropped: 0,
         }
+    }
+
+    /// The scene the program runs in: the machine's bodies (drawn whether or not they are
+    /// checked), the work offset, the job's stock and fixtures.
+    pub fn with_scene(mut self, m: &Machine, g: &Geometry, work_offset: [f64; 3], stock: &[Solid], fixtures: &[Solid]) -> Self {
+        let boxes = |v: &[Solid]| v.iter().filter_map(|s| solid(s).0).collect();
+        self.machine = MachineModel::new(m, g);
+        self.work_offset = work_offset;
+        self.stock = boxes(stock);
+        self.fixtures = boxes(fixtures);
+        self
+    }
+
+    /// A tool comes into the spindle (or its length changes) from block `n` on.
+    pub fn tool(&mut self, n: u64, t: &ToolShape) {
+        if self.tools.len() >= 1000 {
+            return;
+        }
+        let tool = PreviewTool {
+            n,
+            length: t.length,
+            diameter: t.diameter,
+            corner_radius: t.corner_radius,
+            holder_diameter: t.holder_diameter,
+            holder_length: t.holder_length,
+        };
+        match self.tools.last_mut() {
+            Some(last) if last.n == n => *last = tool,
+            _ => self.tools.push(tool),
+        }
+    }
+
+    /// The bodies a `collision` or `near_collision` names ("a and b: overlap by 1.000 mm …"),
+    /// matched against the names the scene has.
+    fn contact(&self, d: &Diagnostic) -> Option<Contact> {
+        if !matches!(d.code, Code::Collision | Code::NearCollision) {
+            return None;
+        }
+        let mut names: Vec<String> = self.machine.bodies.iter().map(|b| b.name.clone()).collect();
+        names.extend(["stock", "holder", "cutter"].map(String::from));
+        names.extend((1..=self.fixtures.len()).map(|i| format!("fixture {i}")));
+        let msg = d.message.as_str();
+        for a in &names {
+            let Some(rest) = msg.strip_prefix(a.as_str()).and_then(|r| r.strip_prefix(" and ")) else { continue };
+            for b in &names {
+                let Some(what) = rest.strip_prefix(b.as_str()).and_then(|r| r.strip_prefix(": ")) else { continue };
+                let num = |s: &str| s.split_whitespace().next().and_then(|x| x.parse::<f64>().ok());
+                let (depth, distance) = match what.strip_prefix("overlap by ") {
+                    Some(x) => (num(x), None),
+                    None => (None, num(what)),
+                };
+                return Some(Contact {
+                    code: d.code.as_str().into(),
+                    a: a.clone(),
+                    b: b.clone(),
+                    depth,
+                    distance,
+                });
+            }
+        }
+        None
     }
 
     /// A block's point for display: rounded, words in the order of `axes`.
@@ -230,6 +338,7 @@ impl PreviewBuilder {
                     nc: nc.chars().take(300).collect(),
                     cl: None,
                     diagnostics: b.diagnostics.clone(),
+                    contacts: b.diagnostics.iter().filter_map(|d| self.contact(d)).collect(),
                 });
             } else {
                 self.marks_dropped += 1;
@@ -326,6 +435,10 @@ impl PreviewBuilder {
             notes,
             notes_dropped: self.notes_dropped,
             cycle_time_s: summary.map_or(r(self.t, 1e3), |s| s.cycle_time_s),
+            work_offset: self.work_offset,
+            stock: self.stock,
+            fixtures: self.fixtures,
+            tools: self.tools,
         }
     }
 }

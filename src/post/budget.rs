@@ -70,4 +70,7 @@ impl<S: Sink + ?Sized> Sink for Metered<'_, S> {
     fn summary(&mut self, s: &Summary) -> std::io::Result<()> {
         self.inner.summary(s)
     }
+    fn tool(&mut self, first_block: u64, t: &crate::collide::ToolShape) {
+        self.inner.tool(first_block, t)
+    }
 }

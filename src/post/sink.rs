@@ -57,6 +57,9 @@ pub trait Sink {
     fn summary(&mut self, _s: &Summary) -> std::io::Result<()> {
         Ok(())
     }
+    /// The tool in the spindle from motion block `first_block` on (its length in force, its
+    /// cutter and holder as the collision check sees them): what a preview draws.
+    fn tool(&mut self, _first_block: u64, _t: &crate::collide::ToolShape) {}
 }
 
 /// NC text to any writer, one line each.

@@ -3,10 +3,11 @@
 // A result opens by URL (/?job=ID), so a link to it can be passed around the shop floor.
 import { markers, plots, view3d } from './view.js';
 import { programView } from './ncview.js';
+import { machineView } from './simulate.js';
 
 const $ = (id) => document.getElementById(id);
 let machines = [];
-let shown = null; // { id, preview, list, view }
+let shown = null; // { id, preview, list, view, sim, plots }
 let token = 0; // the job on screen; a newer one stops the older's polling
 let program = null; // the program view (ncview.js) of the job on screen
 
@@ -54,7 +55,9 @@ function showSettings(s) {
 
 function showMachine() {
   const m = machines.find((x) => x.id === $('machine').value);
-  if (m) $('machine-info').textContent = `${m.kinematics}, ${m.units}, ${m.controller}; axes ${m.linear.map((l) => l.name).join('')}${m.rotary.map((r) => r.name).join('')}`;
+  if (m) $('machine-info').textContent = `${m.kinematics}, ${m.units}, ${m.controller}; axes ${m.linear.map((l) => l.name).join('')}${m.rotary.map((r) => r.name).join('')}` +
+    (m.bodies && m.bodies.length ? `; ${m.bodies.length} bodies` : '; no bodies (no collision check)');
+  $('machine-check').href = '/machine-check.html?machine=' + encodeURIComponent($('machine').value);
 }
 
 function setFile(f) {
@@ -157,6 +160,27 @@ async function showJob(id) {
   if (mine !== token) return;
   $('details').hidden = false;
   showPreview(id, preview);
+  // A preview written before it carried the machine names it by id: the profile's as it is now.
+  let model = preview.machine;
+  if (typeof model !== 'object' || !model) {
+    const m = await fetch('/v1/machines/' + encodeURIComponent(model || job.machine));
+    model = m.ok ? await m.json() : null;
+  }
+  if (mine !== token) return;
+  if (model) showMachineRun(preview, model);
+}
+
+/** The program on the machine (simulate.js), its slider linked to the plots' cursor. */
+function showMachineRun(p, model) {
+  if (shown.sim) shown.sim.dispose();
+  $('collision-info').hidden = true;
+  const ui = { view: $('machine3d'), play: $('sim-play'), slider: $('sim-slider'), speed: $('sim-speed'), where: $('sim-where'), note: $('machine-note'), info: $('collision-info') };
+  shown.sim = machineView(ui, p, model, (m) => {
+    const k = shown.list.findIndex((x) => x.n === m.n);
+    if (k >= 0) pick(shown.list[k]);
+  }, (n) => shown.plots && shown.plots.cursor(n));
+  if (shown.plots) shown.plots.cursor(shown.sim.frames.length ? shown.sim.frames[0].n : 0);
+  window.kinepostSim = shown.sim;
 }
 
 function closeProgram() {
@@ -182,8 +206,10 @@ async function openProgram(job, mine) {
 
 function showPreview(id, p) {
   if (shown && shown.view) shown.view.dispose();
+  if (shown && shown.sim) shown.sim.dispose();
+  window.kinepostSim = null;
   const list = markers(p);
-  shown = { id, preview: p, list, view: null };
+  shown = { id, preview: p, list, view: null, sim: null, plots: null };
   $('path-info').textContent = `${p.points.length} of ${p.blocks} blocks drawn` +
     (p.stride > 1 ? ` (every ${p.stride}th, plus rapid/feed changes and the ends)` : '') +
     `; ${p.marks.length + p.notes.length} marked` + (p.marks_dropped + p.notes_dropped ? `, ${p.marks_dropped + p.notes_dropped} more not shown (see the diagnostics)` : '');
@@ -212,7 +238,10 @@ function showPreview(id, p) {
 }
 
 function drawPlots() {
-  if (shown) plots($('plots'), shown.preview, shown.list, $('xaxis').value, pick);
+  if (!shown) return;
+  shown.plots = plots($('plots'), shown.preview, shown.list, $('xaxis').value, pick, (n) => shown.sim && shown.sim.seek(n, false));
+  const st = shown.sim && shown.sim.state();
+  if (st) shown.plots.cursor(st.n);
 }
 
 /** A marker picked (in the 3D view, a plot or the table): its block, CL line and diagnostics. */

@@ -188,12 +188,22 @@ export function view3d(el, p, list, onPick) {
 /**
  * One SVG chart per axis word in `el`: the value against block number (`x = 'n'`) or estimated
  * time (`x = 't'`), the profile's limits as red bands beyond them, unwinds and branch changes as
- * vertical lines, warnings as ticks at the top. `onPick(marker)` when a line or tick is clicked.
+ * vertical lines, warnings as ticks at the top. `onPick(marker)` when a line or tick is clicked;
+ * `onSeek(n)` when the chart is clicked elsewhere (the block nearest the click). Returns
+ * `{ cursor(n) }`: a vertical cursor at block `n` on every chart (the machine view's block).
  */
-export function plots(el, p, list, x, onPick) {
+export function plots(el, p, list, x, onPick, onSeek) {
   el.replaceChildren();
   const pts = p.points;
-  if (!pts.length) return;
+  const cursors = [];
+  const handle = {
+    cursor(n) {
+      if (!pts.length) return;
+      const xc = sx(x === 't' ? tOf(n) : n).toFixed(1);
+      for (const c of cursors) { c.setAttribute('x1', xc); c.setAttribute('x2', xc); c.setAttribute('visibility', 'visible'); c.dataset.n = n; }
+    },
+  };
+  if (!pts.length) return handle;
   // Drawn at the width it is shown at, so text stays its size on a phone (a 900-wide drawing
   // shrunk to 390 px made the labels 5 px).
   const W = Math.max(320, Math.round(el.clientWidth || 900));
@@ -260,8 +270,19 @@ export function plots(el, p, list, x, onPick) {
         ? node('line', { x1: xm, x2: xm, y1: 8, y2: H - 16, class: `mark ${kind}` }, svg)
         : node('line', { x1: xm, x2: xm, y1: 8, y2: 16, class: `mark ${kind}` }, svg);
       node('title', {}, e).textContent = `block ${m.n}: ${codes.join(', ')}`;
-      e.addEventListener('click', () => onPick(m));
+      e.addEventListener('click', (ev) => { ev.stopPropagation(); onPick(m); });
+    }
+    cursors.push(node('line', { x1: L, x2: L, y1: 4, y2: H - 16, class: 'cursor', visibility: 'hidden' }, svg));
+    if (onSeek) {
+      svg.addEventListener('click', (ev) => {
+        const r = svg.getBoundingClientRect();
+        const v = x0 + ((ev.clientX - r.left) / r.width * W - L) / (W - L - R) * (x1 - x0);
+        let best = 0;
+        xs.forEach((xv, i) => { if (Math.abs(xv - v) < Math.abs(xs[best] - v)) best = i; });
+        onSeek(pts[best].n);
+      });
     }
     el.appendChild(svg);
   });
+  return handle;
 }

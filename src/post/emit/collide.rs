@@ -47,7 +47,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
 
     /// The tool in the spindle: the tool table's diameter, corner radius and holder where it
     /// gives them, else the cutter the CL describes, else the defaults; the length in force.
-    fn tool_shape(&self) -> ToolShape {
+    pub(super) fn tool_shape(&self) -> ToolShape {
         let mm = self.m.units == Units::Mm;
         let mut s = ToolShape::default_for(self.setup.tool_length, mm);
         if let Some((d, r)) = self.cl_cutter {

@@ -85,6 +85,8 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
     /// before its LOAD/TOOL: a line at the change would name the old tool).
     pub(super) fn record_tool(&mut self) {
         self.tool_line_due = false;
+        let shape = self.tool_shape();
+        self.sink.tool(self.blocks + 1, &shape);
         let u = ToolUse {
             tool: self.tool,
             length: self.setup.tool_length,
