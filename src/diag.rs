@@ -117,6 +117,19 @@ pub struct Diagnostic {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub column: Option<u32>,
     pub message: String,
+    /// What a `collision` or `near_collision` message says, for a reader that draws it (the
+    /// preview); NDJSON carries the message only.
+    #[serde(skip)]
+    pub bodies: Option<Box<Bodies>>,
+}
+
+/// The two bodies a collision names and their distance (negative: the overlap's depth), profile
+/// units.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Bodies {
+    pub a: String,
+    pub b: String,
+    pub distance: f64,
 }
 
 impl Diagnostic {
@@ -127,6 +140,7 @@ impl Diagnostic {
             line,
             column: None,
             message: message.into(),
+            bodies: None,
         }
     }
 

@@ -363,41 +363,11 @@ async fn a_preview_draws_the_decimated_path_its_joints_and_every_warning() {
     );
 }
 
-/// A profile with bodies (tests/collide.rs's Spinner), alone in a library directory.
-fn library_with_bodies(name: &str) -> std::path::PathBuf {
-    let dir = std::env::temp_dir().join(format!("kinepost-jobs-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    let toml = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/machines/spinner-u5-620.toml")).unwrap();
-    let toml = if toml.contains("[[body]]") {
-        toml
-    } else {
-        toml + r#"
-[[body]]
-name = "table"
-on = "C"
-cylinder = { from = [0.0, 0.0, -60.0], to = [0.0, 0.0, 0.0], radius = 300.0 }
-[[body]]
-name = "cradle"
-on = "B"
-box = [-320.0, -340.0, -160.0, 320.0, 340.0, -80.0]
-[[body]]
-name = "spindle housing"
-on = "spindle"
-cylinder = { from = [0.0, 0.0, 5.0], to = [0.0, 0.0, 300.0], radius = 90.0 }
-"#
-    };
-    std::fs::write(dir.join("spinner-u5-620.toml"), toml).unwrap();
-    dir
-}
-
 /// The preview carries what the page needs to run the program on the machine: the chain, the
 /// bodies, the tool, the stock, and the bodies each collision names.
 #[tokio::test]
 async fn a_preview_carries_the_machine_the_tool_the_stock_and_each_collisions_bodies() {
-    let mut cfg = common::cfg();
-    cfg.machines = library_with_bodies("scene");
-    let base = common::server(cfg).await;
+    let base = common::server(common::cfg()).await;
     let c = reqwest::Client::new();
     // tests/collide.rs's crash: the tool plunged into the table (line 9), the holder into the
     // table tilted 85° (line 13).
@@ -425,7 +395,7 @@ async fn a_preview_carries_the_machine_the_tool_the_stock_and_each_collisions_bo
     let bodies = m["bodies"].as_array().unwrap();
     let table = bodies.iter().find(|b| b["name"] == "table").expect("the table body");
     assert_eq!(table["on"], "C");
-    assert_eq!(table["cylinder"]["radius"], 300.0);
+    assert_eq!(table["cylinder"]["radius"], 250.0);
     assert!(bodies.iter().any(|b| b["on"] == "B" && b["box"].is_array()));
     assert_eq!(p["work_offset"], serde_json::json!([1.0, 2.0, -3.0]));
     assert_eq!(p["stock"], serde_json::json!([[-50.0, -50.0, 0.0, 50.0, 50.0, 40.0]]));

@@ -275,35 +275,17 @@ impl PreviewBuilder {
         }
     }
 
-    /// The bodies a `collision` or `near_collision` names ("a and b: overlap by 1.000 mm …"),
-    /// matched against the names the scene has.
+    /// The bodies a `collision` or `near_collision` names, as the check found them.
     fn contact(&self, d: &Diagnostic) -> Option<Contact> {
-        if !matches!(d.code, Code::Collision | Code::NearCollision) {
-            return None;
-        }
-        let mut names: Vec<String> = self.machine.bodies.iter().map(|b| b.name.clone()).collect();
-        names.extend(["stock", "holder", "cutter"].map(String::from));
-        names.extend((1..=self.fixtures.len()).map(|i| format!("fixture {i}")));
-        let msg = d.message.as_str();
-        for a in &names {
-            let Some(rest) = msg.strip_prefix(a.as_str()).and_then(|r| r.strip_prefix(" and ")) else { continue };
-            for b in &names {
-                let Some(what) = rest.strip_prefix(b.as_str()).and_then(|r| r.strip_prefix(": ")) else { continue };
-                let num = |s: &str| s.split_whitespace().next().and_then(|x| x.parse::<f64>().ok());
-                let (depth, distance) = match what.strip_prefix("overlap by ") {
-                    Some(x) => (num(x), None),
-                    None => (None, num(what)),
-                };
-                return Some(Contact {
-                    code: d.code.as_str().into(),
-                    a: a.clone(),
-                    b: b.clone(),
-                    depth,
-                    distance,
-                });
-            }
-        }
-        None
+        let b = d.bodies.as_deref()?;
+        let overlap = b.distance < 0.0;
+        Some(Contact {
+            code: d.code.as_str().into(),
+            a: b.a.clone(),
+            b: b.b.clone(),
+            depth: overlap.then_some(-b.distance),
+            distance: (!overlap).then_some(b.distance),
+        })
     }
 
     /// A block's point for display: rounded, words in the order of `axes`.

@@ -41,7 +41,13 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                 (Code::NearCollision, Severity::Warning, format!("{:.3} {unit} apart", h.dist))
             };
             let on = if n > 1 { "at or on the way to this block" } else { "at this block" };
-            diags.push(Diagnostic::new(code, severity, Some(line), format!("{} and {}: {what} {on}", h.a, h.b)));
+            let mut d = Diagnostic::new(code, severity, Some(line), format!("{} and {}: {what} {on}", h.a, h.b));
+            d.bodies = Some(Box::new(crate::diag::Bodies {
+                a: h.a,
+                b: h.b,
+                distance: h.dist,
+            }));
+            diags.push(d);
         }
     }
 
