@@ -5,15 +5,18 @@
 //! decimals: 170 bytes a block, seven times the program. The store keeps what the NC does not
 //! have: per block its joints' exact bits (each against its value predicted from the two blocks
 //! before, so a smooth path costs about four bytes an axis), its number and CL line where they
-//! are not the obvious ones, and where its text lies in the NC. The rare rest — a block with
-//! diagnostics, a diagnostic, the summary, the error that ends a failed run — is stored as its
-//! NDJSON line, written by [`Record`] when it happened and copied out verbatim.
+//! are not the obvious ones, and where its text lies in the NC. A block's diagnostics (a few
+//! blocks in a hundred) are kept as their JSON, read back and written in its record; the rest —
+//! a diagnostic of no block, the summary, the error that ends a failed run — as its NDJSON line,
+//! written by [`Record`] when it happened and copied out verbatim.
 //!
 //! The file: [`MAGIC`] (its format version), then events. An event's first byte holds its kind
 //! (low two bits) and, for a block, which fields follow; integers are LEB128, signed ones
 //! zigzagged. A block: `[n] [axis mask] [NC bytes skipped] [CL line delta] <NC length>`, a nibble
-//! per present axis (its bytes, 0–8), those bytes of `zigzag(bits − predicted bits)`.
+//! per present axis (its bytes, 0–8), those bytes of `zigzag(bits − predicted bits)`; with
+//! diagnostics, their JSON's length and the JSON.
 
+use crate::diag::Diagnostic;
 use crate::output::Record;
 use crate::post::{AxisWords, BlockInfo};
 use std::io::{self, BufRead, Read, Write};
@@ -23,8 +26,8 @@ pub const MAGIC: &[u8; 8] = b"KPBLKS1\n";
 
 /// Event kinds.
 const BLOCK: u8 = 0;
-/// A block with diagnostics: its block fields, then its NDJSON line.
-const BLOCK_LINE: u8 = 1;
+/// A block with diagnostics: its block fields, then their JSON array.
+const BLOCK_DIAGS: u8 = 1;
 /// Any other record: its NDJSON line.
 const RECORD: u8 = 2;
 /// The error record that ends a failed run.
@@ -36,7 +39,7 @@ const F_NO_SOURCE: u8 = 8;
 const F_MASK: u8 = 16;
 const F_SKIP: u8 = 32;
 
-/// A verbatim line longer than this is a damaged file, not a record.
+/// A line or diagnostics' JSON longer than this is a damaged file, not a record.
 const MAX_LINE: u64 = 64 << 20;
 
 /// The last two values of one axis, for the prediction.
@@ -121,18 +124,18 @@ impl<W: Write> BlockWriter<W> {
         let skip = start - self.after_block;
         self.after_block = self.nc_at;
         self.buf.clear();
-        let verbatim = !b.diagnostics.is_empty();
-        self.encode_block(b, skip, text.len() as u64, verbatim);
-        if verbatim {
+        let with_diags = !b.diagnostics.is_empty();
+        self.encode_block(b, skip, text.len() as u64, with_diags);
+        if with_diags {
             self.line.clear();
-            Record::line(text, Some(b)).write_to(&mut self.line)?;
+            serde_json::to_writer(&mut self.line, &b.diagnostics)?;
             put_varint(&mut self.buf, self.line.len() as u64);
             self.buf.extend_from_slice(&self.line);
         }
         self.out.write_all(&self.buf)
     }
 
-    fn encode_block(&mut self, b: &BlockInfo, skip: u64, len: u64, verbatim: bool) {
+    fn encode_block(&mut self, b: &BlockInfo, skip: u64, len: u64, with_diags: bool) {
         let s = &mut self.state;
         let mask = b
             .joints
@@ -140,7 +143,7 @@ impl<W: Write> BlockWriter<W> {
             .iter()
             .enumerate()
             .fold(0u8, |m, (i, v)| m | ((v.is_some() as u8) << i));
-        let mut first = if verbatim { BLOCK_LINE } else { BLOCK };
+        let mut first = if with_diags { BLOCK_DIAGS } else { BLOCK };
         first |= if b.n == s.n + 1 { 0 } else { F_N };
         first |= if b.source_line.is_none() { F_NO_SOURCE } else { 0 };
         first |= if mask == s.mask { 0 } else { F_MASK };
@@ -224,14 +227,14 @@ pub fn rebuild(
 /// One event read back.
 pub(super) enum Event {
     /// A block: its fields, where its text lies in the NC (after `skip` bytes, `len` long), and
-    /// its NDJSON line where it was stored whole.
+    /// its diagnostics' JSON where it has any.
     Block {
         n: u64,
         source_line: Option<u32>,
         joints: AxisWords,
         skip: u64,
         len: u64,
-        line: Option<Vec<u8>>,
+        diagnostics: Option<Vec<u8>>,
     },
     /// A record's NDJSON line; `error`: the one that ends a failed run.
     Record { line: Vec<u8>, error: bool },
@@ -303,13 +306,13 @@ impl<R: BufRead> Decoder<R> {
                 line: self.bytes()?,
                 error: first & 3 == ERROR,
             },
-            kind => self.block(first, kind == BLOCK_LINE)?,
+            kind => self.block(first, kind == BLOCK_DIAGS)?,
         };
         self.at = self.pos;
         Ok(Some(ev))
     }
 
-    fn block(&mut self, first: u8, verbatim: bool) -> io::Result<Event> {
+    fn block(&mut self, first: u8, with_diags: bool) -> io::Result<Event> {
         let n = if first & F_N != 0 { self.varint()? } else { self.state.n + 1 };
         if first & F_MASK != 0 {
             self.state.mask = self.byte()?;
@@ -326,14 +329,14 @@ impl<R: BufRead> Decoder<R> {
         let len = self.varint()?;
         self.state.n = n;
         let joints = self.joints()?;
-        let line = if verbatim { Some(self.bytes()?) } else { None };
+        let diagnostics = if with_diags { Some(self.bytes()?) } else { None };
         Ok(Event::Block {
             n,
             source_line,
             joints,
             skip,
             len,
-            line,
+            diagnostics,
         })
     }
 
@@ -462,7 +465,7 @@ impl<R: BufRead, N: BufRead> Ndjson<R, N> {
                 joints,
                 skip,
                 len,
-                line,
+                diagnostics,
             } => {
                 let nc = self
                     .nc
@@ -473,10 +476,10 @@ impl<R: BufRead, N: BufRead> Ndjson<R, N> {
                 nc.read_exact(&mut self.text)?;
                 self.closed = false;
                 self.summed = false;
-                if let Some(line) = line {
-                    self.out.extend_from_slice(&line);
-                    return Ok(());
-                }
+                let diagnostics: Vec<Diagnostic> = match diagnostics {
+                    Some(json) => serde_json::from_slice(&json)?,
+                    None => Vec::new(),
+                };
                 let nc =
                     std::str::from_utf8(&self.text[..len as usize]).map_err(|e| io::Error::new(io::ErrorKind::InvalidData, e))?;
                 Record::Block {
@@ -484,7 +487,7 @@ impl<R: BufRead, N: BufRead> Ndjson<R, N> {
                     nc,
                     source_line,
                     joints: &joints,
-                    diagnostics: &[],
+                    diagnostics: &diagnostics,
                 }
                 .write_to(&mut self.out)?;
             }
@@ -519,7 +522,7 @@ impl<R: BufRead, N: BufRead> Read for Ndjson<R, N> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::diag::{Code, Diagnostic, Severity};
+    use crate::diag::{Code, Severity};
     use crate::output::FileSink;
     use crate::post::{Sink, Summary};
     use proptest::prelude::*;
