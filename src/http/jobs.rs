@@ -319,9 +319,13 @@ pub async fn job_nc(st: State<Arc<AppState>>, Path(id): Path<String>, req: Reque
 }
 
 /// The NDJSON diagnostics of a finished job: blocks, diagnostics, then the summary or the error.
+/// The same bytes as `kinepost post --diagnostics` writes for the same CL and options (a failed
+/// job's end with its error record), rebuilt from the job's compact store as they stream: a
+/// Range gets the whole (200, `Accept-Ranges: none`), except for a job run by a version before
+/// that store, whose NDJSON file is served as it is.
 #[utoipa::path(get, path = "/v1/jobs/{id}/diagnostics", params(("id" = String, Path)),
     responses((status = 200, description = "One JSON object per line", content_type = "application/x-ndjson"),
-        (status = 206, description = "Part of it (Range)", content_type = "application/x-ndjson"),
+        (status = 206, description = "Part of it (Range; only a job run before the compact store)", content_type = "application/x-ndjson"),
         (status = 304, description = "Not modified (If-None-Match)"),
         (status = 404, description = "Not found", body = super::error::Problem, content_type = "application/problem+json"),
         (status = 409, description = "Not finished", body = super::error::Problem, content_type = "application/problem+json"),

@@ -12,9 +12,10 @@
 //!
 //! The file: [`MAGIC`] (its format version), then events. An event's first byte holds its kind
 //! (low two bits) and, for a block, which fields follow; integers are LEB128, signed ones
-//! zigzagged. A block: `[n] [axis mask] [NC bytes skipped] [CL line delta] <NC length>`, a nibble
-//! per present axis (its bytes, 0–8), those bytes of `zigzag(bits − predicted bits)`; with
-//! diagnostics, their JSON's length and the JSON.
+//! zigzagged. A block: `[extension] [n] [axis mask] [NC bytes skipped] [CL line delta] [NC
+//! length]`, a nibble per present axis (its bytes, 0–8) unless they are the last block's, those
+//! bytes of `zigzag(bits − predicted bits)`; with diagnostics, their JSON's length and the JSON.
+//! What is implied (the next number and CL line, the line to the newline) is not written.
 
 use crate::diag::Diagnostic;
 use crate::output::Record;
@@ -33,11 +34,22 @@ const RECORD: u8 = 2;
 /// The error record that ends a failed run.
 const ERROR: u8 = 3;
 
-/// Block flags (bits 2–7 of the first byte).
-const F_N: u8 = 4;
-const F_NO_SOURCE: u8 = 8;
-const F_MASK: u8 = 16;
-const F_SKIP: u8 = 32;
+/// A block's CL line (bits 2–3 of the first byte): the last one's next, the same, a delta given
+/// (zigzag), none.
+const SRC_NEXT: u8 = 0;
+const SRC_SAME: u8 = 1;
+const SRC_DELTA: u8 = 2;
+const SRC_NONE: u8 = 3;
+/// Block flags: NC bytes skipped before its line given; its residuals' lengths the last
+/// block's (no nibbles); an extension byte follows.
+const F_SKIP: u8 = 16;
+const F_LENS: u8 = 32;
+const F_EXT: u8 = 64;
+/// The extension's flags: the number given (not the last one's next); the axis mask given; the
+/// NC line's length given (else it ends at the next newline).
+const X_N: u8 = 1;
+const X_MASK: u8 = 2;
+const X_LEN: u8 = 4;
 
 /// A line or diagnostics' JSON longer than this is a damaged file, not a record.
 const MAX_LINE: u64 = 64 << 20;
@@ -73,6 +85,8 @@ struct State {
     n: u64,
     source: u32,
     mask: u8,
+    /// The last block's residuals' lengths.
+    lens: [u8; 6],
     axes: [History; 6],
 }
 
@@ -125,7 +139,7 @@ impl<W: Write> BlockWriter<W> {
         self.after_block = self.nc_at;
         self.buf.clear();
         let with_diags = !b.diagnostics.is_empty();
-        self.encode_block(b, skip, text.len() as u64, with_diags);
+        self.encode_block(b, skip, text, with_diags);
         if with_diags {
             self.line.clear();
             serde_json::to_writer(&mut self.line, &b.diagnostics)?;
@@ -135,55 +149,65 @@ impl<W: Write> BlockWriter<W> {
         self.out.write_all(&self.buf)
     }
 
-    fn encode_block(&mut self, b: &BlockInfo, skip: u64, len: u64, with_diags: bool) {
+    fn encode_block(&mut self, b: &BlockInfo, skip: u64, text: &str, with_diags: bool) {
         let s = &mut self.state;
-        let mask = b
-            .joints
-            .0
-            .iter()
-            .enumerate()
-            .fold(0u8, |m, (i, v)| m | ((v.is_some() as u8) << i));
-        let mut first = if with_diags { BLOCK_DIAGS } else { BLOCK };
-        first |= if b.n == s.n + 1 { 0 } else { F_N };
-        first |= if b.source_line.is_none() { F_NO_SOURCE } else { 0 };
-        first |= if mask == s.mask { 0 } else { F_MASK };
+        let mask = b.joints.0.iter().enumerate().fold(0u8, |m, (i, v)| m | ((v.is_some() as u8) << i));
+        // The residuals and their lengths in bytes.
+        let (mut residuals, mut lens, mut k) = ([0u64; 6], [0u8; 6], 0);
+        for (i, v) in b.joints.0.iter().enumerate() {
+            if let Some(v) = *v {
+                let h = &mut s.axes[i];
+                residuals[k] = zigzag((v.to_bits() as i64).wrapping_sub(h.predict().to_bits() as i64));
+                lens[k] = (64 - residuals[k].leading_zeros()).div_ceil(8) as u8;
+                h.push(v);
+                k += 1;
+            }
+        }
+        let source = match b.source_line {
+            None => SRC_NONE,
+            Some(l) if l == s.source.wrapping_add(1) => SRC_NEXT,
+            Some(l) if l == s.source => SRC_SAME,
+            Some(_) => SRC_DELTA,
+        };
+        // A line with a newline inside (none is written so) gives its length.
+        let ext = (b.n != s.n + 1) as u8 * X_N | (mask != s.mask) as u8 * X_MASK | text.contains('\n') as u8 * X_LEN;
+        let same_lens = mask == s.mask && lens == s.lens;
+        let mut first = if with_diags { BLOCK_DIAGS } else { BLOCK } | source << 2;
         first |= if skip == 0 { 0 } else { F_SKIP };
+        first |= if same_lens { F_LENS } else { 0 };
+        first |= if ext == 0 { 0 } else { F_EXT };
         let out = &mut self.buf;
         out.push(first);
-        if first & F_N != 0 {
+        if ext != 0 {
+            out.push(ext);
+        }
+        if ext & X_N != 0 {
             put_varint(out, b.n);
         }
-        if first & F_MASK != 0 {
+        if ext & X_MASK != 0 {
             out.push(mask);
         }
         if skip != 0 {
             put_varint(out, skip);
         }
-        if let Some(l) = b.source_line {
+        if let (SRC_DELTA, Some(l)) = (source, b.source_line) {
             put_varint(out, zigzag(l as i64 - s.source as i64));
-            s.source = l;
         }
-        put_varint(out, len);
-        s.n = b.n;
-        s.mask = mask;
-        // The residuals, then their lengths a nibble each, in front of them.
-        let mut residuals = [0u64; 6];
-        let mut k = 0;
-        for (i, v) in b.joints.0.iter().enumerate() {
-            if let Some(v) = *v {
-                let h = &mut s.axes[i];
-                residuals[k] = zigzag((v.to_bits() as i64).wrapping_sub(h.predict().to_bits() as i64));
-                h.push(v);
-                k += 1;
+        if ext & X_LEN != 0 {
+            put_varint(out, text.len() as u64);
+        }
+        if !same_lens {
+            for pair in lens[..k].chunks(2) {
+                out.push(pair[0] | pair.get(1).map_or(0, |&l| l << 4));
             }
         }
-        let bytes = |r: u64| (64 - r.leading_zeros() as usize).div_ceil(8);
-        for pair in residuals[..k].chunks(2) {
-            out.push(bytes(pair[0]) as u8 | (pair.get(1).map_or(0, |&r| bytes(r) as u8) << 4));
+        for (r, l) in residuals[..k].iter().zip(lens) {
+            out.extend_from_slice(&r.to_le_bytes()[..l as usize]);
         }
-        for &r in &residuals[..k] {
-            out.extend_from_slice(&r.to_le_bytes()[..bytes(r)]);
-        }
+        s.n = b.n;
+        s.source = b.source_line.unwrap_or(s.source);
+        s.mask = mask;
+        s.lens = lens;
     }
 
     /// A record that is no block (diagnostic, summary, error), as its NDJSON line.
@@ -226,14 +250,14 @@ pub fn rebuild(
 
 /// One event read back.
 pub(super) enum Event {
-    /// A block: its fields, where its text lies in the NC (after `skip` bytes, `len` long), and
-    /// its diagnostics' JSON where it has any.
+    /// A block: its fields, where its text lies in the NC (after `skip` bytes, to the newline or
+    /// `len` long), and its diagnostics' JSON where it has any.
     Block {
         n: u64,
         source_line: Option<u32>,
         joints: AxisWords,
         skip: u64,
-        len: u64,
+        len: Option<u64>,
         diagnostics: Option<Vec<u8>>,
     },
     /// A record's NDJSON line; `error`: the one that ends a failed run.
@@ -313,23 +337,24 @@ impl<R: BufRead> Decoder<R> {
     }
 
     fn block(&mut self, first: u8, with_diags: bool) -> io::Result<Event> {
-        let n = if first & F_N != 0 { self.varint()? } else { self.state.n + 1 };
-        if first & F_MASK != 0 {
+        let ext = if first & F_EXT != 0 { self.byte()? } else { 0 };
+        let n = if ext & X_N != 0 { self.varint()? } else { self.state.n + 1 };
+        if ext & X_MASK != 0 {
             self.state.mask = self.byte()?;
         }
         let skip = if first & F_SKIP != 0 { self.varint()? } else { 0 };
-        let source_line = match first & F_NO_SOURCE {
-            0 => {
-                let l = (self.state.source as i64 + unzigzag(self.varint()?)) as u32;
-                self.state.source = l;
-                Some(l)
-            }
+        let last = self.state.source;
+        let source_line = match (first >> 2) & 3 {
+            SRC_NEXT => Some(last.wrapping_add(1)),
+            SRC_SAME => Some(last),
+            SRC_DELTA => Some((last as i64 + unzigzag(self.varint()?)) as u32),
             _ => None,
         };
-        let len = self.varint()?;
-        self.state.n = n;
-        let joints = self.joints()?;
+        let len = if ext & X_LEN != 0 { Some(self.varint()?) } else { None };
+        let joints = self.joints(first & F_LENS != 0)?;
         let diagnostics = if with_diags { Some(self.bytes()?) } else { None };
+        self.state.n = n;
+        self.state.source = source_line.unwrap_or(last);
         Ok(Event::Block {
             n,
             source_line,
@@ -340,22 +365,23 @@ impl<R: BufRead> Decoder<R> {
         })
     }
 
-    fn joints(&mut self) -> io::Result<AxisWords> {
+    fn joints(&mut self, same_lens: bool) -> io::Result<AxisWords> {
         let mask = self.state.mask;
         let k = mask.count_ones() as usize;
-        let mut lens = [0u8; 6];
-        for i in (0..k).step_by(2) {
-            let b = self.byte()?;
-            lens[i] = b & 15;
-            if i + 1 < k {
-                lens[i + 1] = b >> 4;
+        if !same_lens {
+            self.state.lens = [0; 6];
+            for i in (0..k).step_by(2) {
+                let b = self.byte()?;
+                self.state.lens[i] = b & 15;
+                if i + 1 < k {
+                    self.state.lens[i + 1] = b >> 4;
+                }
             }
         }
         let mut joints = AxisWords::default();
-        let mut j = 0;
-        for i in (0..6).filter(|i| mask & (1 << i) != 0) {
+        for (j, i) in (0..6).filter(|i| mask & (1 << i) != 0).enumerate() {
             let mut le = [0u8; 8];
-            let n = (lens[j] as usize).min(8);
+            let n = (self.state.lens[j] as usize).min(8);
             self.r.read_exact(&mut le[..n])?;
             self.pos += n as u64;
             let h = &mut self.state.axes[i];
@@ -363,7 +389,6 @@ impl<R: BufRead> Decoder<R> {
             let v = f64::from_bits(bits as u64);
             h.push(v);
             joints.0[i] = Some(v);
-            j += 1;
         }
         Ok(joints)
     }
@@ -472,16 +497,26 @@ impl<R: BufRead, N: BufRead> Ndjson<R, N> {
                     .as_mut()
                     .ok_or_else(|| io::Error::new(io::ErrorKind::NotFound, "the job's NC is gone"))?;
                 io::copy(&mut nc.take(skip), &mut io::sink())?;
-                self.text.resize(len as usize + 1, 0);
-                nc.read_exact(&mut self.text)?;
+                self.text.clear();
+                match len {
+                    Some(len) => {
+                        self.text.resize(len as usize + 1, 0);
+                        nc.read_exact(&mut self.text)?;
+                    }
+                    None => {
+                        nc.read_until(b'\n', &mut self.text)?;
+                    }
+                }
+                if self.text.pop() != Some(b'\n') {
+                    return Err(io::Error::new(io::ErrorKind::UnexpectedEof, "the job's NC ends mid-line"));
+                }
                 self.closed = false;
                 self.summed = false;
                 let diagnostics: Vec<Diagnostic> = match diagnostics {
                     Some(json) => serde_json::from_slice(&json)?,
                     None => Vec::new(),
                 };
-                let nc =
-                    std::str::from_utf8(&self.text[..len as usize]).map_err(|e| io::Error::new(io::ErrorKind::InvalidData, e))?;
+                let nc = std::str::from_utf8(&self.text).map_err(|e| io::Error::new(io::ErrorKind::InvalidData, e))?;
                 Record::Block {
                     n,
                     nc,
@@ -596,6 +631,7 @@ mod tests {
             let mut lines = Vec::new();
             let mut n = 0;
             let mut notes = Vec::new();
+            let mut last = 0u32;
             for (i, (joints, pick, line)) in rows.iter().enumerate() {
                 let text = format!("G1 X{i} \"quoted\" é");
                 match pick {
@@ -610,8 +646,19 @@ mod tests {
                         lines.push((text, Some(block(n, Some(*line), *joints, vec![d]))));
                     }
                     3 => notes.push((lines.len(), Diagnostic::new(Code::Unwind, Severity::Info, None, format!("note {i}")))),
+                    4 => {
+                        n += 1;
+                        lines.push((format!("G1 X{i}\nY1"), Some(block(n, Some(*line), *joints, vec![]))));
+                    }
+                    5..=9 => {
+                        // The CL line after the last block's, or the same.
+                        n += 1;
+                        last = last.wrapping_add((pick & 1) as u32);
+                        lines.push((text, Some(block(n, Some(last), *joints, vec![]))));
+                    }
                     _ => {
                         n += 1;
+                        last = *line;
                         lines.push((text, Some(block(n, Some(*line), *joints, vec![]))));
                     }
                 }
@@ -642,7 +689,7 @@ mod tests {
             store.line(t, b.as_ref()).unwrap();
         }
         let per_block = store.into_inner().len() as f64 / 10_000.0;
-        assert!(per_block < 28.0, "{per_block} bytes a block");
+        assert!(per_block < 24.0, "{per_block} bytes a block");
         let (cli, rebuilt) = both(&lines, &[]);
         assert_eq!(cli, rebuilt);
     }
