@@ -239,7 +239,7 @@ mod tests {
         let (p, nc) = store(&dir, 3000, false);
         // Cut mid-event: the partial event goes, the record follows the whole ones.
         let len = std::fs::metadata(&p).unwrap().len();
-        std::fs::OpenOptions::new()
+        std::fs::File::options()
             .write(true)
             .open(&p)
             .unwrap()
