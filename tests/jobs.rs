@@ -526,9 +526,12 @@ async fn start_up_sweeps_the_spool_of_what_no_job_owns() {
         (format!("{b}.cl"), old),
         (format!("{a}.nc"), fresh),
         (format!("{a}.ndjson"), fresh),
+        (format!("{a}.blocks"), fresh),
+        (format!("{a}.nc.partial"), fresh),
         (format!("{a}.preview.json"), fresh),
         (format!("{a}.nc.1.tmp"), fresh),
         (format!("{id}.ndjson.3.tmp"), fresh),
+        (format!("{id}.blocks.3.tmp"), fresh),
     ];
     for (name, age) in &planted {
         common::plant(&spool, name, *age);
@@ -552,7 +555,7 @@ async fn start_up_sweeps_the_spool_of_what_no_job_owns() {
     let (_server, base) = start(&data);
     // Answering at all means start-up (recovery, the sweep) is done.
     assert_eq!(c.get(format!("{base}/v1/jobs/{id}/nc")).status_ok().await, 200);
-    let mut kept: Vec<String> = ["cl", "nc", "ndjson", "preview.json", "lines"]
+    let mut kept: Vec<String> = ["cl", "nc", "blocks", "preview.json", "lines"]
         .iter()
         .map(|x| format!("{id}.{x}"))
         .chain(["notes.txt".to_string(), format!("{e}.cl")])
@@ -629,7 +632,8 @@ fn ndjson(text: &str) -> Vec<Value> {
 }
 
 /// A failed job's diagnostics always end with its error record: as the engine wrote it, and
-/// when the file was cut short or lost, with the record after its last whole line.
+/// when the store (or an older version's NDJSON file) was cut short or lost, with the record
+/// after its last whole one.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_failed_jobs_diagnostics_end_with_its_error_even_when_cut_short() {
     let cfg = common::cfg();
@@ -657,22 +661,34 @@ async fn a_failed_jobs_diagnostics_end_with_its_error_even_when_cut_short() {
     assert_eq!(records.last().unwrap()["type"], "error");
     assert_eq!(records.last().unwrap()["error"]["line"], 3002);
 
-    // Cut mid-record, the error and half a block gone (a crash, a full disk): served with the
-    // job's error after the last whole line.
-    let file = cfg.data_dir.join("spool").join(format!("{id}.ndjson"));
-    let cut = whole.len() - whole.lines().last().unwrap().len() - 40;
-    std::fs::write(&file, &whole.as_bytes()[..cut]).unwrap();
+    // The block store cut mid-event, the error and part of a block gone (a crash, a full disk):
+    // served up to its last whole record, then the job's error.
+    let spool = cfg.data_dir.join("spool");
+    let store = spool.join(format!("{id}.blocks"));
+    let full = std::fs::read(&store).unwrap();
+    // The error's line, its event's kind and length (at most 3 bytes), a few of the block's.
+    let cut = full.len() - (whole.lines().last().unwrap().len() + 1) - 5;
+    std::fs::write(&store, &full[..cut]).unwrap();
     let r = c.get(&url).send().await.unwrap();
     assert_eq!(r.status(), 200);
     let mended = ndjson(&r.text().await.unwrap());
     assert_eq!(mended.len(), records.len() - 1, "the cut block is dropped, the error added");
     assert_eq!(mended.last().unwrap()["type"], "error");
     assert_eq!(mended.last().unwrap()["error"]["detail"], failed["error"]);
+    assert_eq!(mended[..mended.len() - 1], records[..records.len() - 2]);
     // Lost altogether: the error record alone.
-    std::fs::remove_file(&file).unwrap();
+    std::fs::remove_file(&store).unwrap();
     let r = c.get(&url).send().await.unwrap();
     assert_eq!(r.status(), 200);
     let alone = ndjson(&r.text().await.unwrap());
     assert_eq!(alone.len(), 1);
     assert_eq!(alone[0]["type"], "error");
+
+    // The NDJSON file a version before the block store left, cut mid-record: mended the same.
+    let file = spool.join(format!("{id}.ndjson"));
+    let cut = whole.len() - whole.lines().last().unwrap().len() - 40;
+    std::fs::write(&file, &whole.as_bytes()[..cut]).unwrap();
+    let mended = ndjson(&c.get(&url).text_ok().await);
+    assert_eq!(mended.len(), records.len() - 1);
+    assert_eq!(mended.last().unwrap()["error"]["detail"], failed["error"]);
 }

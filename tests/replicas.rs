@@ -596,11 +596,13 @@ async fn a_restarting_replica_sweeps_only_its_own_and_expired_spool_files() {
         (format!("{b}.cl"), old),
         (format!("{b}.nc"), fresh),
         (format!("{b}.ndjson"), fresh),
+        (format!("{b}.blocks"), fresh),
         (format!("{b}.preview.json"), fresh),
         (format!("{r}.nc.2.tmp"), fresh),
         (format!("{mine}.nc.1.tmp"), fresh),
         (format!("{id}.preview.json.1.tmp"), fresh),
         (format!("{a}.ndjson.1.tmp"), old),
+        (format!("{a}.blocks.1.tmp"), old),
     ];
     for (name, age) in kept.iter().chain(&removed) {
         common::plant(&spool, name, *age);
@@ -610,7 +612,7 @@ async fn a_restarting_replica_sweeps_only_its_own_and_expired_spool_files() {
     // Answering at all means start-up (and its sweep) is done.
     assert_eq!(c.get(format!("{}/v1/jobs/{id}/nc", second.base)).status_ok().await, 200);
     let mut want: Vec<String> = kept.iter().map(|(n, _)| n.clone()).collect();
-    want.extend(["cl", "lines", "nc", "ndjson", "preview.json"].iter().map(|x| format!("{id}.{x}")));
+    want.extend(["blocks", "cl", "lines", "nc", "preview.json"].iter().map(|x| format!("{id}.{x}")));
     want.sort();
     assert_eq!(common::spool_names(&spool), want);
     let _ = std::fs::remove_dir_all(&spool);

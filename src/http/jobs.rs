@@ -319,9 +319,13 @@ pub async fn job_nc(st: State<Arc<AppState>>, Path(id): Path<String>, req: Reque
 }
 
 /// The NDJSON diagnostics of a finished job: blocks, diagnostics, then the summary or the error.
+/// The same bytes as `kinepost post --diagnostics` writes for the same CL and options (a failed
+/// job's end with its error record), rebuilt from the job's compact store as they stream: a
+/// Range gets the whole (200, `Accept-Ranges: none`), except for a job run by a version before
+/// that store, whose NDJSON file is served as it is.
 #[utoipa::path(get, path = "/v1/jobs/{id}/diagnostics", params(("id" = String, Path)),
     responses((status = 200, description = "One JSON object per line", content_type = "application/x-ndjson"),
-        (status = 206, description = "Part of it (Range)", content_type = "application/x-ndjson"),
+        (status = 206, description = "Part of it (Range; only a job run before the compact store)", content_type = "application/x-ndjson"),
         (status = 304, description = "Not modified (If-None-Match)"),
         (status = 404, description = "Not found", body = super::error::Problem, content_type = "application/problem+json"),
         (status = 409, description = "Not finished", body = super::error::Problem, content_type = "application/problem+json"),
@@ -383,12 +387,12 @@ pub async fn job_lines(st: State<Arc<AppState>>, Path(id): Path<String>, req: Re
 async fn output(State(st): State<Arc<AppState>>, id: String, what: Output, req: Request) -> Result<Response, ApiError> {
     let q = queue(&st)?;
     let job = q.store.get(job_id(&id)?).await?;
-    let (name, tag, ctype) = match what {
-        Output::Nc => ("the NC program", "n", "text/plain; charset=utf-8"),
-        Output::Diagnostics => ("diagnostics", "d", "application/x-ndjson"),
-        Output::Preview => ("a preview", "p", "application/json"),
-        Output::Lines => ("a line map", "l", "application/octet-stream"),
-        Output::Input => ("its input", "i", "text/plain"),
+    let name = match what {
+        Output::Nc => "the NC program",
+        Output::Diagnostics => "diagnostics",
+        Output::Preview => "a preview",
+        Output::Lines => "a line map",
+        Output::Input => "its input",
     };
     let only_succeeded = matches!(what, Output::Nc | Output::Lines);
     let ready = match job.state {
@@ -405,13 +409,77 @@ async fn output(State(st): State<Arc<AppState>>, id: String, what: Output, req: 
             if only_succeeded { "succeeded" } else { "finished" }
         )));
     }
+    if what == Output::Diagnostics {
+        return diagnostics(q, &job, req).await;
+    }
     let path = q.store.output_path(&job.id, what);
-    if what == Output::Diagnostics && job.state == JobState::Failed {
-        if let jobs::Diagnostics::Mended { keep, tail } = q.store.diagnostics(&job).await? {
-            return mended(&path, keep, tail).await;
+    serve_file(&job, &path, what, req).await
+}
+
+/// A finished job's diagnostics: rebuilt from its block store as they stream, or the NDJSON
+/// file of a job run before the store (mended where a failed job's does not end with its error).
+async fn diagnostics(q: &Queue, job: &Job, req: Request) -> Result<Response, ApiError> {
+    match q.store.diagnostics(job).await? {
+        jobs::Diagnostics::Whole(path) => serve_file(job, &path, Output::Diagnostics, req).await,
+        jobs::Diagnostics::Mended { path, keep, tail } => mended(&path, keep, tail).await,
+        jobs::Diagnostics::Rebuilt { store, nc, end, len } => {
+            // The store never changes once the job has finished: its length is a validator.
+            let etag = format!("\"{}-b-{len}\"", job.id);
+            if let Some(r) = super::not_modified(req.headers(), &etag) {
+                return Ok(r);
+            }
+            let reader = tokio::task::spawn_blocking(move || jobs::blocks::rebuild(&store, &nc, end))
+                .await
+                .map_err(|e| ApiError::Internal(e.to_string()))?
+                .map_err(|e| ApiError::Internal(format!("job diagnostics: {e}")))?;
+            let mut resp = Response::new(pumped(reader));
+            let h = resp.headers_mut();
+            h.insert(header::ETAG, HeaderValue::from_str(&etag).expect("ascii etag"));
+            h.insert(header::CONTENT_TYPE, HeaderValue::from_static("application/x-ndjson"));
+            // Made as it streams, its length unknown: a Range gets the whole (200).
+            h.insert(header::ACCEPT_RANGES, HeaderValue::from_static("none"));
+            Ok(resp)
         }
     }
-    let (len, modified) = match tokio::fs::metadata(&path).await {
+}
+
+/// A blocking reader as a body: a thread fills 64 KiB chunks into a channel of four, so a slow
+/// client holds 256 KiB at most; a read error ends the body with an error (never a silent cut).
+fn pumped(mut r: impl std::io::Read + Send + 'static) -> Body {
+    let (tx, rx) = tokio::sync::mpsc::channel::<Result<bytes::Bytes, std::io::Error>>(4);
+    tokio::task::spawn_blocking(move || {
+        loop {
+            let mut buf = vec![0u8; 64 << 10];
+            let n = match r.read(&mut buf) {
+                Ok(0) => return,
+                Ok(n) => n,
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
+                Err(e) => {
+                    let _ = tx.blocking_send(Err(e));
+                    return;
+                }
+            };
+            buf.truncate(n);
+            if tx.blocking_send(Ok(buf.into())).is_err() {
+                return;
+            }
+        }
+    });
+    Body::from_stream(futures_util::stream::unfold(rx, |mut rx| async move {
+        rx.recv().await.map(|item| (item, rx))
+    }))
+}
+
+/// A published output file (Range with If-Range, ETag).
+async fn serve_file(job: &Job, path: &std::path::Path, what: Output, req: Request) -> Result<Response, ApiError> {
+    let (tag, ctype) = match what {
+        Output::Nc => ("n", "text/plain; charset=utf-8"),
+        Output::Diagnostics => ("d", "application/x-ndjson"),
+        Output::Preview => ("p", "application/json"),
+        Output::Lines => ("l", "application/octet-stream"),
+        Output::Input => ("i", "text/plain"),
+    };
+    let (len, modified) = match tokio::fs::metadata(path).await {
         Ok(m) => (m.len(), m.modified().ok()),
         Err(e) if e.kind() == std::io::ErrorKind::NotFound && what != Output::Nc && what != Output::Diagnostics => {
             let why = match what {
@@ -429,7 +497,7 @@ async fn output(State(st): State<Arc<AppState>>, id: String, what: Output, req: 
         return Ok(r);
     }
     let req = if_range(req, &etag, modified);
-    let mut resp = tower_http::services::ServeFile::new(&path)
+    let mut resp = tower_http::services::ServeFile::new(path)
         .oneshot(req)
         .await
         .map_err(|e| ApiError::Internal(e.to_string()))?

@@ -9,6 +9,7 @@
 //!
 //! Knows nothing of HTTP: the service edge maps [`Error`] to statuses and [`Job`] to its DTO.
 
+pub mod blocks;
 mod diagnostics;
 mod store;
 
@@ -20,6 +21,7 @@ use crate::output::linemap::LineMap;
 use crate::output::preview::{Caps, PreviewBuilder};
 use crate::output::{ErrorBody, FileSink, Record};
 use crate::post::{self, BlockInfo, Sink, Summary};
+use blocks::BlockWriter;
 use std::collections::HashMap;
 use std::io::Read;
 use std::path::PathBuf;
@@ -352,10 +354,11 @@ impl<R: Read> Read for Counting<R> {
     }
 }
 
-/// The spool files' sink (and the preview beside them), counting blocks and stopping when the
-/// job is cancelled.
+/// The spool files' sink (NC, block store, line map, and the preview beside them), counting
+/// blocks and stopping when the job is cancelled.
 struct JobSink<'a> {
     files: FileSink<std::fs::File, std::fs::File>,
+    blocks: BlockWriter<std::io::BufWriter<std::fs::File>>,
     lines: LineMap<std::io::BufWriter<std::fs::File>>,
     preview: PreviewBuilder,
     progress: &'a Progress,
@@ -373,18 +376,19 @@ impl Sink for JobSink<'_> {
             self.preview.block(text, b);
         }
         self.lines.line(text, b)?;
+        self.blocks.line(text, b)?;
         self.files.line(text, b)
     }
     fn diagnostic(&mut self, d: &crate::diag::Diagnostic) -> std::io::Result<()> {
         self.preview.note(d, None);
-        self.files.diagnostic(d)
+        self.blocks.record(&Record::Diagnostic { diagnostic: d })
     }
     fn diagnostic_at(&mut self, d: &crate::diag::Diagnostic, pose: &crate::kinematics::Pose) -> std::io::Result<()> {
         self.preview.note(d, Some(pose));
-        self.files.diagnostic(d)
+        self.blocks.record(&Record::Diagnostic { diagnostic: d })
     }
     fn summary(&mut self, s: &Summary) -> std::io::Result<()> {
-        self.files.summary(s)
+        self.blocks.record(&Record::Summary { summary: s })
     }
     fn tool(&mut self, first_block: u64, t: &crate::collide::ToolShape) {
         self.preview.tool(first_block, t)
@@ -428,10 +432,11 @@ fn execute(
         },
     );
     let nc = std::fs::File::create(&paths.nc_tmp).map_err(io)?;
-    let nd = std::fs::File::create(&paths.diag_tmp).map_err(io)?;
+    let blocks = std::io::BufWriter::with_capacity(1 << 16, std::fs::File::create(&paths.blocks_tmp).map_err(io)?);
     let lines = std::io::BufWriter::new(std::fs::File::create(&paths.lines_tmp).map_err(io)?);
     let mut sink = JobSink {
-        files: FileSink::new(nc, Some(nd)),
+        files: FileSink::new(nc, None),
+        blocks: BlockWriter::new(blocks).map_err(io)?,
         lines: LineMap::new(lines),
         preview: PreviewBuilder::new(&profile.machine, opts.mode, Caps::default()).with_scene(
             &profile.machine,
@@ -449,19 +454,18 @@ fn execute(
         Err(e) => {
             // The diagnostics of a failed job end with the error: never a silent truncation.
             let msg = e.to_string();
-            let _ = sink.files.record(&Record::Error {
+            let _ = sink.blocks.record(&Record::Error {
                 error: ErrorBody::from_engine(&e),
             });
             Err(msg)
         }
     };
-    let (nc, nd) = sink.files.into_inner().map_err(io)?;
+    let (nc, _) = sink.files.into_inner().map_err(io)?;
     nc.sync_all().map_err(io)?;
     let lines = sink.lines.into_inner().into_inner().map_err(|e| io(e.into_error()))?;
     lines.sync_all().map_err(io)?;
-    if let Some(nd) = nd {
-        nd.sync_all().map_err(io)?;
-    }
+    let blocks = sink.blocks.into_inner().into_inner().map_err(|e| io(e.into_error()))?;
+    blocks.sync_all().map_err(io)?;
     if !cancel.load(Ordering::Relaxed) {
         let mut source = std::io::BufReader::with_capacity(64 * 1024, std::fs::File::open(&paths.input).map_err(io)?);
         let preview = sink.preview.finish(res.as_ref().ok(), Some(&mut source));

@@ -134,13 +134,18 @@ pub enum Output {
 pub(super) struct Paths {
     pub input: PathBuf,
     pub nc: PathBuf,
+    /// The NDJSON of a job run before the block store (served as it is; written no more).
     pub diag: PathBuf,
+    /// The diagnostics' block store (`jobs::blocks`), which points into the NC.
+    pub blocks: PathBuf,
+    /// A failed job's partial NC: its diagnostics' text, never served as a program.
+    pub nc_partial: PathBuf,
     pub preview: PathBuf,
     pub lines: PathBuf,
     /// Where one run writes, before it publishes: a run cut off and its successor (perhaps on
     /// another replica) never write the same file.
     pub nc_tmp: PathBuf,
-    pub diag_tmp: PathBuf,
+    pub blocks_tmp: PathBuf,
     pub preview_tmp: PathBuf,
     pub lines_tmp: PathBuf,
 }
@@ -151,10 +156,12 @@ impl Paths {
             input: spool.join(format!("{id}.cl")),
             nc: spool.join(format!("{id}.nc")),
             diag: spool.join(format!("{id}.ndjson")),
+            blocks: spool.join(format!("{id}.blocks")),
+            nc_partial: spool.join(format!("{id}.nc.partial")),
             preview: spool.join(format!("{id}.preview.json")),
             lines: spool.join(format!("{id}.lines")),
             nc_tmp: spool.join(format!("{id}.nc.{attempt}.tmp")),
-            diag_tmp: spool.join(format!("{id}.ndjson.{attempt}.tmp")),
+            blocks_tmp: spool.join(format!("{id}.blocks.{attempt}.tmp")),
             preview_tmp: spool.join(format!("{id}.preview.json.{attempt}.tmp")),
             lines_tmp: spool.join(format!("{id}.lines.{attempt}.tmp")),
         }
@@ -636,7 +643,7 @@ impl Store {
         }
         let p = Paths::new(&self.spool, id, job.attempts);
         tokio::fs::rename(&p.nc_tmp, &p.nc).await?;
-        tokio::fs::rename(&p.diag_tmp, &p.diag).await?;
+        tokio::fs::rename(&p.blocks_tmp, &p.blocks).await?;
         tokio::fs::rename(&p.preview_tmp, &p.preview).await?;
         tokio::fs::rename(&p.lines_tmp, &p.lines).await?;
         sync_dir(&self.spool)?;
@@ -664,12 +671,13 @@ impl Store {
             return Ok(());
         }
         let p = Paths::new(&self.spool, id, job.attempts);
-        let _ = tokio::fs::remove_file(&p.nc_tmp).await;
+        // The partial NC stays only as the text its diagnostics point into.
+        let _ = tokio::fs::rename(&p.nc_tmp, &p.nc_partial).await;
         let _ = tokio::fs::remove_file(&p.lines_tmp).await;
-        let _ = tokio::fs::rename(&p.diag_tmp, &p.diag).await;
+        let _ = tokio::fs::rename(&p.blocks_tmp, &p.blocks).await;
         let _ = tokio::fs::rename(&p.preview_tmp, &p.preview).await;
         // Before the row says failed, so that its diagnostics are never read unclosed.
-        let (diag, message) = (p.diag.clone(), msg.to_string());
+        let (diag, message) = (p.blocks.clone(), msg.to_string());
         match tokio::task::spawn_blocking(move || super::diagnostics::close(&diag, &message)).await {
             Ok(Ok(())) => {}
             Ok(Err(e)) => tracing::warn!(job = %id, error = %e, "closing a failed job's diagnostics (served mended)"),
@@ -725,7 +733,7 @@ impl Store {
     /// One run's temporaries.
     pub(super) fn remove_outputs(&self, job: &Job) {
         let p = Paths::new(&self.spool, &job.id, job.attempts);
-        for f in [&p.nc_tmp, &p.diag_tmp, &p.preview_tmp, &p.lines_tmp] {
+        for f in [&p.nc_tmp, &p.blocks_tmp, &p.preview_tmp, &p.lines_tmp] {
             let _ = std::fs::remove_file(f);
         }
     }

@@ -24,7 +24,8 @@ pub(super) fn upload_name(id: &str, node: &str) -> String {
 enum Kind {
     /// `<id>.cl`
     Input,
-    /// `<id>.nc`, `<id>.ndjson`, `<id>.preview.json`, `<id>.lines`
+    /// `<id>.nc`, `<id>.blocks`, `<id>.nc.partial`, `<id>.preview.json`, `<id>.lines` (and
+    /// `<id>.ndjson`, from before the block store)
     Output,
     /// `<id>.<node>.cl.tmp` (`<id>.cl.tmp`, from before uploads named their node: `None`)
     Upload(Option<String>),
@@ -40,7 +41,7 @@ fn classify(name: &str) -> Option<(&str, Kind)> {
     }
     let kind = match rest {
         "cl" => Kind::Input,
-        "nc" | "ndjson" | "preview.json" | "lines" => Kind::Output,
+        "nc" | "blocks" | "nc.partial" | "ndjson" | "preview.json" | "lines" => Kind::Output,
         "cl.tmp" => Kind::Upload(None),
         r => {
             let r = r.strip_suffix(".tmp")?;
@@ -48,7 +49,7 @@ fn classify(name: &str) -> Option<(&str, Kind)> {
                 Kind::Upload(Some(node.to_string()))
             } else {
                 let (out, attempt) = r.rsplit_once('.')?;
-                if !matches!(out, "nc" | "ndjson" | "preview.json" | "lines") {
+                if !matches!(out, "nc" | "blocks" | "ndjson" | "preview.json" | "lines") {
                     return None;
                 }
                 Kind::RunTemp(attempt.parse().ok()?)
@@ -152,6 +153,10 @@ mod tests {
         );
         assert_eq!(classify(&format!("{id}.preview.json.3.tmp")), Some((id, Kind::RunTemp(3))));
         assert_eq!(classify(&format!("{id}.nc.12.tmp")), Some((id, Kind::RunTemp(12))));
+        assert_eq!(classify(&format!("{id}.blocks.2.tmp")), Some((id, Kind::RunTemp(2))));
+        for out in ["blocks", "nc.partial", "ndjson"] {
+            assert_eq!(classify(&format!("{id}.{out}")), Some((id, Kind::Output)));
+        }
         for other in [
             ".readyz",
             "notes.txt",
