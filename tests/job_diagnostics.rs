@@ -67,9 +67,10 @@ const CASES: [(&str, &str, &[&str]); 5] = [
         &["--machine", "haas-umc750", "--sequence-numbers"],
     ),
     (
+        // On a 3 in riser: at z = 0 on the platter its flat tool is a collision at every block.
         "nx_clsf_mech491_project2_inch_5ax.cls",
-        "machine=haas-umc750",
-        &["--machine", "haas-umc750"],
+        "machine=haas-umc750&work_offset=0,0,3",
+        &["--machine", "haas-umc750", "--work-offset", "0,0,3"],
     ),
     (
         "generated/near_singular_jitter.cls",
@@ -77,9 +78,10 @@ const CASES: [(&str, &str, &[&str]); 5] = [
         &["--machine", "spinner-u5-620", "--mode", "tcp"],
     ),
     (
+        // Another machine's points: out of travel on every block (its collisions not checked).
         "generated/htm_shuffled.cls",
-        "machine=dmg-dmc75v&sequence_numbers=true",
-        &["--machine", "dmg-dmc75v", "--sequence-numbers"],
+        "machine=dmg-dmc75v&sequence_numbers=true&collisions=off",
+        &["--machine", "dmg-dmc75v", "--sequence-numbers", "--collisions", "off"],
     ),
     (
         "creo8_ncl_profilfraesen_profile_mm.ncl",
