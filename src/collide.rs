@@ -3,7 +3,8 @@
 //! Pure like `kinematics`: no IO. The profile's `[[body]]` entries (read in `machines`) become a
 //! [`Geometry`]; a post builds one [`World`] from it, the tool and the job's stock, and asks it at
 //! each block (and between blocks, sampled) which bodies touch or come closer than the
-//! clearance. The distance queries are parry's (GJK/EPA on boxes and cylinders).
+//! clearance. The distance queries are parry's (GJK/EPA on boxes and cylinders; a triangle mesh
+//! is a BVH of triangles, each tested as a convex shape, so a mesh is checked by its surface).
 //!
 //! Where a body sits, at home (every joint zero): bodies on the bed, the table and the table
 //! rotaries are given in M; bodies on the ram, the head rotaries and the spindle relative to the
@@ -12,7 +13,8 @@
 use crate::kinematics::{Machine, Mount, Vec3};
 use parry3d_f64::math::{Pose, Rotation, Vector};
 use parry3d_f64::query;
-use parry3d_f64::shape::{Cuboid, Cylinder, RoundShape, Shape};
+use parry3d_f64::shape::{Cuboid, Cylinder, RoundShape, SharedShape, TriMesh};
+use std::sync::Arc;
 
 /// The most bodies a profile may give: a machine model, not a CAD assembly.
 pub const MAX_BODIES: usize = 64;
@@ -72,18 +74,86 @@ impl Link {
 }
 
 /// A body's shape, at home, in its link's coordinates (see the module's text).
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 pub enum Solid {
     /// Opposite corners.
     Box { min: Vec3, max: Vec3 },
     /// The axis from `from` to `to`, and the radius.
     Cylinder { from: Vec3, to: Vec3, radius: f64 },
+    /// A triangle mesh, built once when the profile loads and shared by every post.
+    Mesh(Arc<Mesh>),
+}
+
+/// A triangle mesh body (read from an STL file by `machines`): parry's `TriMesh`, a BVH of its
+/// triangles. Checked by its surface: a body wholly inside a mesh, touching no triangle, is
+/// not found (the sampling between blocks keeps a body from crossing a surface unseen).
+pub struct Mesh {
+    /// The file it was read from (a bare name beside the profile).
+    pub file: String,
+    /// A digest of the file's bytes: the same file, the same mesh (an ETag).
+    pub digest: u64,
+    shape: SharedShape,
+    min: Vec3,
+    max: Vec3,
+}
+
+impl Mesh {
+    /// The mesh of these vertices and triangles, or why not (none, an index out of range).
+    pub fn new(file: &str, digest: u64, vertices: Vec<Vec3>, triangles: Vec<[u32; 3]>) -> Result<Mesh, String> {
+        let (mut min, mut max) = (Vec3::repeat(f64::INFINITY), Vec3::repeat(f64::NEG_INFINITY));
+        for p in &vertices {
+            min = min.inf(p);
+            max = max.sup(p);
+        }
+        let points = vertices.iter().map(v).collect();
+        let tri = TriMesh::new(points, triangles).map_err(|e| format!("not a triangle mesh: {e}"))?;
+        Ok(Mesh {
+            file: file.into(),
+            digest,
+            shape: SharedShape::new(tri),
+            min,
+            max,
+        })
+    }
+
+    fn tri(&self) -> &TriMesh {
+        self.shape.as_trimesh().expect("a Mesh's shape is a TriMesh")
+    }
+
+    /// Its vertices (profile units, at home in its link's coordinates).
+    pub fn vertices(&self) -> impl ExactSizeIterator<Item = Vec3> + '_ {
+        self.tri().vertices().iter().map(|p| Vec3::new(p.x, p.y, p.z))
+    }
+
+    /// Its triangles, as indices into [`Mesh::vertices`].
+    pub fn triangles(&self) -> &[[u32; 3]] {
+        self.tri().indices()
+    }
+
+    /// Its bounding box at home: `(min, max)`.
+    pub fn bounds(&self) -> (Vec3, Vec3) {
+        (self.min, self.max)
+    }
+}
+
+impl PartialEq for Mesh {
+    fn eq(&self, o: &Mesh) -> bool {
+        self.file == o.file && self.digest == o.digest
+    }
+}
+
+impl std::fmt::Debug for Mesh {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Mesh").field("file", &self.file).field("triangles", &self.triangles().len()).finish()
+    }
 }
 
 impl Solid {
     /// The same solid with every length times `k` (CL units into the profile's).
     pub fn scaled(&self, k: f64) -> Solid {
         match *self {
+            // Meshes are the machine's, in profile units already: never a job's solid.
+            Solid::Mesh(ref m) => Solid::Mesh(m.clone()),
             Solid::Box { min, max } => Solid::Box { min: min * k, max: max * k },
             Solid::Cylinder { from, to, radius } => Solid::Cylinder {
                 from: from * k,
@@ -107,6 +177,11 @@ impl Solid {
                     return Err("a cylinder needs two distinct finite end points and a positive radius".into());
                 }
             }
+            Solid::Mesh(m) => {
+                if !(finite(&m.min) && finite(&m.max)) {
+                    return Err(format!("every coordinate must be finite and within ±{}", crate::kinematics::MAX_COORD));
+                }
+            }
         }
         Ok(())
     }
@@ -116,6 +191,12 @@ impl Solid {
         match self {
             Solid::Box { min, max } => (max - min).min(),
             Solid::Cylinder { from, to, radius } => (2.0 * radius).min((to - from).norm()),
+            // A flat mesh (a plate of zero thickness) would ask for endless samples: its
+            // largest extent bounds the step instead of its smallest.
+            Solid::Mesh(m) => {
+                let d = m.max - m.min;
+                if d.min() > 0.0 { d.min() } else { d.max() }
+            }
         }
     }
 
@@ -124,30 +205,32 @@ impl Solid {
         match self {
             Solid::Box { min, max } => min.abs().sup(&max.abs()).norm(),
             Solid::Cylinder { from, to, radius } => from.norm().max(to.norm()) + radius,
+            Solid::Mesh(m) => m.min.abs().sup(&m.max.abs()).norm(),
         }
     }
 
     /// The parry shape and where it sits in the link's coordinates.
-    fn shape(&self, round: f64) -> (Box<dyn Shape>, Pose) {
+    fn shape(&self, round: f64) -> (SharedShape, Pose) {
         match *self {
             Solid::Box { min, max } => {
                 let half = (max - min) / 2.0;
                 let c = (max + min) / 2.0;
-                (Box::new(Cuboid::new(v(&half))), Pose::from_translation(v(&c)))
+                (SharedShape::new(Cuboid::new(v(&half))), Pose::from_translation(v(&c)))
             }
+            Solid::Mesh(ref m) => (m.shape.clone(), Pose::IDENTITY),
             Solid::Cylinder { from, to, radius } => {
                 let d = to - from;
                 let c = (from + to) / 2.0;
                 let rot = Rotation::from_rotation_arc(Vector::Y, v(&d.normalize()));
                 let half = d.norm() / 2.0;
-                let shape: Box<dyn Shape> = if round > 0.0 {
+                let shape = if round > 0.0 {
                     let r = round.min(radius).min(half);
-                    Box::new(RoundShape {
+                    SharedShape::new(RoundShape {
                         inner_shape: Cylinder::new(half - r, radius - r),
                         border_radius: r,
                     })
                 } else {
-                    Box::new(Cylinder::new(half, radius))
+                    SharedShape::new(Cylinder::new(half, radius))
                 };
                 (shape, Pose::from_parts(v(&c), rot))
             }
@@ -210,7 +293,8 @@ pub struct Hit {
 struct Placed {
     name: String,
     link: Link,
-    shape: Box<dyn Shape>,
+    /// Shared: a mesh's is the profile's, not a copy per post.
+    shape: SharedShape,
     local: Pose,
     /// The bounding sphere in the link's coordinates: the cheap first test of a pair.
     centre: Vector,
@@ -418,7 +502,7 @@ impl World {
             if (0..3).any(|k| a.mins[k] > b.maxs[k] + margin || b.mins[k] > a.maxs[k] + margin) {
                 continue;
             }
-            let Ok(Some(c)) = query::contact(&pi, bi.shape.as_ref(), &pj, bj.shape.as_ref(), margin) else {
+            let Ok(Some(c)) = query::contact(&pi, &*bi.shape, &pj, &*bj.shape, margin) else {
                 continue;
             };
             if kind != 0 && c.dist > -self.cut_depth {

@@ -524,3 +524,126 @@ fn fitting_stock(text: &str, floor: f64) -> String {
     let pad = |i: usize| 0.02 * (hi[i] - lo[i]) + 0.01;
     format!("{},{},{floor},{},{},{top}", lo[0] - pad(0), lo[1] - pad(1), hi[0] + pad(0), hi[1] + pad(1))
 }
+
+// Triangle-mesh bodies: STL files beside the profile.
+
+/// A directory with `files` written into it (each test its own).
+fn mesh_dir(test: &str, files: &[(&str, Vec<u8>)]) -> std::path::PathBuf {
+    let dir = std::env::temp_dir().join(format!("kinepost-mesh-{test}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    for (name, bytes) in files {
+        std::fs::write(dir.join(name), bytes).unwrap();
+    }
+    dir
+}
+
+/// SPINNER with its table cylinder swapped for a mesh `file` of the same size (a box).
+fn spinner_mesh(file: &str) -> String {
+    let table = "cylinder = { from = [0.0, 0.0, -60.0], to = [0.0, 0.0, 0.0], radius = 300.0 }";
+    assert!(SPINNER.contains(table));
+    format!("{}\n{}", shipped("spinner-u5-620"), SPINNER.replace(table, &format!("mesh = {file:?}")).replace("name = \"table\"", "name = \"table mesh\""))
+}
+
+fn table_stl() -> Vec<[[f64; 3]; 3]> {
+    common::stl::box_triangles([-300.0, -300.0, -60.0], [300.0, 300.0, 0.0])
+}
+
+#[test]
+fn a_mesh_on_the_table_rotary_is_checked_binary_and_ascii() {
+    let dir = mesh_dir(
+        "crash",
+        &[("table.stl", common::stl::binary(&table_stl())), ("table-ascii.stl", common::stl::ascii(&table_stl()).into_bytes())],
+    );
+    for file in ["table.stl", "table-ascii.stl"] {
+        let p = kinepost::machines::parse_profile_in(&spinner_mesh(file), "spinner-mesh", None, Some(&dir)).unwrap();
+        let g = p.geometry();
+        assert!(matches!(&g.bodies[0].solid, kinepost::collide::Solid::Mesh(m) if m.triangles().len() == 12), "{file}");
+        let (text, lines) = cl(
+            "MM",
+            100.0,
+            &[
+                (true, at([0.0, 0.0, 100.0], UP)),
+                (false, at([100.0, 50.0, 20.0], UP)),
+                (false, at([100.0, 50.0, -5.0], UP)),
+                (true, at([100.0, 50.0, 100.0], UP)),
+                (true, at([0.0, 0.0, 100.0], tilted(85.0))),
+                (false, at([0.0, 0.0, 6.0], tilted(85.0))),
+            ],
+        );
+        let (c, s) = run(&p, &text, Settings::default());
+        s.unwrap();
+        assert_hit(&c, lines[2], "cutter", "table mesh");
+        assert_hit(&c, lines[5], "holder", "table mesh");
+        for (i, l) in lines.iter().enumerate() {
+            if i != 2 && i != 5 {
+                assert!(hits(&c, Code::Collision).iter().all(|d| d.line != Some(*l)), "{file}: line {l}: {:#?}", hits(&c, Code::Collision));
+            }
+        }
+        // A clear path: tilted 30°, the tip above the table, the C table turning.
+        let (text, _) = cl(
+            "MM",
+            100.0,
+            &[
+                (true, at([0.0, 0.0, 150.0], UP)),
+                (false, at([50.0, 0.0, 20.0], tilted(30.0))),
+                (false, at([0.0, 50.0, 20.0], [0.0, 0.5, 0.75f64.sqrt()])),
+                (false, at([-50.0, 0.0, 20.0], [-0.5, 0.0, 0.75f64.sqrt()])),
+                (true, at([0.0, 0.0, 150.0], UP)),
+            ],
+        );
+        let (c, s) = run(&p, &text, Settings::default());
+        s.unwrap();
+        assert_clean(&c, file);
+    }
+}
+
+#[test]
+fn bad_meshes_are_refused_naming_the_key() {
+    let mut nan = table_stl();
+    nan[3][1][2] = f64::NAN;
+    let mut big = common::stl::binary(&table_stl());
+    big.resize(17 << 20, 0);
+    let many: Vec<_> = (0..200_001).map(|i| [[i as f64, 0.0, 0.0], [i as f64, 1.0, 0.0], [i as f64, 0.0, 1.0]]).collect();
+    let dir = mesh_dir(
+        "bad",
+        &[
+            ("nan.stl", common::stl::binary(&nan)),
+            ("big.stl", big),
+            ("many.stl", common::stl::binary(&many)),
+            ("junk.stl", b"not an stl".to_vec()),
+            ("table.stl", common::stl::binary(&table_stl())),
+        ],
+    );
+    let bad = |file: &str, dir: Option<&std::path::Path>| {
+        kinepost::machines::parse_profile_in(&spinner_mesh(file), "spinner-mesh", None, dir).unwrap_err().to_string()
+    };
+    for (file, why) in [
+        ("nan.stl", "finite"),
+        ("big.stl", "larger than"),
+        ("many.stl", "more than 200000 triangles"),
+        ("junk.stl", "STL"),
+        ("gone.stl", "gone.stl"),
+        ("../table.stl", "beside the profile"),
+        ("sub/table.stl", "beside the profile"),
+        ("/etc/passwd", "beside the profile"),
+    ] {
+        let e = bad(file, Some(&dir));
+        assert!(e.contains("body[0].mesh") && e.contains(why), "{file}: {e}");
+    }
+    // No directory (a profile parsed on its own): meshes come from the library's directory only.
+    let e = bad("table.stl", None);
+    assert!(e.contains("body[0].mesh") && e.contains("directory only"), "{e}");
+    // Two shapes in one body.
+    let two = spinner_mesh("table.stl").replace("mesh = \"table.stl\"", "mesh = \"table.stl\"\nbox = [0.0, 0.0, 0.0, 1.0, 1.0, 1.0]");
+    let e = kinepost::machines::parse_profile_in(&two, "two", None, Some(&dir)).unwrap_err().to_string();
+    assert!(e.contains("body[0]") && e.contains("one shape"), "{e}");
+    // The library reads a profile's meshes beside it.
+    std::fs::write(dir.join("spinner-u5-620.toml"), spinner_mesh("table.stl")).unwrap();
+    for f in ["nan.stl", "big.stl", "many.stl", "junk.stl"] {
+        std::fs::remove_file(dir.join(f)).unwrap();
+    }
+    let lib = kinepost::machines::Library::load_dir(&dir).unwrap();
+    assert_eq!(lib.get("spinner-u5-620").unwrap().geometry().bodies.len(), 5);
+    let _ = std::fs::remove_dir_all(&dir);
+}
