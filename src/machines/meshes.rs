@@ -48,7 +48,9 @@ impl<'a> MeshReader<'a> {
         if let Some(m) = self.read.get(name) {
             return Ok(m.clone());
         }
-        let dir = self.dir.ok_or("meshes are read from the machine library's directory only, and this profile has none")?;
+        let dir = self
+            .dir
+            .ok_or("meshes are read from the machine library's directory only, and this profile has none")?;
         let bytes = read_bounded(&dir.join(name)).map_err(|e| format!("{}: {e}", crate::text::quote(name)))?;
         let mesh = parse_stl(name, bytes, MAX_PROFILE_TRIANGLES - self.triangles)?;
         self.triangles += mesh.triangles().len();
@@ -62,7 +64,9 @@ fn is_bare_name(name: &str) -> bool {
     (5..=128).contains(&name.len())
         && name.to_ascii_lowercase().ends_with(".stl")
         && !name.starts_with('.')
-        && name.chars().all(|c| c.is_ascii_alphanumeric() || matches!(c, '.' | '_' | '-'))
+        && name
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || matches!(c, '.' | '_' | '-'))
 }
 
 /// The file's bytes, at most [`MAX_MESH_BYTES`].
@@ -99,12 +103,17 @@ pub fn parse_stl(name: &str, mut bytes: Vec<u8>, budget: usize) -> Result<Arc<Me
     for t in reader {
         let t = t.map_err(bad)?;
         if triangles.len() == max {
-            return Err(format!("more than {max} triangles (at most {MAX_MESH_TRIANGLES} a body, {MAX_PROFILE_TRIANGLES} a profile)"));
+            return Err(format!(
+                "more than {max} triangles (at most {MAX_MESH_TRIANGLES} a body, {MAX_PROFILE_TRIANGLES} a profile)"
+            ));
         }
         let mut tri = [0u32; 3];
         for (k, p) in t.vertices.iter().enumerate() {
             if !p.0.iter().all(|c| c.is_finite()) {
-                return Err(format!("triangle {} has a coordinate that is not a finite number", triangles.len() + 1));
+                return Err(format!(
+                    "triangle {} has a coordinate that is not a finite number",
+                    triangles.len() + 1
+                ));
             }
             tri[k] = *index.entry(p.0.map(f32::to_bits)).or_insert_with(|| {
                 vertices.push(Vec3::new(p.0[0] as f64, p.0[1] as f64, p.0[2] as f64));
@@ -123,7 +132,9 @@ pub fn parse_stl(name: &str, mut bytes: Vec<u8>, budget: usize) -> Result<Arc<Me
 
 /// FNV-1a, 64 bits: a stable digest of a file (the same on every build, unlike `DefaultHasher`).
 fn fnv1a(bytes: &[u8]) -> u64 {
-    bytes.iter().fold(0xcbf2_9ce4_8422_2325, |h, b| (h ^ *b as u64).wrapping_mul(0x100_0000_01b3))
+    bytes
+        .iter()
+        .fold(0xcbf2_9ce4_8422_2325, |h, b| (h ^ *b as u64).wrapping_mul(0x100_0000_01b3))
 }
 
 /// A mesh as a binary STL (what the page draws): normals from the winding, f32 coordinates.
