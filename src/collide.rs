@@ -181,6 +181,9 @@ impl Solid {
                 if !(finite(&m.min) && finite(&m.max)) {
                     return Err(format!("every coordinate must be finite and within ±{}", crate::kinematics::MAX_COORD));
                 }
+                if (m.max - m.min).max() <= 0.0 {
+                    return Err("its triangles all sit at one point".into());
+                }
             }
         }
         Ok(())

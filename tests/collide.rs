@@ -612,6 +612,8 @@ fn bad_meshes_are_refused_naming_the_key() {
             ("big.stl", big),
             ("many.stl", common::stl::binary(&many)),
             ("junk.stl", b"not an stl".to_vec()),
+            ("point.stl", common::stl::binary(&[[[1.0, 2.0, 3.0]; 3]])),
+            ("far.stl", common::stl::binary(&[[[0.0; 3], [1.0, 0.0, 0.0], [0.0, 1e30, 0.0]]])),
             ("table.stl", common::stl::binary(&table_stl())),
         ],
     );
@@ -623,6 +625,8 @@ fn bad_meshes_are_refused_naming_the_key() {
         ("big.stl", "larger than"),
         ("many.stl", "more than 200000 triangles"),
         ("junk.stl", "STL"),
+        ("point.stl", "one point"),
+        ("far.stl", "within"),
         ("gone.stl", "gone.stl"),
         ("../table.stl", "beside the profile"),
         ("sub/table.stl", "beside the profile"),
@@ -640,7 +644,7 @@ fn bad_meshes_are_refused_naming_the_key() {
     assert!(e.contains("body[0]") && e.contains("one shape"), "{e}");
     // The library reads a profile's meshes beside it.
     std::fs::write(dir.join("spinner-u5-620.toml"), spinner_mesh("table.stl")).unwrap();
-    for f in ["nan.stl", "big.stl", "many.stl", "junk.stl"] {
+    for f in ["nan.stl", "big.stl", "many.stl", "junk.stl", "point.stl", "far.stl"] {
         std::fs::remove_file(dir.join(f)).unwrap();
     }
     let lib = kinepost::machines::Library::load_dir(&dir).unwrap();
