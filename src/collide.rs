@@ -4,7 +4,7 @@
 //! [`Geometry`]; a post builds one [`World`] from it, the tool and the job's stock, and asks it at
 //! each block (and between blocks, sampled) which bodies touch or come closer than the
 //! clearance. The distance queries are parry's (GJK/EPA on boxes and cylinders; a triangle mesh
-//! is a BVH of triangles, each tested as a convex shape, so a mesh is checked by its surface).
+//! is a BVH of triangles, each tested as a convex shape, and a closed one an inside test too).
 //!
 //! Where a body sits, at home (every joint zero): bodies on the bed, the table and the table
 //! rotaries are given in M; bodies on the ram, the head rotaries and the spindle relative to the
@@ -85,8 +85,10 @@ pub enum Solid {
 }
 
 /// A triangle mesh body (read from an STL file by `machines`): parry's `TriMesh`, a BVH of its
-/// triangles. Checked by its surface: a body wholly inside a mesh, touching no triangle, is
-/// not found (the sampling between blocks keeps a body from crossing a surface unseen).
+/// triangles, each tested against the other body. A closed mesh wound outward is a solid: a body
+/// wholly inside it, touching no triangle, is found by a point of it (parry's pseudo-normal
+/// inside test). An open one is a surface only (the sampling between blocks keeps a body from
+/// crossing it unseen).
 pub struct Mesh {
     /// The file it was read from (a bare name beside the profile).
     pub file: String,
@@ -105,8 +107,11 @@ impl Mesh {
             min = min.inf(p);
             max = max.sup(p);
         }
-        let points = vertices.iter().map(v).collect();
-        let tri = TriMesh::new(points, triangles).map_err(|e| format!("not a triangle mesh: {e}"))?;
+        let points: Vec<Vector> = vertices.iter().map(v).collect();
+        let tri = match closed(&points, &triangles) {
+            Some(t) => t,
+            None => TriMesh::new(points, triangles).map_err(|e| format!("not a triangle mesh: {e}"))?,
+        };
         Ok(Mesh {
             file: file.into(),
             digest,
@@ -114,6 +119,12 @@ impl Mesh {
             min,
             max,
         })
+    }
+
+    /// Whether it is closed and wound outward: then it is a solid, and a body wholly inside it
+    /// is a hit too.
+    pub fn is_solid(&self) -> bool {
+        self.tri().pseudo_normals_if_oriented().is_some()
     }
 
     fn tri(&self) -> &TriMesh {
@@ -134,6 +145,23 @@ impl Mesh {
     pub fn bounds(&self) -> (Vec3, Vec3) {
         (self.min, self.max)
     }
+}
+
+/// The mesh with its pseudo-normals (parry's inside test) where it is closed (every edge shared
+/// by two triangles), consistently oriented and wound outward (a positive volume); else `None`.
+fn closed(points: &[Vector], triangles: &[[u32; 3]]) -> Option<TriMesh> {
+    use parry3d_f64::shape::TriMeshFlags;
+    let volume: f64 = triangles
+        .iter()
+        .map(|t| t.map(|i| points.get(i as usize).copied().unwrap_or(Vector::ZERO)))
+        .map(|[a, b, c]| a.dot(b.cross(c)))
+        .sum();
+    if volume.is_nan() || volume <= 0.0 {
+        return None;
+    }
+    let flags = TriMeshFlags::HALF_EDGE_TOPOLOGY | TriMeshFlags::ORIENTED;
+    let t = TriMesh::with_flags(points.to_vec(), triangles.to_vec(), flags).ok()?;
+    t.topology()?.half_edges.iter().all(|h| h.twin != u32::MAX).then_some(t)
 }
 
 impl PartialEq for Mesh {
@@ -302,6 +330,9 @@ struct Placed {
     /// The bounding sphere in the link's coordinates: the cheap first test of a pair.
     centre: Vector,
     radius: f64,
+    /// A point of the body (link's coordinates): inside a solid mesh, the whole body is, where
+    /// no triangle touches it.
+    probe: Vector,
 }
 
 /// The bodies of one post, built once, and the pairs that can touch.
@@ -375,6 +406,7 @@ impl World {
         let sphere = shape.compute_local_bounding_sphere();
         self.step = self.step.min(s.smallest() / 2.0);
         self.reach = self.reach.max(s.reach());
+        let probe = local * shape.as_trimesh().map_or(sphere.center, |t| t.vertices()[0]);
         self.bodies.push(Placed {
             name: name.into(),
             link,
@@ -382,6 +414,7 @@ impl World {
             radius: sphere.radius,
             shape,
             local,
+            probe,
         });
     }
 
@@ -505,18 +538,24 @@ impl World {
             if (0..3).any(|k| a.mins[k] > b.maxs[k] + margin || b.mins[k] > a.maxs[k] + margin) {
                 continue;
             }
-            let Ok(Some(c)) = query::contact(&pi, &*bi.shape, &pj, &*bj.shape, margin) else {
-                continue;
+            let dist = match query::contact(&pi, &*bi.shape, &pj, &*bj.shape, margin) {
+                Ok(Some(c)) => c.dist,
+                _ => match inside(bi, &pi, &(Self::pose_of(&l, bj.link) * bj.probe))
+                    .or_else(|| inside(bj, &pj, &(Self::pose_of(&l, bi.link) * bi.probe)))
+                {
+                    Some(d) => d,
+                    None => continue,
+                },
             };
-            if kind != 0 && c.dist > -self.cut_depth {
+            if kind != 0 && dist > -self.cut_depth {
                 continue;
             }
             match out.iter_mut().find(|h| h.a == bi.name && h.b == bj.name) {
-                Some(h) => h.dist = h.dist.min(c.dist),
+                Some(h) => h.dist = h.dist.min(dist),
                 None => out.push(Hit {
                     a: bi.name.clone(),
                     b: bj.name.clone(),
-                    dist: c.dist,
+                    dist,
                 }),
             }
         }
@@ -534,6 +573,16 @@ impl World {
         let n = (moved / self.step.max(1e-6)).ceil();
         if n.is_finite() { (n as usize).clamp(1, MAX_SAMPLES) } else { MAX_SAMPLES }
     }
+}
+
+/// Where another body touches no triangle of `a`: when `a` is a solid mesh (posed at `pa`) and
+/// that body's probe point (in M) is inside it, minus the probe's depth (a lower bound of the
+/// overlap).
+fn inside(a: &Placed, pa: &Pose, probe: &Vector) -> Option<f64> {
+    use parry3d_f64::query::PointQuery;
+    let t = a.shape.as_trimesh().filter(|t| t.pseudo_normals_if_oriented().is_some())?;
+    let p = pa.inverse_transform_point(*probe);
+    t.contains_local_point(p).then(|| -t.project_local_point(p, false).point.distance(p))
 }
 
 /// Which pairs are checked: head-side bodies against the table side and the bed; the cutter

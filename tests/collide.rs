@@ -651,3 +651,44 @@ fn bad_meshes_are_refused_naming_the_key() {
     assert_eq!(lib.get("spinner-u5-620").unwrap().geometry().bodies.len(), 5);
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// A closed mesh wound outward is a solid: a cutter wholly inside it, touching no triangle, is a
+/// hit; an open one (two triangles gone) is a surface, and the same cutter is not.
+#[test]
+fn a_closed_mesh_is_a_solid_an_open_one_a_surface() {
+    use kinepost::collide::{Hit, Solid, ToolShape, World};
+    let open: Vec<_> = table_stl()[2..].to_vec();
+    let inward: Vec<_> = table_stl().into_iter().map(|[a, b, c]| [a, c, b]).collect();
+    let dir = mesh_dir(
+        "solid",
+        &[
+            ("closed.stl", common::stl::binary(&table_stl())),
+            ("open.stl", common::stl::binary(&open)),
+            ("inward.stl", common::stl::ascii(&inward).into_bytes()),
+        ],
+    );
+    let tool = ToolShape { length: 10.0, diameter: 10.0, corner_radius: 0.0, holder_diameter: 0.0, holder_length: 0.0 };
+    for (file, solid) in [("closed.stl", true), ("open.stl", false), ("inward.stl", false)] {
+        let text = format!("{}\n[[body]]\nname = \"table mesh\"\non = \"C\"\nmesh = {file:?}\n", shipped("spinner-u5-620"));
+        let p = kinepost::machines::parse_profile_in(&text, "t", None, Some(&dir)).unwrap();
+        let g = p.geometry();
+        assert!(matches!(&g.bodies[0].solid, Solid::Mesh(m) if m.is_solid() == solid), "{file}");
+        let mut w = World::new(&g, &[], &[], 2.0, 0.01);
+        w.set_tool(tool);
+        let zero = kinepost::kinematics::Vec3::zeros();
+        let at = |w: &mut World, z: f64| {
+            let mut out: Vec<Hit> = Vec::new();
+            w.check_at(&p.machine, &[100.0, 50.0, z], &[0.0; 3], tool.length, &zero, false, &mut out);
+            out
+        };
+        // The cutter spans z −25 … −15 (the table −60 … 0): wholly inside.
+        let deep = at(&mut w, -25.0);
+        assert_eq!(deep.len(), usize::from(solid), "{file}: {deep:?}");
+        if solid {
+            assert!(deep[0].a == "cutter" && deep[0].b == "table mesh" && deep[0].dist <= -15.0, "{deep:?}");
+        }
+        // Through the top face: a hit either way; above it: none.
+        assert!(at(&mut w, -5.0).iter().any(|h| h.b == "table mesh"), "{file}");
+        assert!(at(&mut w, 20.0).is_empty(), "{file}");
+    }
+}
