@@ -86,8 +86,7 @@ pub enum Solid {
 
 /// A triangle mesh body (read from an STL file by `machines`): parry's `TriMesh`, a BVH of its
 /// triangles, each tested against the other body. A closed mesh wound outward is a solid: a body
-/// wholly inside it, touching no triangle, is found by a point of it (parry's pseudo-normal
-/// inside test). An open one is a surface only (the sampling between blocks keeps a body from
+/// wholly inside it, touching no triangle, is found by a point of it (a ray cast). An open one is a surface only (the sampling between blocks keeps a body from
 /// crossing it unseen).
 pub struct Mesh {
     /// The file it was read from (a bare name beside the profile).
@@ -147,7 +146,7 @@ impl Mesh {
     }
 }
 
-/// The mesh with its pseudo-normals (parry's inside test) where it is closed (every edge shared
+/// The mesh with its pseudo-normals (the mark of a solid) where it is closed (every edge shared
 /// by two triangles), consistently oriented and wound outward (a positive volume); else `None`.
 fn closed(points: &[Vector], triangles: &[[u32; 3]]) -> Option<TriMesh> {
     use parry3d_f64::shape::TriMeshFlags;
@@ -578,11 +577,22 @@ impl World {
 /// Where another body touches no triangle of `a`: when `a` is a solid mesh (posed at `pa`) and
 /// that body's probe point (in M) is inside it, minus the probe's depth (a lower bound of the
 /// overlap).
+///
+/// Cheap where nothing is wrong: a box test, then one ray cast (inside where the first triangle
+/// it meets faces away); the depth (a projection) only for a hit.
 fn inside(a: &Placed, pa: &Pose, probe: &Vector) -> Option<f64> {
-    use parry3d_f64::query::PointQuery;
+    use parry3d_f64::query::{PointQuery, Ray, RayCast};
+    use parry3d_f64::shape::FeatureId;
     let t = a.shape.as_trimesh().filter(|t| t.pseudo_normals_if_oriented().is_some())?;
     let p = pa.inverse_transform_point(*probe);
-    t.contains_local_point(p).then(|| -t.project_local_point(p, false).point.distance(p))
+    if !t.local_aabb().contains_local_point(p) {
+        return None;
+    }
+    // Along no axis or diagonal: a ray through an edge or a vertex is unlikely.
+    let ray = Ray::new(p, Vector::new(0.5377, 0.6161, 0.5756).normalize());
+    let hit = t.cast_local_ray_and_get_normal(&ray, f64::MAX, false)?;
+    // Face(1): the triangle was met from behind.
+    (hit.feature == FeatureId::Face(1)).then(|| -t.project_local_point(p, false).point.distance(p))
 }
 
 /// Which pairs are checked: head-side bodies against the table side and the bed; the cutter
