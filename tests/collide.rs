@@ -692,3 +692,30 @@ fn a_closed_mesh_is_a_solid_an_open_one_a_surface() {
         assert!(at(&mut w, 20.0).is_empty(), "{file}");
     }
 }
+
+/// Mesh against mesh (a head housing on the spindle into the table): parry answers it triangle
+/// against triangle; a housing wholly inside the closed table is found too.
+#[test]
+fn a_mesh_against_a_mesh() {
+    use kinepost::collide::{Hit, ToolShape, World};
+    let head = common::stl::box_triangles([-50.0, -50.0, 5.0], [50.0, 50.0, 40.0]);
+    let dir = mesh_dir("mm", &[("table.stl", common::stl::binary(&table_stl())), ("head.stl", common::stl::binary(&head))]);
+    let bodies = "[[body]]\nname = \"table mesh\"\non = \"C\"\nmesh = \"table.stl\"\n[[body]]\nname = \"head mesh\"\non = \"spindle\"\nmesh = \"head.stl\"\n";
+    let p = kinepost::machines::parse_profile_in(&format!("{}\n{bodies}", shipped("spinner-u5-620")), "t", None, Some(&dir)).unwrap();
+    let g = p.geometry();
+    let mut w = World::new(&g, &[], &[], 2.0, 0.01);
+    w.set_tool(ToolShape { length: 10.0, diameter: 10.0, corner_radius: 0.0, holder_diameter: 0.0, holder_length: 0.0 });
+    let zero = kinepost::kinematics::Vec3::zeros();
+    let mut at = |z: f64| {
+        let mut out: Vec<Hit> = Vec::new();
+        w.check_at(&p.machine, &[100.0, 50.0, z], &[0.0; 3], 10.0, &zero, false, &mut out);
+        out.into_iter().filter(|h| h.a == "head mesh").collect::<Vec<_>>()
+    };
+    // The housing spans z + 15 … z + 50 (spindle at z + 10).
+    let through = at(-30.0);
+    assert!(through.len() == 1 && through[0].b == "table mesh" && through[0].dist < 0.0, "{through:?}");
+    let wholly = at(-57.0);
+    assert!(wholly.len() == 1 && wholly[0].dist < 0.0, "wholly inside: {wholly:?}");
+    assert!(at(-14.0).iter().all(|h| h.dist > 0.0), "a near miss at most");
+    assert!(at(0.0).is_empty());
+}
