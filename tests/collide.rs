@@ -719,3 +719,74 @@ fn a_mesh_against_a_mesh() {
     assert!(at(-14.0).iter().all(|h| h.dist > 0.0), "a near miss at most");
     assert!(at(0.0).is_empty());
 }
+
+/// The check skips a pair while the distance it last measured, less how far anything can have
+/// moved since, is still beyond what is told. That bound must never skip a hit: on random walks
+/// of every shipped machine's joints (small steps and jumps, near and into the table), the hits
+/// at each step equal those of a check that remembers nothing.
+#[test]
+fn skipping_pairs_that_cannot_have_closed_in_misses_nothing() {
+    let mut s: u64 = 0x2545F4914F6CDD1D;
+    let mut rnd = move || {
+        s ^= s << 13;
+        s ^= s >> 7;
+        s ^= s << 17;
+        (s >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let (mut steps, mut hits) = (0, 0);
+    for p in library().iter() {
+        hits += walk_compare(p, 3000, &mut rnd);
+        steps += 3000;
+    }
+    assert!(hits > 1000, "the walks touched something only {hits} times in {steps} steps");
+    // Mesh bodies too: a closed table (a solid: wholly inside is a hit) and a head housing.
+    let head = common::stl::box_triangles([-120.0, -120.0, 5.0], [120.0, 120.0, 200.0]);
+    let dir = mesh_dir("walk", &[("table.stl", common::stl::binary(&table_stl())), ("head.stl", common::stl::binary(&head))]);
+    let bodies = "[[body]]\nname = \"table mesh\"\non = \"C\"\nmesh = \"table.stl\"\n[[body]]\nname = \"head mesh\"\non = \"spindle\"\nmesh = \"head.stl\"\n";
+    let p = kinepost::machines::parse_profile_in(&format!("{}\n{bodies}", shipped("spinner-u5-620")), "t", None, Some(&dir)).unwrap();
+    assert!(walk_compare(&p, 3000, &mut rnd) > 100, "the mesh walk touched too little");
+}
+
+/// A random walk of `p`'s joints (small steps, and a jump now and then), checked by one World
+/// that remembers and by a fresh one at every step: the same hits. Returns how many.
+fn walk_compare(p: &Profile, n: usize, rnd: &mut impl FnMut() -> f64) -> usize {
+    use kinepost::collide::{ToolShape, World};
+    let mut hits = 0;
+    let m = &p.machine;
+    let g = p.geometry();
+    let stock = [kinepost::collide::Solid::Box { min: [-40.0, -40.0, 0.0].into(), max: [40.0, 40.0, 30.0].into() }];
+    let len = m.default_tool_length;
+    let tool = ToolShape::default_for(len, m.units == kinepost::kinematics::Units::Mm);
+    let wo = kinepost::kinematics::Vec3::zeros();
+    let mut remembering = World::new(&g, &stock, &[], 2.0, 1e-3);
+    remembering.set_tool(tool);
+    let (mut lin, mut rot) = ([0.0f64; 3], [0.0f64; 3]);
+    for i in 0..3 {
+        if let Some(l) = &m.linears[i] {
+            lin[i] = 0.5 * (l.min + l.max);
+        }
+    }
+    for k in 0..n {
+        let jump = k % 97 == 0;
+        for i in 0..3 {
+            if let Some(l) = &m.linears[i] {
+                let step = if jump { l.max - l.min } else { 0.02 * (l.max - l.min) };
+                lin[i] = (lin[i] + step * (rnd() - 0.5)).clamp(l.min, l.max);
+            }
+        }
+        for r in rot.iter_mut().take(m.rotaries.len()) {
+            *r += if jump { 3.0 } else { 0.05 } * (rnd() - 0.5);
+        }
+        let stock_now = k % 3 == 0;
+        let (mut a, mut b) = (Vec::new(), Vec::new());
+        remembering.check_at(m, &lin, &rot, len, &wo, stock_now, &mut a);
+        let mut fresh = World::new(&g, &stock, &[], 2.0, 1e-3);
+        fresh.set_tool(tool);
+        fresh.check_at(m, &lin, &rot, len, &wo, stock_now, &mut b);
+        let key = |h: &kinepost::collide::Hit| (h.a.clone(), h.b.clone(), (h.dist * 1e9).round() as i64);
+        let (ka, kb): (Vec<_>, Vec<_>) = (a.iter().map(key).collect(), b.iter().map(key).collect());
+        assert_eq!(ka, kb, "{} step {k}: joints {lin:?} {rot:?}", m.id);
+        hits += b.len();
+    }
+    hits
+}
