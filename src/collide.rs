@@ -3,7 +3,8 @@
 //! Pure like `kinematics`: no IO. The profile's `[[body]]` entries (read in `machines`) become a
 //! [`Geometry`]; a post builds one [`World`] from it, the tool and the job's stock, and asks it at
 //! each block (and between blocks, sampled) which bodies touch or come closer than the
-//! clearance. The distance queries are parry's (GJK/EPA on boxes and cylinders).
+//! clearance. The distance queries are parry's (GJK/EPA on boxes and cylinders; a triangle mesh
+//! is a BVH of triangles, each tested as a convex shape, and a closed one an inside test too).
 //!
 //! Where a body sits, at home (every joint zero): bodies on the bed, the table and the table
 //! rotaries are given in M; bodies on the ram, the head rotaries and the spindle relative to the
@@ -12,7 +13,8 @@
 use crate::kinematics::{Machine, Mount, Vec3};
 use parry3d_f64::math::{Pose, Rotation, Vector};
 use parry3d_f64::query;
-use parry3d_f64::shape::{Cuboid, Cylinder, RoundShape, Shape};
+use parry3d_f64::shape::{Cuboid, Cylinder, RoundShape, SharedShape, TriMesh};
+use std::sync::Arc;
 
 /// The most bodies a profile may give: a machine model, not a CAD assembly.
 pub const MAX_BODIES: usize = 64;
@@ -72,18 +74,113 @@ impl Link {
 }
 
 /// A body's shape, at home, in its link's coordinates (see the module's text).
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 pub enum Solid {
     /// Opposite corners.
     Box { min: Vec3, max: Vec3 },
     /// The axis from `from` to `to`, and the radius.
     Cylinder { from: Vec3, to: Vec3, radius: f64 },
+    /// A triangle mesh, built once when the profile loads and shared by every post.
+    Mesh(Arc<Mesh>),
+}
+
+/// A triangle mesh body (read from an STL file by `machines`): parry's `TriMesh`, a BVH of its
+/// triangles, each tested against the other body. A closed mesh wound outward is a solid: a body
+/// wholly inside it, touching no triangle, is found by a point of it (a ray cast). An open one is a surface only (the sampling between blocks keeps a body from
+/// crossing it unseen).
+pub struct Mesh {
+    /// The file it was read from (a bare name beside the profile).
+    pub file: String,
+    /// A digest of the file's bytes: the same file, the same mesh (an ETag).
+    pub digest: u64,
+    shape: SharedShape,
+    min: Vec3,
+    max: Vec3,
+}
+
+impl Mesh {
+    /// The mesh of these vertices and triangles, or why not (none, an index out of range).
+    pub fn new(file: &str, digest: u64, vertices: Vec<Vec3>, triangles: Vec<[u32; 3]>) -> Result<Mesh, String> {
+        let (mut min, mut max) = (Vec3::repeat(f64::INFINITY), Vec3::repeat(f64::NEG_INFINITY));
+        for p in &vertices {
+            min = min.inf(p);
+            max = max.sup(p);
+        }
+        let points: Vec<Vector> = vertices.iter().map(v).collect();
+        let tri = match closed(&points, &triangles) {
+            Some(t) => t,
+            None => TriMesh::new(points, triangles).map_err(|e| format!("not a triangle mesh: {e}"))?,
+        };
+        Ok(Mesh {
+            file: file.into(),
+            digest,
+            shape: SharedShape::new(tri),
+            min,
+            max,
+        })
+    }
+
+    /// Whether it is closed and wound outward: then it is a solid, and a body wholly inside it
+    /// is a hit too.
+    pub fn is_solid(&self) -> bool {
+        self.tri().pseudo_normals_if_oriented().is_some()
+    }
+
+    fn tri(&self) -> &TriMesh {
+        self.shape.as_trimesh().expect("a Mesh's shape is a TriMesh")
+    }
+
+    /// Its vertices (profile units, at home in its link's coordinates).
+    pub fn vertices(&self) -> impl ExactSizeIterator<Item = Vec3> + '_ {
+        self.tri().vertices().iter().map(|p| Vec3::new(p.x, p.y, p.z))
+    }
+
+    /// Its triangles, as indices into [`Mesh::vertices`].
+    pub fn triangles(&self) -> &[[u32; 3]] {
+        self.tri().indices()
+    }
+
+    /// Its bounding box at home: `(min, max)`.
+    pub fn bounds(&self) -> (Vec3, Vec3) {
+        (self.min, self.max)
+    }
+}
+
+/// The mesh with its pseudo-normals (the mark of a solid) where it is closed (every edge shared
+/// by two triangles), consistently oriented and wound outward (a positive volume); else `None`.
+fn closed(points: &[Vector], triangles: &[[u32; 3]]) -> Option<TriMesh> {
+    use parry3d_f64::shape::TriMeshFlags;
+    let volume: f64 = triangles
+        .iter()
+        .map(|t| t.map(|i| points.get(i as usize).copied().unwrap_or(Vector::ZERO)))
+        .map(|[a, b, c]| a.dot(b.cross(c)))
+        .sum();
+    if volume.is_nan() || volume <= 0.0 {
+        return None;
+    }
+    let flags = TriMeshFlags::HALF_EDGE_TOPOLOGY | TriMeshFlags::ORIENTED;
+    let t = TriMesh::with_flags(points.to_vec(), triangles.to_vec(), flags).ok()?;
+    t.topology()?.half_edges.iter().all(|h| h.twin != u32::MAX).then_some(t)
+}
+
+impl PartialEq for Mesh {
+    fn eq(&self, o: &Mesh) -> bool {
+        self.file == o.file && self.digest == o.digest
+    }
+}
+
+impl std::fmt::Debug for Mesh {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Mesh").field("file", &self.file).field("triangles", &self.triangles().len()).finish()
+    }
 }
 
 impl Solid {
     /// The same solid with every length times `k` (CL units into the profile's).
     pub fn scaled(&self, k: f64) -> Solid {
         match *self {
+            // Meshes are the machine's, in profile units already: never a job's solid.
+            Solid::Mesh(ref m) => Solid::Mesh(m.clone()),
             Solid::Box { min, max } => Solid::Box { min: min * k, max: max * k },
             Solid::Cylinder { from, to, radius } => Solid::Cylinder {
                 from: from * k,
@@ -107,6 +204,14 @@ impl Solid {
                     return Err("a cylinder needs two distinct finite end points and a positive radius".into());
                 }
             }
+            Solid::Mesh(m) => {
+                if !(finite(&m.min) && finite(&m.max)) {
+                    return Err(format!("every coordinate must be finite and within ±{}", crate::kinematics::MAX_COORD));
+                }
+                if (m.max - m.min).max() <= 0.0 {
+                    return Err("its triangles all sit at one point".into());
+                }
+            }
         }
         Ok(())
     }
@@ -116,6 +221,12 @@ impl Solid {
         match self {
             Solid::Box { min, max } => (max - min).min(),
             Solid::Cylinder { from, to, radius } => (2.0 * radius).min((to - from).norm()),
+            // A flat mesh (a plate of zero thickness) would ask for endless samples: its
+            // largest extent bounds the step instead of its smallest.
+            Solid::Mesh(m) => {
+                let d = m.max - m.min;
+                if d.min() > 0.0 { d.min() } else { d.max() }
+            }
         }
     }
 
@@ -124,30 +235,32 @@ impl Solid {
         match self {
             Solid::Box { min, max } => min.abs().sup(&max.abs()).norm(),
             Solid::Cylinder { from, to, radius } => from.norm().max(to.norm()) + radius,
+            Solid::Mesh(m) => m.min.abs().sup(&m.max.abs()).norm(),
         }
     }
 
     /// The parry shape and where it sits in the link's coordinates.
-    fn shape(&self, round: f64) -> (Box<dyn Shape>, Pose) {
+    fn shape(&self, round: f64) -> (SharedShape, Pose) {
         match *self {
             Solid::Box { min, max } => {
                 let half = (max - min) / 2.0;
                 let c = (max + min) / 2.0;
-                (Box::new(Cuboid::new(v(&half))), Pose::from_translation(v(&c)))
+                (SharedShape::new(Cuboid::new(v(&half))), Pose::from_translation(v(&c)))
             }
+            Solid::Mesh(ref m) => (m.shape.clone(), Pose::IDENTITY),
             Solid::Cylinder { from, to, radius } => {
                 let d = to - from;
                 let c = (from + to) / 2.0;
                 let rot = Rotation::from_rotation_arc(Vector::Y, v(&d.normalize()));
                 let half = d.norm() / 2.0;
-                let shape: Box<dyn Shape> = if round > 0.0 {
+                let shape = if round > 0.0 {
                     let r = round.min(radius).min(half);
-                    Box::new(RoundShape {
+                    SharedShape::new(RoundShape {
                         inner_shape: Cylinder::new(half - r, radius - r),
                         border_radius: r,
                     })
                 } else {
-                    Box::new(Cylinder::new(half, radius))
+                    SharedShape::new(Cylinder::new(half, radius))
                 };
                 (shape, Pose::from_parts(v(&c), rot))
             }
@@ -210,11 +323,15 @@ pub struct Hit {
 struct Placed {
     name: String,
     link: Link,
-    shape: Box<dyn Shape>,
+    /// Shared: a mesh's is the profile's, not a copy per post.
+    shape: SharedShape,
     local: Pose,
     /// The bounding sphere in the link's coordinates: the cheap first test of a pair.
     centre: Vector,
     radius: f64,
+    /// A point of the body (the shape's coordinates): inside a solid mesh, the whole body is,
+    /// where no triangle touches it.
+    probe: Vector,
 }
 
 /// The bodies of one post, built once, and the pairs that can touch.
@@ -296,6 +413,7 @@ impl World {
         let sphere = shape.compute_local_bounding_sphere();
         self.step = self.step.min(s.smallest() / 2.0);
         self.reach = self.reach.max(s.reach());
+        let probe = shape.as_trimesh().map_or(sphere.center, |t| t.vertices()[0]);
         self.bodies.push(Placed {
             name: name.into(),
             link,
@@ -303,6 +421,7 @@ impl World {
             radius: sphere.radius,
             shape,
             local,
+            probe,
         });
     }
 
@@ -491,14 +610,43 @@ fn distance(bi: &Placed, bj: &Placed, pi: &Pose, pj: &Pose, centres: f64, limit:
     if boxes > limit {
         return Apart(boxes);
     }
-    let horizon = limit.max(0.0) + bi.radius.max(bj.radius);
-    match query::contact(pi, bi.shape.as_ref(), pj, bj.shape.as_ref(), horizon) {
-        Ok(Some(c)) if c.dist <= limit => Touching(c.dist),
-        Ok(Some(c)) => Apart(c.dist),
-        Ok(None) => Apart(horizon),
+    // A mesh's contact query tests every triangle whose box comes within the horizon of the
+    // other body: none beyond what is told (a table's 300 mm, or even a holder's 20, took in
+    // the thousands of slivers of a fine mesh's disc, and a post 15 times as long).
+    let mesh = bi.shape.as_trimesh().is_some() || bj.shape.as_trimesh().is_some();
+    let horizon = limit.max(0.0) + if mesh { 0.0 } else { bi.radius.max(bj.radius) };
+    let gap = match query::contact(pi, &*bi.shape, pj, &*bj.shape, horizon) {
+        Ok(Some(c)) if c.dist <= limit => return Touching(c.dist),
+        Ok(Some(c)) => c.dist,
+        Ok(None) => horizon,
         // A pair of shapes parry cannot query: asked again every time, as it is never told.
-        Err(_) => Apart(f64::NEG_INFINITY),
+        Err(_) => f64::NEG_INFINITY,
+    };
+    // Clear of every triangle of a solid mesh, and yet wholly inside it.
+    match inside(bi, pi, &(pj * bj.probe)).or_else(|| inside(bj, pj, &(pi * bi.probe))) {
+        Some(d) => Touching(d.min(limit)),
+        None => Apart(gap),
     }
+}
+
+/// When `a` is a solid mesh (posed at `pa`) and another body's probe point (in M) is inside it:
+/// minus the probe's depth (a lower bound of the overlap).
+///
+/// Cheap where nothing is wrong: a box test, then one ray cast (inside where the first triangle
+/// it meets faces away); the depth (a projection) only for a hit.
+fn inside(a: &Placed, pa: &Pose, probe: &Vector) -> Option<f64> {
+    use parry3d_f64::query::{PointQuery, Ray, RayCast};
+    use parry3d_f64::shape::FeatureId;
+    let t = a.shape.as_trimesh().filter(|t| t.pseudo_normals_if_oriented().is_some())?;
+    let p = pa.inverse_transform_point(*probe);
+    if !t.local_aabb().contains_local_point(p) {
+        return None;
+    }
+    // Along no axis or diagonal: a ray through an edge or a vertex is unlikely.
+    let ray = Ray::new(p, Vector::new(0.5377, 0.6161, 0.5756).normalize());
+    let hit = t.cast_local_ray_and_get_normal(&ray, f64::MAX, false)?;
+    // Face(1): the triangle was met from behind.
+    (hit.feature == FeatureId::Face(1)).then(|| -t.project_local_point(p, false).point.distance(p))
 }
 
 /// Which pairs are checked: head-side bodies against the table side and the bed; the cutter

@@ -525,13 +525,207 @@ fn fitting_stock(text: &str, floor: f64) -> String {
     format!("{},{},{floor},{},{},{top}", lo[0] - pad(0), lo[1] - pad(1), hi[0] + pad(0), hi[1] + pad(1))
 }
 
+// Triangle-mesh bodies: STL files beside the profile.
+
+/// A directory with `files` written into it (each test its own).
+fn mesh_dir(test: &str, files: &[(&str, Vec<u8>)]) -> std::path::PathBuf {
+    let dir = std::env::temp_dir().join(format!("kinepost-mesh-{test}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    for (name, bytes) in files {
+        std::fs::write(dir.join(name), bytes).unwrap();
+    }
+    dir
+}
+
+/// SPINNER with its table cylinder swapped for a mesh `file` of the same size (a box).
+fn spinner_mesh(file: &str) -> String {
+    let table = "cylinder = { from = [0.0, 0.0, -60.0], to = [0.0, 0.0, 0.0], radius = 300.0 }";
+    assert!(SPINNER.contains(table));
+    format!("{}\n{}", shipped("spinner-u5-620"), SPINNER.replace(table, &format!("mesh = {file:?}")).replace("name = \"table\"", "name = \"table mesh\""))
+}
+
+fn table_stl() -> Vec<[[f64; 3]; 3]> {
+    common::stl::box_triangles([-300.0, -300.0, -60.0], [300.0, 300.0, 0.0])
+}
+
+#[test]
+fn a_mesh_on_the_table_rotary_is_checked_binary_and_ascii() {
+    let dir = mesh_dir(
+        "crash",
+        &[("table.stl", common::stl::binary(&table_stl())), ("table-ascii.stl", common::stl::ascii(&table_stl()).into_bytes())],
+    );
+    for file in ["table.stl", "table-ascii.stl"] {
+        let p = kinepost::machines::parse_profile_in(&spinner_mesh(file), "spinner-mesh", None, Some(&dir)).unwrap();
+        let g = p.geometry();
+        assert!(matches!(&g.bodies[0].solid, kinepost::collide::Solid::Mesh(m) if m.triangles().len() == 12), "{file}");
+        let (text, lines) = cl(
+            "MM",
+            100.0,
+            &[
+                (true, at([0.0, 0.0, 100.0], UP)),
+                (false, at([100.0, 50.0, 20.0], UP)),
+                (false, at([100.0, 50.0, -5.0], UP)),
+                (true, at([100.0, 50.0, 100.0], UP)),
+                (true, at([0.0, 0.0, 100.0], tilted(85.0))),
+                (false, at([0.0, 0.0, 6.0], tilted(85.0))),
+            ],
+        );
+        let (c, s) = run(&p, &text, Settings::default());
+        s.unwrap();
+        assert_hit(&c, lines[2], "cutter", "table mesh");
+        assert_hit(&c, lines[5], "holder", "table mesh");
+        for (i, l) in lines.iter().enumerate() {
+            if i != 2 && i != 5 {
+                assert!(hits(&c, Code::Collision).iter().all(|d| d.line != Some(*l)), "{file}: line {l}: {:#?}", hits(&c, Code::Collision));
+            }
+        }
+        // A clear path: tilted 30°, the tip above the table, the C table turning.
+        let (text, _) = cl(
+            "MM",
+            100.0,
+            &[
+                (true, at([0.0, 0.0, 150.0], UP)),
+                (false, at([50.0, 0.0, 20.0], tilted(30.0))),
+                (false, at([0.0, 50.0, 20.0], [0.0, 0.5, 0.75f64.sqrt()])),
+                (false, at([-50.0, 0.0, 20.0], [-0.5, 0.0, 0.75f64.sqrt()])),
+                (true, at([0.0, 0.0, 150.0], UP)),
+            ],
+        );
+        let (c, s) = run(&p, &text, Settings::default());
+        s.unwrap();
+        assert_clean(&c, file);
+    }
+}
+
+#[test]
+fn bad_meshes_are_refused_naming_the_key() {
+    let mut nan = table_stl();
+    nan[3][1][2] = f64::NAN;
+    let mut big = common::stl::binary(&table_stl());
+    big.resize(17 << 20, 0);
+    let many: Vec<_> = (0..200_001).map(|i| [[i as f64, 0.0, 0.0], [i as f64, 1.0, 0.0], [i as f64, 0.0, 1.0]]).collect();
+    let dir = mesh_dir(
+        "bad",
+        &[
+            ("nan.stl", common::stl::binary(&nan)),
+            ("big.stl", big),
+            ("many.stl", common::stl::binary(&many)),
+            ("junk.stl", b"not an stl".to_vec()),
+            ("point.stl", common::stl::binary(&[[[1.0, 2.0, 3.0]; 3]])),
+            ("far.stl", common::stl::binary(&[[[0.0; 3], [1.0, 0.0, 0.0], [0.0, 1e30, 0.0]]])),
+            ("table.stl", common::stl::binary(&table_stl())),
+        ],
+    );
+    let bad = |file: &str, dir: Option<&std::path::Path>| {
+        kinepost::machines::parse_profile_in(&spinner_mesh(file), "spinner-mesh", None, dir).unwrap_err().to_string()
+    };
+    for (file, why) in [
+        ("nan.stl", "finite"),
+        ("big.stl", "larger than"),
+        ("many.stl", "more than 200000 triangles"),
+        ("junk.stl", "STL"),
+        ("point.stl", "one point"),
+        ("far.stl", "within"),
+        ("gone.stl", "gone.stl"),
+        ("../table.stl", "beside the profile"),
+        ("sub/table.stl", "beside the profile"),
+        ("/etc/passwd", "beside the profile"),
+    ] {
+        let e = bad(file, Some(&dir));
+        assert!(e.contains("body[0].mesh") && e.contains(why), "{file}: {e}");
+    }
+    // No directory (a profile parsed on its own): meshes come from the library's directory only.
+    let e = bad("table.stl", None);
+    assert!(e.contains("body[0].mesh") && e.contains("directory only"), "{e}");
+    // Two shapes in one body.
+    let two = spinner_mesh("table.stl").replace("mesh = \"table.stl\"", "mesh = \"table.stl\"\nbox = [0.0, 0.0, 0.0, 1.0, 1.0, 1.0]");
+    let e = kinepost::machines::parse_profile_in(&two, "two", None, Some(&dir)).unwrap_err().to_string();
+    assert!(e.contains("body[0]") && e.contains("one shape"), "{e}");
+    // The library reads a profile's meshes beside it.
+    std::fs::write(dir.join("spinner-u5-620.toml"), spinner_mesh("table.stl")).unwrap();
+    for f in ["nan.stl", "big.stl", "many.stl", "junk.stl", "point.stl", "far.stl"] {
+        std::fs::remove_file(dir.join(f)).unwrap();
+    }
+    let lib = kinepost::machines::Library::load_dir(&dir).unwrap();
+    assert_eq!(lib.get("spinner-u5-620").unwrap().geometry().bodies.len(), 5);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A closed mesh wound outward is a solid: a cutter wholly inside it, touching no triangle, is a
+/// hit; an open one (two triangles gone) is a surface, and the same cutter is not.
+#[test]
+fn a_closed_mesh_is_a_solid_an_open_one_a_surface() {
+    use kinepost::collide::{Hit, Solid, ToolShape, World};
+    let open: Vec<_> = table_stl()[2..].to_vec();
+    let inward: Vec<_> = table_stl().into_iter().map(|[a, b, c]| [a, c, b]).collect();
+    let dir = mesh_dir(
+        "solid",
+        &[
+            ("closed.stl", common::stl::binary(&table_stl())),
+            ("open.stl", common::stl::binary(&open)),
+            ("inward.stl", common::stl::ascii(&inward).into_bytes()),
+        ],
+    );
+    let tool = ToolShape { length: 10.0, diameter: 10.0, corner_radius: 0.0, holder_diameter: 0.0, holder_length: 0.0 };
+    for (file, solid) in [("closed.stl", true), ("open.stl", false), ("inward.stl", false)] {
+        let text = format!("{}\n[[body]]\nname = \"table mesh\"\non = \"C\"\nmesh = {file:?}\n", shipped("spinner-u5-620"));
+        let p = kinepost::machines::parse_profile_in(&text, "t", None, Some(&dir)).unwrap();
+        let g = p.geometry();
+        assert!(matches!(&g.bodies[0].solid, Solid::Mesh(m) if m.is_solid() == solid), "{file}");
+        let mut w = World::new(&g, &[], &[], 2.0, 0.01);
+        w.set_tool(tool);
+        let zero = kinepost::kinematics::Vec3::zeros();
+        let at = |w: &mut World, z: f64| {
+            let mut out: Vec<Hit> = Vec::new();
+            w.check_at(&p.machine, &[100.0, 50.0, z], &[0.0; 3], tool.length, &zero, false, &mut out);
+            out
+        };
+        // The cutter spans z −25 … −15 (the table −60 … 0): wholly inside.
+        let deep = at(&mut w, -25.0);
+        assert_eq!(deep.len(), usize::from(solid), "{file}: {deep:?}");
+        if solid {
+            assert!(deep[0].a == "cutter" && deep[0].b == "table mesh" && deep[0].dist <= -15.0, "{deep:?}");
+        }
+        // Through the top face: a hit either way; above it: none.
+        assert!(at(&mut w, -5.0).iter().any(|h| h.b == "table mesh"), "{file}");
+        assert!(at(&mut w, 20.0).is_empty(), "{file}");
+    }
+}
+
+/// Mesh against mesh (a head housing on the spindle into the table): parry answers it triangle
+/// against triangle; a housing wholly inside the closed table is found too.
+#[test]
+fn a_mesh_against_a_mesh() {
+    use kinepost::collide::{Hit, ToolShape, World};
+    let head = common::stl::box_triangles([-50.0, -50.0, 5.0], [50.0, 50.0, 40.0]);
+    let dir = mesh_dir("mm", &[("table.stl", common::stl::binary(&table_stl())), ("head.stl", common::stl::binary(&head))]);
+    let bodies = "[[body]]\nname = \"table mesh\"\non = \"C\"\nmesh = \"table.stl\"\n[[body]]\nname = \"head mesh\"\non = \"spindle\"\nmesh = \"head.stl\"\n";
+    let p = kinepost::machines::parse_profile_in(&format!("{}\n{bodies}", shipped("spinner-u5-620")), "t", None, Some(&dir)).unwrap();
+    let g = p.geometry();
+    let mut w = World::new(&g, &[], &[], 2.0, 0.01);
+    w.set_tool(ToolShape { length: 10.0, diameter: 10.0, corner_radius: 0.0, holder_diameter: 0.0, holder_length: 0.0 });
+    let zero = kinepost::kinematics::Vec3::zeros();
+    let mut at = |z: f64| {
+        let mut out: Vec<Hit> = Vec::new();
+        w.check_at(&p.machine, &[100.0, 50.0, z], &[0.0; 3], 10.0, &zero, false, &mut out);
+        out.into_iter().filter(|h| h.a == "head mesh").collect::<Vec<_>>()
+    };
+    // The housing spans z + 15 … z + 50 (spindle at z + 10).
+    let through = at(-30.0);
+    assert!(through.len() == 1 && through[0].b == "table mesh" && through[0].dist < 0.0, "{through:?}");
+    let wholly = at(-57.0);
+    assert!(wholly.len() == 1 && wholly[0].dist < 0.0, "wholly inside: {wholly:?}");
+    assert!(at(-14.0).iter().all(|h| h.dist > 0.0), "a near miss at most");
+    assert!(at(0.0).is_empty());
+}
+
 /// The check skips a pair while the distance it last measured, less how far anything can have
 /// moved since, is still beyond what is told. That bound must never skip a hit: on random walks
 /// of every shipped machine's joints (small steps and jumps, near and into the table), the hits
 /// at each step equal those of a check that remembers nothing.
 #[test]
 fn skipping_pairs_that_cannot_have_closed_in_misses_nothing() {
-    use kinepost::collide::{ToolShape, World};
     let mut s: u64 = 0x2545F4914F6CDD1D;
     let mut rnd = move || {
         s ^= s << 13;
@@ -541,43 +735,58 @@ fn skipping_pairs_that_cannot_have_closed_in_misses_nothing() {
     };
     let (mut steps, mut hits) = (0, 0);
     for p in library().iter() {
-        let m = &p.machine;
-        let g = p.geometry();
-        let stock = [kinepost::collide::Solid::Box { min: [-40.0, -40.0, 0.0].into(), max: [40.0, 40.0, 30.0].into() }];
-        let len = m.default_tool_length;
-        let tool = ToolShape::default_for(len, m.units == kinepost::kinematics::Units::Mm);
-        let wo = kinepost::kinematics::Vec3::zeros();
-        let mut remembering = World::new(&g, &stock, &[], 2.0, 1e-3);
-        remembering.set_tool(tool);
-        let (mut lin, mut rot) = ([0.0f64; 3], [0.0f64; 3]);
-        for i in 0..3 {
-            if let Some(l) = &m.linears[i] {
-                lin[i] = 0.5 * (l.min + l.max);
-            }
-        }
-        for k in 0..3000 {
-            let jump = k % 97 == 0;
-            for i in 0..3 {
-                if let Some(l) = &m.linears[i] {
-                    let step = if jump { l.max - l.min } else { 0.02 * (l.max - l.min) };
-                    lin[i] = (lin[i] + step * (rnd() - 0.5)).clamp(l.min, l.max);
-                }
-            }
-            for r in rot.iter_mut().take(m.rotaries.len()) {
-                *r += if jump { 3.0 } else { 0.05 } * (rnd() - 0.5);
-            }
-            let stock_now = k % 3 == 0;
-            let (mut a, mut b) = (Vec::new(), Vec::new());
-            remembering.check_at(m, &lin, &rot, len, &wo, stock_now, &mut a);
-            let mut fresh = World::new(&g, &stock, &[], 2.0, 1e-3);
-            fresh.set_tool(tool);
-            fresh.check_at(m, &lin, &rot, len, &wo, stock_now, &mut b);
-            let key = |h: &kinepost::collide::Hit| (h.a.clone(), h.b.clone(), (h.dist * 1e9).round() as i64);
-            let (ka, kb): (Vec<_>, Vec<_>) = (a.iter().map(key).collect(), b.iter().map(key).collect());
-            assert_eq!(ka, kb, "{} step {k}: joints {lin:?} {rot:?}", m.id);
-            steps += 1;
-            hits += b.len();
-        }
+        hits += walk_compare(p, 3000, &mut rnd);
+        steps += 3000;
     }
     assert!(hits > 1000, "the walks touched something only {hits} times in {steps} steps");
+    // Mesh bodies too: a closed table (a solid: wholly inside is a hit) and a head housing.
+    let head = common::stl::box_triangles([-120.0, -120.0, 5.0], [120.0, 120.0, 200.0]);
+    let dir = mesh_dir("walk", &[("table.stl", common::stl::binary(&table_stl())), ("head.stl", common::stl::binary(&head))]);
+    let bodies = "[[body]]\nname = \"table mesh\"\non = \"C\"\nmesh = \"table.stl\"\n[[body]]\nname = \"head mesh\"\non = \"spindle\"\nmesh = \"head.stl\"\n";
+    let p = kinepost::machines::parse_profile_in(&format!("{}\n{bodies}", shipped("spinner-u5-620")), "t", None, Some(&dir)).unwrap();
+    assert!(walk_compare(&p, 3000, &mut rnd) > 100, "the mesh walk touched too little");
+}
+
+/// A random walk of `p`'s joints (small steps, and a jump now and then), checked by one World
+/// that remembers and by a fresh one at every step: the same hits. Returns how many.
+fn walk_compare(p: &Profile, n: usize, rnd: &mut impl FnMut() -> f64) -> usize {
+    use kinepost::collide::{ToolShape, World};
+    let mut hits = 0;
+    let m = &p.machine;
+    let g = p.geometry();
+    let stock = [kinepost::collide::Solid::Box { min: [-40.0, -40.0, 0.0].into(), max: [40.0, 40.0, 30.0].into() }];
+    let len = m.default_tool_length;
+    let tool = ToolShape::default_for(len, m.units == kinepost::kinematics::Units::Mm);
+    let wo = kinepost::kinematics::Vec3::zeros();
+    let mut remembering = World::new(&g, &stock, &[], 2.0, 1e-3);
+    remembering.set_tool(tool);
+    let (mut lin, mut rot) = ([0.0f64; 3], [0.0f64; 3]);
+    for i in 0..3 {
+        if let Some(l) = &m.linears[i] {
+            lin[i] = 0.5 * (l.min + l.max);
+        }
+    }
+    for k in 0..n {
+        let jump = k % 97 == 0;
+        for i in 0..3 {
+            if let Some(l) = &m.linears[i] {
+                let step = if jump { l.max - l.min } else { 0.02 * (l.max - l.min) };
+                lin[i] = (lin[i] + step * (rnd() - 0.5)).clamp(l.min, l.max);
+            }
+        }
+        for r in rot.iter_mut().take(m.rotaries.len()) {
+            *r += if jump { 3.0 } else { 0.05 } * (rnd() - 0.5);
+        }
+        let stock_now = k % 3 == 0;
+        let (mut a, mut b) = (Vec::new(), Vec::new());
+        remembering.check_at(m, &lin, &rot, len, &wo, stock_now, &mut a);
+        let mut fresh = World::new(&g, &stock, &[], 2.0, 1e-3);
+        fresh.set_tool(tool);
+        fresh.check_at(m, &lin, &rot, len, &wo, stock_now, &mut b);
+        let key = |h: &kinepost::collide::Hit| (h.a.clone(), h.b.clone(), (h.dist * 1e9).round() as i64);
+        let (ka, kb): (Vec<_>, Vec<_>) = (a.iter().map(key).collect(), b.iter().map(key).collect());
+        assert_eq!(ka, kb, "{} step {k}: joints {lin:?} {rot:?}", m.id);
+        hits += b.len();
+    }
+    hits
 }

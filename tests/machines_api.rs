@@ -366,3 +366,63 @@ async fn writes_are_off_without_a_token_and_files_version_at_start_up() {
     assert!(!m["description"].as_str().unwrap().contains("file edit"));
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// A profile whose table is an STL mesh `file` (the shipped spinner's kinematics, no other body).
+fn spinner_mesh_as(id: &str, file: &str) -> String {
+    let text = spinner_as(id);
+    let cut = text.find("\n# Geometry for the collision check").or_else(|| text.find("\n[[body]]")).unwrap_or(text.len());
+    format!("{}\n[[body]]\nname = \"table mesh\"\non = \"C\"\nmesh = {file:?}\n", &text[..cut])
+}
+
+#[tokio::test]
+async fn mesh_bodies_come_from_the_library_directory_and_are_served_for_the_page() {
+    let dir = std::env::temp_dir().join(format!("kinepost-mesh-lib-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let stl = common::stl::binary(&common::stl::box_triangles([-300.0, -300.0, -60.0], [300.0, 300.0, 0.0]));
+    std::fs::write(dir.join("table.stl"), &stl).unwrap();
+    std::fs::write(dir.join("spinner-mesh.toml"), spinner_mesh_as("spinner-mesh", "table.stl")).unwrap();
+    let mut cfg = common::cfg();
+    cfg.machines = dir.clone();
+    cfg.admin_token = Some(TOKEN.into());
+    let base = common::server(cfg).await;
+    let c = reqwest::Client::new();
+
+    // The profile's body names its mesh; the page fetches the triangles.
+    let m = common::get_json(&c, &format!("{base}/v1/machines/spinner-mesh")).await;
+    let body = &m["bodies"][0];
+    assert_eq!(body["mesh"]["file"], "table.stl", "{m}");
+    assert_eq!(body["mesh"]["triangles"], 12);
+    assert_eq!(body["mesh"]["bounds"], serde_json::json!([-300.0, -300.0, -60.0, 300.0, 300.0, 0.0]));
+    let r = c.get(format!("{base}/v1/machines/spinner-mesh/meshes/table.stl")).send().await.unwrap();
+    assert_eq!(r.status(), 200);
+    assert_eq!(r.headers()["content-type"], "model/stl");
+    let etag = r.headers()["etag"].to_str().unwrap().to_string();
+    let bytes = r.bytes().await.unwrap();
+    assert_eq!(bytes.len(), 84 + 12 * 50);
+    assert_eq!(&bytes[12 + 84..84 + 50 - 2], &stl[12 + 84..84 + 50 - 2], "the first triangle's vertices");
+    let r = c.get(format!("{base}/v1/machines/spinner-mesh/meshes/table.stl")).header("if-none-match", &etag).send().await.unwrap();
+    assert_eq!(r.status(), 304);
+    for url in ["spinner-mesh/meshes/other.stl", "spinner-u5-620/meshes/table.stl", "nobody/meshes/table.stl"] {
+        assert_eq!(c.get(format!("{base}/v1/machines/{url}")).status_ok().await, 404, "{url}");
+    }
+
+    // Over the API: a mesh is a file the operator put in the library directory; none is uploaded.
+    let post = |body: String| {
+        c.post(format!("{base}/v1/machines"))
+            .header("authorization", format!("Bearer {TOKEN}"))
+            .header("content-type", "application/toml")
+            .body(body)
+    };
+    for (file, why) in [("missing.stl", "missing.stl"), ("../table.stl", "beside the profile")] {
+        let r = post(spinner_mesh_as("api-mesh", file)).send().await.unwrap();
+        assert_eq!(r.status(), 422, "{file}");
+        let p: Value = r.json().await.unwrap();
+        assert_eq!(p["key"], "body[0].mesh", "{p}");
+        assert!(p["detail"].as_str().unwrap_or_default().contains(why), "{p}");
+    }
+    assert_eq!(post(spinner_mesh_as("api-mesh", "table.stl")).status_ok().await, 201);
+    let m = common::get_json(&c, &format!("{base}/v1/machines/api-mesh")).await;
+    assert_eq!(m["bodies"][0]["mesh"]["triangles"], 12, "{m}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

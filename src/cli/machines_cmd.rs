@@ -101,7 +101,8 @@ pub(super) fn machines_cmd(lib: &Library, dir: &std::path::Path, a: &MachinesCmd
         }
         MachinesCmd::Add { file, force } => {
             let text = machines::read_text(file).map_err(|e| format!("{}: {e}", file.display()))?;
-            let p = machines::parse_profile(&text, &file.display().to_string(), None).map_err(|e| e.to_string())?;
+            // As over the API: a mesh is a file of the library directory, not copied with it.
+            let p = machines::parse_profile_in(&text, &file.display().to_string(), None, Some(dir)).map_err(|e| e.to_string())?;
             let dest = dir.join(format!("{}.toml", p.machine.id));
             if dest.exists() && !force {
                 return Err(format!("{} exists: use --force to replace it", dest.display()));

@@ -446,3 +446,37 @@ pub(super) async fn version_toml<T: Kind>(shelf: &Shelf<T>, id: &str, version: &
         Err(e) => Err(ApiError::NotFound(e.to_string())),
     }
 }
+
+/// A mesh body's triangles, as the check reads them: binary STL, its ETag the file's digest.
+#[utoipa::path(get, path = "/v1/machines/{id}/meshes/{file}", params(("id" = String, Path), ("file" = String, Path)),
+    responses((status = 200, description = "Binary STL (profile units, the body's link at home)", content_type = "model/stl"),
+        (status = 304, description = "Not modified (If-None-Match)"),
+        (status = 404, description = "No such machine, or no body of it with this mesh", body = Problem, content_type = "application/problem+json")),
+    tag = "machines"
+)]
+pub(super) async fn get_mesh(
+    State(st): State<Arc<AppState>>,
+    Path((id, file)): Path<(String, String)>,
+    headers: HeaderMap,
+) -> Result<Response, ApiError> {
+    let c = st.machines.get(&id)?;
+    let g = c.item.geometry();
+    let mesh = g
+        .bodies
+        .iter()
+        .find_map(|b| match &b.solid {
+            crate::collide::Solid::Mesh(m) if m.file == file => Some(m.clone()),
+            _ => None,
+        })
+        .ok_or_else(|| ApiError::NotFound(format!("machine {} has no body with the mesh {}", quote(&id), quote(&file))))?;
+    let etag = format!("\"mesh-{:016x}\"", mesh.digest);
+    if let Some(r) = super::not_modified(&headers, &etag) {
+        return Ok(r);
+    }
+    let bytes = crate::machines::meshes::to_binary_stl(&mesh);
+    let mut r = (StatusCode::OK, [(header::CONTENT_TYPE, HeaderValue::from_static("model/stl"))], bytes).into_response();
+    if let Ok(v) = HeaderValue::from_str(&etag) {
+        r.headers_mut().insert(header::ETAG, v);
+    }
+    Ok(r)
+}

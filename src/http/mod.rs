@@ -145,7 +145,7 @@ pub struct AppState {
 #[openapi(
     info(title = "kinepost", description = "5-axis CNC postprocessor: CL data in, verified NC out, for any machine profile."),
     paths(post::post_cl, machines::list_machines, machines::get_machine, machines::create_machine, machines::put_machine,
-        machines::delete_machine, machines::list_versions, machines::get_version, tools::get_tools, tools::put_tools,
+        machines::delete_machine, machines::list_versions, machines::get_version, machines::get_mesh, tools::get_tools, tools::put_tools,
         tools::delete_tools, tools::list_tool_versions, tools::get_tool_version, dialects::list_dialects,
         dialects::get_dialect, dialects::create_dialect, dialects::put_dialect, dialects::delete_dialect, dialects::list_dialect_versions, dialects::get_dialect_version, machine_ops::fk_route, machine_ops::ik_route,
         machine_ops::validate_pose, machine_ops::angle_error_fit, machine_ops::calibrate, healthz, readyz, metrics::metrics_route,
@@ -235,6 +235,7 @@ pub fn app(state: Arc<AppState>) -> axum::Router {
         )
         .route("/v1/machines/{id}/versions", get(machines::list_versions))
         .route("/v1/machines/{id}/versions/{version}", get(machines::get_version))
+        .route("/v1/machines/{id}/meshes/{file}", get(machines::get_mesh))
         .route(
             "/v1/machines/{id}/tools",
             get(tools::get_tools).put(tools::put_tools).delete(tools::delete_tools),

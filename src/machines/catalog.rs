@@ -8,7 +8,8 @@
 //! [`Shelf`]s of the same kind of history, each in its own table of the store.
 
 use super::tools::{TABLE_SUFFIX, ToolTable, parse_tool_table};
-use super::{Error, Library, Profile, parse_profile};
+use super::{Error, Library, Profile, parse_profile_in};
+use std::path::{Path, PathBuf};
 use crate::nc::Dialect;
 use sqlx::AnyPool;
 use sqlx::Row;
@@ -47,9 +48,9 @@ pub trait Kind: Send + Sync + Sized + 'static {
     const ETAG: &'static str;
     /// What it is, in messages.
     const WHAT: &'static str;
-    /// Parses and validates `text` (named `file` in errors); `id`: the id it must have. Returns
-    /// its id.
-    fn parse(text: &str, file: &str, id: Option<&str>) -> Result<(String, Self), Error>;
+    /// Parses and validates `text` (named `file` in errors); `id`: the id it must have; `dir`:
+    /// the library directory, where a profile's meshes are read. Returns its id.
+    fn parse(text: &str, file: &str, id: Option<&str>, dir: &Path) -> Result<(String, Self), Error>;
     /// The library's files of this kind, by id.
     fn files(lib: &Library) -> Vec<(String, Arc<Self>)>;
     /// The text of the library's file `id` of this kind.
@@ -63,7 +64,7 @@ impl Kind for Dialect {
     const SUFFIX: &'static str = ".toml";
     const ETAG: &'static str = "-dialect-v";
     const WHAT: &'static str = "dialect";
-    fn parse(text: &str, file: &str, id: Option<&str>) -> Result<(String, Self), Error> {
+    fn parse(text: &str, file: &str, id: Option<&str>, _: &Path) -> Result<(String, Self), Error> {
         let d = super::dialects::parse(text, file, id)?;
         Ok((d.name.clone(), d))
     }
@@ -80,8 +81,10 @@ impl Kind for Profile {
     const SUFFIX: &'static str = ".toml";
     const ETAG: &'static str = "-v";
     const WHAT: &'static str = "machine";
-    fn parse(text: &str, file: &str, id: Option<&str>) -> Result<(String, Self), Error> {
-        let p = parse_profile(text, file, id)?;
+    /// A stored profile has no directory of its own: its meshes are the library directory's
+    /// files (an API write names a file the operator put there; it uploads none).
+    fn parse(text: &str, file: &str, id: Option<&str>, dir: &Path) -> Result<(String, Self), Error> {
+        let p = parse_profile_in(text, file, id, Some(dir))?;
         Ok((p.machine.id.clone(), p))
     }
     fn files(lib: &Library) -> Vec<(String, Arc<Self>)> {
@@ -94,7 +97,7 @@ impl Kind for ToolTable {
     const SUFFIX: &'static str = TABLE_SUFFIX;
     const ETAG: &'static str = "-tools-v";
     const WHAT: &'static str = "tool table of machine";
-    fn parse(text: &str, file: &str, id: Option<&str>) -> Result<(String, Self), Error> {
+    fn parse(text: &str, file: &str, id: Option<&str>, _: &Path) -> Result<(String, Self), Error> {
         // A table is always written to a machine's path: its id is the machine's.
         let id = id.ok_or_else(|| Error::Store("a tool table needs its machine's id".into()))?;
         Ok((id.to_string(), parse_tool_table(text, file)?))
@@ -208,6 +211,8 @@ impl Catalog {
 /// The versions of one kind: the current ones in memory, the history in the store.
 pub struct Shelf<T: Kind> {
     db: Option<AnyPool>,
+    /// The library directory (a profile's meshes).
+    dir: PathBuf,
     current: RwLock<BTreeMap<String, Current<T>>>,
     /// Versions jobs asked for, parsed once.
     old: Mutex<HashMap<(String, i64), Arc<T>>>,
@@ -276,6 +281,7 @@ impl<T: Kind> Shelf<T> {
             .collect();
         Shelf {
             db: None,
+            dir: files.dir.clone(),
             current: RwLock::new(current),
             old: Mutex::new(HashMap::new()),
             write: tokio::sync::Mutex::new(()),
@@ -327,6 +333,7 @@ impl<T: Kind> Shelf<T> {
         }
         let shelf = Shelf {
             db: Some(db),
+            dir: files.dir.clone(),
             current: RwLock::new(BTreeMap::new()),
             old: Mutex::new(HashMap::new()),
             write: tokio::sync::Mutex::new(()),
@@ -371,7 +378,7 @@ impl<T: Kind> Shelf<T> {
             return Ok(p);
         }
         let text = self.text(id, version).await?;
-        let p = Arc::new(T::parse(&text, &format!("{id} v{version}"), Some(id))?.1);
+        let p = Arc::new(T::parse(&text, &format!("{id} v{version}"), Some(id), &self.dir)?.1);
         if let Ok(mut m) = self.old.lock() {
             if m.len() > 256 {
                 m.clear();
@@ -419,7 +426,7 @@ impl<T: Kind> Shelf<T> {
     /// it must have (PUT's path). Returns the new current version and whether it created the
     /// profile.
     pub async fn put(&self, text: &str, id: Option<&str>, expect: Expect) -> Result<(Current<T>, bool), Error> {
-        let (id, item) = T::parse(text, "request body", id)?;
+        let (id, item) = T::parse(text, "request body", id, &self.dir)?;
         let _w = self.write.lock().await;
         let (version, created) = self.append(&id, Some(text), expect).await?;
         let cur = Current {
@@ -515,7 +522,7 @@ impl<T: Kind> Shelf<T> {
                 .map_err(db_err)?;
             let (text, source, created_ms): (Option<String>, String, i64) = (row.get(0), row.get(1), row.get(2));
             let Ok(mut m) = self.current.write() else { continue };
-            match text.map(|t| T::parse(&t, &format!("{id} v{v}"), Some(&id))) {
+            match text.map(|t| T::parse(&t, &format!("{id} v{v}"), Some(&id), &self.dir)) {
                 None => {
                     m.remove(&id);
                 }

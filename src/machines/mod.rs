@@ -12,6 +12,7 @@ use std::sync::Arc;
 
 pub mod catalog;
 pub mod dialects;
+pub mod meshes;
 pub mod tools;
 pub use catalog::{Catalog, Current, Expect, Kind, Shelf};
 
@@ -66,7 +67,7 @@ pub struct ProfileDoc {
     pub body: Vec<BodyDoc>,
 }
 
-/// One body of the machine: a box or a cylinder on a link, at home (`docs/machines.md`).
+/// One body of the machine: a box, a cylinder or a mesh on a link, at home (`docs/machines.md`).
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct BodyDoc {
@@ -78,6 +79,9 @@ pub struct BodyDoc {
     pub box_: Option<[f64; 6]>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub cylinder: Option<CylinderDoc>,
+    /// An STL file beside the profile (a bare file name): see `meshes`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mesh: Option<String>,
     /// Where the numbers come from.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub source: Option<String>,
@@ -179,9 +183,9 @@ impl Profile {
         out
     }
 
-    /// The machine's bodies, validated when the profile was loaded.
+    /// The machine's bodies, validated (and their meshes read) when the profile was loaded.
     pub fn geometry(&self) -> crate::collide::Geometry {
-        geometry(&self.doc, &self.machine).unwrap_or_default()
+        self.bodies.clone()
     }
 
     /// The spindle's speeds in RPM, `[1, MAX_SPINDLE_SPEED]` where the profile does not say.
@@ -197,10 +201,18 @@ impl Profile {
 pub struct Profile {
     pub machine: Machine,
     pub doc: ProfileDoc,
+    /// Built once: a mesh is read and its BVH built here, not per post.
+    bodies: crate::collide::Geometry,
 }
 
-/// Parses and validates one profile. `stem` is the file stem the id must equal, if any.
+/// Parses and validates one profile. `stem` is the file stem the id must equal, if any. It has
+/// no directory: a body with a mesh is refused (see [`parse_profile_in`]).
 pub fn parse_profile(text: &str, file: &str, stem: Option<&str>) -> Result<Profile, Error> {
+    parse_profile_in(text, file, stem, None)
+}
+
+/// Parses and validates one profile whose meshes are files of `dir` (the library's).
+pub fn parse_profile_in(text: &str, file: &str, stem: Option<&str>, dir: Option<&Path>) -> Result<Profile, Error> {
     let doc: ProfileDoc = toml::from_str(text).map_err(|e| Error::Parse {
         file: file.into(),
         message: one_line(&e),
@@ -332,12 +344,12 @@ pub fn parse_profile(text: &str, file: &str, stem: Option<&str>) -> Result<Profi
     if let Some(side) = doc.policy.as_ref().and_then(|p| p.prefer.as_deref()) {
         crate::post::Prefer::parse(side, &machine).map_err(|e| invalid("policy.prefer", e))?;
     }
-    geometry(&doc, &machine).map_err(|(key, problem)| invalid(&key, problem))?;
-    Ok(Profile { machine, doc })
+    let bodies = geometry(&doc, &machine, &mut meshes::MeshReader::new(dir)).map_err(|(key, problem)| invalid(&key, problem))?;
+    Ok(Profile { machine, doc, bodies })
 }
 
 /// The profile's `[[body]]` entries as bodies, or the key that is wrong and why.
-fn geometry(doc: &ProfileDoc, m: &Machine) -> Result<crate::collide::Geometry, (String, String)> {
+fn geometry(doc: &ProfileDoc, m: &Machine, meshes: &mut meshes::MeshReader) -> Result<crate::collide::Geometry, (String, String)> {
     use crate::collide::{Body, Link, Solid};
     if doc.body.len() > crate::collide::MAX_BODIES {
         return Err(("body".into(), format!("more than {} bodies", crate::collide::MAX_BODIES)));
@@ -349,19 +361,21 @@ fn geometry(doc: &ProfileDoc, m: &Machine) -> Result<crate::collide::Geometry, (
             return Err((key("name"), format!("{} must be a unique name of 1 to 64 characters", quote(&b.name))));
         }
         let link = Link::parse(&b.on, m).map_err(|e| (key("on"), e))?;
-        let solid = match (&b.box_, &b.cylinder) {
-            (Some(c), None) => Solid::Box {
+        let solid = match (&b.box_, &b.cylinder, &b.mesh) {
+            (Some(c), None, None) => Solid::Box {
                 min: Vec3::new(c[0], c[1], c[2]),
                 max: Vec3::new(c[3], c[4], c[5]),
             },
-            (None, Some(c)) => Solid::Cylinder {
+            (None, Some(c), None) => Solid::Cylinder {
                 from: Vec3::from(c.from),
                 to: Vec3::from(c.to),
                 radius: c.radius,
             },
-            _ => return Err((key("box"), "give one shape: box or cylinder".into())),
+            (None, None, Some(f)) => Solid::Mesh(meshes.mesh(f).map_err(|e| (key("mesh"), e))?),
+            _ => return Err((key("box"), "give one shape: box, cylinder or mesh".into())),
         };
-        solid.check().map_err(|e| (key(if b.box_.is_some() { "box" } else { "cylinder" }), e))?;
+        let shape = if b.box_.is_some() { "box" } else if b.cylinder.is_some() { "cylinder" } else { "mesh" };
+        solid.check().map_err(|e| (key(shape), e))?;
         bodies.push(Body {
             name: b.name.clone(),
             link,
@@ -418,7 +432,7 @@ pub fn load_file(path: &Path) -> Result<Profile, Error> {
         source,
     })?;
     let stem = path.file_stem().and_then(|s| s.to_str()).unwrap_or_default();
-    parse_profile(&text, &file, Some(stem))
+    parse_profile_in(&text, &file, Some(stem), path.parent())
 }
 
 /// The machine library: every `*.toml` of a directory, by id, with each machine's standing tool

@@ -46,9 +46,18 @@ pub struct ModelCylinder {
     pub radius: f64,
 }
 
+/// A triangle mesh: its triangles are `GET /v1/machines/{id}/meshes/{file}` (binary STL).
+#[derive(Clone, Debug, Serialize, utoipa::ToSchema)]
+pub struct ModelMesh {
+    pub file: String,
+    pub triangles: usize,
+    /// `[x0, y0, z0, x1, y1, z1]`: its bounding box, to frame the view before it is fetched.
+    pub bounds: [f64; 6],
+}
+
 /// A body on a link, at home (every joint zero), as the profile's `[[body]]` gives it: bodies on
 /// `bed`, `table` and the table rotaries in M, those on `ram`, the head rotaries and `spindle`
-/// relative to the gauge point. One of `box` and `cylinder`.
+/// relative to the gauge point. One of `box`, `cylinder` and `mesh`.
 #[derive(Clone, Debug, Serialize, utoipa::ToSchema)]
 pub struct ModelBody {
     pub name: String,
@@ -59,6 +68,8 @@ pub struct ModelBody {
     pub box_: Option<[f64; 6]>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub cylinder: Option<ModelCylinder>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub mesh: Option<ModelMesh>,
 }
 
 /// The machine for drawing and for FK in a page.
@@ -93,9 +104,10 @@ fn link_name(m: &Machine, l: Link) -> String {
     }
 }
 
-/// A box as `[x0, y0, z0, x1, y1, z1]`, or a cylinder.
+/// A box as `[x0, y0, z0, x1, y1, z1]`, or a cylinder (a mesh is neither: see [`mesh`]).
 pub fn solid(s: &Solid) -> (Option<[f64; 6]>, Option<ModelCylinder>) {
     match s {
+        Solid::Mesh(_) => (None, None),
         Solid::Box { min, max } => (Some([min.x, min.y, min.z, max.x, max.y, max.z]), None),
         Solid::Cylinder { from, to, radius } => (
             None,
@@ -106,6 +118,17 @@ pub fn solid(s: &Solid) -> (Option<[f64; 6]>, Option<ModelCylinder>) {
             }),
         ),
     }
+}
+
+/// A mesh body's file and size, for the page to fetch it.
+pub fn mesh(s: &Solid) -> Option<ModelMesh> {
+    let Solid::Mesh(m) = s else { return None };
+    let (a, b) = m.bounds();
+    Some(ModelMesh {
+        file: m.file.clone(),
+        triangles: m.triangles().len(),
+        bounds: [a.x, a.y, a.z, b.x, b.y, b.z],
+    })
 }
 
 /// The bodies of a geometry as the page reads them.
@@ -119,6 +142,7 @@ pub fn bodies(m: &Machine, g: &Geometry) -> Vec<ModelBody> {
                 on: link_name(m, *link),
                 box_,
                 cylinder,
+                mesh: mesh(s),
             }
         })
         .collect()

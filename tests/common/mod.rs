@@ -2,6 +2,7 @@
 #![allow(dead_code)] // each test crate uses part of it
 
 pub mod collect;
+pub mod stl;
 pub mod verify;
 
 use kinepost::http::{AppState, Config, Metrics, app};

@@ -91,6 +91,7 @@ async function open(id) {
   ms.setTool(defaultTool(ch, ch.defaultToolLength));
   ms.pose([0, 0, 0], ch.rot.map(() => 0), ch.defaultToolLength, [0, 0, 0]);
   view.st = stage($('machine3d'), scene, sceneBox(ms.root));
+  ms.loaded.then(() => view.st && view.st.render());
   $('machine-note').textContent = (ms.schematic
     ? `${model.name} (${id}) gives no bodies: a schematic (bed, carriage, a disc per rotary about its axis through its pivot) shows how the axes move, not the machine's shape.`
     : `${model.name} (${id}): ${ch.bodies.length} bodies from the profile, and the default tool.`) + ` ${model.kinematics}, ${model.units}.`;

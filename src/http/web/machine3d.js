@@ -8,12 +8,44 @@ import { links, matrix4, schematic, toolBodies } from './kin.js';
 
 const PALETTE = { bed: 0x8d99ae, table: 0x6c7a89, ram: 0xa3b1c2, spindle: 0xc9d3de, tool: 0xd4a017, holder: 0x5c6b7a, stock: 0x2a9d8f, fixture: 0x9c6644, hit: 0xe00000 };
 
-/** A mesh of a body (box or cylinder, in its link's coordinates). */
+/** The triangles of a binary STL (as GET /v1/machines/{id}/meshes/{file} serves them). */
+export function stlGeometry(buf) {
+  const dv = new DataView(buf);
+  const n = buf.byteLength >= 84 ? dv.getUint32(80, true) : 0;
+  if (84 + 50 * n !== buf.byteLength) throw new Error('not a binary STL');
+  const pos = new Float32Array(n * 9);
+  for (let i = 0; i < n; i++) {
+    for (let k = 0; k < 9; k++) pos[i * 9 + k] = dv.getFloat32(84 + i * 50 + 12 + k * 4, true);
+  }
+  const g = new THREE.BufferGeometry();
+  g.setAttribute('position', new THREE.BufferAttribute(pos, 3));
+  g.computeVertexNormals();
+  return g;
+}
+
+/**
+ * A mesh body: its bounding box until `url`'s triangles arrive, then them. Resolves when drawn
+ * (or left a box: the page goes on without the file).
+ */
+function meshBody(mesh, url) {
+  return fetch(url)
+    .then((r) => (r.ok ? r.arrayBuffer() : Promise.reject(new Error(`${url}: ${r.status}`))))
+    .then((buf) => {
+      const g = stlGeometry(buf);
+      mesh.geometry.dispose();
+      mesh.geometry = g;
+      mesh.position.set(0, 0, 0);
+      mesh.children.forEach((e) => { e.geometry.dispose(); e.geometry = new THREE.EdgesGeometry(g, 30); });
+    })
+    .catch((e) => console.warn(`mesh ${mesh.userData.body}: ${e.message}`));
+}
+
+/** A mesh of a body (box, cylinder or STL mesh, in its link's coordinates). */
 export function bodyMesh(b, color, opacity = 1) {
-  const mat = new THREE.MeshStandardMaterial({ color, roughness: 0.7, metalness: 0.1, transparent: opacity < 1, opacity });
+  const mat = new THREE.MeshStandardMaterial({ color, roughness: 0.7, metalness: 0.1, transparent: opacity < 1, opacity, side: b.mesh ? THREE.DoubleSide : THREE.FrontSide });
   let mesh;
-  if (b.box) {
-    const [x0, y0, z0, x1, y1, z1] = b.box;
+  if (b.box || b.mesh) {
+    const [x0, y0, z0, x1, y1, z1] = b.box || b.mesh.bounds;
     mesh = new THREE.Mesh(new THREE.BoxGeometry(x1 - x0, y1 - y0, z1 - z0), mat);
     mesh.position.set((x0 + x1) / 2, (y0 + y1) / 2, (z0 + z1) / 2);
   } else {
@@ -28,6 +60,7 @@ export function bodyMesh(b, color, opacity = 1) {
   mesh.userData.color = color;
   const edges = new THREE.LineSegments(new THREE.EdgesGeometry(mesh.geometry, 30), new THREE.LineBasicMaterial({ color: 0x303030, transparent: true, opacity: 0.35 }));
   mesh.add(edges);
+  if (b.mesh && b.url) mesh.userData.loaded = meshBody(mesh, b.url);
   return mesh;
 }
 
@@ -40,7 +73,7 @@ function colorOf(ch, on) {
 /**
  * The machine's scene graph: one group per link (posed by `pose`), the bodies in them. `extra`:
  * `{ stock, fixtures }` boxes in W. Returns `{ root, work, schematic, pose(linear, actual, L),
- * setTool(t), highlight(names) , meshes }`; `work` is the W group (a path drawn in it turns with
+ * setTool(t), highlight(names) , meshes, loaded }`; `work` is the W group (a path drawn in it turns with
  * the table).
  */
 export function machineScene(ch, extra = {}) {
@@ -59,8 +92,12 @@ export function machineScene(ch, extra = {}) {
   const isSchematic = ch.bodies.length === 0;
   const bodies = isSchematic ? schematic(ch) : ch.bodies;
   const meshes = new Map();
-  for (const b of bodies) {
+  const loads = [];
+  for (const b0 of bodies) {
+    const url = b0.mesh && `/v1/machines/${encodeURIComponent(ch.id)}/meshes/${encodeURIComponent(b0.mesh.file)}`;
+    const b = url ? { ...b0, url } : b0;
     const m = bodyMesh(b, colorOf(ch, b.on), isSchematic ? 0.55 : 0.8);
+    if (m.userData.loaded) loads.push(m.userData.loaded);
     group(b.on).add(m);
     meshes.set(b.name, m);
   }
@@ -98,7 +135,8 @@ export function machineScene(ch, extra = {}) {
     }
     return p;
   };
-  return { root, work: groups.work, groups, schematic: isSchematic, meshes, pose, setTool, highlight };
+  // `loaded`: every mesh body drawn (render again then).
+  return { root, work: groups.work, groups, schematic: isSchematic, meshes, pose, setTool, highlight, loaded: Promise.all(loads) };
 }
 
 /**

@@ -111,6 +111,7 @@ export function machineView(ui, p, model, onPick, onFrame) {
   if (fr.length) { const s = state(0); ms.setTool(s.tool); ms.pose(s.linear, s.actual, s.tool.length, wo); }
   const frame = sceneBox(ms.root);
   const st = stage(ui.view, scene, frame);
+  ms.loaded.then(() => st && st.render());
 
   ui.slider.min = '0';
   ui.slider.max = String(Math.max(fr.length - 1, 0));
