@@ -277,7 +277,7 @@ impl<'a, S: Sink + ?Sized> Emitter<'a, S> {
     }
 
     /// The program's end and its summary, handed to the sink and returned.
-    pub(in crate::post) fn finish(mut self) -> Result<Summary, Error> {
+    pub(in crate::post) fn finish(&mut self) -> Result<Summary, Error> {
         if self.sum.cl_points == 0 {
             // An empty program that ends well is easily taken for a posted part (a wrong file
             // uploaded, a CL dialect not read): say it.
