@@ -177,7 +177,7 @@ fn corpus() -> Vec<PathBuf> {
 /// unreachable somewhere: errors, repositions, tool changes), in both modes, and with canned
 /// cycles and tilted planes (their look-ahead).
 #[test]
-fn corpus_files_on_every_profile_in_both_modes() {
+fn corpus_files_on_each_kind_of_machine_in_both_modes() {
     let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     let lib = library();
     let files = corpus();
