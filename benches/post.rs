@@ -1,6 +1,7 @@
 //! End to end on a generated 5-axis file: read, IK, plan, linearize, format, write (to a null
-//! sink), one core. `cargo bench --bench post [-- POINTS MACHINE]` runs TCP, then joint mode, and
-//! prints points per second and peak RSS (VmHWM), which must not grow with the input.
+//! sink), one core. `cargo bench --bench post [-- POINTS MACHINE]` runs TCP, then joint mode, then
+//! joint on two threads (`Options::threads`), and prints points per second and peak RSS (VmHWM),
+//! which must not grow with the input. The yardsticks below are beside the one-thread joint run.
 //!
 //! Then the same file through three yardsticks, measured in the same minute (this VM's speed
 //! varies by a third from day to day and by half within an hour, ratios measured together vary
@@ -16,39 +17,12 @@
 
 use kinepost::machines::Library;
 use kinepost::post::{self, Mode, Options, TextSink};
-use std::io::{Read, Write};
-use std::time::Instant;
+use std::io::Write;
 
-/// Every GOTO line's six numbers, parsed the tuned way (SIMD line splitting, fast_float2).
-fn gotos(path: &std::path::Path, mut each: impl FnMut([f64; 6])) {
-    let mut f = std::fs::File::open(path).unwrap();
-    let mut buf = vec![0u8; 1 << 16];
-    let mut have = 0usize;
-    loop {
-        let got = f.read(&mut buf[have..]).unwrap();
-        if got == 0 {
-            break;
-        }
-        have += got;
-        let mut start = 0;
-        while let Some(e) = memchr::memchr(b'\n', &buf[start..have]) {
-            let line = &buf[start..start + e];
-            start += e + 1;
-            let Some(mut rest) = line.strip_prefix(b"GOTO/") else {
-                continue;
-            };
-            let mut v = [0.0f64; 6];
-            for x in v.iter_mut() {
-                let (y, used) = fast_float2::parse_partial::<f64, _>(rest).unwrap_or((0.0, 0));
-                *x = y;
-                rest = &rest[(used + 1).min(rest.len())..];
-            }
-            each(v);
-        }
-        buf.copy_within(start..have, 0);
-        have -= start;
-    }
-}
+#[path = "floors/mod.rs"]
+mod floors;
+use floors::{floor, gotos, plain_floor};
+use std::time::Instant;
 
 /// `X Y Z B C` words of `v`, each rounded to `scale` (10^decimals), into `o`: returns the
 /// integers written.
@@ -71,81 +45,6 @@ fn words(o: &mut Vec<u8>, v: &[f64; 5], scale: [u64; 5]) -> [i64; 5] {
     }
     o.push(b'\n');
     out
-}
-
-/// `.fff ` for a fraction `f` < 1000 (both floors' words).
-#[inline(always)]
-fn point3(f: u64) -> [u8; 5] {
-    [
-        b'.',
-        b'0' + (f / 100) as u8,
-        b'0' + (f / 10 % 10) as u8,
-        b'0' + (f % 10) as u8,
-        b' ',
-    ]
-}
-
-/// The floor: GOTO lines to `X Y Z B C` words, nothing else. Returns the lines converted. (Its
-/// words are written as they were when this yardstick was first measured: 3 decimals each, the
-/// divisions by constants.)
-fn floor(path: &std::path::Path) -> u64 {
-    let mut w = std::io::BufWriter::with_capacity(1 << 16, std::io::sink());
-    let mut o: Vec<u8> = Vec::with_capacity(128);
-    let mut n = 0u64;
-    gotos(path, |v| {
-        o.clear();
-        for (k, x) in v.iter().take(5).enumerate() {
-            o.push(b"XYZBC"[k]);
-            let r = (x * 1000.0).round() as i64;
-            if r < 0 {
-                o.push(b'-');
-            }
-            let a = r.unsigned_abs();
-            o.extend_from_slice(itoa::Buffer::new().format(a / 1000).as_bytes());
-            o.extend_from_slice(&point3(a % 1000));
-        }
-        o.push(b'\n');
-        w.write_all(&o).unwrap();
-        n += 1;
-    });
-    n
-}
-
-/// The floor written plainly: `read_line`, `str::parse` for the six numbers and the words by
-/// integer formatting (no SIMD parsing, no `format!`): 6.2-7.7 M lines/s on this VM, the rate the
-/// issue gives its floor "here".
-fn plain_floor(path: &std::path::Path) -> u64 {
-    use std::io::BufRead;
-    let mut r = std::io::BufReader::with_capacity(1 << 16, std::fs::File::open(path).unwrap());
-    let mut w = std::io::BufWriter::with_capacity(1 << 16, std::io::sink());
-    let (mut line, mut n) = (String::new(), 0u64);
-    let mut ib = itoa::Buffer::new();
-    loop {
-        line.clear();
-        if r.read_line(&mut line).unwrap() == 0 {
-            break;
-        }
-        let Some(rest) = line.trim_end().strip_prefix("GOTO/") else {
-            continue;
-        };
-        let mut v = [0.0f64; 6];
-        for (x, s) in v.iter_mut().zip(rest.split(',')) {
-            *x = s.trim().parse().unwrap_or(0.0);
-        }
-        for (k, x) in v.iter().take(5).enumerate() {
-            let r = (x * 1000.0).round() as i64;
-            w.write_all(&[b"XYZBC"[k]]).unwrap();
-            if r < 0 {
-                w.write_all(b"-").unwrap();
-            }
-            let a = r.unsigned_abs();
-            w.write_all(ib.format(a / 1000).as_bytes()).unwrap();
-            w.write_all(&point3(a % 1000)).unwrap();
-        }
-        w.write_all(b"\n").unwrap();
-        n += 1;
-    }
-    n
 }
 
 /// The least a correct postprocessor does per point, as a lower bound for the engine: the floor's
@@ -230,16 +129,17 @@ fn main() {
     let bytes = std::fs::metadata(&path).unwrap().len();
     let rss0 = peak_rss_kb();
     let mut joint_s = 0.0;
-    for mode in [Mode::Tcp, Mode::Joint] {
+    for (mode, threads) in [(Mode::Tcp, 1), (Mode::Joint, 1), (Mode::Joint, 2)] {
         let mut o = Options::new(&m);
         o.mode = mode;
+        o.threads = threads;
         let input = std::io::BufReader::with_capacity(1 << 16, std::fs::File::open(&path).unwrap());
         let mut sink = TextSink(std::io::BufWriter::with_capacity(1 << 16, std::io::sink()));
         let t = Instant::now();
         let s = post::post(input, &m, &o, &mut sink).unwrap();
         let dt = t.elapsed().as_secs_f64();
         println!(
-            "{id} {mode:?}: {} CL points ({:.1} MB) -> {} blocks in {dt:.3} s: {:.3} M points/s; peak RSS {} kB (before: {rss0} kB); FK replay max {:.1e}",
+            "{id} {mode:?}, {threads} thread(s): {} CL points ({:.1} MB) -> {} blocks in {dt:.3} s: {:.3} M points/s; peak RSS {} kB (before: {rss0} kB); FK replay max {:.1e}",
             s.cl_points,
             bytes as f64 / 1e6,
             s.blocks,
@@ -247,15 +147,17 @@ fn main() {
             peak_rss_kb(),
             s.max_tip_deviation
         );
-        joint_s = dt;
+        if (mode, threads) == (Mode::Joint, 1) {
+            joint_s = dt;
+        }
     }
-    let (n, dt) = timed(|| floor(&path));
+    let (n, dt) = timed(|| floor(&path, std::io::sink()));
     println!(
         "floor (parse six numbers, write five words): {n} lines in {dt:.3} s: {:.3} M lines/s; kinepost joint takes {:.2}x the floor (2 M/s on the issue's 6.5 M/s floor: 3.25x)",
         n as f64 / dt / 1e6,
         joint_s / dt
     );
-    let (n, dp) = timed(|| plain_floor(&path));
+    let (n, dp) = timed(|| plain_floor(&path, std::io::sink()));
     println!(
         "plain floor (read_line, str::parse, integer words): {n} lines in {dp:.3} s: {:.3} M lines/s; kinepost joint takes {:.2}x it",
         n as f64 / dp / 1e6,

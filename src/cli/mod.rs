@@ -217,6 +217,12 @@ pub struct ServeArgs {
     /// running then resume on the next start).
     #[arg(long, env = "KINEPOST_SHUTDOWN_GRACE", default_value_t = 60.0, allow_hyphen_values = true)]
     pub shutdown_grace: f64,
+    /// Threads each streamed post (`POST /v1/post`) runs on: 1 or 2.
+    #[arg(long, env = "KINEPOST_POST_THREADS", default_value_t = 1)]
+    pub post_threads: u32,
+    /// Threads each job's post runs on: 1 or 2.
+    #[arg(long, env = "KINEPOST_JOB_THREADS", default_value_t = 1)]
+    pub job_threads: u32,
     #[command(flatten)]
     pub budget: BudgetArgs,
 }
@@ -352,6 +358,10 @@ pub struct PostArgs {
     /// Bodies closer than this (profile units; default 2 mm / 0.08 in) are a near_collision.
     #[arg(long)]
     pub collision_clearance: Option<f64>,
+    /// Threads for the post: 1, or 2 (the CL read and planned beside the NC written; the same
+    /// output). Default: 2 where the machine has two cores or more.
+    #[arg(long, default_value_t = default_threads())]
+    pub threads: u32,
     /// The stock: a box x0,y0,z0,x1,y1,z1 in the CL's frame and units.
     #[arg(long, allow_hyphen_values = true)]
     pub stock: Option<String>,
@@ -432,7 +442,15 @@ fn library(cli: &Cli) -> Result<Library, String> {
 }
 
 /// Opens a CL input: a path, or `-` for standard input.
-pub fn open_input(path: &str) -> Result<Box<dyn std::io::BufRead>, String> {
+/// Two threads for a post where there are two cores (one post is the machine's whole load).
+fn default_threads() -> u32 {
+    match std::thread::available_parallelism() {
+        Ok(n) if n.get() >= 2 => 2,
+        _ => 1,
+    }
+}
+
+pub fn open_input(path: &str) -> Result<Box<dyn std::io::BufRead + Send>, String> {
     if path == "-" {
         Ok(Box::new(std::io::BufReader::with_capacity(1 << 16, std::io::stdin())))
     } else {
@@ -536,6 +554,8 @@ fn serve(cli: &Cli, a: &ServeArgs) -> Result<(), String> {
         job_lease: seconds("job-lease-secs", a.job_lease_secs, 1.0, 86400.0, 1.0)?,
         shutdown_grace: seconds("shutdown-grace", a.shutdown_grace, 0.0, 86400.0, 1.0)?,
         post_budget: a.budget.budget()?,
+        post_threads: kinepost::post::threads(Some(a.post_threads)).map_err(|e| format!("--post-{e}"))?,
+        job_threads: kinepost::post::threads(Some(a.job_threads)).map_err(|e| format!("--job-{e}"))?,
     };
     let rt = tokio::runtime::Runtime::new().map_err(|e| e.to_string())?;
     let r = rt.block_on(kinepost::http::serve(cfg));
@@ -720,6 +740,7 @@ fn post_cmd(
         unwind: a.unwind.clone(),
         collisions: a.collisions.clone(),
         collision_clearance: a.collision_clearance,
+        threads: Some(a.threads),
         stock: a.stock.clone(),
         fixtures: a.fixtures.clone(),
         tool_table: match &a.tool_table {

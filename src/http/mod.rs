@@ -82,6 +82,10 @@ pub struct Config {
     pub shutdown_grace: Duration,
     /// What one post (stream or job) may cost: output per CL byte read, and seconds.
     pub post_budget: crate::post::Budget,
+    /// Threads a streamed post runs on, and a job's (`post::threads`; see reliability.md for
+    /// why one each under load).
+    pub post_threads: usize,
+    pub job_threads: usize,
 }
 
 impl Config {
@@ -97,6 +101,7 @@ impl Config {
             spool_dir: self.spool_dir.clone(),
             lease: self.job_lease,
             budget: self.post_budget,
+            threads: self.job_threads,
         }
     }
 }
@@ -128,6 +133,8 @@ impl Default for Config {
             job_lease: Duration::from_secs(30),
             shutdown_grace: Duration::from_secs(60),
             post_budget: crate::post::Budget::default(),
+            post_threads: 1,
+            job_threads: 1,
         }
     }
 }

@@ -130,6 +130,7 @@ impl PostParams {
             unwind: self.unwind.clone(),
             collisions: self.collisions.clone(),
             collision_clearance: self.collision_clearance,
+            threads: None, // the server's to choose (`Config::post_threads`), not a request's
             stock: self.stock.clone(),
             fixtures: self.fixtures.clone(),
         }
@@ -367,6 +368,7 @@ pub async fn post_cl(
     });
     let ((profile, mut opts), body) = refuse_unread(checked, body).await?;
     opts.budget = st.config.post_budget;
+    opts.threads = st.config.post_threads;
     opts.header.push(format!("DATE {} UTC", crate::output::utc_now()));
     if let Some(f) = &filename {
         opts.header.push(format!("SOURCE {f}"));

@@ -83,6 +83,8 @@ pub struct Config {
     pub lease: Duration,
     /// What one job's post may cost (output per CL byte, seconds).
     pub budget: crate::post::Budget,
+    /// Threads a job's post runs on (`post::threads`).
+    pub threads: usize,
 }
 
 /// The store plus the workers' shared state: which jobs run here, and their cancel flags.
@@ -278,9 +280,9 @@ impl Queue {
         let task = {
             let (job, cancel, progress) = (job.clone(), cancel.clone(), progress.clone());
             let spool = self.store.spool().to_path_buf();
-            let budget = self.config.budget;
+            let run = (self.config.budget, self.config.threads);
             tokio::task::spawn_blocking(move || {
-                execute(profile?, tools?, dialect?, &spool, &job, budget, &cancel, &progress)
+                execute(profile?, tools?, dialect?, &spool, &job, run, &cancel, &progress)
             })
         };
         tokio::pin!(task);
@@ -403,7 +405,7 @@ fn execute(
     dialect: Option<Arc<crate::nc::Dialect>>,
     spool: &std::path::Path,
     job: &Job,
-    budget: post::Budget,
+    (budget, threads): (post::Budget, usize),
     cancel: &AtomicBool,
     progress: &Arc<Progress>,
 ) -> Result<Summary, String> {
@@ -413,6 +415,7 @@ fn execute(
         _ => crate::nc::dialect(id),
     })?;
     opts.budget = budget;
+    opts.threads = threads;
     opts.header.push(format!("JOB {}", job.id));
     if let Some(f) = &job.filename {
         opts.header.push(format!("SOURCE {f}"));

@@ -11,6 +11,7 @@
 mod budget;
 mod emit;
 mod lookahead;
+mod pipe;
 mod plan;
 mod policy;
 mod settings;
@@ -22,7 +23,7 @@ pub mod verify;
 
 pub use emit::linearize::{NONLINEAR_SAMPLES, seg_dist};
 pub use policy::{Prefer, Retract, RotaryFeed, Unwind};
-pub use settings::{Budget, MAX_SPINDLE_SPEED, Mode, Options, Settings, parse_triple};
+pub use settings::{Budget, MAX_SPINDLE_SPEED, Mode, Options, Settings, parse_triple, threads};
 pub use sink::{AxisStats, AxisWords, BlockInfo, Sink, Summary, TextSink, ToolUse};
 pub use tools::LengthFrom;
 pub use source::{ArcSpec, Hole, HolePart, Item, MotionPt, ProgEvent, Source};
@@ -61,8 +62,9 @@ impl From<source::Error> for Error {
     }
 }
 
-/// Post-processes CL from `input` for machine `m` into `sink`.
-pub fn post<R: BufRead, S: Sink + ?Sized>(input: R, m: &Machine, o: &Options, sink: &mut S) -> Result<Summary, Error> {
+/// Post-processes CL from `input` for machine `m` into `sink`. With `o.threads` 2 the CL is read
+/// and planned on a second thread (`pipe`); the output is the same byte for byte.
+pub fn post<R: BufRead + Send, S: Sink + ?Sized>(input: R, m: &Machine, o: &Options, sink: &mut S) -> Result<Summary, Error> {
     let mut sink = budget::Metered::new(sink, o.budget);
     let r = run(input, m, o, &mut sink);
     match (r, sink.tripped) {
@@ -71,7 +73,7 @@ pub fn post<R: BufRead, S: Sink + ?Sized>(input: R, m: &Machine, o: &Options, si
     }
 }
 
-fn run<R: BufRead, S: Sink + ?Sized>(
+fn run<R: BufRead + Send, S: Sink + ?Sized>(
     input: R,
     m: &Machine,
     o: &Options,
@@ -81,68 +83,189 @@ fn run<R: BufRead, S: Sink + ?Sized>(
     src.canned_cycles = o.canned_cycles;
     src.feed_max = emit::feed_max(&o.dialect, m.units, crate::nc::FeedMode::PerMinute);
     src.spindle_range = o.spindle_range;
-    let mut lengths = tools::Lengths::new(m.units, o.tool_length, o.tool_table.as_deref(), m.default_tool_length);
+    let lengths = tools::Lengths::new(m.units, o.tool_length, o.tool_table.as_deref(), m.default_tool_length);
     let setup = Setup::new(lengths.length, o.work_offset);
     let mut e = Emitter::new(m, o, sink, setup, &src);
     e.program_start()?;
-    let mut planner = Planner::new(m, setup, o.prefer);
-    let mut pending: VecDeque<Out> = VecDeque::new();
-    let mut failed: Option<Error> = None;
-    loop {
-        let item = src.next_item()?;
-        e.sink.read = src.bytes_read();
-        let Some(item) = item else { break };
-        // The tool length governs IK: a change cannot wait in the window. It takes effect after
-        // the tool change it belongs to is written (the retract is the old tool's).
-        let step = match &item {
-            Item::Event(ProgEvent::ToolLength { length, line }) if o.tool_length.is_none() => {
-                lengths.cl_length(*length, *line)
+    let plan = Plan {
+        src,
+        planner: Planner::new(m, setup, o.prefer),
+        lengths,
+        o,
+    };
+    let apply = Apply {
+        e,
+        pending: VecDeque::new(),
+        failed: None,
+    };
+    if o.threads > 1 {
+        return pipe::run(plan, apply, m, setup);
+    }
+    let mut direct = Direct { apply, summary: None };
+    plan.produce(&mut direct)?;
+    direct.summary.ok_or_else(|| Error::Io(std::io::Error::other("the post ended without its end")))
+}
+
+/// What the reading and planning half asks of the emitting half, in the order a single thread
+/// does it: both halves on one thread ([`Direct`]) or on two (`pipe`) run the same calls, so
+/// the output cannot differ.
+#[allow(clippy::large_enum_variant)]
+enum Op {
+    /// CL bytes read so far: the budget's measure for what is written next.
+    Read(u64),
+    Out(Out),
+    /// Write everything held back (before a tool length takes effect).
+    DrainAll,
+    ToolLength(f64, tools::LengthFrom),
+    /// One CL item done: the emitter's first error, what it may write now, strict mode's stop
+    /// (with the source's own strict error, if this item raised one).
+    ItemEnd(Option<Diagnostic>),
+    /// Strict mode: the source's error after its last item.
+    Strict(Diagnostic),
+    /// The source failed (a read error).
+    Fail(Error),
+    /// Collision checks the reading thread ran ahead (`pipe`).
+    Checks(Vec<emit::collide::Checked>),
+    /// The end of the CL: everything written, the summary.
+    End,
+}
+
+/// The emitting half: the emitter and what waits for its look-ahead.
+struct Apply<'a, 'b, S: Sink + ?Sized> {
+    e: Emitter<'a, budget::Metered<'b, S>>,
+    pending: VecDeque<Out>,
+    failed: Option<Error>,
+}
+
+impl<S: Sink + ?Sized> Apply<'_, '_, S> {
+    /// One op; the summary at [`Op::End`]. An error ends the post.
+    fn op(&mut self, op: Op) -> Result<Option<Summary>, Error> {
+        let e = &mut self.e;
+        match op {
+            Op::Read(n) => e.sink.read = n,
+            Op::Out(x) => deliver(e, &mut self.pending, &mut self.failed, x),
+            Op::DrainAll => e.drain(&mut self.pending, true)?,
+            Op::ToolLength(l, from) => e.tool_length(l, from)?,
+            Op::ItemEnd(src_strict) => {
+                if let Some(err) = self.failed.take() {
+                    return Err(err);
+                }
+                e.drain(&mut self.pending, false)?;
+                if let Some(d) = e.strict_error.take().or(src_strict) {
+                    return Err(Error::Strict(d));
+                }
             }
-            Item::Event(ProgEvent::Tool { number, line, .. }) => lengths.tool(*number, *line),
-            Item::Motion(_) if lengths.waiting() => lengths.motion(),
-            _ => tools::Step::default(),
-        };
-        let length_change = step.set.is_some() || step.diag.is_some();
-        if length_change {
-            planner.finish(&mut |x| deliver(&mut e, &mut pending, &mut failed, x));
-            let tool = match &item {
-                Item::Event(ev @ ProgEvent::Tool { .. }) => Some(ev.clone()),
-                _ => None,
+            Op::Strict(d) => return Err(Error::Strict(d)),
+            Op::Fail(err) => return Err(err),
+            Op::Checks(c) => e.ahead(c),
+            Op::End => {
+                if let Some(err) = self.failed.take() {
+                    return Err(err);
+                }
+                e.drain(&mut self.pending, true)?;
+                if let Some(d) = e.strict_error.take() {
+                    return Err(Error::Strict(d));
+                }
+                return e.finish().map(Some);
+            }
+        }
+        Ok(None)
+    }
+}
+
+/// Where the reading half's ops go. An error stops it (the post failed, or the emitting half
+/// is gone).
+trait Down {
+    fn op(&mut self, op: Op) -> Result<(), Error>;
+}
+
+/// One thread: each op applied as it comes.
+struct Direct<'a, 'b, S: Sink + ?Sized> {
+    apply: Apply<'a, 'b, S>,
+    summary: Option<Summary>,
+}
+
+impl<S: Sink + ?Sized> Down for Direct<'_, '_, S> {
+    fn op(&mut self, op: Op) -> Result<(), Error> {
+        if let Some(s) = self.apply.op(op)? {
+            self.summary = Some(s);
+        }
+        Ok(())
+    }
+}
+
+/// The reading half: the source, the tool lengths (they govern IK) and the planner.
+struct Plan<'m, R> {
+    src: Source<R>,
+    planner: Planner<'m>,
+    lengths: tools::Lengths<'m>,
+    o: &'m Options,
+}
+
+impl<R: BufRead> Plan<'_, R> {
+    /// Reads and plans the whole CL, handing every emitter call to `down` in order. Stops at
+    /// the first op `down` refuses, or at the source's strict error.
+    fn produce(mut self, down: &mut impl Down) -> Result<(), Error> {
+        let o = self.o;
+        loop {
+            let item = match self.src.next_item() {
+                Ok(i) => i,
+                Err(err) => return down.op(Op::Fail(err.into())),
             };
-            for ev in tool.into_iter().chain(step.diag.map(ProgEvent::Diag)) {
-                planner.push_event(ev, &mut |x| deliver(&mut e, &mut pending, &mut failed, x));
+            down.op(Op::Read(self.src.bytes_read()))?;
+            let Some(item) = item else { break };
+            // The tool length governs IK: a change cannot wait in the window. It takes effect
+            // after the tool change it belongs to is written (the retract is the old tool's).
+            let lengths = &mut self.lengths;
+            let step = match &item {
+                Item::Event(ProgEvent::ToolLength { length, line }) if o.tool_length.is_none() => lengths.cl_length(*length, *line),
+                Item::Event(ProgEvent::Tool { number, line, .. }) => lengths.tool(*number, *line),
+                Item::Motion(_) if lengths.waiting() => lengths.motion(),
+                _ => tools::Step::default(),
+            };
+            let mut out = |x| {
+                // A refusal shows at the next op outside the planner.
+                let _ = down.op(Op::Out(x));
+            };
+            let length_change = step.set.is_some() || step.diag.is_some();
+            if length_change {
+                self.planner.finish(&mut out);
+                let tool = match &item {
+                    Item::Event(ev @ ProgEvent::Tool { .. }) => Some(ev.clone()),
+                    _ => None,
+                };
+                for ev in tool.into_iter().chain(step.diag.map(ProgEvent::Diag)) {
+                    self.planner.push_event(ev, &mut out);
+                }
+                down.op(Op::DrainAll)?;
+                if let Some((l, from)) = step.set {
+                    self.planner.setup.tool_length = l;
+                    down.op(Op::ToolLength(l, from))?;
+                }
             }
-            e.drain(&mut pending, true)?;
-            if let Some((l, from)) = step.set {
-                planner.setup.tool_length = l;
-                e.tool_length(l, from)?;
+            let mut out = |x| {
+                let _ = down.op(Op::Out(x));
+            };
+            match item {
+                Item::Motion(pt) => self.planner.push_point(pt, &mut out),
+                // Weighed above (with the job's length fixed, the emitter tells a CL length it overrides).
+                Item::Event(ProgEvent::ToolLength { .. }) if o.tool_length.is_none() => {}
+                Item::Event(ProgEvent::Tool { .. }) if length_change => {} // written above
+                Item::Event(ev) => self.planner.push_event(ev, &mut out),
+            }
+            let strict = self.src.strict_error.take();
+            let stop = strict.is_some();
+            down.op(Op::ItemEnd(strict))?;
+            if stop {
+                return Ok(()); // the emitting half stops there
             }
         }
-        match item {
-            Item::Motion(pt) => planner.push_point(pt, &mut |x| deliver(&mut e, &mut pending, &mut failed, x)),
-            // Weighed above (with the job's length fixed, the emitter tells a CL length it overrides).
-            Item::Event(ProgEvent::ToolLength { .. }) if o.tool_length.is_none() => {}
-            Item::Event(ProgEvent::Tool { .. }) if length_change => {} // written above
-            Item::Event(ev) => planner.push_event(ev, &mut |x| deliver(&mut e, &mut pending, &mut failed, x)),
+        if let Some(d) = self.src.strict_error.take() {
+            return down.op(Op::Strict(d));
         }
-        if let Some(err) = failed.take() {
-            return Err(err);
-        }
-        e.drain(&mut pending, false)?;
-        if let Some(d) = e.strict_error.take().or_else(|| src.strict_error.take()) {
-            return Err(Error::Strict(d));
-        }
+        self.planner.finish(&mut |x| {
+            let _ = down.op(Op::Out(x));
+        });
+        down.op(Op::End)
     }
-    if let Some(d) = src.strict_error.take() {
-        return Err(Error::Strict(d));
-    }
-    planner.finish(&mut |x| deliver(&mut e, &mut pending, &mut failed, x));
-    if let Some(err) = failed.take() {
-        return Err(err);
-    }
-    e.drain(&mut pending, true)?;
-    if let Some(d) = e.strict_error.take() {
-        return Err(Error::Strict(d));
-    }
-    e.finish()
 }

@@ -164,6 +164,7 @@ pub struct Column {
 }
 
 /// A committed point: its column and the candidate chosen.
+#[derive(Clone)]
 pub struct Committed {
     pub pt: MotionPt,
     pub cand: Option<Cand>,
@@ -171,6 +172,7 @@ pub struct Committed {
 }
 
 #[allow(clippy::large_enum_variant)]
+#[derive(Clone)]
 pub enum Out {
     Event(ProgEvent),
     Point(Committed),

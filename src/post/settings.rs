@@ -89,6 +89,9 @@ pub struct Options {
     /// The job's stock and fixtures: boxes in W (the CL's frame), the CL's units.
     pub stock: Vec<crate::collide::Solid>,
     pub fixtures: Vec<crate::collide::Solid>,
+    /// Threads one post runs on: 1, or 2 (the CL read and planned beside the emitting). The
+    /// output is the same either way; the caller chooses what its load wants (`threads`).
+    pub threads: usize,
 }
 
 /// What one post may cost, whatever its input: blocks written per CL byte read beyond a floor
@@ -178,6 +181,17 @@ impl Options {
             collision_clearance: if mm { 2.0 } else { 0.08 },
             stock: Vec::new(),
             fixtures: Vec::new(),
+            threads: 1,
+        }
+    }
+
+    /// The same options for a run that never stops on its own (no strict mode, no budget): the
+    /// shadow emitter of a two-thread post (`pipe`), whose path is the real one's to its stop.
+    pub(super) fn unstoppable(&self) -> Options {
+        Options {
+            strict: false,
+            budget: Budget::new(0, 0.0).unwrap_or_default(),
+            ..self.clone()
         }
     }
 
@@ -188,6 +202,16 @@ impl Options {
             Some("none") => None,
             Some(w) => Some(w),
         }
+    }
+}
+
+/// The threads a post runs on, from a setting (1 where absent): 1 or 2, the two halves of the
+/// pipeline (`post::pipe`); more would have nothing to run.
+pub fn threads(n: Option<u32>) -> Result<usize, String> {
+    match n {
+        None | Some(1) => Ok(1),
+        Some(2) => Ok(2),
+        Some(n) => Err(format!("threads {n}: expected 1 or 2")),
     }
 }
 
@@ -287,6 +311,10 @@ pub struct Settings {
     /// Fixtures: boxes as the stock's, separated by `;`.
     #[serde(default)]
     pub fixtures: Option<String>,
+    /// Threads one post runs on, 1 or 2 ([`threads`]); 1 where absent. Each edge sets its own
+    /// default (the CLI two where there are two cores, the service one: see reliability.md).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub threads: Option<u32>,
 }
 
 impl Settings {
@@ -416,6 +444,7 @@ impl Settings {
             }
             o.tolerance = t;
         }
+        o.threads = threads(self.threads)?;
         o.sequence_numbers = self.sequence_numbers.unwrap_or(false);
         o.program_number = self.program_number.unwrap_or(1000);
         let numbers = o.dialect.program_numbers();

@@ -5,34 +5,115 @@ use super::{At, Emitter};
 use crate::collide::{Hit, ToolShape};
 use crate::diag::{Code, Diagnostic, Severity};
 use crate::kinematics::Units;
+use crate::kinematics::{Machine, Vec3};
 use crate::post::Sink;
+use std::collections::VecDeque;
+
+/// Every `SHARE`th collision check is the reading thread's, on two threads with collisions on
+/// (`post::pipe`): the checks are most of a post's work, and the reading half has time for some.
+const SHARE: u64 = 2;
+
+/// With two threads, a shadow emitter on the reading thread replays the same ops (without the
+/// sink) to know the checks ahead and runs its share; the real one takes their answers.
+pub(in crate::post) enum Share {
+    Shadow(Vec<Checked>),
+    Real(VecDeque<Checked>),
+}
+
+/// One collision check done ahead: what it was asked (all of it) and what it found.
+pub(in crate::post) struct Checked {
+    seq: u64,
+    key: Key,
+    n: usize,
+    hits: Vec<Hit>,
+}
+
+/// Everything a check's answer depends on besides the world's bodies: the motion's ends
+/// (linears, actual rotary angles), whether the stock counts, the tool.
+#[derive(PartialEq)]
+struct Key {
+    from: Option<([f64; 3], [f64; 3])>,
+    to: ([f64; 3], [f64; 3]),
+    stock: bool,
+    tool: ToolShape,
+    length: f64,
+}
+
+/// The samples along the move and the deepest hit per pair.
+fn check(world: &mut crate::collide::World, m: &Machine, key: &Key, wo: &Vec3) -> (usize, Vec<Hit>) {
+    world.set_tool(key.tool);
+    let len = key.length;
+    let mut hits: Vec<Hit> = Vec::new();
+    let (to_lin, to_act) = &key.to;
+    let n = key.from.as_ref().map_or(1, |(lin, act)| world.samples(m, (lin, act), (to_lin, to_act), len));
+    for k in 1..=n {
+        let t = k as f64 / n as f64;
+        let (mut lin, mut act) = (*to_lin, *to_act);
+        if let Some((p_lin, p_act)) = key.from.as_ref().filter(|_| k < n) {
+            for i in 0..3 {
+                lin[i] = p_lin[i] + (to_lin[i] - p_lin[i]) * t;
+                act[i] = p_act[i] + (to_act[i] - p_act[i]) * t;
+            }
+        }
+        world.check_at(m, &lin, &act, len, wo, key.stock, &mut hits);
+    }
+    (n, hits)
+}
 
 impl<S: Sink + ?Sized> Emitter<'_, S> {
+    /// The checks the shadow ran since last asked (for the real emitter's [`Emitter::ahead`]).
+    pub(in crate::post) fn checked(&mut self) -> Vec<Checked> {
+        match &mut self.share {
+            Some(Share::Shadow(done)) => std::mem::take(done),
+            _ => Vec::new(),
+        }
+    }
+
+    /// Answers the shadow found, in order.
+    pub(in crate::post) fn ahead(&mut self, checks: Vec<Checked>) {
+        if let Some(Share::Real(ready)) = &mut self.share {
+            ready.extend(checks);
+        }
+    }
+
     /// Diagnostics of the bodies that overlap (`collision`, an error) or come closer than the
     /// clearance (`near_collision`, a warning) at `to` or on the way from `prev`.
     pub(super) fn collisions(&mut self, prev: Option<&At>, to: &At, rapid: bool, line: u32, diags: &mut Vec<Diagnostic>) {
-        let shape = self.tool_shape();
+        let tool = self.tool_shape();
         let Some(world) = self.world.as_mut() else { return };
-        world.set_tool(shape);
-        let stock = world.stock_at_rapid(rapid);
-        let (m, len, wo) = (self.m, self.setup.tool_length, self.setup.work_offset);
-        let mut hits: Vec<Hit> = Vec::new();
         // The move from the block before (not across a tool change: the machine went elsewhere).
         let from = prev.filter(|_| !self.tool_changed);
-        let n = from.map_or(1, |p| {
-            world.samples(m, (&p.joints.linear, &p.actual), (&to.joints.linear, &to.actual), len)
-        });
-        for k in 1..=n {
-            let t = k as f64 / n as f64;
-            let (mut lin, mut act) = (to.joints.linear, to.actual);
-            if let Some(p) = from.filter(|_| k < n) {
-                for i in 0..3 {
-                    lin[i] = p.joints.linear[i] + (to.joints.linear[i] - p.joints.linear[i]) * t;
-                    act[i] = p.actual[i] + (to.actual[i] - p.actual[i]) * t;
+        let key = Key {
+            from: from.map(|p| (p.joints.linear, p.actual)),
+            to: (to.joints.linear, to.actual),
+            stock: world.stock_at_rapid(rapid),
+            tool,
+            length: self.setup.tool_length,
+        };
+        let seq = self.checks;
+        self.checks += 1;
+        let theirs = seq % SHARE == SHARE - 1;
+        let (n, hits) = match &mut self.share {
+            None => check(world, self.m, &key, &self.setup.work_offset),
+            // The shadow checks its share only, and needs no diagnostics.
+            Some(Share::Shadow(done)) => {
+                if theirs {
+                    let (n, hits) = check(world, self.m, &key, &self.setup.work_offset);
+                    done.push(Checked { seq, key, n, hits });
+                }
+                return;
+            }
+            Some(Share::Real(ready)) => {
+                while ready.front().is_some_and(|c| c.seq < seq) {
+                    ready.pop_front();
+                }
+                match ready.front() {
+                    // The same check, to the bit: its answer (else the shadow went another way).
+                    Some(c) if theirs && c.seq == seq && c.key == key => ready.pop_front().map(|c| (c.n, c.hits)).unwrap_or_default(),
+                    _ => check(world, self.m, &key, &self.setup.work_offset),
                 }
             }
-            world.check_at(m, &lin, &act, len, &wo, stock, &mut hits);
-        }
+        };
         let unit = self.m.units.as_str();
         for h in hits {
             let (code, severity, what) = if h.dist < 0.0 {
