@@ -99,7 +99,7 @@ fn run<R: BufRead + Send, S: Sink + ?Sized>(
         failed: None,
     };
     if o.threads > 1 {
-        return pipe::run(plan, apply, m, setup);
+        return pipe::run(plan, apply);
     }
     let mut direct = Direct { apply, summary: None };
     plan.produce(&mut direct)?;
@@ -124,8 +124,6 @@ enum Op {
     Strict(Diagnostic),
     /// The source failed (a read error).
     Fail(Error),
-    /// Collision checks the reading thread ran ahead (`pipe`).
-    Checks(Vec<emit::collide::Checked>),
     /// The end of the CL: everything written, the summary.
     End,
 }
@@ -157,7 +155,6 @@ impl<S: Sink + ?Sized> Apply<'_, '_, S> {
             }
             Op::Strict(d) => return Err(Error::Strict(d)),
             Op::Fail(err) => return Err(err),
-            Op::Checks(c) => e.ahead(c),
             Op::End => {
                 if let Some(err) = self.failed.take() {
                     return Err(err);

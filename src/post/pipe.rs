@@ -3,22 +3,15 @@
 //! caller's. The reading half hands over the same [`Op`]s a single thread applies as it goes,
 //! in batches (one message per point would cost more than planning it) through a bounded
 //! channel, so the output is the same byte for byte and memory stays flat.
-//!
-//! With collisions on, the checks are most of the work (three quarters of a post on a generated
-//! path): a shadow emitter on the reading thread applies the same ops into no sink, and runs
-//! every other collision check; the real emitter takes those answers where its own check is
-//! the same to the bit (it always is: the emitter's path does not depend on what is found) and
-//! runs the rest.
+//! The collision check stays with the emitter: it is about a third of a post, and replaying the
+//! emitter on the reading thread to run part of it there cost more than it saved
+//! (`docs/reliability.md`).
 //!
 //! The sink stays on the caller's thread (the CLI's, HTTP's and jobs' sinks need not be `Send`).
 //! When the emitting half stops (an error, strict mode, the budget), it drops the channel: the
 //! reading half's next send fails and it ends, so the caller never waits on a full queue.
 
-use super::emit::Emitter;
-use super::emit::collide::Share;
-use super::{Apply, Down, Error, Op, Plan, Sink, Summary, TextSink, budget::Metered};
-use crate::kinematics::{Machine, Setup};
-use std::collections::VecDeque;
+use super::{Apply, Down, Error, Op, Plan, Sink, Summary};
 use std::io::BufRead;
 use std::sync::mpsc::{Receiver, SyncSender, TryRecvError, sync_channel};
 use std::sync::Mutex;
@@ -31,47 +24,22 @@ const BATCH: usize = 1024;
 const QUEUED: usize = 4;
 
 /// The two-thread post. If no thread can be started, the post runs on this one.
-pub(super) fn run<R: BufRead + Send, S: Sink + ?Sized>(
-    plan: Plan<'_, R>,
-    mut apply: Apply<'_, '_, S>,
-    m: &Machine,
-    setup: Setup,
-) -> Result<Summary, Error> {
-    // The shadow: the same options, but it never stops on its own (no strict mode, no budget)
-    // and writes nowhere.
-    let o = plan.o.unstoppable();
-    let mut nowhere = TextSink(std::io::sink());
-    let mut nowhere = Metered::new(&mut nowhere, o.budget);
-    let shadow = (apply.e.world.is_some()).then(|| {
-        apply.e.share = Some(Share::Real(VecDeque::new()));
-        let mut e = Emitter::new(m, &o, &mut nowhere, setup, &plan.src);
-        e.share = Some(Share::Shadow(Vec::new()));
-        // As the real one did (it writes nowhere: it cannot fail).
-        let _ = e.program_start();
-        Apply {
-            e,
-            pending: VecDeque::new(),
-            failed: None,
-        }
-    });
+pub(super) fn run<R: BufRead + Send, S: Sink + ?Sized>(plan: Plan<'_, R>, mut apply: Apply<'_, '_, S>) -> Result<Summary, Error> {
     // The reading half, where a failed spawn can take it back.
-    let slot = Mutex::new(Some((plan, shadow)));
+    let slot = Mutex::new(Some(plan));
     let threaded = std::thread::scope(|scope| {
         let (tx, rx) = sync_channel::<Vec<Op>>(QUEUED);
         let (back_tx, back_rx) = sync_channel::<Vec<Op>>(QUEUED + 2);
         let started = std::thread::Builder::new().name("kinepost-read".into()).spawn_scoped(scope, || {
             let taken = slot.lock().ok().and_then(|mut p| p.take());
-            if let Some((plan, shadow)) = taken {
-                let mut down = Tee {
-                    shadow,
-                    down: Batches {
-                        tx,
-                        back: back_rx,
-                        buf: Vec::with_capacity(BATCH),
-                    },
+            if let Some(plan) = taken {
+                let mut down = Batches {
+                    tx,
+                    back: back_rx,
+                    buf: Vec::with_capacity(BATCH),
                 };
                 if plan.produce(&mut down).is_ok() {
-                    down.down.flush();
+                    down.flush();
                 }
             }
         });
@@ -85,47 +53,11 @@ pub(super) fn run<R: BufRead + Send, S: Sink + ?Sized>(
     match threaded {
         Some(r) => r,
         None => {
-            let (plan, _) = slot.into_inner().ok().flatten().ok_or_else(|| Error::Io(std::io::Error::other("no reading thread")))?;
-            apply.e.share = None;
+            let plan = slot.into_inner().ok().flatten().ok_or_else(|| Error::Io(std::io::Error::other("no reading thread")))?;
             let mut direct = super::Direct { apply, summary: None };
             plan.produce(&mut direct)?;
             direct.summary.ok_or_else(|| Error::Io(std::io::Error::other("the post ended without its end")))
         }
-    }
-}
-
-/// The reading half's ops through the shadow first (when collisions are on): the checks it ran
-/// go ahead of the op whose blocks ask for them.
-struct Tee<'a, 'b> {
-    shadow: Option<Apply<'a, 'b, TextSink<std::io::Sink>>>,
-    down: Batches,
-}
-
-impl Down for Tee<'_, '_> {
-    fn op(&mut self, op: Op) -> Result<(), Error> {
-        if let Some(shadow) = &mut self.shadow {
-            let copy = match &op {
-                Op::Read(n) => Some(Op::Read(*n)),
-                Op::Out(x) => Some(Op::Out(x.clone())),
-                Op::DrainAll => Some(Op::DrainAll),
-                Op::ToolLength(l, from) => Some(Op::ToolLength(*l, *from)),
-                Op::ItemEnd(d) => Some(Op::ItemEnd(d.clone())),
-                Op::Strict(_) | Op::Fail(_) | Op::Checks(_) | Op::End => None,
-            };
-            if let Some(copy) = copy {
-                match shadow.op(copy) {
-                    Ok(_) => {
-                        let done = shadow.e.checked();
-                        if !done.is_empty() {
-                            self.down.op(Op::Checks(done))?;
-                        }
-                    }
-                    // Stopped (the source's strict error): the real emitter checks the rest.
-                    Err(_) => self.shadow = None,
-                }
-            }
-        }
-        self.down.op(op)
     }
 }
 

@@ -185,16 +185,6 @@ impl Options {
         }
     }
 
-    /// The same options for a run that never stops on its own (no strict mode, no budget): the
-    /// shadow emitter of a two-thread post (`pipe`), whose path is the real one's to its stop.
-    pub(super) fn unstoppable(&self) -> Options {
-        Options {
-            strict: false,
-            budget: Budget::new(0, 0.0).unwrap_or_default(),
-            ..self.clone()
-        }
-    }
-
     /// The work coordinate word the program writes, if any.
     pub fn wcs_word(&self) -> Option<&str> {
         match self.work_coordinates.as_deref() {

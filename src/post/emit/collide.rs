@@ -7,30 +7,9 @@ use crate::diag::{Code, Diagnostic, Severity};
 use crate::kinematics::Units;
 use crate::kinematics::{Machine, Vec3};
 use crate::post::Sink;
-use std::collections::VecDeque;
 
-/// Every `SHARE`th collision check is the reading thread's, on two threads with collisions on
-/// (`post::pipe`): the checks are most of a post's work, and the reading half has time for some.
-const SHARE: u64 = 2;
-
-/// With two threads, a shadow emitter on the reading thread replays the same ops (without the
-/// sink) to know the checks ahead and runs its share; the real one takes their answers.
-pub(in crate::post) enum Share {
-    Shadow(Vec<Checked>),
-    Real(VecDeque<Checked>),
-}
-
-/// One collision check done ahead: what it was asked (all of it) and what it found.
-pub(in crate::post) struct Checked {
-    seq: u64,
-    key: Key,
-    n: usize,
-    hits: Vec<Hit>,
-}
-
-/// Everything a check's answer depends on besides the world's bodies: the motion's ends
-/// (linears, actual rotary angles), whether the stock counts, the tool.
-#[derive(PartialEq)]
+/// What a check is asked: the motion's ends (linears, actual rotary angles), whether the stock
+/// counts, the tool.
 struct Key {
     from: Option<([f64; 3], [f64; 3])>,
     to: ([f64; 3], [f64; 3]),
@@ -61,21 +40,6 @@ fn check(world: &mut crate::collide::World, m: &Machine, key: &Key, wo: &Vec3) -
 }
 
 impl<S: Sink + ?Sized> Emitter<'_, S> {
-    /// The checks the shadow ran since last asked (for the real emitter's [`Emitter::ahead`]).
-    pub(in crate::post) fn checked(&mut self) -> Vec<Checked> {
-        match &mut self.share {
-            Some(Share::Shadow(done)) => std::mem::take(done),
-            _ => Vec::new(),
-        }
-    }
-
-    /// Answers the shadow found, in order.
-    pub(in crate::post) fn ahead(&mut self, checks: Vec<Checked>) {
-        if let Some(Share::Real(ready)) = &mut self.share {
-            ready.extend(checks);
-        }
-    }
-
     /// Diagnostics of the bodies that overlap (`collision`, an error) or come closer than the
     /// clearance (`near_collision`, a warning) at `to` or on the way from `prev`.
     pub(super) fn collisions(&mut self, prev: Option<&At>, to: &At, rapid: bool, line: u32, diags: &mut Vec<Diagnostic>) {
@@ -90,30 +54,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             tool,
             length: self.setup.tool_length,
         };
-        let seq = self.checks;
-        self.checks += 1;
-        let theirs = seq % SHARE == SHARE - 1;
-        let (n, hits) = match &mut self.share {
-            None => check(world, self.m, &key, &self.setup.work_offset),
-            // The shadow checks its share only, and needs no diagnostics.
-            Some(Share::Shadow(done)) => {
-                if theirs {
-                    let (n, hits) = check(world, self.m, &key, &self.setup.work_offset);
-                    done.push(Checked { seq, key, n, hits });
-                }
-                return;
-            }
-            Some(Share::Real(ready)) => {
-                while ready.front().is_some_and(|c| c.seq < seq) {
-                    ready.pop_front();
-                }
-                match ready.front() {
-                    // The same check, to the bit: its answer (else the shadow went another way).
-                    Some(c) if theirs && c.seq == seq && c.key == key => ready.pop_front().map(|c| (c.n, c.hits)).unwrap_or_default(),
-                    _ => check(world, self.m, &key, &self.setup.work_offset),
-                }
-            }
-        };
+        let (n, hits) = check(world, self.m, &key, &self.setup.work_offset);
         let unit = self.m.units.as_str();
         for h in hits {
             let (code, severity, what) = if h.dist < 0.0 {

@@ -173,10 +173,6 @@ pub(super) struct Emitter<'a, S: Sink + ?Sized> {
     pub(super) cutcom: cutcom::State,
     /// The machine's bodies, the tool and the stock, when the collision check is on.
     pub(super) world: Option<crate::collide::World>,
-    /// Collision checks made (each one's number), and with two threads the share of them the
-    /// other thread runs (`collide.rs`).
-    pub(super) checks: u64,
-    pub(in crate::post) share: Option<collide::Share>,
 }
 
 impl<'a, S: Sink + ?Sized> Emitter<'a, S> {
@@ -277,8 +273,6 @@ impl<'a, S: Sink + ?Sized> Emitter<'a, S> {
                 let k = |v: &[crate::collide::Solid]| v.iter().map(|s| s.scaled(src.scale)).collect::<Vec<_>>();
                 crate::collide::World::new(g, &k(&o.stock), &k(&o.fixtures), o.collision_clearance, o.tolerance.max(1e-3))
             }),
-            checks: 0,
-            share: None,
         }
     }
 
