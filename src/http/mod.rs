@@ -345,6 +345,7 @@ fn static_file(name: &str) -> Response {
         "ncview.js" => (include_str!("web/ncview.js"), "text/javascript; charset=utf-8"),
         "kin.js" => (include_str!("web/kin.js"), "text/javascript; charset=utf-8"),
         "machine3d.js" => (include_str!("web/machine3d.js"), "text/javascript; charset=utf-8"),
+        "viewport.js" => (include_str!("web/viewport.js"), "text/javascript; charset=utf-8"),
         "simulate.js" => (include_str!("web/simulate.js"), "text/javascript; charset=utf-8"),
         "check.js" => (include_str!("web/check.js"), "text/javascript; charset=utf-8"),
         "machine-check.html" => (include_str!("web/machine-check.html"), "text/html; charset=utf-8"),

@@ -4,6 +4,7 @@
 // `machineView`), the machine check page moves it from sliders (check.js).
 import * as THREE from 'three';
 import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
+import { followBox } from './viewport.js';
 import { links, matrix4, schematic, toolBodies } from './kin.js';
 
 const PALETTE = { bed: 0x8d99ae, table: 0x6c7a89, ram: 0xa3b1c2, spindle: 0xc9d3de, tool: 0xd4a017, holder: 0x5c6b7a, stock: 0x2a9d8f, fixture: 0x9c6644, hit: 0xe00000 };
@@ -178,18 +179,7 @@ export function stage(el, scene, frame) {
   controls.update();
   const render = () => renderer.render(scene, camera);
   controls.addEventListener('change', render);
-  const resized = new ResizeObserver(() => {
-    const [cw, ch] = [el.clientWidth, el.clientHeight];
-    if (!cw || !ch) return;
-    renderer.setSize(cw, ch);
-    camera.aspect = cw / ch;
-    camera.updateProjectionMatrix();
-    render();
-  });
-  resized.observe(el);
-  const scheme = window.matchMedia('(prefers-color-scheme: dark)');
-  const recolour = () => { renderer.setClearColor(new THREE.Color(getComputedStyle(el).backgroundColor || '#fff')); render(); };
-  scheme.addEventListener('change', recolour);
+  const unfollow = followBox(el, renderer, camera, render);
   return {
     renderer,
     camera,
@@ -201,8 +191,7 @@ export function stage(el, scene, frame) {
       return { x: (p.x + 1) / 2 * r.width, y: (1 - p.y) / 2 * r.height, z: p.z };
     },
     dispose() {
-      resized.disconnect();
-      scheme.removeEventListener('change', recolour);
+      unfollow();
       controls.dispose();
       renderer.dispose();
     },

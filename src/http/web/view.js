@@ -2,6 +2,7 @@
 // number or time (SVG). Data: GET /v1/jobs/{id}/preview. Pure drawing: app.js decides when.
 import * as THREE from 'three';
 import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
+import { followBox } from './viewport.js';
 
 const COLORS = { feed: 0x1d6fd8, rapid: 0xe76f51, axis: 0x7a9a3a, error: 0xd00000, warning: 0xf0a000, event: 0x8e44ad };
 const SVGNS = 'http://www.w3.org/2000/svg';
@@ -125,21 +126,7 @@ export function view3d(el, p, list, onPick) {
   const render = () => renderer.render(scene, camera);
   controls.addEventListener('change', render);
   render();
-  // The view follows its box (a phone turned, a window resized): it was drawn once at the width
-  // it had, and a page opened narrow then widened, or the reverse, overflowed.
-  const resized = new ResizeObserver(() => {
-    const [cw, ch] = [el.clientWidth, el.clientHeight];
-    if (!cw || !ch) return;
-    renderer.setSize(cw, ch);
-    camera.aspect = cw / ch;
-    camera.updateProjectionMatrix();
-    render();
-  });
-  resized.observe(el);
-  // Dark mode switched while the view is open: the page's background again.
-  const scheme = window.matchMedia('(prefers-color-scheme: dark)');
-  const recolour = () => { renderer.setClearColor(new THREE.Color(getComputedStyle(el).backgroundColor || '#fff')); render(); };
-  scheme.addEventListener('change', recolour);
+  const unfollow = followBox(el, renderer, camera, render);
 
   const screenOf = (tip) => {
     const v = new THREE.Vector3(...tip).project(camera);
@@ -177,8 +164,7 @@ export function view3d(el, p, list, onPick) {
       return list[i] && list[i].tip ? screenOf(list[i].tip) : null;
     },
     dispose() {
-      resized.disconnect();
-      scheme.removeEventListener('change', recolour);
+      unfollow();
       controls.dispose();
       renderer.dispose();
     },
