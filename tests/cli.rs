@@ -134,7 +134,16 @@ fn ik_converts_explicit_units() {
         "1",
     ]);
     let (_, b, _) = kinepost(&["ik", "--machine", "haas-umc750", "1", "0", "0", "0", "0", "1"]);
-    assert_eq!(json(&a), json(&b));
+    let (a, b) = (json(&a), json(&b));
+    let (sa, sb) = (&a["solutions"][0], &b["solutions"][0]);
+    for k in ["X", "Y", "Z", "B", "C"] {
+        // 25.4 × (1 / 25.4) is 1 less an ulp.
+        assert!((sa[k].as_f64().unwrap() - sb[k].as_f64().unwrap()).abs() < 1e-12, "{k}: {sa} {sb}");
+    }
+    for k in ["branch", "within_limits", "singular", "free_axis"] {
+        assert_eq!(sa[k], sb[k], "{k}");
+    }
+    assert_eq!(a["solutions"].as_array().unwrap().len(), b["solutions"].as_array().unwrap().len());
 }
 
 #[test]

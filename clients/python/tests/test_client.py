@@ -12,6 +12,8 @@ from conftest import DATA
 
 PLANE = DATA / "nx_clsf_mech491_simple_mill_plane_mm.cls"  # mm, 3-axis facing
 BIG = DATA / "nx_clsf_mech491_project2_inch_5ax.cls"  # inch, 5-axis, ~400 KB of NC
+# Its part stands on a 3 in riser: at z = 0 on the platter its flat tool runs into the table.
+RISER = (0, 0, 3)
 GOOD = "spinner-u5-620"
 # The facing pass runs below this machine's Z travel: every block is a limit violation.
 TOO_SHORT = "dmu-nutating-45"
@@ -70,7 +72,7 @@ def test_post_options_reach_the_server(client):
 
 
 def test_post_stream_yields_text_as_it_comes(client):
-    stream = client.post_stream(BIG, "haas-umc750")
+    stream = client.post_stream(BIG, "haas-umc750", work_offset=RISER)
     with pytest.raises(RuntimeError):
         stream.outcome  # not read yet: no outcome to trust
     chunks = list(stream)
@@ -78,7 +80,7 @@ def test_post_stream_yields_text_as_it_comes(client):
     text = "".join(chunks)
     assert text.startswith("%\n") and text.rstrip().endswith("%")
     assert stream.outcome.ok and stream.outcome.warnings == 1
-    assert program_lines(text) == program_lines(client.post(BIG, "haas-umc750"))
+    assert program_lines(text) == program_lines(client.post(BIG, "haas-umc750", work_offset=RISER))
 
 
 def test_post_ndjson_yields_records_and_the_summary(client):
@@ -168,7 +170,7 @@ def test_no_server_is_a_kinepost_error_without_status():
 
 
 def test_a_job_runs_with_progress_and_its_outputs_stream(client, tmp_path):
-    job = client.submit_job(BIG, "haas-umc750", tolerance=0.001)
+    job = client.submit_job(BIG, "haas-umc750", tolerance=0.001, work_offset=RISER)
     assert job.state in ("queued", "running", "succeeded") and job.filename == BIG.name
     assert job.settings["tolerance"] == 0.001
     seen = []
@@ -188,7 +190,7 @@ def test_a_job_runs_with_progress_and_its_outputs_stream(client, tmp_path):
     assert client.job_nc(job.id, buf) == size and buf.getvalue() == dest.read_bytes()
     nc = dest.read_text()
     assert "(KINEPOST: ERRORS 0, WARNINGS" in nc
-    assert program_lines(nc) == program_lines(client.post(BIG, "haas-umc750", tolerance=0.001))
+    assert program_lines(nc) == program_lines(client.post(BIG, "haas-umc750", tolerance=0.001, work_offset=RISER))
 
     diags = client.job_diagnostics(job.id)
     records = list(diags)
