@@ -8,33 +8,25 @@ use crate::kinematics::Units;
 use crate::kinematics::{Machine, Vec3};
 use crate::post::Sink;
 
-/// What a check is asked: the motion's ends (linears, actual rotary angles), whether the stock
-/// counts, the tool.
-struct Key {
-    from: Option<([f64; 3], [f64; 3])>,
-    to: ([f64; 3], [f64; 3]),
-    stock: bool,
-    tool: ToolShape,
-    length: f64,
-}
+/// Joints at one end of a move: linears, actual rotary angles (radians).
+type Ends<'a> = (&'a [f64; 3], &'a [f64; 3]);
 
-/// The samples along the move and the deepest hit per pair.
-fn check(world: &mut crate::collide::World, m: &Machine, key: &Key, wo: &Vec3) -> (usize, Vec<Hit>) {
-    world.set_tool(key.tool);
-    let len = key.length;
+/// The samples along the move from `from` (none: the machine got to `to` some other way) to
+/// `to`, and the deepest hit per pair.
+fn sweep(world: &mut crate::collide::World, m: &Machine, from: Option<Ends>, to: Ends, len: f64, wo: &Vec3, stock: bool) -> (usize, Vec<Hit>) {
     let mut hits: Vec<Hit> = Vec::new();
-    let (to_lin, to_act) = &key.to;
-    let n = key.from.as_ref().map_or(1, |(lin, act)| world.samples(m, (lin, act), (to_lin, to_act), len));
+    let (to_lin, to_act) = to;
+    let n = from.map_or(1, |f| world.samples(m, f, to, len));
     for k in 1..=n {
         let t = k as f64 / n as f64;
         let (mut lin, mut act) = (*to_lin, *to_act);
-        if let Some((p_lin, p_act)) = key.from.as_ref().filter(|_| k < n) {
+        if let Some((p_lin, p_act)) = from.filter(|_| k < n) {
             for i in 0..3 {
                 lin[i] = p_lin[i] + (to_lin[i] - p_lin[i]) * t;
                 act[i] = p_act[i] + (to_act[i] - p_act[i]) * t;
             }
         }
-        world.check_at(m, &lin, &act, len, wo, key.stock, &mut hits);
+        world.check_at(m, &lin, &act, len, wo, stock, &mut hits);
     }
     (n, hits)
 }
@@ -45,16 +37,12 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
     pub(super) fn collisions(&mut self, prev: Option<&At>, to: &At, rapid: bool, line: u32, diags: &mut Vec<Diagnostic>) {
         let tool = self.tool_shape();
         let Some(world) = self.world.as_mut() else { return };
+        world.set_tool(tool);
+        let stock = world.stock_at_rapid(rapid);
         // The move from the block before (not across a tool change: the machine went elsewhere).
-        let from = prev.filter(|_| !self.tool_changed);
-        let key = Key {
-            from: from.map(|p| (p.joints.linear, p.actual)),
-            to: (to.joints.linear, to.actual),
-            stock: world.stock_at_rapid(rapid),
-            tool,
-            length: self.setup.tool_length,
-        };
-        let (n, hits) = check(world, self.m, &key, &self.setup.work_offset);
+        let from = prev.filter(|_| !self.tool_changed).map(|p| (&p.joints.linear, &p.actual));
+        let to = (&to.joints.linear, &to.actual);
+        let (n, hits) = sweep(world, self.m, from, to, self.setup.tool_length, &self.setup.work_offset, stock);
         let unit = self.m.units.as_str();
         for h in hits {
             let (code, severity, what) = if h.dist < 0.0 {
