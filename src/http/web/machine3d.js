@@ -4,7 +4,7 @@
 // `machineView`), the machine check page moves it from sliders (check.js).
 import * as THREE from 'three';
 import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
-import { followBox } from './viewport.js';
+import { followBox, webgl } from './viewport.js';
 import { links, matrix4, schematic, toolBodies } from './kin.js';
 
 const PALETTE = { bed: 0x8d99ae, table: 0x6c7a89, ram: 0xa3b1c2, spindle: 0xc9d3de, tool: 0xd4a017, holder: 0x5c6b7a, stock: 0x2a9d8f, fixture: 0x9c6644, hit: 0xe00000 };
@@ -146,19 +146,10 @@ export function machineScene(ch, extra = {}) {
  * where the browser gives no WebGL.
  */
 export function stage(el, scene, frame) {
-  el.replaceChildren();
+  const renderer = webgl(el);
+  if (!renderer) return null;
   const w = el.clientWidth || 800;
   const h = el.clientHeight || 480;
-  let renderer;
-  try {
-    renderer = new THREE.WebGLRenderer({ antialias: true, preserveDrawingBuffer: true });
-  } catch (e) {
-    const msg = document.createElement('p');
-    msg.className = 'error';
-    msg.textContent = `No 3D view: this browser gives no WebGL (${e.message}).`;
-    el.appendChild(msg);
-    return null;
-  }
   renderer.setPixelRatio(window.devicePixelRatio || 1);
   renderer.setSize(w, h);
   renderer.setClearColor(new THREE.Color(getComputedStyle(el).backgroundColor || '#fff'));

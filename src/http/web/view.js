@@ -2,7 +2,7 @@
 // number or time (SVG). Data: GET /v1/jobs/{id}/preview. Pure drawing: app.js decides when.
 import * as THREE from 'three';
 import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
-import { followBox } from './viewport.js';
+import { followBox, webgl } from './viewport.js';
 
 const COLORS = { feed: 0x1d6fd8, rapid: 0xe76f51, axis: 0x7a9a3a, error: 0xd00000, warning: 0xf0a000, event: 0x8e44ad };
 const SVGNS = 'http://www.w3.org/2000/svg';
@@ -28,19 +28,10 @@ export function markers(p) {
  * the canvas: what a click on it needs) and `dispose()`.
  */
 export function view3d(el, p, list, onPick) {
-  el.replaceChildren();
+  const renderer = webgl(el);
+  if (!renderer) return { select() {}, markerScreen() { return null; }, dispose() {} };
   const w = el.clientWidth || 800;
   const h = el.clientHeight || 480;
-  let renderer;
-  try {
-    renderer = new THREE.WebGLRenderer({ antialias: true, preserveDrawingBuffer: true });
-  } catch (e) {
-    const msg = document.createElement('p');
-    msg.className = 'error';
-    msg.textContent = `No 3D view: this browser gives no WebGL (${e.message}).`;
-    el.appendChild(msg);
-    return { select() {}, markerScreen() { return null; }, dispose() {} };
-  }
   renderer.setPixelRatio(window.devicePixelRatio || 1);
   renderer.setSize(w, h);
   // The page's own background (dark mode).
