@@ -9,6 +9,7 @@ mod fk;
 mod model;
 mod solver;
 mod subproblem;
+mod three;
 
 pub use angle_error::AngleError;
 pub use fk::{controlled_point, fk, fk_actual, machine_frame, tcp_fk, tcp_point, tool_axis};

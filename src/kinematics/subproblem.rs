@@ -174,6 +174,35 @@ impl Pair {
         }
     }
 
+    /// The meet as polynomials in `q`, for the 3-rotary resultant: with `γ = sin θ1 sin A`
+    /// (either sign), `(cos α1, sin α1) · st1²` and `(cos α2, sin α2)` are affine in `γ` and in
+    /// `q`'s components, and `γ² = st1² − L²`; [`Pair::angles`] is [`Formal::angles`] at
+    /// `γ = ±√D`.
+    #[inline]
+    pub fn formal(&self, q: &Vec3) -> Formal {
+        let (eq, fq, ct1) = (self.e.dot(q), self.f.dot(q), self.s1.dot(q));
+        let st2 = eq * eq + fq * fq;
+        let st1 = st2.sqrt();
+        let one_minus = if ct1 > 0.0 { st2 / (1.0 + ct1) } else { 1.0 - ct1 };
+        let l = (self.k0 + self.cw * one_minus) * self.inv_sw;
+        Formal {
+            ct1,
+            eq,
+            fq,
+            st2,
+            l,
+            d: (st1 - l) * (st1 + l),
+            zs: self.zs,
+            ws: self.ws,
+        }
+    }
+
+    /// sin θ1 of a meet: 0 where `q` lies along s1.
+    #[inline]
+    pub fn st1(m: &Meet) -> f64 {
+        m.st1
+    }
+
     /// The angle by which `q` misses the reachable set (0 when reachable).
     pub fn miss(&self, q: &Vec3) -> f64 {
         let centre = self.cw * self.cos_t2;
@@ -245,6 +274,40 @@ impl Pair {
                 wrap(2.0 * self.theta_m - t2p),
             ),
         ]
+    }
+}
+
+/// [`Pair::formal`]'s pieces for one target.
+#[derive(Clone, Copy, Debug)]
+pub struct Formal {
+    ct1: f64,
+    eq: f64,
+    fq: f64,
+    /// sin² θ1: 0 where `q` lies along s1.
+    pub st2: f64,
+    l: f64,
+    /// γ²: negative where the cones miss each other.
+    pub d: f64,
+    zs: [f64; 3],
+    ws: [f64; 3],
+}
+
+impl Formal {
+    /// `(cos α1, sin α1)` and `(cos α2, sin α2)` at any real `γ` (`st2` > 0): rotations only
+    /// at `γ = ±√D`, but the controlled point is affine in each pair, so three values of `γ`
+    /// give its residual as a quadratic in `γ`.
+    #[inline]
+    pub fn angles(&self, gamma: f64) -> (Cs, Cs) {
+        let inv = 1.0 / self.st2;
+        let a1 = Cs {
+            c: (self.l * self.eq + gamma * self.fq) * inv,
+            s: (self.l * self.fq - gamma * self.eq) * inv,
+        };
+        let a2 = Cs {
+            c: self.zs[0] * self.ct1 + self.zs[1] * self.l + self.zs[2] * gamma,
+            s: self.ws[0] * self.ct1 + self.ws[1] * self.l + self.ws[2] * gamma,
+        };
+        (a1, a2)
     }
 }
 

@@ -1,0 +1,602 @@
+//! The 3-rotary / 2-linear chain, where the outer angle is the one unknown. At each outer angle
+//! the inner pair meets the orientation on two branches (`γ = ±√D`), and the missing linear's
+//! coordinate f±(a) must vanish there. The product `st1⁴ f₊ f₋` is a trigonometric polynomial of
+//! degree 8 in the outer angle (odd powers of γ cancel), so 17 samples give it exactly; its
+//! roots are isolated with proven bounds, each settled on its own branch and polished in joint
+//! space. Where the product is too small for its rounding to tell (a double root; the
+//! orientation passing near the inner axis, where the factor `st1⁴` is tiny), the adaptive scan
+//! of f± ([`scan`]) searches that stretch; it searches the whole turn where the orientation
+//! passes through the inner axis or the product vanishes identically.
+
+mod scan;
+
+use super::fk::rotate;
+use super::model::{Chain, Machine};
+use super::solver::{IkOptions, Solution, Solutions, controlled_point_cs, push};
+use super::subproblem::{Cs, FreeAngle, Pair};
+use super::{Error, Pose, Setup, Vec3, wrap};
+use arrayvec::ArrayVec;
+
+/// Degree of the product in the outer angle, and its samples.
+const DEGREE: usize = 8;
+const NODES: usize = 2 * DEGREE + 1;
+/// First sample angle: away from the angles a profile's axes favour (0, ±π/2, π).
+const OFFSET: f64 = 0.123_456_789;
+/// Intervals of the first pass over the circle.
+const GRID: usize = 32;
+/// Subdivisions below the grid: 2π/32 / 2³⁰ ≈ 2e-10 rad.
+const MAX_DEPTH: u32 = 30;
+/// sin² of the closest approach of the orientation to the inner axis below which the scan
+/// searches the whole turn: the product then vanishes to rounding (st1⁴ < 1e-24) over a stretch.
+const NEAR_INNER_AXIS: f64 = 1e-12;
+
+/// The 1-D problem of one pose: the chain, the orientation and the point to place.
+pub(super) struct Residual<'a> {
+    m: &'a Machine,
+    ch: &'a Chain,
+    s0: &'a Vec3,
+    pair: &'a Pair,
+    missing: usize,
+    u: &'a Vec3,
+    p_w: Vec3,
+    tool_length: f64,
+    free: FreeAngle,
+}
+
+impl Residual<'_> {
+    /// The orientation the inner pair must reach at outer angle `a`.
+    fn inner(&self, a: f64) -> Vec3 {
+        rotate(self.s0, a.cos(), -a.sin(), self.u)
+    }
+
+    /// The missing linear's coordinate with the rotaries at `cs` (sequence order).
+    #[inline(always)]
+    fn coordinate(&self, cs: [Cs; 3]) -> f64 {
+        let mut rcs = [Cs::ZERO; 3];
+        for (k, &ri) in self.ch.seq.iter().enumerate() {
+            rcs[ri] = cs[k];
+        }
+        controlled_point_cs(self.m, &rcs, &self.p_w, self.tool_length)[self.missing]
+    }
+
+    /// f on branch `sg` at outer angle `a`, with the angles; `None` where the inner pair cannot
+    /// reach the orientation, unless `clamp` (evaluated on the fold).
+    fn eval(&self, a: f64, sg: i8, clamp: bool) -> Option<(f64, [Cs; 3], bool)> {
+        let a0 = Cs::of(a);
+        let v = rotate(self.s0, a0.c, -a0.s, self.u);
+        let meet = self.pair.meet(&v);
+        if meet.reach < 0.0 && !clamp {
+            return None;
+        }
+        let (a1, a2, sing) = self.pair.angles(&v, &meet, sg as f64, self.free);
+        let cs = [a0, a1, a2];
+        Some((self.coordinate(cs), cs, sing))
+    }
+
+    /// f on both branches at outer angle `a` (clamped to the fold), and sin² θ1 there.
+    fn branches(&self, a: f64) -> ([f64; 2], f64) {
+        let a0 = Cs::of(a);
+        let v = rotate(self.s0, a0.c, -a0.s, self.u);
+        let meet = self.pair.meet(&v);
+        let f = [1.0, -1.0].map(|sg| {
+            let (a1, a2, _) = self.pair.angles(&v, &meet, sg, self.free);
+            self.coordinate([a0, a1, a2])
+        });
+        let st1 = Pair::st1(&meet);
+        (f, st1 * st1)
+    }
+
+    /// Whether the inner pair reaches the orientation at outer angle `a` (on the fold to
+    /// rounding): a zero of f clamped to the fold inside a gap of reach is not a solution.
+    fn reachable(&self, a: f64) -> bool {
+        self.pair.meet(&self.inner(a)).reach >= -1e-14
+    }
+
+    /// `st1⁴ f₊ f₋` at outer angle `a0`, also where the branches are complex (D < 0), from f
+    /// at γ = 0 and ±st1 (f is quadratic in γ); `None` where the orientation lies on the inner
+    /// axis.
+    fn product(&self, a0: Cs) -> Option<f64> {
+        let v = rotate(self.s0, a0.c, -a0.s, self.u);
+        let fm = self.pair.formal(&v);
+        if !(fm.st2 > 1e-200) {
+            return None;
+        }
+        let h = fm.st2.sqrt();
+        let at = |g: f64| {
+            let (a1, a2) = fm.angles(g);
+            self.coordinate([a0, a1, a2])
+        };
+        let (f0, fp, fm_) = (at(0.0), at(h), at(-h));
+        let (q1, q2) = (0.5 * (fp - fm_), 0.5 * (fp + fm_) - f0);
+        let rho = fm.d / fm.st2; // sin² A
+        let p = f0 + q2 * rho;
+        let g = if rho >= 0.0 {
+            let r = q1 * rho.sqrt();
+            (p + r) * (p - r)
+        } else {
+            p * p - q1 * q1 * rho
+        };
+        Some(g * fm.st2 * fm.st2)
+    }
+
+    /// Where the orientation passes nearest the inner axis over a turn of the outer rotary:
+    /// `s1·v(a) = α + β cos a − γ sin a`; its sin² there.
+    fn closest_to_inner_axis(&self) -> f64 {
+        let (s0, s1, u) = (self.s0, &self.pair.s1, self.u);
+        let alpha = s1.dot(s0) * s0.dot(u);
+        let (beta, gamma) = (s1.dot(u) - alpha, s1.dot(&s0.cross(u)));
+        let m = (alpha.abs() + beta.hypot(gamma)).min(1.0);
+        (1.0 - m) * (1.0 + m)
+    }
+}
+
+#[allow(clippy::too_many_arguments)]
+pub(super) fn three(
+    m: &Machine,
+    ch: &Chain,
+    s0: &Vec3,
+    pair: &Pair,
+    missing: usize,
+    u: &Vec3,
+    pose: &Pose,
+    setup: &Setup,
+    opt: &IkOptions,
+    free: FreeAngle,
+    out: &mut Solutions,
+) -> Result<(), Error> {
+    let r = Residual {
+        m,
+        ch,
+        s0,
+        pair,
+        missing,
+        u,
+        p_w: pose.tip + setup.work_offset,
+        tool_length: setup.tool_length,
+        free,
+    };
+    let scale = 1.0 + r.p_w.norm() + setup.tool_length.abs();
+    let mut found = match resultant_roots(&r, scale) {
+        Some(found) if !found.is_empty() => found,
+        _ => scan::roots(&r, scale)?,
+    };
+    found.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let mut count = 0u8;
+    for (a, sg) in found {
+        let v = r.inner(a);
+        let meet = pair.meet(&v);
+        let (a1, a2, sing) = pair.angles(&v, &meet, sg as f64, free);
+        let branch = if meet.reach <= 1e-14 || meet.on_axis { 0 } else { sg };
+        // The same pose reached on the fold by both branches is one solution.
+        if branch == 0
+            && out
+                .iter()
+                .any(|s| s.branch == 0 && wrap(s.actual[ch.seq[0]] - a).abs() < 1e-9)
+        {
+            continue;
+        }
+        let sing = sing.then_some((ch.seq[1], opt.free_angle));
+        push(m, out, pose, setup, &ch.seq, [Cs::of(a), a1, a2], None, branch, count, sing);
+        if let Some(s) = out.last_mut() {
+            polish(m, pose, setup, s);
+        }
+        count += 1;
+    }
+    Ok(())
+}
+
+/// The roots of f± (outer angle, branch) through the product's roots; `None` where the scan must
+/// search instead.
+fn resultant_roots(r: &Residual, scale: f64) -> Option<ArrayVec<(f64, i8), 16>> {
+    if r.closest_to_inner_axis() < NEAR_INNER_AXIS {
+        return None;
+    }
+    let poly = Trig::interpolate(|a0| r.product(a0))?;
+    let iso = poly.isolate()?;
+    let tol = 1e-9 * scale;
+    let mut found: ArrayVec<(f64, i8), 16> = ArrayVec::new();
+    let mut add = |a: f64, sg: i8| {
+        let a = wrap(a);
+        if !found.iter().any(|&(b, s)| s == sg && wrap(a - b).abs() < 1e-9) {
+            found.try_push((a, sg)).ok()
+        } else {
+            Some(())
+        }
+    };
+    for &(x, slope, lo, hi) in &iso.roots {
+        let (f, st2) = r.branches(x);
+        for (k, sg) in [1i8, -1].into_iter().enumerate() {
+            // A root of the product is a root of the branch nearer zero; of both on the fold.
+            if !(f[k].abs() <= f[1 - k].abs() || f[k].abs() <= 1e-6 * scale) {
+                continue;
+            }
+            // f's slope there, from the product's: g' = st1⁴ f' f_other where f = 0.
+            let other = f[1 - k];
+            let d = if other.abs() > 1e-6 * scale {
+                slope / (st2 * st2 * other)
+            } else {
+                f64::NAN
+            };
+            let (a, fa) = settle(|a| r.eval(a, sg, true).map(|v| v.0), x, f[k], d, (lo, hi), scale);
+            if fa.abs() <= tol && r.reachable(a) {
+                add(a, sg)?;
+            }
+        }
+    }
+    for &(lo, hi) in &iso.unsure {
+        for sg in [1i8, -1] {
+            for a in scan::local(r, sg, lo, hi, scale) {
+                add(a, sg)?;
+            }
+        }
+    }
+    Some(found)
+}
+
+/// Newton's step on f from a root of the product, then secant steps, within the interval that
+/// holds the root alone: the product's rounding (its coefficients carry that of every sample)
+/// can leave its root a few ulps of the product away from f's. `slope`: f' at x, or NaN.
+fn settle(f: impl Fn(f64) -> Option<f64>, x: f64, fx: f64, slope: f64, (lo, hi): (f64, f64), scale: f64) -> (f64, f64) {
+    let (mut x, mut fx, mut d) = (x, fx, slope);
+    for _ in 0..4 {
+        if !(fx.abs() > 1e-14 * scale) {
+            break;
+        }
+        if !(d.is_finite() && d != 0.0) {
+            let h = 1e-8 * (1.0 + x.abs());
+            let Some(fh) = f(x + h) else { break };
+            d = (fh - fx) / h;
+        }
+        let xn = x - fx / d;
+        if !(lo..=hi).contains(&xn) {
+            break;
+        }
+        let Some(fn_) = f(xn) else { break };
+        if fn_.abs() >= fx.abs() {
+            break;
+        }
+        d = (fn_ - fx) / (xn - x);
+        (x, fx) = (xn, fn_);
+    }
+    (x, fx)
+}
+
+/// `g(x) = a₀ + Σ aₖ cos kx + bₖ sin kx`, k = 1..=8.
+struct Trig {
+    a: [f64; DEGREE + 1],
+    b: [f64; DEGREE + 1],
+    /// Σ k³(|aₖ| + |bₖ|): bounds |g‴|, so that |g''| near a point is bounded by its value
+    /// there (the product's size varies by orders over the circle: a global bound on g'' would
+    /// prove nothing where it is small).
+    jerk: f64,
+    /// The bound on how wrong a computed g is.
+    noise: f64,
+}
+
+/// A point of the circle with g, g', g'' there.
+#[derive(Clone, Copy)]
+struct At {
+    x: f64,
+    z: Cs,
+    g: f64,
+    d: f64,
+    e: f64,
+}
+
+impl Trig {
+    /// The polynomial through `NODES` equally spaced samples (exact for degree ≤ 8).
+    fn interpolate(g: impl Fn(Cs) -> Option<f64>) -> Option<Trig> {
+        let (mut a, mut b) = ([0.0; DEGREE + 1], [0.0; DEGREE + 1]);
+        let mut sum = 0.0;
+        for j in 0..NODES {
+            let z = Cs::of(OFFSET + std::f64::consts::TAU * j as f64 / NODES as f64);
+            let gj = g(z)?;
+            if !gj.is_finite() {
+                return None;
+            }
+            sum += gj.abs();
+            let mut zk = Cs::ZERO;
+            for k in 0..=DEGREE {
+                a[k] += gj * zk.c;
+                b[k] += gj * zk.s;
+                zk = mul(zk, z);
+            }
+        }
+        a[0] /= NODES as f64;
+        b[0] = 0.0;
+        for k in 1..=DEGREE {
+            a[k] *= 2.0 / NODES as f64;
+            b[k] *= 2.0 / NODES as f64;
+        }
+        let size: f64 = (0..=DEGREE).map(|k| a[k].abs() + b[k].abs()).sum();
+        // A product that is rounding only: f± vanishes identically (the scan's case).
+        if !(size > 1e-12 * sum / NODES as f64) {
+            return None;
+        }
+        Some(Trig {
+            a,
+            b,
+            jerk: (1..=DEGREE).map(|k| (k * k * k) as f64 * (a[k].abs() + b[k].abs())).sum(),
+            noise: 2e-14 * (size + sum),
+        })
+    }
+
+    /// g, g', g'' at the point `z` = (cos x, sin x).
+    #[inline]
+    fn at(&self, x: f64, z: Cs) -> At {
+        let (mut g, mut d, mut e) = (self.a[0], 0.0, 0.0);
+        let mut zk = z;
+        for k in 1..=DEGREE {
+            let (c, s) = (self.a[k] * zk.c + self.b[k] * zk.s, self.b[k] * zk.c - self.a[k] * zk.s);
+            let k = k as f64;
+            g += c;
+            d += k * s;
+            e -= k * k * c;
+            zk = mul(zk, z);
+        }
+        At { x, z, g, d, e }
+    }
+
+    /// The one root between `p` and `q`, where g is proven monotone: Newton's steps, bisecting
+    /// whenever a step would leave the bracket.
+    fn newton(&self, p: At, q: At) -> (f64, f64) {
+        let (mut lo, mut hi) = (p, q);
+        let mut x = p.x - p.g * (q.x - p.x) / (q.g - p.g);
+        let mut d = p.d;
+        for _ in 0..32 {
+            let a = self.at(x, Cs::of(x));
+            d = a.d;
+            if a.g.abs() <= self.noise {
+                return (x, d);
+            }
+            if a.g.signum() == lo.g.signum() {
+                lo = a;
+            } else {
+                hi = a;
+            }
+            let (l, r) = (lo.x.min(hi.x), lo.x.max(hi.x));
+            let mut next = x - a.g / a.d;
+            if !(next > l && next < r) {
+                next = 0.5 * (l + r);
+            }
+            if (next - x).abs() <= 4.0 * f64::EPSILON * (1.0 + x.abs()) {
+                return (next, d);
+            }
+            x = next;
+        }
+        (x, d)
+    }
+
+    /// Every root on the circle, by subdivision: an interval is dropped where the bound on g''
+    /// proves g keeps its sign, and bracketed where it proves g monotone; where neither is
+    /// proven once the bound is down to rounding, the interval is unsure (a double root, roots
+    /// closer than rounding tells apart, or none). `None` past 32 of either.
+    fn isolate(&self) -> Option<Isolated<'_>> {
+        let mut out = Isolated {
+            t: self,
+            roots: ArrayVec::new(),
+            unsure: ArrayVec::new(),
+        };
+        let step = std::f64::consts::TAU / GRID as f64;
+        let turn = Cs::of(step);
+        let first = self.at(OFFSET, Cs::of(OFFSET));
+        let mut prev = first;
+        for i in 1..=GRID {
+            // The circle closes on the first point.
+            let cur = if i == GRID {
+                At {
+                    x: OFFSET + std::f64::consts::TAU,
+                    ..first
+                }
+            } else {
+                let x = OFFSET + step * i as f64;
+                self.at(x, if i % 8 == 0 { Cs::of(x) } else { mul(prev.z, turn) })
+            };
+            out.interval(prev, cur, 0)?;
+            prev = cur;
+        }
+        Some(out)
+    }
+}
+
+/// (cos, sin) of the sum of two angles.
+#[inline(always)]
+fn mul(p: Cs, q: Cs) -> Cs {
+    Cs {
+        c: p.c * q.c - p.s * q.s,
+        s: p.c * q.s + p.s * q.c,
+    }
+}
+
+/// What the isolation found.
+struct Isolated<'a> {
+    t: &'a Trig,
+    /// A root, g' there, and an interval that holds it and no other.
+    roots: ArrayVec<(f64, f64, f64, f64), 32>,
+    /// Intervals where rounding hides how many roots there are (adjacent ones merged).
+    unsure: ArrayVec<(f64, f64), 32>,
+}
+
+impl Isolated<'_> {
+    fn unsure(&mut self, lo: f64, hi: f64) -> Option<()> {
+        match self.unsure.last_mut() {
+            Some(last) if lo <= last.1 + 1e-12 => last.1 = hi,
+            _ => self.unsure.try_push((lo, hi)).ok()?,
+        }
+        Some(())
+    }
+
+    fn interval(&mut self, p: At, q: At, depth: u32) -> Option<()> {
+        let h = q.x - p.x;
+        // |g''| on the interval: at most its value at the nearer end plus jerk × h/2.
+        let c = p.e.abs().max(q.e.abs()) + 0.5 * self.t.jerk * h;
+        let noise = self.t.noise;
+        // A zero at the left end is a root whose interval is its neighbourhood.
+        let s0 = if p.g == 0.0 {
+            self.roots.try_push((p.x, p.d, p.x - h, q.x)).ok()?;
+            p.d.signum()
+        } else {
+            p.g.signum()
+        };
+        let change = s0 != q.g.signum() && q.g != 0.0;
+        let bend = 0.125 * c * h * h;
+        if change {
+            if p.d.signum() == q.d.signum() && p.d.abs().min(q.d.abs()) > 0.5 * c * h {
+                let (r, d) = self.t.newton(p, q);
+                return self.roots.try_push((r, d, p.x, q.x)).ok();
+            }
+        } else {
+            // |g| from below: the chord less the bend, or on each half the tangent at its end
+            // less the bend (each half's bound is concave: least at the half's ends).
+            let (g0, g1) = (s0 * p.g, s0 * q.g);
+            let tangents = g0
+                .min(g1)
+                .min(g0 + s0 * p.d * 0.5 * h - bend)
+                .min(g1 - s0 * q.d * 0.5 * h - bend);
+            if tangents.max(g0.min(g1) - bend) > noise {
+                return Some(());
+            }
+        }
+        if bend <= noise || depth >= MAX_DEPTH {
+            return self.unsure(p.x, q.x);
+        }
+        // The midpoint of the arc: the normalised sum of its ends.
+        let (zc, zs) = (p.z.c + q.z.c, p.z.s + q.z.s);
+        let n = 1.0 / (zc * zc + zs * zs).sqrt();
+        let mid = self.t.at(0.5 * (p.x + q.x), Cs { c: zc * n, s: zs * n });
+        self.interval(p, mid, depth + 1)?;
+        self.interval(mid, q, depth + 1)
+    }
+}
+
+/// Gauss–Newton on all joints at once. Next to the inner pair's singularity the 1-D
+/// parametrisation is ill-conditioned (the inner angle moves ~1e5× faster than the outer one), so
+/// the best double for the outer angle can leave 1e-8 of tip error; in full joint space the same
+/// problem is well-conditioned and two steps bring it to rounding level.
+/// Enough for any 6×5 the polish sees; a matrix that needs more is not worth polishing with.
+const SVD_MAX_ITER: usize = 200;
+
+fn polish(m: &Machine, pose: &Pose, setup: &Setup, sol: &mut Solution) {
+    use nalgebra::{SMatrix, SVector};
+    let lin: ArrayVec<usize, 3> = (0..3).filter(|&i| m.linears[i].is_some()).collect();
+    let nr = m.rotaries.len();
+    if lin.len() + nr != 5 {
+        return;
+    }
+    let residual = |x: &SVector<f64, 5>| -> SVector<f64, 6> {
+        let mut l = [0.0; 3];
+        for (k, &i) in lin.iter().enumerate() {
+            l[i] = x[k];
+        }
+        let mut a = [0.0; 3];
+        a[..nr].copy_from_slice(&x.as_slice()[lin.len()..lin.len() + nr]);
+        let p = super::fk::fk_actual(m, &l, &a, setup);
+        let (dt, da) = (p.tip - pose.tip, p.axis - pose.axis.normalize());
+        SVector::<f64, 6>::new(dt.x, dt.y, dt.z, da.x, da.y, da.z)
+    };
+    let mut x = SVector::<f64, 5>::zeros();
+    for (k, &i) in lin.iter().enumerate() {
+        x[k] = sol.joints.linear[i];
+    }
+    for k in 0..nr {
+        x[lin.len() + k] = sol.actual[k];
+    }
+    let mut r = residual(&x);
+    if !r.iter().all(|v| v.is_finite()) {
+        return;
+    }
+    let scale = 1.0 + pose.tip.norm() + setup.tool_length.abs();
+    for _ in 0..3 {
+        if r.norm() <= 1e-12 * scale {
+            break;
+        }
+        let mut jac = SMatrix::<f64, 6, 5>::zeros();
+        for c in 0..5 {
+            let h = 1e-6 * (1.0 + x[c].abs());
+            let (mut xp, mut xm) = (x, x);
+            xp[c] += h;
+            xm[c] -= h;
+            jac.set_column(c, &((residual(&xp) - residual(&xm)) / (2.0 * h)));
+        }
+        // Minimum-norm least squares: directions the pose barely sees (near a singularity) get
+        // no step, so the polish cannot slide along them to another, equally exact solution.
+        // Bounded: nalgebra's plain `svd` never returns on a matrix holding inf or NaN.
+        let Some(svd) = jac.try_svd(true, true, f64::EPSILON, SVD_MAX_ITER) else {
+            return;
+        };
+        let cutoff = 1e-8 * svd.singular_values.max();
+        let Ok(step) = svd.solve(&(-r), cutoff) else { return };
+        if step.norm() > 1e-6 * (1.0 + x.norm()) {
+            break; // a polish corrects rounding, it does not move to another solution
+        }
+        let xn = x + step;
+        let rn = residual(&xn);
+        if rn.norm() >= r.norm() {
+            break;
+        }
+        x = xn;
+        r = rn;
+    }
+    for (k, &i) in lin.iter().enumerate() {
+        sol.joints.linear[i] = x[k];
+    }
+    for k in 0..nr {
+        sol.actual[k] = x[lin.len() + k];
+        sol.joints.rotary[k] = m.rotaries[k].word(sol.actual[k]);
+    }
+}
+
+/// Brent's method on a bracket with `fa`, `fb` of opposite signs; to machine precision.
+fn brent(f: impl Fn(f64) -> Option<f64>, a: f64, b: f64, fa: f64, fb: f64) -> Option<f64> {
+    let (mut a, mut b, mut fa, mut fb) = (a, b, fa, fb);
+    if fa.abs() < fb.abs() {
+        std::mem::swap(&mut a, &mut b);
+        std::mem::swap(&mut fa, &mut fb);
+    }
+    let (mut c, mut fc) = (a, fa);
+    let mut d = b - a;
+    let mut bisected = true;
+    for _ in 0..200 {
+        if fb == 0.0 || (b - a).abs() < 4.0 * f64::EPSILON * (1.0 + b.abs()) {
+            return Some(b);
+        }
+        let mut s = if fa != fc && fb != fc {
+            a * fb * fc / ((fa - fb) * (fa - fc)) + b * fa * fc / ((fb - fa) * (fb - fc)) + c * fa * fb / ((fc - fa) * (fc - fb))
+        } else {
+            b - fb * (b - a) / (fb - fa)
+        };
+        let lo = (3.0 * a + b) / 4.0;
+        let between = if lo < b { s > lo && s < b } else { s > b && s < lo };
+        let tol = 2.0 * f64::EPSILON * (1.0 + b.abs());
+        if !between
+            || (bisected && (s - b).abs() >= (b - c).abs() / 2.0)
+            || (!bisected && (s - b).abs() >= (c - d).abs() / 2.0)
+            || (bisected && (b - c).abs() < tol)
+            || (!bisected && (c - d).abs() < tol)
+        {
+            s = 0.5 * (a + b);
+            bisected = true;
+        } else {
+            bisected = false;
+        }
+        let fs = f(s)?;
+        d = c;
+        c = b;
+        fc = fb;
+        if fa.signum() != fs.signum() {
+            b = s;
+            fb = fs;
+        } else {
+            a = s;
+            fa = fs;
+        }
+        if fa.abs() < fb.abs() {
+            std::mem::swap(&mut a, &mut b);
+            std::mem::swap(&mut fa, &mut fb);
+        }
+    }
+    Some(b)
+}
+
+#[cfg(test)]
+mod tests;
