@@ -27,8 +27,12 @@ const GRID: usize = 32;
 /// Subdivisions below the grid: 2π/32 / 2³⁰ ≈ 2e-10 rad.
 const MAX_DEPTH: u32 = 30;
 /// sin² of the closest approach of the orientation to the inner axis below which the scan
-/// searches the whole turn: the product then vanishes to rounding (st1⁴ < 1e-24) over a stretch.
-const NEAR_INNER_AXIS: f64 = 1e-12;
+/// searches the whole turn: within 3e-5 rad of it the inner angles turn through π within a few
+/// µrad of outer angle, finer than the zone's scan resolves.
+const NEAR_INNER_AXIS: f64 = 1e-9;
+/// sin² θ1 under which the product's factor st1⁴ (< 1e-8) hides roots from its rounding: a
+/// stretch of outer angle where the scan searches each branch instead.
+const SWING_ZONE: f64 = 1e-4;
 
 /// The 1-D problem of one pose: the chain, the orientation and the point to place.
 pub(super) struct Residual<'a> {
@@ -119,14 +123,19 @@ impl Residual<'_> {
         Some(g * fm.st2 * fm.st2)
     }
 
-    /// Where the orientation passes nearest the inner axis over a turn of the outer rotary:
-    /// `s1·v(a) = α + β cos a − γ sin a`; its sin² there.
-    fn closest_to_inner_axis(&self) -> f64 {
+    /// Where the orientation passes nearest the inner axis over a turn of the outer rotary
+    /// (`s1·v(a) = α + β cos a − γ sin a`): the outer angle, sin² θ1 there, and the half-width
+    /// of the stretch around it where sin² θ1 < [`SWING_ZONE`].
+    fn closest_to_inner_axis(&self) -> (f64, f64, f64) {
         let (s0, s1, u) = (self.s0, &self.pair.s1, self.u);
         let alpha = s1.dot(s0) * s0.dot(u);
         let (beta, gamma) = (s1.dot(u) - alpha, s1.dot(&s0.cross(u)));
-        let m = (alpha.abs() + beta.hypot(gamma)).min(1.0);
-        (1.0 - m) * (1.0 + m)
+        let rho = beta.hypot(gamma);
+        let m = (alpha.abs() + rho).min(1.0);
+        let toward = if alpha >= 0.0 { 0.0 } else { std::f64::consts::PI };
+        // |s1·v| = |α| + ρ cos Δ at Δ from the nearest point.
+        let half = (((1.0 - SWING_ZONE).sqrt() - alpha.abs()) / rho.max(1e-300)).clamp(-1.0, 1.0).acos();
+        (wrap(toward - gamma.atan2(beta)), (1.0 - m) * (1.0 + m), half)
     }
 }
 
@@ -188,9 +197,13 @@ pub(super) fn three(
 /// The roots of f± (outer angle, branch) through the product's roots; `None` where the scan must
 /// search instead.
 fn resultant_roots(r: &Residual, scale: f64) -> Option<ArrayVec<(f64, i8), 16>> {
-    if r.closest_to_inner_axis() < NEAR_INNER_AXIS {
+    let (near, st2_min, half) = r.closest_to_inner_axis();
+    if st2_min < NEAR_INNER_AXIS {
         return None;
     }
+    // Roots of the product inside the swing zone are left to the scan of the zone.
+    let zone = (st2_min < SWING_ZONE).then_some((near - half, near + half));
+    let outside = |x: f64| zone.is_none_or(|(lo, hi)| !(lo..=hi).contains(&(near + wrap(x - near))));
     let poly = Trig::interpolate(|a0| r.product(a0))?;
     let iso = poly.isolate()?;
     let tol = 1e-9 * scale;
@@ -203,7 +216,7 @@ fn resultant_roots(r: &Residual, scale: f64) -> Option<ArrayVec<(f64, i8), 16>> 
             Some(())
         }
     };
-    for &(x, slope, lo, hi) in &iso.roots {
+    for &(x, slope, lo, hi) in iso.roots.iter().filter(|r| outside(r.0)) {
         let (f, st2) = r.branches(x);
         for (k, sg) in [1i8, -1].into_iter().enumerate() {
             // A root of the product is a root of the branch nearer zero; of both on the fold.
@@ -223,7 +236,18 @@ fn resultant_roots(r: &Residual, scale: f64) -> Option<ArrayVec<(f64, i8), 16>> 
             }
         }
     }
-    for &(lo, hi) in &iso.unsure {
+    for &(lo, hi) in iso.unsure.iter().filter(|u| outside(u.0) || outside(u.1)) {
+        for x in unsure_roots(r, lo, hi) {
+            let (f, _) = r.branches(x);
+            for (k, sg) in [1i8, -1].into_iter().enumerate() {
+                let (a, fa) = settle(|a| r.eval(a, sg, true).map(|v| v.0), x, f[k], f64::NAN, (lo - 1e-3, hi + 1e-3), scale);
+                if fa.abs() <= tol && r.reachable(a) {
+                    add(a, sg)?;
+                }
+            }
+        }
+    }
+    if let Some((lo, hi)) = zone {
         for sg in [1i8, -1] {
             for a in scan::local(r, sg, lo, hi, scale) {
                 add(a, sg)?;
@@ -231,6 +255,48 @@ fn resultant_roots(r: &Residual, scale: f64) -> Option<ArrayVec<(f64, i8), 16>> 
         }
     }
     Some(found)
+}
+
+/// Candidate roots in a stretch where the polynomial's rounding hides them (a double root, or
+/// two closer than it tells apart): the product itself, rounded relative to its size, sampled
+/// over the stretch and as much again on either side; its sign changes bracketed, its dips
+/// toward zero minimised.
+fn unsure_roots(r: &Residual, lo: f64, hi: f64) -> ArrayVec<f64, 16> {
+    const N: usize = 32;
+    let g = |x: f64| r.product(Cs::of(x)).unwrap_or(0.0);
+    let w = (hi - lo).max(1e-7);
+    let (a, b) = (lo - w, hi + w);
+    let mut xs: ArrayVec<f64, { N + 1 }> = (0..=N).map(|k| a + (b - a) * k as f64 / N as f64).collect();
+    xs.sort_by(f64::total_cmp);
+    let gs: ArrayVec<f64, { N + 1 }> = xs.iter().map(|&x| g(x)).collect();
+    let mut out = ArrayVec::new();
+    for i in 0..xs.len() - 1 {
+        if gs[i] == 0.0 {
+            let _ = out.try_push(xs[i]);
+        } else if gs[i].signum() != gs[i + 1].signum()
+            && let Some(x) = brent(|x| Some(g(x)), xs[i], xs[i + 1], gs[i], gs[i + 1])
+        {
+            let _ = out.try_push(x);
+        }
+    }
+    for i in 1..xs.len() - 1 {
+        let (g0, g1, g2) = (gs[i - 1], gs[i], gs[i + 1]);
+        if g0.signum() == g1.signum() && g1.signum() == g2.signum() && g1.abs() < g0.abs() && g1.abs() <= g2.abs() {
+            // Crossing zero: two roots, one each side of the least value; else a candidate.
+            let sg = g1.signum();
+            let (x, gx) = scan::golden_min(|x| Some(sg * g(x)), xs[i - 1], xs[i + 1]);
+            if gx < 0.0 {
+                for (l, h, gl) in [(xs[i - 1], x, g0), (x, xs[i + 1], g2)] {
+                    if let Some(x) = brent(|x| Some(g(x)), l, h, gl, sg * gx) {
+                        let _ = out.try_push(x);
+                    }
+                }
+            } else {
+                let _ = out.try_push(x);
+            }
+        }
+    }
+    out
 }
 
 /// Newton's step on f from a root of the product, then secant steps, within the interval that

@@ -121,7 +121,7 @@ impl<F: Fn(f64, bool) -> Option<(f64, [Cs; 3], bool)>, G: Fn(f64) -> f64> Scan<'
 }
 
 /// Minimises f on [a, b] by golden section; (argmin, f there).
-fn golden_min(f: impl Fn(f64) -> Option<f64>, a: f64, b: f64) -> (f64, f64) {
+pub(super) fn golden_min(f: impl Fn(f64) -> Option<f64>, a: f64, b: f64) -> (f64, f64) {
     let g = 0.5 * (5f64.sqrt() - 1.0);
     let h = |x: f64| f(x).unwrap_or(f64::INFINITY);
     let (mut a, mut b) = (a, b);
@@ -225,16 +225,13 @@ pub(super) fn roots(r: &Residual, scale: f64) -> Result<ArrayVec<(f64, i8), 16>,
     }
     Ok(found)
 }
-
-/// The roots of f on branch `sg` in a short stretch where the product could not tell them
-/// apart: the scan over the stretch and as much again on either side.
-pub(super) fn local(r: &Residual, sg: i8, lo: f64, hi: f64, scale: f64) -> ArrayVec<f64, 16> {
+/// The roots of f on branch `sg` over the stretch [a, b] (where the inner angles swing too fast
+/// for the product to tell its roots).
+pub(super) fn local(r: &Residual, sg: i8, a: f64, b: f64, scale: f64) -> ArrayVec<f64, 16> {
     const N: usize = 16;
     let reach = |a: f64| r.pair.meet(&r.inner(a)).reach;
     let eval = |a: f64, clamp: bool| r.eval(a, sg, clamp);
     let lever = scale + r.m.rotaries.iter().map(|r| r.pivot.norm()).sum::<f64>();
-    let w = (hi - lo).max(1e-7);
-    let (a, b) = (lo - w, hi + w);
     let mut scan = Scan {
         eval: &eval,
         reach: &reach,
