@@ -237,10 +237,24 @@ fn resultant_roots(r: &Residual, scale: f64) -> Option<ArrayVec<(f64, i8), 16>> 
         }
     }
     for &(lo, hi) in iso.unsure.iter().filter(|u| outside(u.0) || outside(u.1)) {
-        for x in unsure_roots(r, lo, hi) {
-            let (f, _) = r.branches(x);
+        for (x, dip) in unsure_roots(r, lo, hi) {
+            let (fx, _) = r.branches(x);
             for (k, sg) in [1i8, -1].into_iter().enumerate() {
-                let (a, fa) = settle(|a| r.eval(a, sg, true).map(|v| v.0), x, f[k], f64::NAN, (lo - 1e-3, hi + 1e-3), scale);
+                let f = |a: f64| r.eval(a, sg, true).map(|v| v.0);
+                let (a, fa) = if dip {
+                    // A dip is a root only where f itself touches zero (a double root).
+                    let w = (hi - lo).max(1e-7);
+                    let (a, fa) = scan::golden_min(|a| f(a).map(f64::abs), x - w, x + w);
+                    (a, if fa <= 1e-12 * scale { fa } else { f64::INFINITY })
+                } else if fx[k].abs() <= fx[1 - k].abs() || fx[k].abs() <= 1e-6 * scale {
+                    let (a, fa) = settle(f, x, fx[k], f64::NAN, (lo - 1e-3, hi + 1e-3), scale);
+                    // Near a flat stretch of f, small is not zero: f must change sign there.
+                    let d = 1e-8 * (1.0 + a.abs());
+                    let crosses = matches!((f(a - d), f(a + d)), (Some(l), Some(h)) if l.signum() != h.signum());
+                    (a, if crosses || fa.abs() <= 1e-12 * scale { fa } else { f64::INFINITY })
+                } else {
+                    continue;
+                };
                 if fa.abs() <= tol && r.reachable(a) {
                     add(a, sg)?;
                 }
@@ -261,7 +275,7 @@ fn resultant_roots(r: &Residual, scale: f64) -> Option<ArrayVec<(f64, i8), 16>> 
 /// two closer than it tells apart): the product itself, rounded relative to its size, sampled
 /// over the stretch and as much again on either side; its sign changes bracketed, its dips
 /// toward zero minimised.
-fn unsure_roots(r: &Residual, lo: f64, hi: f64) -> ArrayVec<f64, 16> {
+fn unsure_roots(r: &Residual, lo: f64, hi: f64) -> ArrayVec<(f64, bool), 16> {
     const N: usize = 32;
     let g = |x: f64| r.product(Cs::of(x)).unwrap_or(0.0);
     let w = (hi - lo).max(1e-7);
@@ -272,11 +286,11 @@ fn unsure_roots(r: &Residual, lo: f64, hi: f64) -> ArrayVec<f64, 16> {
     let mut out = ArrayVec::new();
     for i in 0..xs.len() - 1 {
         if gs[i] == 0.0 {
-            let _ = out.try_push(xs[i]);
+            let _ = out.try_push((xs[i], false));
         } else if gs[i].signum() != gs[i + 1].signum()
             && let Some(x) = brent(|x| Some(g(x)), xs[i], xs[i + 1], gs[i], gs[i + 1])
         {
-            let _ = out.try_push(x);
+            let _ = out.try_push((x, false));
         }
     }
     for i in 1..xs.len() - 1 {
@@ -288,11 +302,11 @@ fn unsure_roots(r: &Residual, lo: f64, hi: f64) -> ArrayVec<f64, 16> {
             if gx < 0.0 {
                 for (l, h, gl) in [(xs[i - 1], x, g0), (x, xs[i + 1], g2)] {
                     if let Some(x) = brent(|x| Some(g(x)), l, h, gl, sg * gx) {
-                        let _ = out.try_push(x);
+                        let _ = out.try_push((x, false));
                     }
                 }
             } else {
-                let _ = out.try_push(x);
+                let _ = out.try_push((x, true));
             }
         }
     }

@@ -181,7 +181,7 @@ fn compare(m: &Machine, rng: &mut Rng, cases: usize, tally: &mut [usize; 6]) {
             let p = fk(m, &s.joints, &setup);
             let (dp, da) = ((p.tip - pose.tip).norm(), (p.axis - pose.axis).norm());
             assert!(
-                dp <= 1e-9 * scale && da <= 1e-10,
+                dp <= 1e-12 * scale && da <= 1e-12,
                 "{}: {s:?} misses the pose by {dp}, {da}; joints {j:?}",
                 m.id
             );
