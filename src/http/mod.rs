@@ -7,6 +7,7 @@ mod dialects;
 mod error;
 mod jobs;
 mod limits;
+mod lines;
 mod machine_ops;
 mod machines;
 mod metrics;

@@ -11,13 +11,13 @@
 
 pub mod blocks;
 mod diagnostics;
+pub mod lines;
 mod store;
 
 pub use diagnostics::Diagnostics;
 pub use store::{Job, Output, State, Store, Submission};
 
 use crate::machines::{Catalog, Library, Profile};
-use crate::output::linemap::LineMap;
 use crate::output::preview::{Caps, PreviewBuilder};
 use crate::output::{ErrorBody, FileSink, Record};
 use crate::post::{self, BlockInfo, Sink, Summary};
@@ -356,12 +356,12 @@ impl<R: Read> Read for Counting<R> {
     }
 }
 
-/// The spool files' sink (NC, block store, line map, and the preview beside them), counting
+/// The spool files' sink (NC, block store, compact line map, and the preview beside them), counting
 /// blocks and stopping when the job is cancelled.
 struct JobSink<'a> {
     files: FileSink<std::fs::File, std::fs::File>,
     blocks: BlockWriter<std::io::BufWriter<std::fs::File>>,
-    lines: LineMap<std::io::BufWriter<std::fs::File>>,
+    lines: lines::Writer<std::io::BufWriter<std::fs::File>>,
     preview: PreviewBuilder,
     progress: &'a Progress,
     cancel: &'a AtomicBool,
@@ -440,7 +440,7 @@ fn execute(
     let mut sink = JobSink {
         files: FileSink::new(nc, None),
         blocks: BlockWriter::new(blocks).map_err(io)?,
-        lines: LineMap::new(lines),
+        lines: lines::Writer::new(lines).map_err(io)?,
         preview: PreviewBuilder::new(&profile.machine, opts.mode, Caps::default()).with_scene(
             &profile.machine,
             &profile.geometry(),
@@ -465,7 +465,7 @@ fn execute(
     };
     let (nc, _) = sink.files.into_inner().map_err(io)?;
     nc.sync_all().map_err(io)?;
-    let lines = sink.lines.into_inner().into_inner().map_err(|e| io(e.into_error()))?;
+    let lines = sink.lines.finish().map_err(io)?.into_inner().map_err(|e| io(e.into_error()))?;
     lines.sync_all().map_err(io)?;
     let blocks = sink.blocks.into_inner().into_inner().map_err(|e| io(e.into_error()))?;
     blocks.sync_all().map_err(io)?;
