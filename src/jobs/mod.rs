@@ -83,7 +83,8 @@ pub struct Config {
     pub lease: Duration,
     /// What one job's post may cost (output per CL byte, seconds).
     pub budget: crate::post::Budget,
-    /// Threads a job's post runs on (`post::threads`).
+    /// Threads a job's post runs on (`post::threads`); 0: two while this node runs fewer jobs
+    /// than it has cores, else one ([`Queue::threads_for_next`]).
     pub threads: usize,
 }
 
@@ -280,7 +281,7 @@ impl Queue {
         let task = {
             let (job, cancel, progress) = (job.clone(), cancel.clone(), progress.clone());
             let spool = self.store.spool().to_path_buf();
-            let run = (self.config.budget, self.config.threads);
+            let run = (self.config.budget, self.threads_for_next());
             tokio::task::spawn_blocking(move || {
                 execute(profile?, tools?, dialect?, &spool, &job, run, &cancel, &progress)
             })
@@ -326,6 +327,20 @@ impl Queue {
         if let Err(e) = outcome {
             tracing::error!(job = %id, error = %e, "recording a job's end");
         }
+    }
+}
+
+impl Queue {
+    /// The threads a job starting now runs on. Where the setting leaves it to the node: the
+    /// second thread where a core is idle (the job alone, or fewer running than cores), since
+    /// it costs some 10 % more CPU and buys nothing on a busy node (reliability.md).
+    fn threads_for_next(&self) -> usize {
+        if self.config.threads != 0 {
+            return self.config.threads;
+        }
+        let running = self.running.lock().map(|m| m.len()).unwrap_or(usize::MAX);
+        let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+        if running < cores { 2 } else { 1 }
     }
 }
 

@@ -122,6 +122,10 @@ fn other_line(text: &str) -> (u32, u32) {
 /// `M6`/`M06` as a word outside a comment, or a TNC `TOOL CALL` that names a tool (a speed-only
 /// `TOOL CALL S…` changes nothing).
 fn tool_change(text: &str) -> u32 {
+    // Neither `M` nor `T`: no tool change (a motion block, millions of them; this is the cheap test).
+    if memchr::memchr2(b'M', b'T', text.as_bytes()).is_none() {
+        return 0;
+    }
     let code = text.split([';', '(']).next().unwrap_or("");
     let m6 = code.split_ascii_whitespace().any(|w| matches!(w, "M6" | "M06"));
     let call = code
