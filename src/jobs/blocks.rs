@@ -407,46 +407,6 @@ impl<R: BufRead> Decoder<R> {
         })
     }
 
-    /// The next `count` bits (at most 64) of a block's joints.
-    fn bits(&mut self, count: u32) -> io::Result<u64> {
-        if count > 32 {
-            let low = self.bits(32)?;
-            return Ok(low | self.bits(count - 32)? << 32);
-        }
-        while self.n < count {
-            self.acc |= (self.byte()? as u64) << self.n;
-            self.n += 8;
-        }
-        let v = self.acc & ((1u64 << count) - 1);
-        self.acc >>= count;
-        self.n -= count;
-        Ok(v)
-    }
-
-    /// A residual's bit count ([`put_count`]).
-    fn count(&mut self, last: u8) -> io::Result<u8> {
-        let z = if self.bits(1)? == 1 {
-            0
-        } else if self.bits(1)? == 1 {
-            1 + self.bits(1)?
-        } else if self.bits(1)? == 1 {
-            3 + self.bits(2)?
-        } else if self.bits(1)? == 1 {
-            7 + self.bits(3)?
-        } else {
-            let c = self.bits(7)?;
-            if c > 64 {
-                return Err(io::Error::new(io::ErrorKind::InvalidData, "a residual of more than 64 bits"));
-            }
-            return Ok(c as u8);
-        };
-        let c = last as i64 + unzigzag(z);
-        if !(0..=64).contains(&c) {
-            return Err(io::Error::new(io::ErrorKind::InvalidData, "a residual of more than 64 bits"));
-        }
-        Ok(c as u8)
-    }
-
     fn byte(&mut self) -> io::Result<u8> {
         let mut b = [0u8; 1];
         self.r.read_exact(&mut b)?;
@@ -536,24 +496,28 @@ impl<R: BufRead> Decoder<R> {
         })
     }
 
+    /// A block's joints: from the reader's buffer where it holds the most they can take (a
+    /// word at a time), else a byte at a time.
     fn joints(&mut self, t: u32) -> io::Result<AxisWords> {
-        let mask = self.state.mask;
-        let mut joints = AxisWords::default();
-        for i in (0..6).filter(|i| mask & (1 << i) != 0) {
-            let count = self.count(self.state.bits[i])?;
-            self.state.bits[i] = count;
-            let r = match count {
-                0 => 0,
-                c => 1u64 << (c - 1) | self.bits(c as u32 - 1)?,
-            };
-            let h = &mut self.state.axes[i];
-            let v = f64::from_bits((h.predict(t).to_bits() as i64).wrapping_add(unzigzag(r)) as u64);
-            h.push(v, t);
-            joints.0[i] = Some(v);
-        }
-        // The padding to the byte.
-        (self.acc, self.n) = (0, 0);
-        Ok(joints)
+        let mut state = std::mem::take(&mut self.state);
+        let joints = match self.r.fill_buf() {
+            Ok(buf) if buf.len() >= MOST_JOINT_BYTES => {
+                let mut b = SliceBits { b: buf, pos: 0 };
+                let joints = decode_joints(&mut b, &mut state, t);
+                let used = b.pos.div_ceil(8);
+                self.r.consume(used);
+                self.pos += used as u64;
+                joints
+            }
+            _ => {
+                let joints = decode_joints(self, &mut state, t);
+                // The padding to the byte.
+                (self.acc, self.n) = (0, 0);
+                joints
+            }
+        };
+        self.state = state;
+        joints
     }
 
     fn joints_v1(&mut self, same_lens: bool) -> io::Result<AxisWords> {
@@ -583,6 +547,95 @@ impl<R: BufRead> Decoder<R> {
         }
         Ok(joints)
     }
+}
+
+/// The most a block's joints take: six counts of 11 bits and residuals of 63.
+const MOST_JOINT_BYTES: usize = (6 * (11 + 63usize)).div_ceil(8);
+
+/// Where a block's joints' bits come from: the reader a byte at a time, or its buffer.
+trait BitRead {
+    /// The next `count` bits (at most 64).
+    fn bits(&mut self, count: u32) -> io::Result<u64>;
+
+    /// A residual's bit count ([`put_count`]).
+    fn count(&mut self, last: u8) -> io::Result<u8> {
+        let z = if self.bits(1)? == 1 {
+            0
+        } else if self.bits(1)? == 1 {
+            1 + self.bits(1)?
+        } else if self.bits(1)? == 1 {
+            3 + self.bits(2)?
+        } else if self.bits(1)? == 1 {
+            7 + self.bits(3)?
+        } else {
+            let c = self.bits(7)?;
+            if c > 64 {
+                return Err(io::Error::new(io::ErrorKind::InvalidData, "a residual of more than 64 bits"));
+            }
+            return Ok(c as u8);
+        };
+        let c = last as i64 + unzigzag(z);
+        if !(0..=64).contains(&c) {
+            return Err(io::Error::new(io::ErrorKind::InvalidData, "a residual of more than 64 bits"));
+        }
+        Ok(c as u8)
+    }
+}
+
+impl<R: BufRead> BitRead for Decoder<R> {
+    fn bits(&mut self, count: u32) -> io::Result<u64> {
+        if count > 32 {
+            let low = self.bits(32)?;
+            return Ok(low | self.bits(count - 32)? << 32);
+        }
+        while self.n < count {
+            self.acc |= (self.byte()? as u64) << self.n;
+            self.n += 8;
+        }
+        let v = self.acc & ((1u64 << count) - 1);
+        self.acc >>= count;
+        self.n -= count;
+        Ok(v)
+    }
+}
+
+/// The bits of a buffer that holds a whole block's joints ([`MOST_JOINT_BYTES`] or more).
+struct SliceBits<'a> {
+    b: &'a [u8],
+    pos: usize,
+}
+
+impl BitRead for SliceBits<'_> {
+    fn bits(&mut self, count: u32) -> io::Result<u64> {
+        if count > 32 {
+            let low = self.bits(32)?;
+            return Ok(low | self.bits(count - 32)? << 32);
+        }
+        let (byte, shift) = (self.pos / 8, self.pos % 8);
+        let mut w = [0u8; 8];
+        let end = (byte + 8).min(self.b.len());
+        w[..end - byte].copy_from_slice(&self.b[byte..end]);
+        self.pos += count as usize;
+        Ok((u64::from_le_bytes(w) >> shift) & ((1u64 << count) - 1))
+    }
+}
+
+/// A block's joints (version 2): per present axis its residual's bit count, then the residual.
+fn decode_joints(b: &mut impl BitRead, state: &mut State, t: u32) -> io::Result<AxisWords> {
+    let mut joints = AxisWords::default();
+    for i in (0..6).filter(|i| state.mask & (1 << i) != 0) {
+        let count = b.count(state.bits[i])?;
+        state.bits[i] = count;
+        let r = match count {
+            0 => 0,
+            c => 1u64 << (c - 1) | b.bits(c as u32 - 1)?,
+        };
+        let h = &mut state.axes[i];
+        let v = f64::from_bits((h.predict(t).to_bits() as i64).wrapping_add(unzigzag(r)) as u64);
+        h.push(v, t);
+        joints.0[i] = Some(v);
+    }
+    Ok(joints)
 }
 
 /// The NDJSON rebuilt from a store and the NC it points into, read like a file: bounded memory
