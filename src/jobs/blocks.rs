@@ -227,10 +227,10 @@ impl<W: Write> BlockWriter<W> {
             Some(_) => SRC_DELTA,
         };
         // A line with a newline inside (none is written so) gives its length.
-        let ext = (b.n != s.n + 1) as u8 * X_N
-            | (mask != s.mask) as u8 * X_MASK
-            | text.contains('\n') as u8 * X_LEN
-            | repeat as u8 * X_REPEAT;
+        let ext = ((b.n != s.n + 1) as u8 * X_N)
+            | ((mask != s.mask) as u8 * X_MASK)
+            | (text.contains('\n') as u8 * X_LEN)
+            | (repeat as u8 * X_REPEAT);
         let mut first = if with_diags { BLOCK_DIAGS } else { BLOCK } | source << 2;
         first |= if skip == 0 { 0 } else { F_SKIP };
         first |= if ext == 0 { 0 } else { F_EXT };
