@@ -220,8 +220,9 @@ pub struct ServeArgs {
     /// Threads each streamed post (`POST /v1/post`) runs on: 1 or 2.
     #[arg(long, env = "KINEPOST_POST_THREADS", default_value_t = 1)]
     pub post_threads: u32,
-    /// Threads each job's post runs on: 1 or 2.
-    #[arg(long, env = "KINEPOST_JOB_THREADS", default_value_t = 1)]
+    /// Threads each job's post runs on: 1 or 2; 0: two while this node runs fewer jobs than it
+    /// has cores (counting the job), else one.
+    #[arg(long, env = "KINEPOST_JOB_THREADS", default_value_t = 0)]
     pub job_threads: u32,
     #[command(flatten)]
     pub budget: BudgetArgs,
@@ -555,7 +556,10 @@ fn serve(cli: &Cli, a: &ServeArgs) -> Result<(), String> {
         shutdown_grace: seconds("shutdown-grace", a.shutdown_grace, 0.0, 86400.0, 1.0)?,
         post_budget: a.budget.budget()?,
         post_threads: kinepost::post::threads(Some(a.post_threads)).map_err(|e| format!("--post-{e}"))?,
-        job_threads: kinepost::post::threads(Some(a.job_threads)).map_err(|e| format!("--job-{e}"))?,
+        job_threads: match a.job_threads {
+            0 => 0,
+            n => kinepost::post::threads(Some(n)).map_err(|e| format!("--job-{e}"))?,
+        },
     };
     let rt = tokio::runtime::Runtime::new().map_err(|e| e.to_string())?;
     let r = rt.block_on(kinepost::http::serve(cfg));

@@ -413,7 +413,27 @@ async fn output(State(st): State<Arc<AppState>>, id: String, what: Output, req: 
         return diagnostics(q, &job, req).await;
     }
     let path = q.store.output_path(&job.id, what);
+    if what == Output::Lines
+        && let Some((store, modified)) = compact_lines(&path).await?
+    {
+        return super::lines::serve(&job, store, modified, req).await;
+    }
     serve_file(&job, &path, what, req).await
+}
+
+/// A line map stored compactly, and when it was written; `None`: a file of the fixed-size
+/// entries (a job run before the compact store), or none at all (served as files are).
+async fn compact_lines(path: &std::path::Path) -> Result<Option<(jobs::lines::Store, Option<std::time::SystemTime>)>, ApiError> {
+    let path = path.to_path_buf();
+    let opened = tokio::task::spawn_blocking(move || -> std::io::Result<_> {
+        let modified = std::fs::metadata(&path)?.modified().ok();
+        Ok(jobs::lines::Store::open(&path)?.map(|s| (s, modified)))
+    });
+    match opened.await.map_err(|e| ApiError::Internal(e.to_string()))? {
+        Ok(found) => Ok(found),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(None),
+        Err(e) => Err(ApiError::Internal(format!("job line map: {e}"))),
+    }
 }
 
 /// A finished job's diagnostics: rebuilt from its block store as they stream, or the NDJSON
@@ -445,7 +465,7 @@ async fn diagnostics(q: &Queue, job: &Job, req: Request) -> Result<Response, Api
 
 /// A blocking reader as a body: a thread fills 64 KiB chunks into a channel of four, so a slow
 /// client holds 256 KiB at most; a read error ends the body with an error (never a silent cut).
-fn pumped(mut r: impl std::io::Read + Send + 'static) -> Body {
+pub(super) fn pumped(mut r: impl std::io::Read + Send + 'static) -> Body {
     let (tx, rx) = tokio::sync::mpsc::channel::<Result<bytes::Bytes, std::io::Error>>(4);
     tokio::task::spawn_blocking(move || {
         loop {
@@ -514,7 +534,7 @@ async fn serve_file(job: &Job, path: &std::path::Path, what: Output, req: Reques
 /// RFC 9110 §13.1.5: a Range sent with an If-Range that does not name this output (its strong
 /// ETag, or the Last-Modified date served with it) is ignored, so that a client resuming a
 /// download of something else gets the whole output (200), never a part spliced onto another.
-fn if_range(mut req: Request, etag: &str, modified: Option<std::time::SystemTime>) -> Request {
+pub(super) fn if_range(mut req: Request, etag: &str, modified: Option<std::time::SystemTime>) -> Request {
     let Some(v) = req.headers().get(header::IF_RANGE) else {
         return req;
     };

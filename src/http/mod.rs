@@ -7,6 +7,7 @@ mod dialects;
 mod error;
 mod jobs;
 mod limits;
+mod lines;
 mod machine_ops;
 mod machines;
 mod metrics;
@@ -83,7 +84,7 @@ pub struct Config {
     /// What one post (stream or job) may cost: output per CL byte read, and seconds.
     pub post_budget: crate::post::Budget,
     /// Threads a streamed post runs on, and a job's (`post::threads`; see reliability.md for
-    /// why one each under load).
+    /// why one each under load); a job's 0: two where a core is idle (`jobs::Config::threads`).
     pub post_threads: usize,
     pub job_threads: usize,
 }
@@ -134,7 +135,7 @@ impl Default for Config {
             shutdown_grace: Duration::from_secs(60),
             post_budget: crate::post::Budget::default(),
             post_threads: 1,
-            job_threads: 1,
+            job_threads: 0,
         }
     }
 }

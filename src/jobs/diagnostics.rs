@@ -243,7 +243,7 @@ mod tests {
             .write(true)
             .open(&p)
             .unwrap()
-            .set_len(len - 3)
+            .set_len(len - 1)
             .unwrap();
         close(&p, "job spool: No space left on device").unwrap();
         let l = served(&p, &nc, Some("another message"));

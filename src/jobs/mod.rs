@@ -11,13 +11,13 @@
 
 pub mod blocks;
 mod diagnostics;
+pub mod lines;
 mod store;
 
 pub use diagnostics::Diagnostics;
 pub use store::{Job, Output, State, Store, Submission};
 
 use crate::machines::{Catalog, Library, Profile};
-use crate::output::linemap::LineMap;
 use crate::output::preview::{Caps, PreviewBuilder};
 use crate::output::{ErrorBody, FileSink, Record};
 use crate::post::{self, BlockInfo, Sink, Summary};
@@ -83,7 +83,8 @@ pub struct Config {
     pub lease: Duration,
     /// What one job's post may cost (output per CL byte, seconds).
     pub budget: crate::post::Budget,
-    /// Threads a job's post runs on (`post::threads`).
+    /// Threads a job's post runs on (`post::threads`); 0: two while this node runs fewer jobs
+    /// than it has cores, else one ([`Queue::threads_for_next`]).
     pub threads: usize,
 }
 
@@ -280,7 +281,7 @@ impl Queue {
         let task = {
             let (job, cancel, progress) = (job.clone(), cancel.clone(), progress.clone());
             let spool = self.store.spool().to_path_buf();
-            let run = (self.config.budget, self.config.threads);
+            let run = (self.config.budget, self.threads_for_next());
             tokio::task::spawn_blocking(move || {
                 execute(profile?, tools?, dialect?, &spool, &job, run, &cancel, &progress)
             })
@@ -329,6 +330,20 @@ impl Queue {
     }
 }
 
+impl Queue {
+    /// The threads a job starting now runs on. Where the setting leaves it to the node: the
+    /// second thread where a core is idle (the job alone, or fewer running than cores), since
+    /// it costs some 10 % more CPU and buys nothing on a busy node (reliability.md).
+    fn threads_for_next(&self) -> usize {
+        if self.config.threads != 0 {
+            return self.config.threads;
+        }
+        let running = self.running.lock().map(|m| m.len()).unwrap_or(usize::MAX);
+        let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+        if running < cores { 2 } else { 1 }
+    }
+}
+
 #[derive(Default)]
 struct Progress {
     bytes: AtomicU64,
@@ -356,12 +371,12 @@ impl<R: Read> Read for Counting<R> {
     }
 }
 
-/// The spool files' sink (NC, block store, line map, and the preview beside them), counting
+/// The spool files' sink (NC, block store, compact line map, and the preview beside them), counting
 /// blocks and stopping when the job is cancelled.
 struct JobSink<'a> {
     files: FileSink<std::fs::File, std::fs::File>,
     blocks: BlockWriter<std::io::BufWriter<std::fs::File>>,
-    lines: LineMap<std::io::BufWriter<std::fs::File>>,
+    lines: lines::Writer<std::io::BufWriter<std::fs::File>>,
     preview: PreviewBuilder,
     progress: &'a Progress,
     cancel: &'a AtomicBool,
@@ -440,7 +455,7 @@ fn execute(
     let mut sink = JobSink {
         files: FileSink::new(nc, None),
         blocks: BlockWriter::new(blocks).map_err(io)?,
-        lines: LineMap::new(lines),
+        lines: lines::Writer::new(lines).map_err(io)?,
         preview: PreviewBuilder::new(&profile.machine, opts.mode, Caps::default()).with_scene(
             &profile.machine,
             &profile.geometry(),
@@ -465,7 +480,7 @@ fn execute(
     };
     let (nc, _) = sink.files.into_inner().map_err(io)?;
     nc.sync_all().map_err(io)?;
-    let lines = sink.lines.into_inner().into_inner().map_err(|e| io(e.into_error()))?;
+    let lines = sink.lines.finish().map_err(io)?.into_inner().map_err(|e| io(e.into_error()))?;
     lines.sync_all().map_err(io)?;
     let blocks = sink.blocks.into_inner().into_inner().map_err(|e| io(e.into_error()))?;
     blocks.sync_all().map_err(io)?;

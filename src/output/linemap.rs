@@ -20,31 +20,67 @@ pub const BRANCH_CHANGE: u32 = 8;
 /// A line that changes the tool (`M6`, `TOOL CALL n`).
 pub const TOOL_CHANGE: u32 = 16;
 
-/// Writes entries as the program's lines go by.
-pub struct LineMap<W: Write> {
-    out: W,
+/// One NC line's entry.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Entry {
+    pub offset: u64,
+    pub cl: u32,
+    pub flags: u32,
+}
+
+impl Entry {
+    /// The entry as the line map serves it.
+    pub fn to_bytes(self) -> [u8; ENTRY] {
+        let mut e = [0u8; ENTRY];
+        e[0..4].copy_from_slice(&(self.offset as u32).to_le_bytes());
+        e[4..8].copy_from_slice(&((self.offset >> 32) as u32).to_le_bytes());
+        e[8..12].copy_from_slice(&self.cl.to_le_bytes());
+        e[12..16].copy_from_slice(&self.flags.to_le_bytes());
+        e
+    }
+}
+
+/// Makes the entries as the program's lines go by (the writers' one definition of them).
+#[derive(Default)]
+pub struct Entries {
     offset: u64,
 }
 
-impl<W: Write> LineMap<W> {
-    pub fn new(out: W) -> Self {
-        LineMap { out, offset: 0 }
-    }
-
-    /// One NC line as the NC file has it (`text` and its newline).
-    pub fn line(&mut self, text: &str, b: Option<&BlockInfo>) -> std::io::Result<()> {
+impl Entries {
+    /// The entry of one NC line as the NC file has it (`text` and its newline).
+    pub fn next(&mut self, text: &str, b: Option<&BlockInfo>) -> Entry {
         let (cl, flags) = match b {
             Some(b) => (b.source_line.unwrap_or(0), block_flags(b)),
             None => other_line(text),
         };
-        let off = self.offset;
-        let mut e = [0u8; ENTRY];
-        e[0..4].copy_from_slice(&(off as u32).to_le_bytes());
-        e[4..8].copy_from_slice(&((off >> 32) as u32).to_le_bytes());
-        e[8..12].copy_from_slice(&cl.to_le_bytes());
-        e[12..16].copy_from_slice(&(flags | tool_change(text)).to_le_bytes());
+        let offset = self.offset;
         self.offset += text.len() as u64 + 1;
-        self.out.write_all(&e)
+        Entry {
+            offset,
+            cl,
+            flags: flags | tool_change(text),
+        }
+    }
+}
+
+/// Writes the fixed-size entries as the program's lines go by (what the line map serves; a job
+/// stores them compactly, `jobs::lines`).
+pub struct LineMap<W: Write> {
+    out: W,
+    entries: Entries,
+}
+
+impl<W: Write> LineMap<W> {
+    pub fn new(out: W) -> Self {
+        LineMap {
+            out,
+            entries: Entries::default(),
+        }
+    }
+
+    /// One NC line as the NC file has it (`text` and its newline).
+    pub fn line(&mut self, text: &str, b: Option<&BlockInfo>) -> std::io::Result<()> {
+        self.out.write_all(&self.entries.next(text, b).to_bytes())
     }
 
     pub fn into_inner(self) -> W {
@@ -86,6 +122,10 @@ fn other_line(text: &str) -> (u32, u32) {
 /// `M6`/`M06` as a word outside a comment, or a TNC `TOOL CALL` that names a tool (a speed-only
 /// `TOOL CALL S…` changes nothing).
 fn tool_change(text: &str) -> u32 {
+    // Neither `M` nor `T`: no tool change (a motion block, millions of them; this is the cheap test).
+    if memchr::memchr2(b'M', b'T', text.as_bytes()).is_none() {
+        return 0;
+    }
     let code = text.split([';', '(']).next().unwrap_or("");
     let m6 = code.split_ascii_whitespace().any(|w| matches!(w, "M6" | "M06"));
     let call = code
