@@ -123,19 +123,22 @@ impl Residual<'_> {
         Some(g * fm.st2 * fm.st2)
     }
 
-    /// Where the orientation passes nearest the inner axis over a turn of the outer rotary
-    /// (`s1·v(a) = α + β cos a − γ sin a`): the outer angle, sin² θ1 there, and the half-width
-    /// of the stretch around it where sin² θ1 < [`SWING_ZONE`].
-    fn closest_to_inner_axis(&self) -> (f64, f64, f64) {
+    /// Where the orientation passes nearest the inner axis, toward +s1 and toward −s1, over a
+    /// turn of the outer rotary (`s1·v(a) = α + β cos a − γ sin a`): for each, the outer angle,
+    /// sin² θ1 there, and the half-width of the stretch around it where sin² θ1 < [`SWING_ZONE`].
+    fn inner_axis_passes(&self) -> [(f64, f64, f64); 2] {
         let (s0, s1, u) = (self.s0, &self.pair.s1, self.u);
         let alpha = s1.dot(s0) * s0.dot(u);
         let (beta, gamma) = (s1.dot(u) - alpha, s1.dot(&s0.cross(u)));
         let rho = beta.hypot(gamma);
-        let m = (alpha.abs() + rho).min(1.0);
-        let toward = if alpha >= 0.0 { 0.0 } else { std::f64::consts::PI };
-        // |s1·v| = |α| + ρ cos Δ at Δ from the nearest point.
-        let half = (((1.0 - SWING_ZONE).sqrt() - alpha.abs()) / rho.max(1e-300)).clamp(-1.0, 1.0).acos();
-        (wrap(toward - gamma.atan2(beta)), (1.0 - m) * (1.0 + m), half)
+        let peak = -gamma.atan2(beta);
+        [1.0, -1.0].map(|sg: f64| {
+            // sg (s1·v) = sg α + ρ cos Δ at Δ from the pass.
+            let m = (sg * alpha + rho).min(1.0);
+            let half = (((1.0 - SWING_ZONE).sqrt() - sg * alpha) / rho.max(1e-300)).clamp(-1.0, 1.0).acos();
+            let at = if sg > 0.0 { peak } else { peak + std::f64::consts::PI };
+            (wrap(at), (1.0 - m) * (1.0 + m), half)
+        })
     }
 }
 
@@ -197,13 +200,17 @@ pub(super) fn three(
 /// The roots of f± (outer angle, branch) through the product's roots; `None` where the scan must
 /// search instead.
 fn resultant_roots(r: &Residual, scale: f64) -> Option<ArrayVec<(f64, i8), 16>> {
-    let (near, st2_min, half) = r.closest_to_inner_axis();
-    if st2_min < NEAR_INNER_AXIS {
+    let passes = r.inner_axis_passes();
+    if passes.iter().any(|p| p.1 < NEAR_INNER_AXIS) {
         return None;
     }
-    // Roots of the product inside the swing zone are left to the scan of the zone.
-    let zone = (st2_min < SWING_ZONE).then_some((near - half, near + half));
-    let outside = |x: f64| zone.is_none_or(|(lo, hi)| !(lo..=hi).contains(&(near + wrap(x - near))));
+    // Roots of the product inside a swing zone are left to the scan of the zone.
+    let zones: ArrayVec<(f64, f64, f64), 2> = passes
+        .iter()
+        .filter(|p| p.1 < SWING_ZONE)
+        .map(|&(at, _, half)| (at, at - half, at + half))
+        .collect();
+    let outside = |x: f64| !zones.iter().any(|&(at, lo, hi)| (lo..=hi).contains(&(at + wrap(x - at))));
     let poly = Trig::interpolate(|a0| r.product(a0))?;
     let iso = poly.isolate()?;
     let tol = 1e-9 * scale;
@@ -217,23 +224,21 @@ fn resultant_roots(r: &Residual, scale: f64) -> Option<ArrayVec<(f64, i8), 16>> 
         }
     };
     for &(x, slope, lo, hi) in iso.roots.iter().filter(|r| outside(r.0)) {
-        let (f, st2) = r.branches(x);
-        for (k, sg) in [1i8, -1].into_iter().enumerate() {
-            // A root of the product is a root of the branch nearer zero; of both on the fold.
-            if !(f[k].abs() <= f[1 - k].abs() || f[k].abs() <= 1e-6 * scale) {
-                continue;
+        let mut got = settled(r, x, slope, (lo, hi), scale);
+        if got.is_empty() {
+            // Next to a fold f± turns like √reach, so the polynomial's root (rounded to the
+            // product's largest values) can sit where f is far from zero: bracket the product
+            // itself, smooth across the fold and rounded to its own size.
+            let g = |x: f64| r.product(Cs::of(x)).unwrap_or(0.0);
+            let (gl, gh) = (g(lo), g(hi));
+            if gl.signum() != gh.signum()
+                && let Some(x) = brent(|x| Some(g(x)), lo, hi, gl, gh)
+            {
+                got = settled(r, x, f64::NAN, (lo, hi), scale);
             }
-            // f's slope there, from the product's: g' = st1⁴ f' f_other where f = 0.
-            let other = f[1 - k];
-            let d = if other.abs() > 1e-6 * scale {
-                slope / (st2 * st2 * other)
-            } else {
-                f64::NAN
-            };
-            let (a, fa) = settle(|a| r.eval(a, sg, true).map(|v| v.0), x, f[k], d, (lo, hi), scale);
-            if fa.abs() <= tol && r.reachable(a) {
-                add(a, sg)?;
-            }
+        }
+        for (a, sg) in got {
+            add(a, sg)?;
         }
     }
     for &(lo, hi) in iso.unsure.iter().filter(|u| outside(u.0) || outside(u.1)) {
@@ -261,7 +266,7 @@ fn resultant_roots(r: &Residual, scale: f64) -> Option<ArrayVec<(f64, i8), 16>> 
             }
         }
     }
-    if let Some((lo, hi)) = zone {
+    for &(_, lo, hi) in &zones {
         for sg in [1i8, -1] {
             for a in scan::local(r, sg, lo, hi, scale) {
                 add(a, sg)?;
@@ -308,6 +313,30 @@ fn unsure_roots(r: &Residual, lo: f64, hi: f64) -> ArrayVec<(f64, bool), 16> {
             } else {
                 let _ = out.try_push((x, true));
             }
+        }
+    }
+    out
+}
+
+/// The roots of f± at a root `x` of the product alone in (lo, hi): the branch nearer zero (both
+/// on the fold), settled; `slope`: the product's g' at x, or NaN.
+fn settled(r: &Residual, x: f64, slope: f64, (lo, hi): (f64, f64), scale: f64) -> ArrayVec<(f64, i8), 2> {
+    let (f, st2) = r.branches(x);
+    let mut out = ArrayVec::new();
+    for (k, sg) in [1i8, -1].into_iter().enumerate() {
+        if !(f[k].abs() <= f[1 - k].abs() || f[k].abs() <= 1e-6 * scale) {
+            continue;
+        }
+        // f's slope there, from the product's: g' = st1⁴ f' f_other where f = 0.
+        let other = f[1 - k];
+        let d = if other.abs() > 1e-6 * scale {
+            slope / (st2 * st2 * other)
+        } else {
+            f64::NAN
+        };
+        let (a, fa) = settle(|a| r.eval(a, sg, true).map(|v| v.0), x, f[k], d, (lo, hi), scale);
+        if fa.abs() <= 1e-9 * scale && r.reachable(a) {
+            out.push((a, sg));
         }
     }
     out
@@ -368,19 +397,17 @@ impl Trig {
     fn interpolate(g: impl Fn(Cs) -> Option<f64>) -> Option<Trig> {
         let (mut a, mut b) = ([0.0; DEGREE + 1], [0.0; DEGREE + 1]);
         let mut sum = 0.0;
-        for j in 0..NODES {
-            let z = Cs::of(OFFSET + std::f64::consts::TAU * j as f64 / NODES as f64);
-            let gj = g(z)?;
+        for (j, zk) in NODE_POWERS.iter().enumerate() {
+            let gj = g(zk[1])?;
             if !gj.is_finite() {
                 return None;
             }
             sum += gj.abs();
-            let mut zk = Cs::ZERO;
             for k in 0..=DEGREE {
-                a[k] += gj * zk.c;
-                b[k] += gj * zk.s;
-                zk = mul(zk, z);
+                a[k] += gj * zk[k].c;
+                b[k] += gj * zk[k].s;
             }
+            debug_assert!(j < NODES);
         }
         a[0] /= NODES as f64;
         b[0] = 0.0;
@@ -404,17 +431,21 @@ impl Trig {
     /// g, g', g'' at the point `z` = (cos x, sin x).
     #[inline]
     fn at(&self, x: f64, z: Cs) -> At {
+        self.at_powers(x, &powers(z))
+    }
+
+    /// As [`Trig::at`], from the powers `z¹ … z⁸` (a grid point's are a table's).
+    #[inline]
+    fn at_powers(&self, x: f64, zk: &[Cs; DEGREE + 1]) -> At {
         let (mut g, mut d, mut e) = (self.a[0], 0.0, 0.0);
-        let mut zk = z;
         for k in 1..=DEGREE {
-            let (c, s) = (self.a[k] * zk.c + self.b[k] * zk.s, self.b[k] * zk.c - self.a[k] * zk.s);
+            let (c, s) = (self.a[k] * zk[k].c + self.b[k] * zk[k].s, self.b[k] * zk[k].c - self.a[k] * zk[k].s);
             let k = k as f64;
             g += c;
             d += k * s;
             e -= k * k * c;
-            zk = mul(zk, z);
         }
-        At { x, z, g, d, e }
+        At { x, z: zk[1], g, d, e }
     }
 
     /// The one root between `p` and `q`, where g is proven monotone: Newton's steps, bisecting
@@ -458,8 +489,7 @@ impl Trig {
             unsure: ArrayVec::new(),
         };
         let step = std::f64::consts::TAU / GRID as f64;
-        let turn = Cs::of(step);
-        let first = self.at(OFFSET, Cs::of(OFFSET));
+        let first = self.at_powers(OFFSET, &GRID_POWERS[0]);
         let mut prev = first;
         for i in 1..=GRID {
             // The circle closes on the first point.
@@ -469,8 +499,7 @@ impl Trig {
                     ..first
                 }
             } else {
-                let x = OFFSET + step * i as f64;
-                self.at(x, if i % 8 == 0 { Cs::of(x) } else { mul(prev.z, turn) })
+                self.at_powers(OFFSET + step * i as f64, &GRID_POWERS[i])
             };
             out.interval(prev, cur, 0)?;
             prev = cur;
@@ -478,6 +507,22 @@ impl Trig {
         Some(out)
     }
 }
+
+/// `z⁰ … z⁸`, by products in a tree (four deep, not a chain of eight).
+#[inline(always)]
+fn powers(z: Cs) -> [Cs; DEGREE + 1] {
+    let z2 = mul(z, z);
+    let (z3, z4) = (mul(z2, z), mul(z2, z2));
+    [Cs::ZERO, z, z2, z3, z4, mul(z4, z), mul(z4, z2), mul(z4, z3), mul(z4, z4)]
+}
+
+/// The powers at the sample angles and at the grid's points: the same for every pose.
+static NODE_POWERS: std::sync::LazyLock<[[Cs; DEGREE + 1]; NODES]> = std::sync::LazyLock::new(|| {
+    std::array::from_fn(|j| powers(Cs::of(OFFSET + std::f64::consts::TAU * j as f64 / NODES as f64)))
+});
+static GRID_POWERS: std::sync::LazyLock<[[Cs; DEGREE + 1]; GRID]> = std::sync::LazyLock::new(|| {
+    std::array::from_fn(|i| powers(Cs::of(OFFSET + std::f64::consts::TAU * i as f64 / GRID as f64)))
+});
 
 /// (cos, sin) of the sum of two angles.
 #[inline(always)]

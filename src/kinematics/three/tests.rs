@@ -213,3 +213,4 @@ fn the_resultant_finds_every_root_the_scan_finds() {
     );
     assert!(tally[1] * 10 >= tally[0] * 9, "the scan answered too often: {tally:?}");
 }
+
