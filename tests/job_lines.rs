@@ -9,6 +9,21 @@ use common::Fetch;
 use serde_json::Value;
 use std::time::Duration;
 
+/// A server and a succeeded job of a generated spinner path: (config, base URL, client, id).
+async fn job(points: usize, seed: u64) -> (kinepost::http::Config, String, reqwest::Client, String) {
+    let cfg = common::cfg();
+    let base = common::server(cfg.clone()).await;
+    let c = reqwest::Client::new();
+    let j: Value = c
+        .post(format!("{base}/v1/jobs?machine=spinner-u5-620"))
+        .body(common::generated("spinner-u5-620", points, seed))
+        .json_ok()
+        .await;
+    let id = j["id"].as_str().unwrap().to_string();
+    common::wait_job(&c, &base, &id, "succeeded", Duration::from_secs(120)).await;
+    (cfg, base, c, id)
+}
+
 /// What a client sees of one request: status, the headers that say what the bytes are, bytes.
 async fn seen(c: &reqwest::Client, url: &str, headers: &[(&str, &str)]) -> (u16, Vec<(String, String)>, Vec<u8>) {
     let mut req = c.get(url);
@@ -50,17 +65,7 @@ fn requests(len: u64, etag: &str) -> Vec<Vec<(&'static str, String)>> {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_compact_line_map_is_served_as_the_fixed_size_file_was() {
-    let cfg = common::cfg();
-    let base = common::server(cfg.clone()).await;
-    let c = reqwest::Client::new();
-    let cl = common::generated("spinner-u5-620", 20_000, 3);
-    let j: Value = c
-        .post(format!("{base}/v1/jobs?machine=spinner-u5-620"))
-        .body(cl)
-        .json_ok()
-        .await;
-    let id = j["id"].as_str().unwrap().to_string();
-    common::wait_job(&c, &base, &id, "succeeded", Duration::from_secs(120)).await;
+    let (cfg, base, c, id) = job(20_000, 3).await;
     let url = format!("{base}/v1/jobs/{id}/lines");
     let (status, _, whole) = seen(&c, &url, &[]).await;
     assert_eq!(status, 200);
@@ -118,17 +123,7 @@ async fn the_compact_line_map_is_served_as_the_fixed_size_file_was() {
 /// Random ranges of a bigger map, each the whole's bytes.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn random_ranges_are_the_wholes_bytes() {
-    let cfg = common::cfg();
-    let base = common::server(cfg.clone()).await;
-    let c = reqwest::Client::new();
-    let cl = common::generated("spinner-u5-620", 60_000, 11);
-    let j: Value = c
-        .post(format!("{base}/v1/jobs?machine=spinner-u5-620"))
-        .body(cl)
-        .json_ok()
-        .await;
-    let id = j["id"].as_str().unwrap().to_string();
-    common::wait_job(&c, &base, &id, "succeeded", Duration::from_secs(120)).await;
+    let (_, base, c, id) = job(60_000, 11).await;
     let url = format!("{base}/v1/jobs/{id}/lines");
     let (_, _, whole) = seen(&c, &url, &[]).await;
     let len = whole.len() as u64;

@@ -27,6 +27,7 @@ use crate::diag::Diagnostic;
 use crate::output::Record;
 use crate::post::{AxisWords, BlockInfo};
 use std::io::{self, BufRead, Read, Write};
+use super::varint::{put_varint, unzigzag, zigzag};
 
 /// The file's first bytes; a later format gets a new one.
 pub const MAGIC: &[u8; 8] = b"KPBLKS2\n";
@@ -131,22 +132,6 @@ impl State {
             ..d.clone()
         })
     }
-}
-
-fn zigzag(v: i64) -> u64 {
-    ((v << 1) ^ (v >> 63)) as u64
-}
-
-fn unzigzag(v: u64) -> i64 {
-    ((v >> 1) as i64) ^ -((v & 1) as i64)
-}
-
-fn put_varint(out: &mut Vec<u8>, mut v: u64) {
-    while v >= 0x80 {
-        out.push(v as u8 | 0x80);
-        v >>= 7;
-    }
-    out.push(v as u8);
 }
 
 /// Writes the store as the program's lines and records go by.

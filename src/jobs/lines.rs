@@ -19,6 +19,7 @@ use crate::output::linemap::{ENTRY, Entries, Entry};
 use crate::post::BlockInfo;
 use std::io::{self, BufRead, Read, Seek, SeekFrom, Write};
 use std::path::Path;
+use super::varint::{put_varint, unzigzag, zigzag};
 
 /// The file's first bytes; a later format gets a new one.
 pub const MAGIC: &[u8; 8] = b"KPLINES2";
@@ -44,22 +45,6 @@ struct State {
     offset: u64,
     cl: u32,
     len: u32,
-}
-
-fn zigzag(v: i64) -> u64 {
-    ((v << 1) ^ (v >> 63)) as u64
-}
-
-fn unzigzag(v: u64) -> i64 {
-    ((v >> 1) as i64) ^ -((v & 1) as i64)
-}
-
-fn put_varint(out: &mut Vec<u8>, mut v: u64) {
-    while v >= 0x80 {
-        out.push(v as u8 | 0x80);
-        v >>= 7;
-    }
-    out.push(v as u8);
 }
 
 /// Writes the store as the program's lines go by; [`Writer::finish`] adds the checkpoints.

@@ -13,6 +13,7 @@ pub mod blocks;
 mod diagnostics;
 pub mod lines;
 mod store;
+mod varint;
 
 pub use diagnostics::Diagnostics;
 pub use store::{Job, Output, State, Store, Submission};

@@ -722,11 +722,14 @@ impl Store {
                 state: j.state,
             });
         }
+        // Files first: on a full disk the row's delete needs the room they hold (a job that
+        // failed filling the disk would otherwise pin it). A row left by a failed delete lists
+        // a job with no outputs, and the next delete removes it.
+        self.remove_files(id);
         sqlx::query("DELETE FROM jobs WHERE id = $1")
             .bind(id)
             .execute(&self.pool)
             .await?;
-        self.remove_files(id);
         Ok(())
     }
 
