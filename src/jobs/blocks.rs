@@ -27,7 +27,7 @@ use crate::diag::Diagnostic;
 use crate::output::Record;
 use crate::post::{AxisWords, BlockInfo};
 use std::io::{self, BufRead, Read, Write};
-use super::varint::{put_varint, unzigzag, zigzag};
+use super::varint::{get_varint, put_varint, unzigzag, zigzag};
 
 /// The file's first bytes; a later format gets a new one.
 pub const MAGIC: &[u8; 8] = b"KPBLKS2\n";
@@ -400,15 +400,7 @@ impl<R: BufRead> Decoder<R> {
     }
 
     fn varint(&mut self) -> io::Result<u64> {
-        let mut v = 0u64;
-        for shift in (0..64).step_by(7) {
-            let b = self.byte()?;
-            v |= ((b & 0x7f) as u64) << shift;
-            if b & 0x80 == 0 {
-                return Ok(v);
-            }
-        }
-        Err(io::Error::new(io::ErrorKind::InvalidData, "varint too long"))
+        get_varint(|| self.byte(), || io::Error::new(io::ErrorKind::InvalidData, "varint too long"))
     }
 
     fn bytes(&mut self) -> io::Result<Vec<u8>> {

@@ -19,7 +19,7 @@ use crate::output::linemap::{ENTRY, Entries, Entry};
 use crate::post::BlockInfo;
 use std::io::{self, BufRead, Read, Seek, SeekFrom, Write};
 use std::path::Path;
-use super::varint::{put_varint, unzigzag, zigzag};
+use super::varint::{get_varint, put_varint, unzigzag, zigzag};
 
 /// The file's first bytes; a later format gets a new one.
 pub const MAGIC: &[u8; 8] = b"KPLINES2";
@@ -169,15 +169,7 @@ fn byte<R: BufRead>(r: &mut R) -> io::Result<u8> {
 }
 
 fn varint<R: BufRead>(r: &mut R) -> io::Result<u64> {
-    let mut v = 0u64;
-    for shift in (0..64).step_by(7) {
-        let b = byte(r)?;
-        v |= ((b & 0x7f) as u64) << shift;
-        if b & 0x80 == 0 {
-            return Ok(v);
-        }
-    }
-    Err(damaged("varint too long"))
+    get_varint(|| byte(r), || damaged("varint too long"))
 }
 
 fn damaged(why: &str) -> io::Error {

@@ -101,6 +101,14 @@ pub struct Meet {
     pub on_axis: bool,
 }
 
+impl Meet {
+    /// sin θ1: 0 where `q` lies along s1.
+    #[inline]
+    pub fn st1(&self) -> f64 {
+        self.st1
+    }
+}
+
 impl Pair {
     /// `None` when the axes are parallel (they would leave one orientation freedom unused).
     pub fn new(s1: Vec3, s2: Vec3) -> Option<Pair> {
@@ -159,9 +167,8 @@ impl Pair {
             };
         }
         // 1 − cos θ1 without cancellation.
-        let one_minus = if ct1 > 0.0 { st1 * st1 / (1.0 + ct1) } else { 1.0 - ct1 };
         let inv = 1.0 / st1;
-        let cos_a = (self.k0 + self.cw * one_minus) * inv * self.inv_sw;
+        let cos_a = self.lateral(ct1, st1 * st1) * inv * self.inv_sw;
         let reach = (1.0 - cos_a) * (1.0 + cos_a);
         Meet {
             ct1,
@@ -183,8 +190,7 @@ impl Pair {
         let (eq, fq, ct1) = (self.e.dot(q), self.f.dot(q), self.s1.dot(q));
         let st2 = eq * eq + fq * fq;
         let st1 = st2.sqrt();
-        let one_minus = if ct1 > 0.0 { st2 / (1.0 + ct1) } else { 1.0 - ct1 };
-        let l = (self.k0 + self.cw * one_minus) * self.inv_sw;
+        let l = self.lateral(ct1, st2) * self.inv_sw;
         Formal {
             ct1,
             eq,
@@ -197,10 +203,12 @@ impl Pair {
         }
     }
 
-    /// sin θ1 of a meet: 0 where `q` lies along s1.
+    /// `sin θ1 cos A · sin ω` from cos θ1 and sin² θ1: `cos θ2 − cos ω + cos ω (1 − cos θ1)`,
+    /// with 1 − cos θ1 taken without cancellation (1 − c = s²/(1 + c) where c > 0).
     #[inline]
-    pub fn st1(m: &Meet) -> f64 {
-        m.st1
+    fn lateral(&self, ct1: f64, st2: f64) -> f64 {
+        let one_minus = if ct1 > 0.0 { st2 / (1.0 + ct1) } else { 1.0 - ct1 };
+        self.k0 + self.cw * one_minus
     }
 
     /// The angle by which `q` misses the reachable set (0 when reachable).

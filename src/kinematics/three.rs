@@ -13,7 +13,7 @@ mod scan;
 use super::fk::rotate;
 use super::model::{Chain, Machine};
 use super::solver::{IkOptions, Solution, Solutions, controlled_point_cs, push};
-use super::subproblem::{Cs, FreeAngle, Pair};
+use super::subproblem::{Cs, FreeAngle, Meet, Pair};
 use super::{Error, Pose, Setup, Vec3, wrap};
 use arrayvec::ArrayVec;
 
@@ -63,12 +63,18 @@ impl Residual<'_> {
         controlled_point_cs(self.m, &rcs, &self.p_w, self.tool_length)[self.missing]
     }
 
+    /// The outer rotation at `a`, the orientation the inner pair must reach, and their meet.
+    #[inline(always)]
+    fn meet_at(&self, a: f64) -> (Cs, Vec3, Meet) {
+        let a0 = Cs::of(a);
+        let v = rotate(self.s0, a0.c, -a0.s, self.u);
+        (a0, v, self.pair.meet(&v))
+    }
+
     /// f on branch `sg` at outer angle `a`, with the angles; `None` where the inner pair cannot
     /// reach the orientation, unless `clamp` (evaluated on the fold).
     fn eval(&self, a: f64, sg: i8, clamp: bool) -> Option<(f64, [Cs; 3], bool)> {
-        let a0 = Cs::of(a);
-        let v = rotate(self.s0, a0.c, -a0.s, self.u);
-        let meet = self.pair.meet(&v);
+        let (a0, v, meet) = self.meet_at(a);
         if meet.reach < 0.0 && !clamp {
             return None;
         }
@@ -79,15 +85,12 @@ impl Residual<'_> {
 
     /// f on both branches at outer angle `a` (clamped to the fold), and sin² θ1 there.
     fn branches(&self, a: f64) -> ([f64; 2], f64) {
-        let a0 = Cs::of(a);
-        let v = rotate(self.s0, a0.c, -a0.s, self.u);
-        let meet = self.pair.meet(&v);
+        let (a0, v, meet) = self.meet_at(a);
         let f = [1.0, -1.0].map(|sg| {
             let (a1, a2, _) = self.pair.angles(&v, &meet, sg, self.free);
             self.coordinate([a0, a1, a2])
         });
-        let st1 = Pair::st1(&meet);
-        (f, st1 * st1)
+        (f, meet.st1() * meet.st1())
     }
 
     /// Whether the inner pair reaches the orientation at outer angle `a` (on the fold to
@@ -251,7 +254,7 @@ fn resultant_roots(r: &Residual, scale: f64) -> Option<ArrayVec<(f64, i8), 16>> 
                     let w = (hi - lo).max(1e-7);
                     let (a, fa) = scan::golden_min(|a| f(a).map(f64::abs), x - w, x + w);
                     (a, if fa <= 1e-12 * scale { fa } else { f64::INFINITY })
-                } else if fx[k].abs() <= fx[1 - k].abs() || fx[k].abs() <= 1e-6 * scale {
+                } else if vanishes(&fx, k, scale) {
                     let (a, fa) = settle(f, x, fx[k], f64::NAN, (lo - 1e-3, hi + 1e-3), scale);
                     // Near a flat stretch of f, small is not zero: f must change sign there.
                     let d = 1e-8 * (1.0 + a.abs());
@@ -285,8 +288,7 @@ fn unsure_roots(r: &Residual, lo: f64, hi: f64) -> ArrayVec<(f64, bool), 16> {
     let g = |x: f64| r.product(Cs::of(x)).unwrap_or(0.0);
     let w = (hi - lo).max(1e-7);
     let (a, b) = (lo - w, hi + w);
-    let mut xs: ArrayVec<f64, { N + 1 }> = (0..=N).map(|k| a + (b - a) * k as f64 / N as f64).collect();
-    xs.sort_by(f64::total_cmp);
+    let xs: ArrayVec<f64, { N + 1 }> = (0..=N).map(|k| a + (b - a) * k as f64 / N as f64).collect();
     let gs: ArrayVec<f64, { N + 1 }> = xs.iter().map(|&x| g(x)).collect();
     let mut out = ArrayVec::new();
     for i in 0..xs.len() - 1 {
@@ -318,13 +320,19 @@ fn unsure_roots(r: &Residual, lo: f64, hi: f64) -> ArrayVec<(f64, bool), 16> {
     out
 }
 
+/// Whether branch `k` of f = [f₊, f₋] is the one a root of the product belongs to: the one
+/// nearer zero, or both on the fold.
+fn vanishes(f: &[f64; 2], k: usize, scale: f64) -> bool {
+    f[k].abs() <= f[1 - k].abs() || f[k].abs() <= 1e-6 * scale
+}
+
 /// The roots of f± at a root `x` of the product alone in (lo, hi): the branch nearer zero (both
 /// on the fold), settled; `slope`: the product's g' at x, or NaN.
 fn settled(r: &Residual, x: f64, slope: f64, (lo, hi): (f64, f64), scale: f64) -> ArrayVec<(f64, i8), 2> {
     let (f, st2) = r.branches(x);
     let mut out = ArrayVec::new();
     for (k, sg) in [1i8, -1].into_iter().enumerate() {
-        if !(f[k].abs() <= f[1 - k].abs() || f[k].abs() <= 1e-6 * scale) {
+        if !vanishes(&f, k, scale) {
             continue;
         }
         // f's slope there, from the product's: g' = st1⁴ f' f_other where f = 0.
@@ -397,7 +405,7 @@ impl Trig {
     fn interpolate(g: impl Fn(Cs) -> Option<f64>) -> Option<Trig> {
         let (mut a, mut b) = ([0.0; DEGREE + 1], [0.0; DEGREE + 1]);
         let mut sum = 0.0;
-        for (j, zk) in NODE_POWERS.iter().enumerate() {
+        for zk in NODE_POWERS.iter() {
             let gj = g(zk[1])?;
             if !gj.is_finite() {
                 return None;
@@ -407,7 +415,6 @@ impl Trig {
                 a[k] += gj * zk[k].c;
                 b[k] += gj * zk[k].s;
             }
-            debug_assert!(j < NODES);
         }
         a[0] /= NODES as f64;
         b[0] = 0.0;
@@ -517,12 +524,13 @@ fn powers(z: Cs) -> [Cs; DEGREE + 1] {
 }
 
 /// The powers at the sample angles and at the grid's points: the same for every pose.
-static NODE_POWERS: std::sync::LazyLock<[[Cs; DEGREE + 1]; NODES]> = std::sync::LazyLock::new(|| {
-    std::array::from_fn(|j| powers(Cs::of(OFFSET + std::f64::consts::TAU * j as f64 / NODES as f64)))
-});
-static GRID_POWERS: std::sync::LazyLock<[[Cs; DEGREE + 1]; GRID]> = std::sync::LazyLock::new(|| {
-    std::array::from_fn(|i| powers(Cs::of(OFFSET + std::f64::consts::TAU * i as f64 / GRID as f64)))
-});
+static NODE_POWERS: std::sync::LazyLock<[[Cs; DEGREE + 1]; NODES]> = std::sync::LazyLock::new(circle);
+static GRID_POWERS: std::sync::LazyLock<[[Cs; DEGREE + 1]; GRID]> = std::sync::LazyLock::new(circle);
+
+/// The powers at `N` equally spaced angles from [`OFFSET`].
+fn circle<const N: usize>() -> [[Cs; DEGREE + 1]; N] {
+    std::array::from_fn(|i| powers(Cs::of(OFFSET + std::f64::consts::TAU * i as f64 / N as f64)))
+}
 
 /// (cos, sin) of the sum of two angles.
 #[inline(always)]

@@ -170,45 +170,22 @@ fn fold(reach: &impl Fn(f64) -> f64, valid: f64, invalid: f64) -> f64 {
 
 /// The roots of f± (outer angle, branch), or why there are none.
 pub(super) fn roots(r: &Residual, scale: f64) -> Result<ArrayVec<(f64, i8), 16>, Error> {
-    let reach = |a: f64| r.pair.meet(&r.inner(a)).reach;
     let step = std::f64::consts::TAU / SAMPLES as f64;
-    let lever = scale + r.m.rotaries.iter().map(|r| r.pivot.norm()).sum::<f64>();
     let mut found: ArrayVec<(f64, i8), 16> = ArrayVec::new();
     let mut any_valid = false;
     let mut best_miss = f64::INFINITY;
     let mut closest = f64::INFINITY;
     for sg in [1i8, -1] {
-        let eval = |a: f64, clamp: bool| r.eval(a, sg, clamp);
-        let mut scan = Scan {
-            eval: &eval,
-            reach: &reach,
-            leaves: Vec::with_capacity(SAMPLES + 64),
-            lever,
+        let at = |k: usize| -std::f64::consts::PI + step * k as f64;
+        let seen = |s: &Sample| match s.v {
+            Some((f, _)) => {
+                any_valid = true;
+                closest = closest.min(f.abs());
+            }
+            None => best_miss = best_miss.min(r.pair.miss(&r.inner(s.a))),
         };
-        let mut prev = scan.sample(-std::f64::consts::PI, false);
-        scan.leaves.push(prev);
-        for k in 1..=SAMPLES {
-            let cur = scan.sample(-std::f64::consts::PI + step * k as f64, false);
-            match cur.v {
-                Some((f, _)) => {
-                    any_valid = true;
-                    closest = closest.min(f.abs());
-                }
-                None => best_miss = best_miss.min(r.pair.miss(&r.inner(cur.a))),
-            }
-            scan.refine(prev, cur, 0);
-            prev = cur;
-        }
-        for a in scan.roots(1e-9 * scale) {
-            // Keep only true roots: a sign change across a branch discontinuity is not one, nor
-            // is a zero of f clamped to the fold inside a gap where the pair cannot reach.
-            if let Some((f, _, _)) = eval(a, true)
-                && f.abs() <= 1e-9 * scale
-                && r.reachable(a)
-                && !found.is_full()
-            {
-                found.push((a, sg));
-            }
+        for a in branch(r, sg, SAMPLES, at, scale, seen) {
+            let _ = found.try_push((a, sg));
         }
     }
     if !any_valid {
@@ -225,26 +202,36 @@ pub(super) fn roots(r: &Residual, scale: f64) -> Result<ArrayVec<(f64, i8), 16>,
     }
     Ok(found)
 }
+
 /// The roots of f on branch `sg` over the stretch [a, b] (where the inner angles swing too fast
 /// for the product to tell its roots).
 pub(super) fn local(r: &Residual, sg: i8, a: f64, b: f64, scale: f64) -> ArrayVec<f64, 16> {
     const N: usize = 16;
+    branch(r, sg, N, |k| a + (b - a) * k as f64 / N as f64, scale, |_| {})
+}
+
+/// One branch scanned from the samples at `at(0..=n)` (increasing), refined between them, each
+/// after the first shown to `seen`: its roots that are zeros of f where the pair reaches.
+fn branch(r: &Residual, sg: i8, n: usize, at: impl Fn(usize) -> f64, scale: f64, mut seen: impl FnMut(&Sample)) -> ArrayVec<f64, 16> {
     let reach = |a: f64| r.pair.meet(&r.inner(a)).reach;
     let eval = |a: f64, clamp: bool| r.eval(a, sg, clamp);
     let lever = scale + r.m.rotaries.iter().map(|r| r.pivot.norm()).sum::<f64>();
     let mut scan = Scan {
         eval: &eval,
         reach: &reach,
-        leaves: Vec::with_capacity(N + 64),
+        leaves: Vec::with_capacity(n + 64),
         lever,
     };
-    let mut prev = scan.sample(a, false);
+    let mut prev = scan.sample(at(0), false);
     scan.leaves.push(prev);
-    for k in 1..=N {
-        let cur = scan.sample(a + (b - a) * k as f64 / N as f64, false);
+    for k in 1..=n {
+        let cur = scan.sample(at(k), false);
+        seen(&cur);
         scan.refine(prev, cur, 0);
         prev = cur;
     }
+    // Keep only true roots: a sign change across a branch discontinuity is not one, nor is a
+    // zero of f clamped to the fold inside a gap where the pair cannot reach.
     let tol = 1e-9 * scale;
     scan.roots(tol)
         .into_iter()
