@@ -91,9 +91,11 @@ impl AngleError {
         let g = |c: f64| c + self.delta(c) - actual;
         let (mut lo, mut hi) = (actual - self.max_abs - 1e-9, actual + self.max_abs + 1e-9);
         let mut c = actual - self.delta(actual);
+        // The rounding of `g` itself: a residual below it only chases the last bits.
+        let floor = 4.0 * f64::EPSILON * (1.0 + actual.abs());
         for _ in 0..100 {
             let v = g(c);
-            if v == 0.0 {
+            if v.abs() <= floor {
                 return c;
             }
             if v < 0.0 {

@@ -177,6 +177,7 @@ pub(super) fn three(
     };
     found.sort_by(|a, b| a.0.total_cmp(&b.0));
     let mut count = 0u8;
+    let first = out.len();
     for (a, sg) in found {
         let v = r.inner(a);
         let meet = pair.meet(&v);
@@ -195,9 +196,27 @@ pub(super) fn three(
         if let Some(s) = out.last_mut() {
             polish(m, pose, setup, s);
         }
+        // Next to the inner axis the rounding can split one root of f in two, a hair apart: one
+        // solution, the one that reproduces the pose better.
+        let n = out.len();
+        if let Some(k) = (first..n.saturating_sub(1)).find(|&k| {
+            (0..3).all(|i| wrap(out[k].actual[i] - out[n - 1].actual[i]).abs() < 1e-7)
+        }) {
+            if miss(m, pose, setup, &out[n - 1]) < miss(m, pose, setup, &out[k]) {
+                out.swap(k, n - 1);
+            }
+            out.pop();
+            continue;
+        }
         count += 1;
     }
     Ok(())
+}
+
+/// How far a solution's pose is from the one wanted: tip distance plus axis angle (rad).
+fn miss(m: &Machine, pose: &Pose, setup: &Setup, s: &Solution) -> f64 {
+    let p = super::fk::fk_actual(m, &s.joints.linear, &s.actual, setup);
+    (p.tip - pose.tip).norm() + (p.axis - pose.axis.normalize()).norm()
 }
 
 /// The roots of f± (outer angle, branch) through the product's roots; `None` where the scan must
@@ -216,7 +235,6 @@ fn resultant_roots(r: &Residual, scale: f64) -> Option<ArrayVec<(f64, i8), 16>> 
     let outside = |x: f64| !zones.iter().any(|&(at, lo, hi)| (lo..=hi).contains(&(at + wrap(x - at))));
     let poly = Trig::interpolate(|a0| r.product(a0))?;
     let iso = poly.isolate()?;
-    let tol = 1e-9 * scale;
     let mut found: ArrayVec<(f64, i8), 16> = ArrayVec::new();
     let mut add = |a: f64, sg: i8| {
         let a = wrap(a);
@@ -226,6 +244,10 @@ fn resultant_roots(r: &Residual, scale: f64) -> Option<ArrayVec<(f64, i8), 16>> 
             Some(())
         }
     };
+    // Where the product's rounding hides how many roots there are (a double root; the
+    // orientation near the inner axis, where its factor st1⁴ is tiny), the scan of f± searches.
+    let mut scans: ArrayVec<(f64, f64), 64> = iso.unsure.iter().copied().collect();
+    scans.extend(zones.iter().map(|&(_, lo, hi)| (lo, hi)));
     for &(x, slope, lo, hi) in iso.roots.iter().filter(|r| outside(r.0)) {
         let mut got = settled(r, x, slope, (lo, hi), scale);
         if got.is_empty() {
@@ -240,84 +262,21 @@ fn resultant_roots(r: &Residual, scale: f64) -> Option<ArrayVec<(f64, i8), 16>> 
                 got = settled(r, x, f64::NAN, (lo, hi), scale);
             }
         }
+        if got.is_empty() {
+            scans.try_push((lo, hi)).ok()?;
+        }
         for (a, sg) in got {
             add(a, sg)?;
         }
     }
-    for &(lo, hi) in iso.unsure.iter().filter(|u| outside(u.0) || outside(u.1)) {
-        for (x, dip) in unsure_roots(r, lo, hi) {
-            let (fx, _) = r.branches(x);
-            for (k, sg) in [1i8, -1].into_iter().enumerate() {
-                let f = |a: f64| r.eval(a, sg, true).map(|v| v.0);
-                let (a, fa) = if dip {
-                    // A dip is a root only where f itself touches zero (a double root).
-                    let w = (hi - lo).max(1e-7);
-                    let (a, fa) = scan::golden_min(|a| f(a).map(f64::abs), x - w, x + w);
-                    (a, if fa <= 1e-12 * scale { fa } else { f64::INFINITY })
-                } else if vanishes(&fx, k, scale) {
-                    let (a, fa) = settle(f, x, fx[k], f64::NAN, (lo - 1e-3, hi + 1e-3), scale);
-                    // Near a flat stretch of f, small is not zero: f must change sign there.
-                    let d = 1e-8 * (1.0 + a.abs());
-                    let crosses = matches!((f(a - d), f(a + d)), (Some(l), Some(h)) if l.signum() != h.signum());
-                    (a, if crosses || fa.abs() <= 1e-12 * scale { fa } else { f64::INFINITY })
-                } else {
-                    continue;
-                };
-                if fa.abs() <= tol && r.reachable(a) {
-                    add(a, sg)?;
-                }
-            }
-        }
-    }
-    for &(_, lo, hi) in &zones {
+    for &(lo, hi) in &scans {
         for sg in [1i8, -1] {
-            for a in scan::local(r, sg, lo, hi, scale) {
+            for a in scan::local(r, sg, lo - 1e-9, hi + 1e-9, scale) {
                 add(a, sg)?;
             }
         }
     }
     Some(found)
-}
-
-/// Candidate roots in a stretch where the polynomial's rounding hides them (a double root, or
-/// two closer than it tells apart): the product itself, rounded relative to its size, sampled
-/// over the stretch and as much again on either side; its sign changes bracketed, its dips
-/// toward zero minimised.
-fn unsure_roots(r: &Residual, lo: f64, hi: f64) -> ArrayVec<(f64, bool), 16> {
-    const N: usize = 32;
-    let g = |x: f64| r.product(Cs::of(x)).unwrap_or(0.0);
-    let w = (hi - lo).max(1e-7);
-    let (a, b) = (lo - w, hi + w);
-    let xs: ArrayVec<f64, { N + 1 }> = (0..=N).map(|k| a + (b - a) * k as f64 / N as f64).collect();
-    let gs: ArrayVec<f64, { N + 1 }> = xs.iter().map(|&x| g(x)).collect();
-    let mut out = ArrayVec::new();
-    for i in 0..xs.len() - 1 {
-        if gs[i] == 0.0 {
-            let _ = out.try_push((xs[i], false));
-        } else if gs[i].signum() != gs[i + 1].signum()
-            && let Some(x) = brent(|x| Some(g(x)), xs[i], xs[i + 1], gs[i], gs[i + 1])
-        {
-            let _ = out.try_push((x, false));
-        }
-    }
-    for i in 1..xs.len() - 1 {
-        let (g0, g1, g2) = (gs[i - 1], gs[i], gs[i + 1]);
-        if g0.signum() == g1.signum() && g1.signum() == g2.signum() && g1.abs() < g0.abs() && g1.abs() <= g2.abs() {
-            // Crossing zero: two roots, one each side of the least value; else a candidate.
-            let sg = g1.signum();
-            let (x, gx) = scan::golden_min(|x| Some(sg * g(x)), xs[i - 1], xs[i + 1]);
-            if gx < 0.0 {
-                for (l, h, gl) in [(xs[i - 1], x, g0), (x, xs[i + 1], g2)] {
-                    if let Some(x) = brent(|x| Some(g(x)), l, h, gl, sg * gx) {
-                        let _ = out.try_push((x, false));
-                    }
-                }
-            } else {
-                let _ = out.try_push((x, true));
-            }
-        }
-    }
-    out
 }
 
 /// Whether branch `k` of f = [f₊, f₋] is the one a root of the product belongs to: the one
@@ -561,9 +520,13 @@ impl Isolated<'_> {
 
     fn interval(&mut self, p: At, q: At, depth: u32) -> Option<()> {
         let h = q.x - p.x;
-        // |g''| on the interval: at most its value at the nearer end plus jerk × h/2.
-        let c = p.e.abs().max(q.e.abs()) + 0.5 * self.t.jerk * h;
         let noise = self.t.noise;
+        // The coefficients' rounding (at most `noise` summed) reaches the n-th derivative 8ⁿ-fold.
+        let (slope_noise, curve_noise) = (8.0 * noise, 64.0 * noise);
+        let jerk = self.t.jerk + 512.0 * noise;
+        // |g''| on the interval: g'' leaves each end at most at the rate `jerk`, so it stays
+        // within the tent of the two ends' values.
+        let c = 0.5 * (p.e + q.e).abs() + 0.5 * jerk * h + curve_noise;
         // A zero at the left end is a root whose interval is its neighbourhood.
         let s0 = if p.g == 0.0 {
             self.roots.try_push((p.x, p.d, p.x - h, q.x)).ok()?;
@@ -574,7 +537,7 @@ impl Isolated<'_> {
         let change = s0 != q.g.signum() && q.g != 0.0;
         let bend = 0.125 * c * h * h;
         if change {
-            if p.d.signum() == q.d.signum() && p.d.abs().min(q.d.abs()) > 0.5 * c * h {
+            if p.d.signum() == q.d.signum() && p.d.abs().min(q.d.abs()) - slope_noise > 0.5 * c * h {
                 let (r, d) = self.t.newton(p, q);
                 return self.roots.try_push((r, d, p.x, q.x)).ok();
             }
@@ -584,8 +547,8 @@ impl Isolated<'_> {
             let (g0, g1) = (s0 * p.g, s0 * q.g);
             let tangents = g0
                 .min(g1)
-                .min(g0 + s0 * p.d * 0.5 * h - bend)
-                .min(g1 - s0 * q.d * 0.5 * h - bend);
+                .min(g0 + (s0 * p.d - slope_noise) * 0.5 * h - bend)
+                .min(g1 - (s0 * q.d + slope_noise) * 0.5 * h - bend);
             if tangents.max(g0.min(g1) - bend) > noise {
                 return Some(());
             }

@@ -13,6 +13,8 @@ use arrayvec::ArrayVec;
 const SAMPLES: usize = 360;
 const MAX_DEPTH: u32 = 10;
 const SWING: f64 = 0.1; // rad of inner-angle change that asks for a finer look
+/// A stretch's scan starts this deep: the stretches the product leaves to it are narrow.
+const LOCAL_DEPTH: u32 = 4;
 
 /// One evaluation of the 3-rotary residual: outer angle, missing-linear coordinate, angles.
 #[derive(Clone, Copy)]
@@ -121,7 +123,7 @@ impl<F: Fn(f64, bool) -> Option<(f64, [Cs; 3], bool)>, G: Fn(f64) -> f64> Scan<'
 }
 
 /// Minimises f on [a, b] by golden section; (argmin, f there).
-pub(super) fn golden_min(f: impl Fn(f64) -> Option<f64>, a: f64, b: f64) -> (f64, f64) {
+fn golden_min(f: impl Fn(f64) -> Option<f64>, a: f64, b: f64) -> (f64, f64) {
     let g = 0.5 * (5f64.sqrt() - 1.0);
     let h = |x: f64| f(x).unwrap_or(f64::INFINITY);
     let (mut a, mut b) = (a, b);
@@ -184,7 +186,7 @@ pub(super) fn roots(r: &Residual, scale: f64) -> Result<ArrayVec<(f64, i8), 16>,
             }
             None => best_miss = best_miss.min(r.pair.miss(&r.inner(s.a))),
         };
-        for a in branch(r, sg, SAMPLES, at, scale, seen) {
+        for a in branch(r, sg, SAMPLES, at, scale, 0, seen) {
             let _ = found.try_push((a, sg));
         }
     }
@@ -203,16 +205,16 @@ pub(super) fn roots(r: &Residual, scale: f64) -> Result<ArrayVec<(f64, i8), 16>,
     Ok(found)
 }
 
-/// The roots of f on branch `sg` over the stretch [a, b] (where the inner angles swing too fast
-/// for the product to tell its roots).
+/// The roots of f on branch `sg` over the stretch [a, b] (where the product's rounding cannot
+/// tell its roots).
 pub(super) fn local(r: &Residual, sg: i8, a: f64, b: f64, scale: f64) -> ArrayVec<f64, 16> {
-    const N: usize = 16;
-    branch(r, sg, N, |k| a + (b - a) * k as f64 / N as f64, scale, |_| {})
+    const N: usize = 4;
+    branch(r, sg, N, |k| a + (b - a) * k as f64 / N as f64, scale, LOCAL_DEPTH, |_| {})
 }
 
 /// One branch scanned from the samples at `at(0..=n)` (increasing), refined between them, each
 /// after the first shown to `seen`: its roots that are zeros of f where the pair reaches.
-fn branch(r: &Residual, sg: i8, n: usize, at: impl Fn(usize) -> f64, scale: f64, mut seen: impl FnMut(&Sample)) -> ArrayVec<f64, 16> {
+fn branch(r: &Residual, sg: i8, n: usize, at: impl Fn(usize) -> f64, scale: f64, depth0: u32, mut seen: impl FnMut(&Sample)) -> ArrayVec<f64, 16> {
     let reach = |a: f64| r.pair.meet(&r.inner(a)).reach;
     let eval = |a: f64, clamp: bool| r.eval(a, sg, clamp);
     let lever = scale + r.m.rotaries.iter().map(|r| r.pivot.norm()).sum::<f64>();
@@ -227,7 +229,7 @@ fn branch(r: &Residual, sg: i8, n: usize, at: impl Fn(usize) -> f64, scale: f64,
     for k in 1..=n {
         let cur = scan.sample(at(k), false);
         seen(&cur);
-        scan.refine(prev, cur, 0);
+        scan.refine(prev, cur, depth0);
         prev = cur;
     }
     // Keep only true roots: a sign change across a branch discontinuity is not one, nor is a

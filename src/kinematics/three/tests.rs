@@ -7,6 +7,9 @@ use crate::kinematics::model::Shape;
 use crate::kinematics::subproblem::FreeAngle;
 use crate::kinematics::{Joints, Linear, Machine, MachineSpec, Mount, Rotary, Setup, Units, Vec3, fk, wrap};
 
+/// A whole turn, in radians.
+const TURN: (f64, f64) = (-std::f64::consts::PI, std::f64::consts::PI);
+
 /// xorshift: deterministic, so a failure names its case.
 struct Rng(u64);
 
@@ -140,8 +143,8 @@ fn has(roots: &[(f64, i8)], a: f64, sg: Option<i8>) -> bool {
 }
 
 /// Counts of (cases, resultant answered, roots the scan found, found by both, resultant only,
-/// the scan's roots that are none).
-fn compare(m: &Machine, rng: &mut Rng, cases: usize, tally: &mut [usize; 6]) {
+/// the scan's roots that are none); the rotaries drawn from `travel` (radians).
+fn compare(m: &Machine, rng: &mut Rng, cases: usize, travel: [(f64, f64); 3], tally: &mut [usize; 6]) {
     let setup = Setup::new(m.default_tool_length, Vec3::zeros());
     for _ in 0..cases {
         let mut j = Joints::default();
@@ -150,8 +153,8 @@ fn compare(m: &Machine, rng: &mut Rng, cases: usize, tally: &mut [usize; 6]) {
                 j.linear[i] = rng.range(-800.0, 800.0);
             }
         }
-        for a in j.rotary.iter_mut() {
-            *a = rng.range(-std::f64::consts::PI, std::f64::consts::PI);
+        for (a, &(lo, hi)) in j.rotary.iter_mut().zip(&travel) {
+            *a = rng.range(lo, hi);
         }
         let (old, new, outer, bogus) = both(m, &j, &setup);
         tally[0] += 1;
@@ -204,13 +207,42 @@ fn the_resultant_finds_every_root_the_scan_finds() {
             continue;
         }
         machines += 1;
-        compare(&m, &mut rng, 25, &mut tally);
+        compare(&m, &mut rng, 25, [TURN; 3], &mut tally);
     }
-    compare(&propeller(), &mut rng, 500 * k, &mut tally);
+    let d = f64::to_radians;
+    compare(&propeller(), &mut rng, 500 * k, [TURN; 3], &mut tally);
+    // Within the profile's travel; and with B within 3° of ±90°, where the tool lies along A (the
+    // inner axis) for some C, and close roots gather (the cases that found two gaps).
+    compare(&propeller(), &mut rng, 500 * k, [TURN, (d(-120.0), d(120.0)), (d(-100.0), d(100.0))], &mut tally);
+    compare(&propeller(), &mut rng, 250 * k, [TURN, (d(-120.0), d(120.0)), (d(87.0), d(93.0))], &mut tally);
+    compare(&propeller(), &mut rng, 250 * k, [TURN, (d(-120.0), d(120.0)), (d(-93.0), d(-87.0))], &mut tally);
     eprintln!(
         "cases {}, resultant answered {}, scan roots {}, also found {}, resultant only {}, scan's roots in an unreachable gap {}",
         tally[0], tally[1], tally[2], tally[3], tally[4], tally[5]
     );
     assert!(tally[1] * 10 >= tally[0] * 9, "the scan answered too often: {tally:?}");
+}
+
+
+
+#[test]
+fn two_roots_on_one_branch_microradians_apart_are_both_found() {
+    // Poses the profile's own travel gave (1 in 100 000 each): B near −90°, two roots of f₋
+    // 3e-5 and 1.2e-5 rad apart, where the product's rounding could not tell them apart.
+    let m = propeller();
+    let setup = Setup::new(m.default_tool_length, Vec3::zeros());
+    for (linear, rotary) in [
+        ([0.0, -728.0634614002945, -335.9523285179989], [-2.6760457067572943, -1.9567300858593424, -1.5606983370650898]),
+        ([0.0, -826.190101812559, -250.0622762929595], [0.002308303649497301, -2.0935446392706036, -1.5419024073980092]),
+    ] {
+        let j = Joints { linear, rotary };
+        let (old, new, outer, _) = both(&m, &j, &setup);
+        let new = new.expect("the resultant answers");
+        assert!(has(&new, outer, None));
+        for &(a, sg) in &old {
+            assert!(has(&new, a, Some(sg)), "({a}, {sg}) is missing from {new:?}; the scan: {old:?}");
+        }
+        assert_eq!(new.len(), old.len(), "{new:?} against the scan's {old:?}");
+    }
 }
 
