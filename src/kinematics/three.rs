@@ -215,8 +215,14 @@ pub(super) fn three(
 
 /// How far a solution's pose is from the one wanted: tip distance plus axis angle (rad).
 fn miss(m: &Machine, pose: &Pose, setup: &Setup, s: &Solution) -> f64 {
-    let p = super::fk::fk_actual(m, &s.joints.linear, &s.actual, setup);
-    (p.tip - pose.tip).norm() + (p.axis - pose.axis.normalize()).norm()
+    let (dt, da) = pose_error(m, &s.joints.linear, &s.actual, pose, setup);
+    dt.norm() + da.norm()
+}
+
+/// The tip's and the axis's errors of the joints' pose against the one wanted.
+fn pose_error(m: &Machine, linear: &[f64; 3], actual: &[f64; 3], pose: &Pose, setup: &Setup) -> (Vec3, Vec3) {
+    let p = super::fk::fk_actual(m, linear, actual, setup);
+    (p.tip - pose.tip, p.axis - pose.axis.normalize())
 }
 
 /// The roots of f± (outer angle, branch) through the product's roots; `None` where the scan must
@@ -586,8 +592,7 @@ fn polish(m: &Machine, pose: &Pose, setup: &Setup, sol: &mut Solution) {
         }
         let mut a = [0.0; 3];
         a[..nr].copy_from_slice(&x.as_slice()[lin.len()..lin.len() + nr]);
-        let p = super::fk::fk_actual(m, &l, &a, setup);
-        let (dt, da) = (p.tip - pose.tip, p.axis - pose.axis.normalize());
+        let (dt, da) = pose_error(m, &l, &a, pose, setup);
         SVector::<f64, 6>::new(dt.x, dt.y, dt.z, da.x, da.y, da.z)
     };
     let mut x = SVector::<f64, 5>::zeros();
