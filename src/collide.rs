@@ -346,12 +346,17 @@ pub struct World {
     step: f64,
     reach: f64,
     tool: Option<ToolShape>,
-    /// Scratch: each body's pose and box at the sample being checked (no allocation a block).
-    centres: Vec<Vector>,
     /// Per pair, a lower bound on its bodies' distance: the last one measured, less how far
     /// anything can have moved since. A pair still farther than it must be is not queried
     /// again; most pairs stay clear for many blocks, and parry's queries are the check's cost.
     lower: Vec<f64>,
+    /// How far anything can have moved since the last pass over the pairs (not yet taken off
+    /// `lower`).
+    pending: f64,
+    /// At the last pass, the least of `lower` less each pair's limit, over the pairs other than
+    /// the cutter against the stock, and over those: while `pending` stays below it, no pair
+    /// needs a query, and a block costs no pass.
+    slack: [f64; 2],
     /// The joints (linear; actual rotary angles), work offset and tool length of the last check.
     last: Option<([f64; 3], [f64; 3], Vec3, f64)>,
     /// The block before was a rapid (or there was none): see [`World::stock_at_rapid`].
@@ -392,8 +397,9 @@ impl World {
             reach: 0.0,
             tool: None,
             prev_rapid: true,
-            centres: Vec::new(),
             lower: Vec::new(),
+            pending: 0.0,
+            slack: [f64::NEG_INFINITY; 2],
             last: None,
         };
         for b in &g.bodies {
@@ -471,6 +477,7 @@ impl World {
             }
         }
         self.lower = vec![f64::NEG_INFINITY; self.pairs.len()];
+        self.slack = [f64::NEG_INFINITY; 2];
         self.last = None;
     }
 
@@ -545,38 +552,44 @@ impl World {
             _ => f64::INFINITY,
         };
         self.last = Some((*linear, *actual, *work_offset, tool_length));
-        let l = Self::links(m, linear, actual, tool_length, work_offset);
-        self.centres.clear();
-        for b in &self.bodies {
-            self.centres.push(Self::pose_of(&l, b.link) * b.centre);
+        // Rounded up: the sum is never short of the motion.
+        self.pending = (self.pending + moved) * (1.0 + 2.0 * f64::EPSILON);
+        let clear = |slack: f64| slack - self.pending > 1e-9 * (1.0 + slack.abs());
+        if clear(self.slack[0]) && (!stock || clear(self.slack[1])) {
+            return;
         }
+        // The links' poses only where a pair must be asked.
+        let mut links = None;
+        let mut slack = [f64::INFINITY; 2];
         for (p, &(i, j, kind)) in self.pairs.iter().enumerate() {
-            self.lower[p] -= moved;
-            if kind == 2 && !stock {
-                continue;
-            }
+            self.lower[p] -= self.pending;
             // Told below this distance: the clearance, or for the cutter the depth it may cut.
             let limit = if kind == 0 { self.clearance } else { -self.cut_depth };
-            if self.lower[p] > limit {
-                continue;
-            }
-            let (bi, bj) = (&self.bodies[i], &self.bodies[j]);
-            let (pi, pj) = (Self::pose_of(&l, bi.link) * bi.local, Self::pose_of(&l, bj.link) * bj.local);
-            match distance(bi, bj, &pi, &pj, self.centres[i].distance(self.centres[j]), limit) {
-                Apart(d) => self.lower[p] = d,
-                Touching(d) => {
-                    self.lower[p] = d;
-                    match out.iter_mut().find(|h| h.a == bi.name && h.b == bj.name) {
-                        Some(h) => h.dist = h.dist.min(d),
-                        None => out.push(Hit {
-                            a: bi.name.clone(),
-                            b: bj.name.clone(),
-                            dist: d,
-                        }),
+            if (kind != 2 || stock) && self.lower[p] <= limit {
+                let l = links.get_or_insert_with(|| Self::links(m, linear, actual, tool_length, work_offset));
+                let (bi, bj) = (&self.bodies[i], &self.bodies[j]);
+                let (li, lj) = (Self::pose_of(l, bi.link), Self::pose_of(l, bj.link));
+                let centres = (li * bi.centre).distance(lj * bj.centre);
+                self.lower[p] = match distance(bi, bj, &(li * bi.local), &(lj * bj.local), centres, limit) {
+                    Apart(d) => d,
+                    Touching(d) => {
+                        match out.iter_mut().find(|h| h.a == bi.name && h.b == bj.name) {
+                            Some(h) => h.dist = h.dist.min(d),
+                            None => out.push(Hit {
+                                a: bi.name.clone(),
+                                b: bj.name.clone(),
+                                dist: d,
+                            }),
+                        }
+                        d
                     }
-                }
+                };
             }
+            let class = usize::from(kind == 2);
+            slack[class] = slack[class].min(self.lower[p] - limit);
         }
+        self.slack = slack;
+        self.pending = 0.0;
     }
 
     /// How many samples the motion between two joint sets needs so that no body moves more than
