@@ -28,11 +28,8 @@ const GRID: usize = 32;
 const MAX_DEPTH: u32 = 30;
 /// sin² of the closest approach of the orientation to the inner axis below which the scan
 /// searches the whole turn: within 3e-5 rad of it the inner angles turn through π within a few
-/// µrad of outer angle, finer than the zone's scan resolves.
+/// µrad of outer angle, finer than a stretch's scan resolves.
 const NEAR_INNER_AXIS: f64 = 1e-9;
-/// sin² θ1 under which the product's factor st1⁴ (< 1e-8) hides roots from its rounding: a
-/// stretch of outer angle where the scan searches each branch instead.
-const SWING_ZONE: f64 = 1e-4;
 
 /// The 1-D problem of one pose: the chain, the orientation and the point to place.
 pub(super) struct Residual<'a> {
@@ -126,22 +123,14 @@ impl Residual<'_> {
         Some(g * fm.st2 * fm.st2)
     }
 
-    /// Where the orientation passes nearest the inner axis, toward +s1 and toward −s1, over a
-    /// turn of the outer rotary (`s1·v(a) = α + β cos a − γ sin a`): for each, the outer angle,
-    /// sin² θ1 there, and the half-width of the stretch around it where sin² θ1 < [`SWING_ZONE`].
-    fn inner_axis_passes(&self) -> [(f64, f64, f64); 2] {
+    /// sin² of the orientation's closest approach to the inner axis (toward +s1 or −s1) over a
+    /// turn of the outer rotary (`s1·v(a) = α + β cos a − γ sin a`).
+    fn nearest_inner_axis(&self) -> f64 {
         let (s0, s1, u) = (self.s0, &self.pair.s1, self.u);
         let alpha = s1.dot(s0) * s0.dot(u);
         let (beta, gamma) = (s1.dot(u) - alpha, s1.dot(&s0.cross(u)));
-        let rho = beta.hypot(gamma);
-        let peak = -gamma.atan2(beta);
-        [1.0, -1.0].map(|sg: f64| {
-            // sg (s1·v) = sg α + ρ cos Δ at Δ from the pass.
-            let m = (sg * alpha + rho).min(1.0);
-            let half = (((1.0 - SWING_ZONE).sqrt() - sg * alpha) / rho.max(1e-300)).clamp(-1.0, 1.0).acos();
-            let at = if sg > 0.0 { peak } else { peak + std::f64::consts::PI };
-            (wrap(at), (1.0 - m) * (1.0 + m), half)
-        })
+        let m = (alpha.abs() + beta.hypot(gamma)).min(1.0);
+        (1.0 - m) * (1.0 + m)
     }
 }
 
@@ -228,17 +217,9 @@ fn pose_error(m: &Machine, linear: &[f64; 3], actual: &[f64; 3], pose: &Pose, se
 /// The roots of f± (outer angle, branch) through the product's roots; `None` where the scan must
 /// search instead.
 fn resultant_roots(r: &Residual, scale: f64) -> Option<ArrayVec<(f64, i8), 16>> {
-    let passes = r.inner_axis_passes();
-    if passes.iter().any(|p| p.1 < NEAR_INNER_AXIS) {
+    if r.nearest_inner_axis() < NEAR_INNER_AXIS {
         return None;
     }
-    // Roots of the product inside a swing zone are left to the scan of the zone.
-    let zones: ArrayVec<(f64, f64, f64), 2> = passes
-        .iter()
-        .filter(|p| p.1 < SWING_ZONE)
-        .map(|&(at, _, half)| (at, at - half, at + half))
-        .collect();
-    let outside = |x: f64| !zones.iter().any(|&(at, lo, hi)| (lo..=hi).contains(&(at + wrap(x - at))));
     let poly = Trig::interpolate(|a0| r.product(a0))?;
     let iso = poly.isolate()?;
     let mut found: ArrayVec<(f64, i8), 16> = ArrayVec::new();
@@ -253,8 +234,7 @@ fn resultant_roots(r: &Residual, scale: f64) -> Option<ArrayVec<(f64, i8), 16>> 
     // Where the product's rounding hides how many roots there are (a double root; the
     // orientation near the inner axis, where its factor st1⁴ is tiny), the scan of f± searches.
     let mut scans: ArrayVec<(f64, f64), 64> = iso.unsure.iter().copied().collect();
-    scans.extend(zones.iter().map(|&(_, lo, hi)| (lo, hi)));
-    for &(x, slope, lo, hi) in iso.roots.iter().filter(|r| outside(r.0)) {
+    for &(x, slope, lo, hi) in &iso.roots {
         let mut got = settled(r, x, slope, (lo, hi), scale);
         if got.is_empty() {
             // Next to a fold f± turns like √reach, so the polynomial's root (rounded to the
