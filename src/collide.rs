@@ -565,7 +565,8 @@ impl World {
             self.lower[p] -= self.pending;
             // Told below this distance: the clearance, or for the cutter the depth it may cut.
             let limit = if kind == 0 { self.clearance } else { -self.cut_depth };
-            if (kind != 2 || stock) && self.lower[p] <= limit {
+            // Not above the limit (a NaN bound too): asked.
+            if (kind != 2 || stock) && !(self.lower[p] > limit) {
                 let l = links.get_or_insert_with(|| Self::links(m, linear, actual, tool_length, work_offset));
                 let (bi, bj) = (&self.bodies[i], &self.bodies[j]);
                 let (li, lj) = (Self::pose_of(l, bi.link), Self::pose_of(l, bj.link));
