@@ -347,8 +347,9 @@ pub struct World {
     reach: f64,
     tool: Option<ToolShape>,
     /// Per pair, a lower bound on its bodies' distance: the last one measured, less how far
-    /// anything can have moved since. A pair still farther than it must be is not queried
-    /// again; most pairs stay clear for many blocks, and parry's queries are the check's cost.
+    /// anything could move up to the last pass (`pending` is the rest). A pair still farther
+    /// than it must be is not queried again; most pairs stay clear for many blocks, and parry's
+    /// queries are the check's cost.
     lower: Vec<f64>,
     /// How far anything can have moved since the last pass over the pairs (not yet taken off
     /// `lower`).
