@@ -80,20 +80,28 @@ impl Residual<'_> {
         Some((self.coordinate(cs), cs, sing))
     }
 
-    /// f on both branches at outer angle `a` (clamped to the fold), and sin² θ1 there.
-    fn branches(&self, a: f64) -> ([f64; 2], f64) {
+    /// f on both branches at outer angle `a` (clamped to the fold), sin² θ1 and the pair's reach
+    /// there.
+    fn branches(&self, a: f64) -> ([f64; 2], f64, f64) {
         let (a0, v, meet) = self.meet_at(a);
         let f = [1.0, -1.0].map(|sg| {
             let (a1, a2, _) = self.pair.angles(&v, &meet, sg, self.free);
             self.coordinate([a0, a1, a2])
         });
-        (f, meet.st1() * meet.st1())
+        (f, meet.st1() * meet.st1(), meet.reach)
+    }
+
+    /// f on branch `sg` at outer angle `a` (clamped to the fold), and the pair's reach there.
+    fn clamped(&self, a: f64, sg: i8) -> (f64, f64) {
+        let (a0, v, meet) = self.meet_at(a);
+        let (a1, a2, _) = self.pair.angles(&v, &meet, sg as f64, self.free);
+        (self.coordinate([a0, a1, a2]), meet.reach)
     }
 
     /// Whether the inner pair reaches the orientation at outer angle `a` (on the fold to
     /// rounding): a zero of f clamped to the fold inside a gap of reach is not a solution.
     fn reachable(&self, a: f64) -> bool {
-        self.pair.meet(&self.inner(a)).reach >= -1e-14
+        reaches(self.pair.meet(&self.inner(a)).reach)
     }
 
     /// `st1⁴ f₊ f₋` at outer angle `a0`, also where the branches are complex (D < 0), from f
@@ -168,8 +176,7 @@ pub(super) fn three(
     let mut count = 0u8;
     let first = out.len();
     for (a, sg) in found {
-        let v = r.inner(a);
-        let meet = pair.meet(&v);
+        let (a0, v, meet) = r.meet_at(a);
         let (a1, a2, sing) = pair.angles(&v, &meet, sg as f64, free);
         let branch = if meet.reach <= 1e-14 || meet.on_axis { 0 } else { sg };
         // The same pose reached on the fold by both branches is one solution.
@@ -181,7 +188,7 @@ pub(super) fn three(
             continue;
         }
         let sing = sing.then_some((ch.seq[1], opt.free_angle));
-        push(m, out, pose, setup, &ch.seq, [Cs::of(a), a1, a2], None, branch, count, sing);
+        push(m, out, pose, setup, &ch.seq, [a0, a1, a2], None, branch, count, sing);
         if let Some(s) = out.last_mut() {
             polish(m, pose, setup, s);
         }
@@ -274,7 +281,7 @@ fn vanishes(f: &[f64; 2], k: usize, scale: f64) -> bool {
 /// The roots of f± at a root `x` of the product alone in (lo, hi): the branch nearer zero (both
 /// on the fold), settled; `slope`: the product's g' at x, or NaN.
 fn settled(r: &Residual, x: f64, slope: f64, (lo, hi): (f64, f64), scale: f64) -> ArrayVec<(f64, i8), 2> {
-    let (f, st2) = r.branches(x);
+    let (f, st2, reach) = r.branches(x);
     let mut out = ArrayVec::new();
     for (k, sg) in [1i8, -1].into_iter().enumerate() {
         if !vanishes(&f, k, scale) {
@@ -287,8 +294,8 @@ fn settled(r: &Residual, x: f64, slope: f64, (lo, hi): (f64, f64), scale: f64) -
         } else {
             f64::NAN
         };
-        let (a, fa) = settle(|a| r.eval(a, sg, true).map(|v| v.0), x, f[k], d, (lo, hi), scale);
-        if fa.abs() <= 1e-9 * scale && r.reachable(a) {
+        let (a, fa, reach) = settle(|a| r.clamped(a, sg), x, (f[k], reach), d, (lo, hi), scale);
+        if fa.abs() <= 1e-9 * scale && reaches(reach) {
             out.push((a, sg));
         }
     }
@@ -297,30 +304,35 @@ fn settled(r: &Residual, x: f64, slope: f64, (lo, hi): (f64, f64), scale: f64) -
 
 /// Newton's step on f from a root of the product, then secant steps, within the interval that
 /// holds the root alone: the product's rounding (its coefficients carry that of every sample)
-/// can leave its root a few ulps of the product away from f's. `slope`: f' at x, or NaN.
-fn settle(f: impl Fn(f64) -> Option<f64>, x: f64, fx: f64, slope: f64, (lo, hi): (f64, f64), scale: f64) -> (f64, f64) {
-    let (mut x, mut fx, mut d) = (x, fx, slope);
+/// can leave its root a few ulps of the product away from f's. `slope`: f' at x, or NaN; `f`
+/// gives f and something else of the point (`px` at x), returned with the point settled on.
+fn settle<P: Copy>(f: impl Fn(f64) -> (f64, P), x: f64, (fx, px): (f64, P), slope: f64, (lo, hi): (f64, f64), scale: f64) -> (f64, f64, P) {
+    let (mut x, mut fx, mut px, mut d) = (x, fx, px, slope);
     for _ in 0..4 {
         if !(fx.abs() > 1e-14 * scale) {
             break;
         }
         if !(d.is_finite() && d != 0.0) {
             let h = 1e-8 * (1.0 + x.abs());
-            let Some(fh) = f(x + h) else { break };
-            d = (fh - fx) / h;
+            d = (f(x + h).0 - fx) / h;
         }
         let xn = x - fx / d;
         if !(lo..=hi).contains(&xn) {
             break;
         }
-        let Some(fn_) = f(xn) else { break };
+        let (fn_, pn) = f(xn);
         if fn_.abs() >= fx.abs() {
             break;
         }
         d = (fn_ - fx) / (xn - x);
-        (x, fx) = (xn, fn_);
+        (x, fx, px) = (xn, fn_, pn);
     }
-    (x, fx)
+    (x, fx, px)
+}
+
+/// Whether the pair's reach is that of an orientation it reaches (on the fold to rounding).
+fn reaches(reach: f64) -> bool {
+    reach >= -1e-14
 }
 
 /// `g(x) = a₀ + Σ aₖ cos kx + bₖ sin kx`, k = 1..=8.
@@ -407,13 +419,15 @@ impl Trig {
     }
 
     /// The one root between `p` and `q`, where g is proven monotone: Newton's steps, bisecting
-    /// whenever a step would leave the bracket.
+    /// whenever a step would leave the bracket. Each point's (cos, sin) is its neighbour's turned
+    /// by the step ([`turn_small`]), or the bracket's chord midpoint: no sincos.
     fn newton(&self, p: At, q: At) -> (f64, f64) {
         let (mut lo, mut hi) = (p, q);
         let mut x = p.x - p.g * (q.x - p.x) / (q.g - p.g);
+        let mut z = turn_small(p.z, x - p.x);
         let mut d = p.d;
         for _ in 0..32 {
-            let a = self.at(x, Cs::of(x));
+            let a = self.at(x, z);
             d = a.d;
             if a.g.abs() <= self.noise {
                 return (x, d);
@@ -425,8 +439,11 @@ impl Trig {
             }
             let (l, r) = (lo.x.min(hi.x), lo.x.max(hi.x));
             let mut next = x - a.g / a.d;
-            if !(next > l && next < r) {
+            if next > l && next < r {
+                z = turn_small(a.z, next - x);
+            } else {
                 next = 0.5 * (l + r);
+                z = chord_mid(lo.z, hi.z);
             }
             if (next - x).abs() <= 4.0 * f64::EPSILON * (1.0 + x.abs()) {
                 return (next, d);
@@ -481,6 +498,37 @@ static GRID_POWERS: std::sync::LazyLock<[[Cs; DEGREE + 1]; GRID]> = std::sync::L
 /// The powers at `N` equally spaced angles from [`OFFSET`].
 fn circle<const N: usize>() -> [[Cs; DEGREE + 1]; N] {
     std::array::from_fn(|i| powers(Cs::of(OFFSET + std::f64::consts::TAU * i as f64 / N as f64)))
+}
+
+/// The midpoint of the arc between two points of the unit circle (less than a half turn apart):
+/// the normalised sum of its ends.
+#[inline]
+fn chord_mid(p: Cs, q: Cs) -> Cs {
+    let (c, s) = (p.c + q.c, p.s + q.s);
+    let n = 1.0 / (c * c + s * s).sqrt();
+    Cs { c: c * n, s: s * n }
+}
+
+/// `z` turned by `h` (|h| ≤ 0.2, within a grid interval): cos h and sin h by their Taylor series
+/// to h¹⁴ and h¹³, whose next terms are below 1e-22 there.
+#[inline]
+fn turn_small(z: Cs, h: f64) -> Cs {
+    debug_assert!(h.abs() <= 0.2, "{h}");
+    const S: [f64; 7] = [1.0, -1.0 / 6.0, 1.0 / 120.0, -1.0 / 5040.0, 1.0 / 362_880.0, -1.0 / 39_916_800.0, 1.0 / 6_227_020_800.0];
+    const C: [f64; 8] = [
+        1.0,
+        -1.0 / 2.0,
+        1.0 / 24.0,
+        -1.0 / 720.0,
+        1.0 / 40_320.0,
+        -1.0 / 3_628_800.0,
+        1.0 / 479_001_600.0,
+        -1.0 / 87_178_291_200.0,
+    ];
+    let h2 = h * h;
+    let s = h * S.iter().rev().fold(0.0, |acc, k| acc * h2 + k);
+    let c = C.iter().rev().fold(0.0, |acc, k| acc * h2 + k);
+    mul(z, Cs { c, s })
 }
 
 /// (cos, sin) of the sum of two angles.
@@ -550,10 +598,7 @@ impl Isolated<'_> {
         if bend <= noise || depth >= MAX_DEPTH {
             return self.unsure(p.x, q.x);
         }
-        // The midpoint of the arc: the normalised sum of its ends.
-        let (zc, zs) = (p.z.c + q.z.c, p.z.s + q.z.s);
-        let n = 1.0 / (zc * zc + zs * zs).sqrt();
-        let mid = self.t.at(0.5 * (p.x + q.x), Cs { c: zc * n, s: zs * n });
+        let mid = self.t.at(0.5 * (p.x + q.x), chord_mid(p.z, q.z));
         self.interval(p, mid, depth + 1)?;
         self.interval(mid, q, depth + 1)
     }
