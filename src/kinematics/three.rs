@@ -346,11 +346,14 @@ struct Trig {
     /// Σ k⁴(|aₖ| + |bₖ|): bounds |g⁗|, so that |g‴| near a point is bounded by its value there
     /// (in the valley the factor st1⁴ digs, every derivative is small but `jerk` is not).
     snap: f64,
+    /// Σ k⁵(|aₖ| + |bₖ|): bounds the fifth derivative, so that |g⁗| near a point is bounded by
+    /// its value there, the same way.
+    crackle: f64,
     /// The bound on how wrong a computed g is.
     noise: f64,
 }
 
-/// A point of the circle with g, g', g'', g''' there.
+/// A point of the circle with g and its first four derivatives there.
 #[derive(Clone, Copy)]
 struct At {
     x: f64,
@@ -359,6 +362,7 @@ struct At {
     d: f64,
     e: f64,
     j: f64,
+    four: f64,
 }
 
 impl Trig {
@@ -393,11 +397,12 @@ impl Trig {
             b,
             jerk: (1..=DEGREE).map(|k| (k * k * k) as f64 * (a[k].abs() + b[k].abs())).sum(),
             snap: (1..=DEGREE).map(|k| (k * k * k * k) as f64 * (a[k].abs() + b[k].abs())).sum(),
+            crackle: (1..=DEGREE).map(|k| (k * k * k * k * k) as f64 * (a[k].abs() + b[k].abs())).sum(),
             noise: 2e-14 * (size + sum),
         })
     }
 
-    /// g, g', g'' at the point `z` = (cos x, sin x).
+    /// g and its derivatives at the point `z` = (cos x, sin x).
     #[inline]
     fn at(&self, x: f64, z: Cs) -> At {
         self.at_powers(x, &powers(z))
@@ -406,7 +411,7 @@ impl Trig {
     /// As [`Trig::at`], from the powers `z¹ … z⁸` (a grid point's are a table's).
     #[inline]
     fn at_powers(&self, x: f64, zk: &[Cs; DEGREE + 1]) -> At {
-        let (mut g, mut d, mut e, mut j) = (self.a[0], 0.0, 0.0, 0.0);
+        let (mut g, mut d, mut e, mut j, mut four) = (self.a[0], 0.0, 0.0, 0.0, 0.0);
         for k in 1..=DEGREE {
             let (c, s) = (self.a[k] * zk[k].c + self.b[k] * zk[k].s, self.b[k] * zk[k].c - self.a[k] * zk[k].s);
             let k = k as f64;
@@ -414,8 +419,9 @@ impl Trig {
             d += k * s;
             e -= k * k * c;
             j -= k * k * k * s;
+            four += k * k * k * k * c;
         }
-        At { x, z: zk[1], g, d, e, j }
+        At { x, z: zk[1], g, d, e, j, four }
     }
 
     /// The one root between `p` and `q`, where g is proven monotone: Newton's steps, bisecting
@@ -563,9 +569,11 @@ impl Isolated<'_> {
         let noise = self.t.noise;
         // The coefficients' rounding (at most `noise` summed) reaches the n-th derivative 8ⁿ-fold.
         let (slope_noise, curve_noise) = (8.0 * noise, 64.0 * noise);
-        // |g'''| on the interval: g''' leaves each end at most at the rate `snap`, so it stays
-        // within the tent of the two ends' values; or `jerk`, where that is less.
-        let snap = self.t.snap + 4096.0 * noise;
+        // |g''''| on the interval: g'''' leaves each end at most at the rate `crackle`, so it
+        // stays within the tent of the two ends' values; or `snap`, where that is less.
+        let crackle = self.t.crackle + 32768.0 * noise;
+        let snap = (0.5 * (p.four + q.four).abs() + 0.5 * crackle * h).min(self.t.snap) + 4096.0 * noise;
+        // |g'''| on the interval: within the tent of the two ends' values, the same way.
         let jerk = (0.5 * (p.j + q.j).abs() + 0.5 * snap * h).min(self.t.jerk) + 512.0 * noise;
         // |g''| on the interval: within the tent of the two ends' values, the same way.
         let c = 0.5 * (p.e + q.e).abs() + 0.5 * jerk * h + curve_noise;
