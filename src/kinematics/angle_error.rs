@@ -134,10 +134,10 @@ impl AngleError {
         let n = 4000;
         for i in 0..=n {
             let x = self.range.0 + (self.range.1 - self.range.0) * i as f64 / n as f64;
-            if 1.0 + self.dpoly(x) <= 0.05 {
+            let (_, slope) = self.value_and_slope(x);
+            if slope <= 0.05 {
                 return Err(format!(
-                    "c + Δ(c) must increase over the fitted range; its slope is {:.3} at {:.3}°",
-                    1.0 + self.dpoly(x),
+                    "c + Δ(c) must increase over the fitted range; its slope is {slope:.3} at {:.3}°",
                     x.to_degrees()
                 ));
             }
@@ -148,12 +148,6 @@ impl AngleError {
     #[inline]
     fn poly(&self, x: f64) -> f64 {
         self.k.iter().rev().fold(0.0, |acc, c| acc * x + c)
-    }
-
-    #[inline]
-    fn dpoly(&self, x: f64) -> f64 {
-        let n = self.k.len();
-        (1..n).rev().fold(0.0, |acc, i| acc * x + i as f64 * self.k[i])
     }
 
     /// Δ(word) in radians, with the word clamped into the fitted range.
