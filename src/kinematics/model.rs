@@ -8,7 +8,7 @@ use super::{Error, Vec3};
 use arrayvec::ArrayVec;
 
 mod chain;
-pub(crate) use chain::{Chain, Shape};
+pub(crate) use chain::{Chain, Link, Shape};
 
 /// Length units of a profile. Every length of a profile, and its NC output, is in these units.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]

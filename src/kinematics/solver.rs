@@ -3,7 +3,7 @@
 //! machine precomputed of its chain ([`super::model::Chain`]: the orientation sequence, the chain's shape).
 
 use super::fk::rotate;
-use super::model::{Machine, Shape};
+use super::model::{Link, Machine, Shape};
 use super::subproblem::{Cs, FreeAngle, sp1};
 use super::{Error, Joints, Pose, Setup, Vec3};
 use arrayvec::ArrayVec;
@@ -179,7 +179,7 @@ pub fn ik_into(m: &Machine, pose: &Pose, setup: &Setup, opt: &IkOptions, out: &m
                 push(m, out, pose, setup, &ch.seq, [a1, a2, Cs::ZERO], None, 0, 0, sing);
             }
         }
-        Shape::Three { s0, pair, missing } => super::three::three(m, ch, s0, pair, *missing, &u, pose, setup, opt, free, out)?,
+        Shape::Three { s0, pair, missing, form } => super::three::three(m, ch, s0, pair, *missing, form, &u, pose, setup, opt, free, out)?,
     }
     Ok(())
 }
@@ -213,7 +213,7 @@ pub(super) fn push(
         actual[ri] = free;
         ri
     });
-    let cp = controlled_point_cs(m, &rcs, &(pose.tip + setup.work_offset), setup.tool_length);
+    let cp = controlled_point_cs(&m.chain.links, &rcs, &(pose.tip + setup.work_offset), setup.tool_length);
     let mut joints = Joints::default();
     for i in 0..3 {
         joints.linear[i] = if m.chain.has_linear[i] { cp[i] } else { 0.0 };
@@ -242,7 +242,7 @@ pub(super) fn push(
 /// Always inlined: called, it read back a `tip + offset` just stored as halves with one wide load
 /// (a store-forwarding stall: 17% of this function's samples, itself 8% of a joint-mode run).
 #[inline(always)]
-pub(super) fn controlled_point_cs(m: &Machine, cs: &[Cs; 3], p_w: &Vec3, tool_length: f64) -> Vec3 {
+pub(super) fn controlled_point_cs(links: &[Link], cs: &[Cs; 3], p_w: &Vec3, tool_length: f64) -> Vec3 {
     #[inline(always)]
     fn turn(k: &[f64; 3], o: &[f64; 3], c: f64, s: f64, p: [f64; 3]) -> [f64; 3] {
         let v = [p[0] - o[0], p[1] - o[1], p[2] - o[2]];
@@ -255,7 +255,6 @@ pub(super) fn controlled_point_cs(m: &Machine, cs: &[Cs; 3], p_w: &Vec3, tool_le
     }
     let mut v = [0.0; 3];
     let mut p = [p_w.x, p_w.y, p_w.z];
-    let links = &m.chain.links;
     for i in (0..links.len()).rev() {
         let (l, a) = (&links[i], cs[i]);
         if l.head {

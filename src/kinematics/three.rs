@@ -11,20 +11,22 @@
 mod scan;
 
 use super::fk::rotate;
-use super::model::{Chain, Machine};
+use super::model::{Chain, Link, Machine};
 use super::solver::{IkOptions, Solution, Solutions, controlled_point_cs, push};
 use super::subproblem::{Cs, FreeAngle, Meet, Pair};
 use super::{Error, Pose, Setup, Vec3, wrap};
 use arrayvec::ArrayVec;
+use wide::f64x2;
 
 /// Degree of the product in the outer angle, and its samples.
 const DEGREE: usize = 8;
 const NODES: usize = 2 * DEGREE + 1;
 /// First sample angle: away from the angles a profile's axes favour (0, ±π/2, π).
 const OFFSET: f64 = 0.123_456_789;
-/// Intervals of the first pass over the circle.
-const GRID: usize = 32;
-/// Subdivisions below the grid: 2π/32 / 2³⁰ ≈ 2e-10 rad.
+/// Intervals of the first pass over the circle (fewer take more subdivisions, more take more
+/// intervals that hold nothing: 20 is the least work on the bench's poses).
+const GRID: usize = 20;
+/// Subdivisions below the grid: 2π/20 / 2³⁰ ≈ 3e-10 rad.
 const MAX_DEPTH: u32 = 30;
 /// sin² of the closest approach of the orientation to the inner axis below which the scan
 /// searches the whole turn: within 3e-5 rad of it the inner angles turn through π within a few
@@ -34,13 +36,12 @@ const NEAR_INNER_AXIS: f64 = 1e-9;
 /// The 1-D problem of one pose: the chain, the orientation and the point to place.
 pub(super) struct Residual<'a> {
     m: &'a Machine,
-    ch: &'a Chain,
     s0: &'a Vec3,
     pair: &'a Pair,
     missing: usize,
     u: &'a Vec3,
-    p_w: Vec3,
-    tool_length: f64,
+    /// The missing linear's coordinate at this pose's tip and tool length: [`Form`]'s terms.
+    terms: [f64; TERMS],
     free: FreeAngle,
 }
 
@@ -53,11 +54,7 @@ impl Residual<'_> {
     /// The missing linear's coordinate with the rotaries at `cs` (sequence order).
     #[inline(always)]
     fn coordinate(&self, cs: [Cs; 3]) -> f64 {
-        let mut rcs = [Cs::ZERO; 3];
-        for (k, &ri) in self.ch.seq.iter().enumerate() {
-            rcs[ri] = cs[k];
-        }
-        controlled_point_cs(self.m, &rcs, &self.p_w, self.tool_length)[self.missing]
+        contract(&contract_outer(&self.terms, cs[0]), cs[1], cs[2])
     }
 
     /// The outer rotation at `a`, the orientation the inner pair must reach, and their meet.
@@ -114,9 +111,10 @@ impl Residual<'_> {
             return None;
         }
         let h = fm.st2.sqrt();
+        let inner = contract_outer(&self.terms, a0);
         let at = |g: f64| {
             let (a1, a2) = fm.angles(g);
-            self.coordinate([a0, a1, a2])
+            contract(&inner, a1, a2)
         };
         let (f0, fp, fm_) = (at(0.0), at(h), at(-h));
         let (q1, q2) = (0.5 * (fp - fm_), 0.5 * (fp + fm_) - f0);
@@ -142,6 +140,78 @@ impl Residual<'_> {
     }
 }
 
+/// Terms of the multilinear form: (1, cos, sin) of each rotary, in sequence order.
+const TERMS: usize = 27;
+
+/// The missing linear's coordinate as a form in the rotaries' (1, cos, sin), the outer first:
+/// the chain turns the tip and the tool's pivots once per rotary, affinely in its (cos, sin), so
+/// the coordinate is multilinear in the three pairs, and its terms are linear in the tip and the
+/// tool length. Built with the chain; a pose's terms are five products each, and evaluating them
+/// costs a few dozen products where turning the chain costs three rotations.
+#[derive(Clone, Debug)]
+pub(crate) struct Form {
+    /// The terms' parts proportional to the tip's x, y, z and to the tool length, and the rest.
+    parts: [[f64; TERMS]; 5],
+}
+
+impl Form {
+    pub(crate) fn new(links: &[Link], seq: &[usize], missing: usize) -> Form {
+        // The tip's and the tool length's parts come from the chain turned about its axes through
+        // the origin (their rotations alone), the rest from the chain as built: no part is the
+        // difference of large values.
+        let bare: ArrayVec<Link, 3> = links.iter().map(|l| Link { pivot: [0.0; 3], ..*l }).collect();
+        let mut parts = [[0.0; TERMS]; 5];
+        for (input, part) in parts.iter_mut().enumerate() {
+            let mut p = Vec3::zeros();
+            if input < 3 {
+                p[input] = 1.0;
+            }
+            let (chain, tool_length) = match input {
+                0..=2 => (&bare[..], 0.0),
+                3 => (&bare[..], 1.0),
+                _ => (links, 0.0),
+            };
+            // Values at (cos, sin) = (0, 0), (1, 0), (0, 1) of each rotary ...
+            const AT: [Cs; 3] = [Cs { c: 0.0, s: 0.0 }, Cs { c: 1.0, s: 0.0 }, Cs { c: 0.0, s: 1.0 }];
+            for (t, value) in part.iter_mut().enumerate() {
+                let mut cs = [Cs::ZERO; 3];
+                for (k, &ri) in seq.iter().enumerate() {
+                    cs[ri] = AT[t / 3usize.pow(2 - k as u32) % 3];
+                }
+                *value = controlled_point_cs(chain, &cs, &p, tool_length)[missing];
+            }
+            // ... to the coefficients of (1, cos, sin): less the value at (0, 0), factor by factor.
+            for k in 0..3 {
+                let stride = 3usize.pow(2 - k as u32);
+                for t in (0..TERMS).filter(|t| t / stride % 3 == 0) {
+                    part[t + stride] -= part[t];
+                    part[t + 2 * stride] -= part[t];
+                }
+            }
+        }
+        Form { parts }
+    }
+
+    /// The terms at the tip `p_w` (work offset added) and the tool length.
+    fn at(&self, p_w: &Vec3, tool_length: f64) -> [f64; TERMS] {
+        let [x, y, z, l, one] = &self.parts;
+        std::array::from_fn(|t| x[t] * p_w.x + y[t] * p_w.y + z[t] * p_w.z + l[t] * tool_length + one[t])
+    }
+}
+
+/// The terms with the outer rotary at `a0`: a form in the inner two.
+#[inline(always)]
+fn contract_outer(t: &[f64; TERMS], a0: Cs) -> [f64; 9] {
+    std::array::from_fn(|i| t[i] + t[i + 9] * a0.c + t[i + 18] * a0.s)
+}
+
+/// The form in the inner two at `a1`, `a2`.
+#[inline(always)]
+fn contract(t: &[f64; 9], a1: Cs, a2: Cs) -> f64 {
+    let row = |i: usize| t[i] + t[i + 1] * a2.c + t[i + 2] * a2.s;
+    row(0) + row(3) * a1.c + row(6) * a1.s
+}
+
 #[allow(clippy::too_many_arguments)]
 pub(super) fn three(
     m: &Machine,
@@ -149,6 +219,7 @@ pub(super) fn three(
     s0: &Vec3,
     pair: &Pair,
     missing: usize,
+    form: &Form,
     u: &Vec3,
     pose: &Pose,
     setup: &Setup,
@@ -156,18 +227,17 @@ pub(super) fn three(
     free: FreeAngle,
     out: &mut Solutions,
 ) -> Result<(), Error> {
+    let p_w = pose.tip + setup.work_offset;
     let r = Residual {
         m,
-        ch,
         s0,
         pair,
         missing,
         u,
-        p_w: pose.tip + setup.work_offset,
-        tool_length: setup.tool_length,
+        terms: form.at(&p_w, setup.tool_length),
         free,
     };
-    let scale = 1.0 + r.p_w.norm() + setup.tool_length.abs();
+    let scale = 1.0 + p_w.norm() + setup.tool_length.abs();
     let mut found = match resultant_roots(&r, scale) {
         Some(found) if !found.is_empty() => found,
         _ => scan::roots(&r, scale)?,
@@ -337,8 +407,10 @@ fn reaches(reach: f64) -> bool {
 
 /// `g(x) = a₀ + Σ aₖ cos kx + bₖ sin kx`, k = 1..=8.
 struct Trig {
-    a: [f64; DEGREE + 1],
-    b: [f64; DEGREE + 1],
+    a0: f64,
+    /// aₖ and bₖ at index k − 1.
+    a: [f64; DEGREE],
+    b: [f64; DEGREE],
     /// Σ k³(|aₖ| + |bₖ|): bounds |g‴|, so that |g''| near a point is bounded by its value
     /// there (the product's size varies by orders over the circle: a global bound on g'' would
     /// prove nothing where it is small).
@@ -351,6 +423,9 @@ struct Trig {
     crackle: f64,
     /// The bound on how wrong a computed g is.
     noise: f64,
+    /// ... and its n-th derivative: the coefficients' rounding (at most `noise` summed) reaches
+    /// it 8ⁿ-fold.
+    noise_at: [f64; 5],
 }
 
 /// A point of the circle with g and its first four derivatives there.
@@ -368,37 +443,41 @@ struct At {
 impl Trig {
     /// The polynomial through `NODES` equally spaced samples (exact for degree ≤ 8).
     fn interpolate(g: impl Fn(Cs) -> Option<f64>) -> Option<Trig> {
-        let (mut a, mut b) = ([0.0; DEGREE + 1], [0.0; DEGREE + 1]);
+        let (mut a0, mut a, mut b) = (0.0, [0.0; DEGREE], [0.0; DEGREE]);
         let mut sum = 0.0;
         for zk in NODE_POWERS.iter() {
-            let gj = g(zk[1])?;
+            let gj = g(zk.first())?;
             if !gj.is_finite() {
                 return None;
             }
             sum += gj.abs();
-            for k in 0..=DEGREE {
-                a[k] += gj * zk[k].c;
-                b[k] += gj * zk[k].s;
+            a0 += gj;
+            for k in 0..DEGREE {
+                a[k] += gj * zk.c[k];
+                b[k] += gj * zk.s[k];
             }
         }
-        a[0] /= NODES as f64;
-        b[0] = 0.0;
-        for k in 1..=DEGREE {
+        a0 /= NODES as f64;
+        for k in 0..DEGREE {
             a[k] *= 2.0 / NODES as f64;
             b[k] *= 2.0 / NODES as f64;
         }
-        let size: f64 = (0..=DEGREE).map(|k| a[k].abs() + b[k].abs()).sum();
+        let size: f64 = a0.abs() + (0..DEGREE).map(|k| a[k].abs() + b[k].abs()).sum::<f64>();
         // A product that is rounding only: f± vanishes identically (the scan's case).
         if !(size > 1e-12 * sum / NODES as f64) {
             return None;
         }
+        let noise = 2e-14 * (size + sum);
+        let weighed = |n: i32| (0..DEGREE).map(|k| ((k + 1) as f64).powi(n) * (a[k].abs() + b[k].abs())).sum::<f64>();
         Some(Trig {
+            a0,
             a,
             b,
-            jerk: (1..=DEGREE).map(|k| (k * k * k) as f64 * (a[k].abs() + b[k].abs())).sum(),
-            snap: (1..=DEGREE).map(|k| (k * k * k * k) as f64 * (a[k].abs() + b[k].abs())).sum(),
-            crackle: (1..=DEGREE).map(|k| (k * k * k * k * k) as f64 * (a[k].abs() + b[k].abs())).sum(),
-            noise: 2e-14 * (size + sum),
+            jerk: weighed(3),
+            snap: weighed(4),
+            crackle: weighed(5) + 32768.0 * noise,
+            noise,
+            noise_at: std::array::from_fn(|n| 8f64.powi(n as i32) * noise),
         })
     }
 
@@ -410,48 +489,84 @@ impl Trig {
 
     /// As [`Trig::at`], from the powers `z¹ … z⁸` (a grid point's are a table's).
     #[inline]
-    fn at_powers(&self, x: f64, zk: &[Cs; DEGREE + 1]) -> At {
-        let (mut g, mut d, mut e, mut j, mut four) = (self.a[0], 0.0, 0.0, 0.0, 0.0);
-        for k in 1..=DEGREE {
-            let (c, s) = (self.a[k] * zk[k].c + self.b[k] * zk[k].s, self.b[k] * zk[k].c - self.a[k] * zk[k].s);
-            let k = k as f64;
-            g += c;
-            d += k * s;
-            e -= k * k * c;
-            j -= k * k * k * s;
-            four += k * k * k * k * c;
+    fn at_powers(&self, x: f64, zk: &Powers) -> At {
+        // Terms k and k + 1 side by side: g, g″ and g⁗ weigh the terms u, g′ and g‴ the terms v.
+        let mut acc = [f64x2::ZERO; 5];
+        for k in (0..DEGREE).step_by(2) {
+            let (u, v) = self.terms(zk, k);
+            acc[0] = acc[0] + u;
+            acc[1] = acc[1] + lanes(&WEIGHT[1], k) * v;
+            acc[2] = acc[2] + lanes(&WEIGHT[2], k) * u;
+            acc[3] = acc[3] + lanes(&WEIGHT[3], k) * v;
+            acc[4] = acc[4] + lanes(&WEIGHT[4], k) * u;
         }
-        At { x, z: zk[1], g, d, e, j, four }
+        At {
+            x,
+            z: zk.first(),
+            g: self.a0 + acc[0].reduce_add(),
+            d: acc[1].reduce_add(),
+            e: -acc[2].reduce_add(),
+            j: -acc[3].reduce_add(),
+            four: acc[4].reduce_add(),
+        }
     }
 
-    /// The one root between `p` and `q`, where g is proven monotone: Newton's steps, bisecting
-    /// whenever a step would leave the bracket. Each point's (cos, sin) is its neighbour's turned
-    /// by the step ([`turn_small`]), or the bracket's chord midpoint: no sincos.
-    fn newton(&self, p: At, q: At) -> (f64, f64) {
-        let (mut lo, mut hi) = (p, q);
+    /// g and g′ alone at the point `z` = (cos x, sin x): what Newton's steps read.
+    #[inline]
+    fn slope_at(&self, z: Cs) -> (f64, f64) {
+        let zk = powers(z);
+        let mut acc = [f64x2::ZERO; 2];
+        for k in (0..DEGREE).step_by(2) {
+            let (u, v) = self.terms(&zk, k);
+            acc[0] = acc[0] + u;
+            acc[1] = acc[1] + lanes(&WEIGHT[1], k) * v;
+        }
+        (self.a0 + acc[0].reduce_add(), acc[1].reduce_add())
+    }
+
+    /// The terms `aₖ cos kx + bₖ sin kx` and `bₖ cos kx − aₖ sin kx` (g's and g′'s without
+    /// their factors k) at index `k` and the next.
+    #[inline(always)]
+    fn terms(&self, zk: &Powers, k: usize) -> (f64x2, f64x2) {
+        let (a, b) = (lanes(&self.a, k), lanes(&self.b, k));
+        let (c, s) = (lanes(&zk.c, k), lanes(&zk.s, k));
+        (a * c + b * s, b * c - a * s)
+    }
+
+    /// The one root between `p` and `q`, where g is proven monotone, with |g'| ≥ `slope` and
+    /// |g''| ≤ `curve` there: Newton's steps, bisecting whenever a step would leave the bracket.
+    /// A step whose landing is provably within rounding of the root (curve · δ² / 2|g'|, δ the
+    /// distance to the root |g| / slope bounds) is taken without evaluating g there. Each
+    /// point's (cos, sin) is its neighbour's turned by the step ([`turn_small`]), or the
+    /// bracket's chord midpoint: no sincos.
+    fn newton(&self, p: &At, q: &At, slope: f64, curve: f64) -> (f64, f64) {
+        let (mut lo, mut hi) = ((p.x, p.z, p.g), (q.x, q.z, q.g));
         let mut x = p.x - p.g * (q.x - p.x) / (q.g - p.g);
         let mut z = turn_small(p.z, x - p.x);
         let mut d = p.d;
         for _ in 0..32 {
-            let a = self.at(x, z);
-            d = a.d;
-            if a.g.abs() <= self.noise {
+            let g;
+            (g, d) = self.slope_at(z);
+            if g.abs() <= self.noise {
                 return (x, d);
             }
-            if a.g.signum() == lo.g.signum() {
-                lo = a;
+            if g.signum() == lo.2.signum() {
+                lo = (x, z, g);
             } else {
-                hi = a;
+                hi = (x, z, g);
             }
-            let (l, r) = (lo.x.min(hi.x), lo.x.max(hi.x));
-            let mut next = x - a.g / a.d;
-            if next > l && next < r {
-                z = turn_small(a.z, next - x);
+            let (l, r) = (lo.0.min(hi.0), lo.0.max(hi.0));
+            let mut next = x - g / d;
+            let landed = if next > l && next < r {
+                z = turn_small(z, next - x);
+                let far = g / slope;
+                curve * far * far <= 4.0 * f64::EPSILON * (1.0 + next.abs()) * d.abs()
             } else {
                 next = 0.5 * (l + r);
-                z = chord_mid(lo.z, hi.z);
-            }
-            if (next - x).abs() <= 4.0 * f64::EPSILON * (1.0 + x.abs()) {
+                z = chord_mid(lo.1, hi.1);
+                false
+            };
+            if landed || (next - x).abs() <= 4.0 * f64::EPSILON * (1.0 + x.abs()) {
                 return (next, d);
             }
             x = next;
@@ -482,27 +597,66 @@ impl Trig {
             } else {
                 self.at_powers(OFFSET + step * i as f64, &GRID_POWERS[i])
             };
-            out.interval(prev, cur, 0)?;
+            out.interval(&prev, &cur, 0)?;
             prev = cur;
         }
         Some(out)
     }
 }
 
-/// `z⁰ … z⁸`, by products in a tree (four deep, not a chain of eight).
+/// `z¹ … z⁸` as (cos kx, sin kx) at index k − 1, cosines and sines apart so that the terms
+/// are computed two at a time.
+#[derive(Clone, Copy)]
+struct Powers {
+    c: [f64; DEGREE],
+    s: [f64; DEGREE],
+}
+
+impl Powers {
+    fn first(&self) -> Cs {
+        Cs { c: self.c[0], s: self.s[0] }
+    }
+}
+
+/// kⁿ at index k − 1, n = 0..=4: the factors the derivatives put on the terms.
+const WEIGHT: [[f64; DEGREE]; 5] = {
+    let mut w = [[1.0; DEGREE]; 5];
+    let mut n = 1;
+    while n < 5 {
+        let mut k = 0;
+        while k < DEGREE {
+            w[n][k] = w[n - 1][k] * (k + 1) as f64;
+            k += 1;
+        }
+        n += 1;
+    }
+    w
+};
+
+/// Terms `k` and `k + 1` of `v` in the two lanes of a vector register.
 #[inline(always)]
-fn powers(z: Cs) -> [Cs; DEGREE + 1] {
+fn lanes(v: &[f64; DEGREE], k: usize) -> f64x2 {
+    f64x2::new([v[k], v[k + 1]])
+}
+
+/// `z¹ … z⁸`, by products in a tree (four deep, not a chain of eight).
+#[inline(always)]
+fn powers(z: Cs) -> Powers {
     let z2 = mul(z, z);
     let (z3, z4) = (mul(z2, z), mul(z2, z2));
-    [Cs::ZERO, z, z2, z3, z4, mul(z4, z), mul(z4, z2), mul(z4, z3), mul(z4, z4)]
+    let (z5, z6, z7, z8) = (mul(z4, z), mul(z4, z2), mul(z4, z3), mul(z4, z4));
+    Powers {
+        c: [z.c, z2.c, z3.c, z4.c, z5.c, z6.c, z7.c, z8.c],
+        s: [z.s, z2.s, z3.s, z4.s, z5.s, z6.s, z7.s, z8.s],
+    }
 }
 
 /// The powers at the sample angles and at the grid's points: the same for every pose.
-static NODE_POWERS: std::sync::LazyLock<[[Cs; DEGREE + 1]; NODES]> = std::sync::LazyLock::new(circle);
-static GRID_POWERS: std::sync::LazyLock<[[Cs; DEGREE + 1]; GRID]> = std::sync::LazyLock::new(circle);
+static NODE_POWERS: std::sync::LazyLock<[Powers; NODES]> = std::sync::LazyLock::new(circle);
+static GRID_POWERS: std::sync::LazyLock<[Powers; GRID]> = std::sync::LazyLock::new(circle);
 
 /// The powers at `N` equally spaced angles from [`OFFSET`].
-fn circle<const N: usize>() -> [[Cs; DEGREE + 1]; N] {
+fn circle<const N: usize>() -> [Powers; N] {
     std::array::from_fn(|i| powers(Cs::of(OFFSET + std::f64::consts::TAU * i as f64 / N as f64)))
 }
 
@@ -515,11 +669,11 @@ fn chord_mid(p: Cs, q: Cs) -> Cs {
     Cs { c: c * n, s: s * n }
 }
 
-/// `z` turned by `h` (|h| ≤ 0.2, within a grid interval): cos h and sin h by their Taylor series
-/// to h¹⁴ and h¹³, whose next terms are below 1e-22 there.
+/// `z` turned by `h` (|h| ≤ 2π/20, within a grid interval): cos h and sin h by their Taylor
+/// series to h¹⁴ and h¹³, whose next terms are below 3e-20 there.
 #[inline]
 fn turn_small(z: Cs, h: f64) -> Cs {
-    debug_assert!(h.abs() <= 0.2, "{h}");
+    debug_assert!(h.abs() <= std::f64::consts::TAU / GRID as f64, "{h}");
     const S: [f64; 7] = [1.0, -1.0 / 6.0, 1.0 / 120.0, -1.0 / 5040.0, 1.0 / 362_880.0, -1.0 / 39_916_800.0, 1.0 / 6_227_020_800.0];
     const C: [f64; 8] = [
         1.0,
@@ -564,52 +718,59 @@ impl Isolated<'_> {
         Some(())
     }
 
-    fn interval(&mut self, p: At, q: At, depth: u32) -> Option<()> {
-        let h = q.x - p.x;
-        let noise = self.t.noise;
-        // The coefficients' rounding (at most `noise` summed) reaches the n-th derivative 8ⁿ-fold.
-        let (slope_noise, curve_noise) = (8.0 * noise, 64.0 * noise);
+    fn interval(&mut self, p: &At, q: &At, depth: u32) -> Option<()> {
+        let (t, h) = (self.t, q.x - p.x);
         // |g''''| on the interval: g'''' leaves each end at most at the rate `crackle`, so it
         // stays within the tent of the two ends' values; or `snap`, where that is less.
-        let crackle = self.t.crackle + 32768.0 * noise;
-        let snap = (0.5 * (p.four + q.four).abs() + 0.5 * crackle * h).min(self.t.snap) + 4096.0 * noise;
+        let snap = min(0.5 * (p.four + q.four).abs() + 0.5 * t.crackle * h, t.snap) + t.noise_at[4];
         // |g'''| on the interval: within the tent of the two ends' values, the same way.
-        let jerk = (0.5 * (p.j + q.j).abs() + 0.5 * snap * h).min(self.t.jerk) + 512.0 * noise;
+        let jerk = min(0.5 * (p.j + q.j).abs() + 0.5 * snap * h, t.jerk) + t.noise_at[3];
         // |g''| on the interval: within the tent of the two ends' values, the same way.
-        let c = 0.5 * (p.e + q.e).abs() + 0.5 * jerk * h + curve_noise;
+        let c = 0.5 * (p.e + q.e).abs() + 0.5 * jerk * h + t.noise_at[2];
         // A zero at the left end is a root whose interval is its neighbourhood.
         let s0 = if p.g == 0.0 {
             self.roots.try_push((p.x, p.d, p.x - h, q.x)).ok()?;
-            p.d.signum()
+            sign(p.d)
         } else {
-            p.g.signum()
+            sign(p.g)
         };
-        let change = s0 != q.g.signum() && q.g != 0.0;
         let bend = 0.125 * c * h * h;
-        if change {
-            if p.d.signum() == q.d.signum() && p.d.abs().min(q.d.abs()) - slope_noise > 0.5 * c * h {
-                let (r, d) = self.t.newton(p, q);
+        if s0 != sign(q.g) && q.g != 0.0 {
+            let slope = min(p.d.abs(), q.d.abs()) - t.noise_at[1] - 0.5 * c * h;
+            if sign(p.d) == sign(q.d) && slope > 0.0 {
+                let (r, d) = t.newton(p, q, slope, c);
                 return self.roots.try_push((r, d, p.x, q.x)).ok();
             }
         } else {
             // |g| from below: the chord less the bend, or on each half the tangent at its end
             // less the bend (each half's bound is concave: least at the half's ends).
             let (g0, g1) = (s0 * p.g, s0 * q.g);
-            let tangents = g0
-                .min(g1)
-                .min(g0 + (s0 * p.d - slope_noise) * 0.5 * h - bend)
-                .min(g1 - (s0 * q.d + slope_noise) * 0.5 * h - bend);
-            if tangents.max(g0.min(g1) - bend) > noise {
+            let chord = min(g0, g1);
+            let left = g0 + (s0 * p.d - t.noise_at[1]) * 0.5 * h - bend;
+            let right = g1 - (s0 * q.d + t.noise_at[1]) * 0.5 * h - bend;
+            if chord - bend > t.noise || min(chord, min(left, right)) > t.noise {
                 return Some(());
             }
         }
-        if bend <= noise || depth >= MAX_DEPTH {
+        if bend <= t.noise || depth >= MAX_DEPTH {
             return self.unsure(p.x, q.x);
         }
-        let mid = self.t.at(0.5 * (p.x + q.x), chord_mid(p.z, q.z));
-        self.interval(p, mid, depth + 1)?;
-        self.interval(mid, q, depth + 1)
+        let mid = t.at(0.5 * (p.x + q.x), chord_mid(p.z, q.z));
+        self.interval(p, &mid, depth + 1)?;
+        self.interval(&mid, q, depth + 1)
     }
+}
+
+/// ±1 by the sign bit: `signum` without its NaN test (the isolation's values are finite).
+#[inline(always)]
+fn sign(x: f64) -> f64 {
+    1f64.copysign(x)
+}
+
+/// The lesser of two finite values: `f64::min` without its NaN handling.
+#[inline(always)]
+fn min(a: f64, b: f64) -> f64 {
+    if a < b { a } else { b }
 }
 
 /// Gauss–Newton on all joints at once. Next to the inner pair's singularity the 1-D

@@ -7,6 +7,7 @@
 use super::{Linear, Mount, Rotary};
 use crate::kinematics::Vec3;
 use crate::kinematics::subproblem::Pair;
+use crate::kinematics::three::Form;
 use arrayvec::ArrayVec;
 
 #[derive(Clone, Debug)]
@@ -38,7 +39,7 @@ pub(crate) enum Shape {
     Two(Pair),
     /// Three rotaries, one linear missing: the outer angle is found by a 1-D root search on the
     /// missing linear's coordinate, the inner two by subproblem 2.
-    Three { s0: Vec3, pair: Pair, missing: usize },
+    Three { s0: Vec3, pair: Pair, missing: usize, form: Box<Form> },
 }
 
 impl Chain {
@@ -79,6 +80,15 @@ impl Chain {
                 Ok(())
             }
         };
+        let links = rotaries
+            .iter()
+            .map(|r| Link {
+                axis: r.axis.into(),
+                pivot: r.pivot.into(),
+                head: r.mount == Mount::Head,
+                compensated: r.angle_error.is_some(),
+            })
+            .collect::<ArrayVec<Link, 3>>();
         let shape = match (rotaries.len(), nlin) {
             (0, 3) => Shape::Fixed,
             (1, 3) => Shape::One { s: s(0) },
@@ -92,6 +102,7 @@ impl Chain {
                     s0: s(0),
                     pair: pair(1, 2)?,
                     missing: missing[0],
+                    form: Box::new(Form::new(&links, &seq, missing[0])),
                 }
             }
             (3, 3) => return Err("three rotaries with three linears are redundant: not supported".into()),
@@ -101,15 +112,6 @@ impl Chain {
                 ));
             }
         };
-        let links = rotaries
-            .iter()
-            .map(|r| Link {
-                axis: r.axis.into(),
-                pivot: r.pivot.into(),
-                head: r.mount == Mount::Head,
-                compensated: r.angle_error.is_some(),
-            })
-            .collect();
         Ok(Chain {
             seq,
             shape,

@@ -14,7 +14,7 @@ const SAMPLES: usize = 360;
 const MAX_DEPTH: u32 = 10;
 const SWING: f64 = 0.1; // rad of inner-angle change that asks for a finer look
 /// A stretch's scan starts this deep: the stretches the product leaves to it are narrow.
-const LOCAL_DEPTH: u32 = 4;
+const LOCAL_DEPTH: u32 = 6;
 
 /// One evaluation of the 3-rotary residual: outer angle, missing-linear coordinate, angles.
 #[derive(Clone, Copy)]

@@ -2,9 +2,10 @@
 //! the shipped one: every root the scan finds, the resultant finds, and the pose's own joints are
 //! always among the roots.
 
-use super::{Residual, resultant_roots, scan};
+use super::{Residual, contract, contract_outer, resultant_roots, scan};
 use crate::kinematics::model::Shape;
-use crate::kinematics::subproblem::FreeAngle;
+use crate::kinematics::solver::controlled_point_cs;
+use crate::kinematics::subproblem::{Cs, FreeAngle};
 use crate::kinematics::{Joints, Linear, Machine, MachineSpec, Mount, Rotary, Setup, Units, Vec3, fk, wrap};
 
 /// A whole turn, in radians.
@@ -111,23 +112,22 @@ fn propeller() -> Machine {
 /// (scan's roots, resultant's roots or None, the outer angle of the joints that made the pose,
 /// the scan's roots where the inner pair cannot reach the orientation).
 fn both(m: &Machine, j: &Joints, setup: &Setup) -> (Vec<(f64, i8)>, Option<Vec<(f64, i8)>>, f64, usize) {
-    let Shape::Three { s0, pair, missing } = &m.chain.shape else {
+    let Shape::Three { s0, pair, missing, form } = &m.chain.shape else {
         panic!("not a 3-rotary chain")
     };
     let pose = fk(m, j, setup);
     let u = pose.axis;
+    let p_w = pose.tip + setup.work_offset;
     let r = Residual {
         m,
-        ch: &m.chain,
         s0,
         pair,
         missing: *missing,
         u: &u,
-        p_w: pose.tip + setup.work_offset,
-        tool_length: setup.tool_length,
+        terms: form.at(&p_w, setup.tool_length),
         free: FreeAngle(0.0),
     };
-    let scale = 1.0 + r.p_w.norm() + setup.tool_length.abs();
+    let scale = 1.0 + p_w.norm() + setup.tool_length.abs();
     let mut old = scan::roots(&r, scale).map(|v| v.to_vec()).unwrap_or_default();
     let n = old.len();
     old.retain(|&(a, _)| pair.meet(&r.inner(a)).reach >= -1e-14);
@@ -243,4 +243,31 @@ fn two_roots_on_one_branch_microradians_apart_are_both_found() {
     }
     // Both answered by the resultant, and no root of its own beyond the scan's.
     assert_eq!((tally[1], tally[4]), (2, 0), "{tally:?}");
+}
+
+#[test]
+fn the_form_is_the_chain_turned() {
+    // The missing coordinate from the form against the chain turned rotary by rotary, on random
+    // machines, tips, tool lengths and rotations (and (cos, sin) off the circle, where the samples
+    // read it): the same polynomial, so equal to rounding.
+    let mut rng = Rng(0x5DEECE66D);
+    let mut machines = 0;
+    while machines < 200 {
+        let Some(m) = random_machine(&mut rng) else { continue };
+        let Shape::Three { missing, form, .. } = &m.chain.shape else { continue };
+        machines += 1;
+        for _ in 0..50 {
+            let p_w = Vec3::new(rng.range(-900.0, 900.0), rng.range(-900.0, 900.0), rng.range(-900.0, 900.0));
+            let tool_length = rng.range(0.0, 300.0);
+            let cs: [Cs; 3] = std::array::from_fn(|_| Cs { c: rng.range(-1.5, 1.5), s: rng.range(-1.5, 1.5) });
+            let mut by_chain_order = [Cs::ZERO; 3];
+            for (k, &ri) in m.chain.seq.iter().enumerate() {
+                by_chain_order[ri] = cs[k];
+            }
+            let want = controlled_point_cs(&m.chain.links, &by_chain_order, &p_w, tool_length)[*missing];
+            let got = contract(&contract_outer(&form.at(&p_w, tool_length), cs[0]), cs[1], cs[2]);
+            let scale = 1.0 + p_w.norm() + tool_length + m.rotaries.iter().map(|r| r.pivot.norm()).sum::<f64>();
+            assert!((got - want).abs() <= 1e-13 * scale, "{got} against {want}, machine {m:?}");
+        }
+    }
 }
