@@ -81,11 +81,12 @@ impl Residual<'_> {
     /// there.
     fn branches(&self, a: f64) -> ([f64; 2], f64, f64) {
         let (a0, v, meet) = self.meet_at(a);
-        let f = [1.0, -1.0].map(|sg| {
+        let outer = contract_outer(&self.terms, a0);
+        let on = |sg: f64| {
             let (a1, a2, _) = self.pair.angles(&v, &meet, sg, self.free);
-            self.coordinate([a0, a1, a2])
-        });
-        (f, meet.st1() * meet.st1(), meet.reach)
+            contract(&outer, a1, a2)
+        };
+        ([on(1.0), on(-1.0)], meet.st1() * meet.st1(), meet.reach)
     }
 
     /// f on branch `sg` at outer angle `a` (clamped to the fold), and the pair's reach there.
@@ -127,6 +128,11 @@ impl Residual<'_> {
             p * p - q1 * q1 * rho
         };
         Some(g * fm.st2 * fm.st2)
+    }
+
+    /// The longest lever arm of the chain: bounds how far the tip moves per radian of any angle.
+    fn lever(&self, scale: f64) -> f64 {
+        scale + self.m.rotaries.iter().map(|r| r.pivot.norm()).sum::<f64>()
     }
 
     /// sin² of the orientation's closest approach to the inner axis (toward +s1 or −s1) over a
@@ -245,6 +251,7 @@ pub(super) fn three(
     found.sort_by(|a, b| a.0.total_cmp(&b.0));
     let mut count = 0u8;
     let first = out.len();
+    let lever = r.lever(scale);
     for (a, sg) in found {
         let (a0, v, meet) = r.meet_at(a);
         let (a1, a2, sing) = pair.angles(&v, &meet, sg as f64, free);
@@ -259,7 +266,9 @@ pub(super) fn three(
         }
         let sing = sing.then_some((ch.seq[1], opt.free_angle));
         push(m, out, pose, setup, &ch.seq, [a0, a1, a2], None, branch, count, sing);
-        if let Some(s) = out.last_mut() {
+        if built_miss(&r, [a0, a1, a2], lever) > 1e-13 * (1.0 + pose.tip.norm() + setup.tool_length.abs())
+            && let Some(s) = out.last_mut()
+        {
             polish(m, pose, setup, s);
         }
         // Next to the inner axis the rounding can split one root of f in two, a hair apart: one
@@ -277,6 +286,20 @@ pub(super) fn three(
         count += 1;
     }
     Ok(())
+}
+
+/// How far the rotations `cs` (sequence order) with the linears they give miss the pose, by the
+/// arithmetic that built them: the linears place the tip exactly for these (cos, sin) but for the
+/// missing coordinate, so the miss is that coordinate, the axis the rotations turn z to, and how
+/// far a (cos, sin) is off the circle (the solution's angle is its direction) times the longest
+/// lever `lever`. Where it is at rounding the polish has nothing to correct, and its FK (three
+/// sincos and the chain) is not run.
+fn built_miss(r: &Residual, cs: [Cs; 3], lever: f64) -> f64 {
+    let z = Vec3::z();
+    let inner = rotate(&r.pair.s2, cs[2].c, cs[2].s, &z);
+    let axis = rotate(r.s0, cs[0].c, cs[0].s, &rotate(&r.pair.s1, cs[1].c, cs[1].s, &inner));
+    let off_circle: f64 = cs.iter().map(|z| (z.c * z.c + z.s * z.s - 1.0).abs()).sum();
+    r.coordinate(cs).abs() + (axis - r.u).norm() + lever * off_circle
 }
 
 /// How far a solution's pose is from the one wanted: tip distance plus axis angle (rad).

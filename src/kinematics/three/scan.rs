@@ -217,7 +217,7 @@ pub(super) fn local(r: &Residual, sg: i8, a: f64, b: f64, scale: f64) -> ArrayVe
 fn branch(r: &Residual, sg: i8, n: usize, at: impl Fn(usize) -> f64, scale: f64, depth0: u32, mut seen: impl FnMut(&Sample)) -> ArrayVec<f64, 16> {
     let reach = |a: f64| r.pair.meet(&r.inner(a)).reach;
     let eval = |a: f64, clamp: bool| r.eval(a, sg, clamp);
-    let lever = scale + r.m.rotaries.iter().map(|r| r.pivot.norm()).sum::<f64>();
+    let lever = r.lever(scale);
     let mut scan = Scan {
         eval: &eval,
         reach: &reach,
