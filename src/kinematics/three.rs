@@ -441,8 +441,9 @@ struct Trig {
     /// Σ k⁴(|aₖ| + |bₖ|): bounds |g⁗|, so that |g‴| near a point is bounded by its value there
     /// (in the valley the factor st1⁴ digs, every derivative is small but `jerk` is not).
     snap: f64,
-    /// Σ k⁵(|aₖ| + |bₖ|): bounds the fifth derivative, so that |g⁗| near a point is bounded by
-    /// its value there, the same way.
+    /// Σ k⁵(|aₖ| + |bₖ|) plus the coefficients' rounding there (8⁵ `noise`): bounds the fifth
+    /// derivative of the computed g, so that |g⁗| near a point is bounded by its value there, the
+    /// same way.
     crackle: f64,
     /// The bound on how wrong a computed g is.
     noise: f64,
