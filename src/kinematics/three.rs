@@ -8,6 +8,7 @@
 //! of f± ([`scan`]) searches that stretch; it searches the whole turn where the orientation
 //! passes through the inner axis or the product vanishes identically.
 
+mod circle;
 mod scan;
 
 use super::fk::rotate;
@@ -16,6 +17,7 @@ use super::solver::{IkOptions, Solution, Solutions, controlled_point_cs, push};
 use super::subproblem::{Cs, FreeAngle, Meet, Pair};
 use super::{Error, Pose, Setup, Vec3, wrap};
 use arrayvec::ArrayVec;
+use circle::{chord_mid, mul, turn, turn_small, unit};
 use wide::f64x2;
 
 /// Degree of the product in the outer angle, and its samples.
@@ -57,18 +59,18 @@ impl Residual<'_> {
         contract(&contract_outer(&self.terms, cs[0]), cs[1], cs[2])
     }
 
-    /// The outer rotation at `a`, the orientation the inner pair must reach, and their meet.
+    /// The orientation the inner pair must reach with the outer rotation at `a0`, and its meet.
     #[inline(always)]
-    fn meet_at(&self, a: f64) -> (Cs, Vec3, Meet) {
-        let a0 = Cs::of(a);
+    fn meet_at(&self, a0: Cs) -> (Vec3, Meet) {
         let v = rotate(self.s0, a0.c, -a0.s, self.u);
-        (a0, v, self.pair.meet(&v))
+        (v, self.pair.meet(&v))
     }
 
     /// f on branch `sg` at outer angle `a`, with the angles; `None` where the inner pair cannot
     /// reach the orientation, unless `clamp` (evaluated on the fold).
     fn eval(&self, a: f64, sg: i8, clamp: bool) -> Option<(f64, [Cs; 3], bool)> {
-        let (a0, v, meet) = self.meet_at(a);
+        let a0 = Cs::of(a);
+        let (v, meet) = self.meet_at(a0);
         if meet.reach < 0.0 && !clamp {
             return None;
         }
@@ -77,10 +79,10 @@ impl Residual<'_> {
         Some((self.coordinate(cs), cs, sing))
     }
 
-    /// f on both branches at outer angle `a` (clamped to the fold), sin² θ1 and the pair's reach
-    /// there.
-    fn branches(&self, a: f64) -> ([f64; 2], f64, f64) {
-        let (a0, v, meet) = self.meet_at(a);
+    /// f on both branches with the outer rotation at `a0` (clamped to the fold), sin² θ1 and the
+    /// pair's reach there.
+    fn branches(&self, a0: Cs) -> ([f64; 2], f64, f64) {
+        let (v, meet) = self.meet_at(a0);
         let outer = contract_outer(&self.terms, a0);
         let on = |sg: f64| {
             let (a1, a2, _) = self.pair.angles(&v, &meet, sg, self.free);
@@ -89,9 +91,10 @@ impl Residual<'_> {
         ([on(1.0), on(-1.0)], meet.st1() * meet.st1(), meet.reach)
     }
 
-    /// f on branch `sg` at outer angle `a` (clamped to the fold), and the pair's reach there.
-    fn clamped(&self, a: f64, sg: i8) -> (f64, f64) {
-        let (a0, v, meet) = self.meet_at(a);
+    /// f on branch `sg` with the outer rotation at `a0` (clamped to the fold), and the pair's
+    /// reach there.
+    fn clamped(&self, a0: Cs, sg: i8) -> (f64, f64) {
+        let (v, meet) = self.meet_at(a0);
         let (a1, a2, _) = self.pair.angles(&v, &meet, sg as f64, self.free);
         (self.coordinate([a0, a1, a2]), meet.reach)
     }
@@ -208,7 +211,11 @@ impl Form {
 /// The terms with the outer rotary at `a0`: a form in the inner two.
 #[inline(always)]
 fn contract_outer(t: &[f64; TERMS], a0: Cs) -> [f64; 9] {
-    std::array::from_fn(|i| t[i] + t[i + 9] * a0.c + t[i + 18] * a0.s)
+    let mut out = [0.0; 9];
+    for (i, o) in out.iter_mut().enumerate() {
+        *o = t[i] + t[i + 9] * a0.c + t[i + 18] * a0.s;
+    }
+    out
 }
 
 /// The form in the inner two at `a1`, `a2`.
@@ -246,14 +253,14 @@ pub(super) fn three(
     let scale = 1.0 + p_w.norm() + setup.tool_length.abs();
     let mut found = match resultant_roots(&r, scale) {
         Some(found) if !found.is_empty() => found,
-        _ => scan::roots(&r, scale)?,
+        _ => scan::roots(&r, scale)?.into_iter().map(|(a, sg)| (a, Cs::of(a), sg)).collect(),
     };
     found.sort_by(|a, b| a.0.total_cmp(&b.0));
     let mut count = 0u8;
     let first = out.len();
     let lever = r.lever(scale);
-    for (a, sg) in found {
-        let (a0, v, meet) = r.meet_at(a);
+    for (a, a0, sg) in found {
+        let (v, meet) = r.meet_at(a0);
         let (a1, a2, sing) = pair.angles(&v, &meet, sg as f64, free);
         let branch = if meet.reach <= 1e-14 || meet.on_axis { 0 } else { sg };
         // The same pose reached on the fold by both branches is one solution.
@@ -289,17 +296,18 @@ pub(super) fn three(
 }
 
 /// How far the rotations `cs` (sequence order) with the linears they give miss the pose, by the
-/// arithmetic that built them: the linears place the tip exactly for these (cos, sin) but for the
-/// missing coordinate, so the miss is that coordinate, the axis the rotations turn z to, and how
-/// far a (cos, sin) is off the circle (the solution's angle is its direction) times the longest
-/// lever `lever`. Where it is at rounding the polish has nothing to correct, and its FK (three
-/// sincos and the chain) is not run.
+/// arithmetic that built them, in tip units: the linears place the tip exactly for these
+/// (cos, sin) but for the missing coordinate, so the miss is that coordinate plus the longest
+/// lever `lever` times the angles the orientation is off by: the axis the rotations turn z to,
+/// and how far a (cos, sin) is off the circle (the solution's angle is its direction). Where it
+/// is at rounding the polish has nothing to correct, and its FK (three sincos and the chain) is
+/// not run.
 fn built_miss(r: &Residual, cs: [Cs; 3], lever: f64) -> f64 {
     let z = Vec3::z();
     let inner = rotate(&r.pair.s2, cs[2].c, cs[2].s, &z);
     let axis = rotate(r.s0, cs[0].c, cs[0].s, &rotate(&r.pair.s1, cs[1].c, cs[1].s, &inner));
     let off_circle: f64 = cs.iter().map(|z| (z.c * z.c + z.s * z.s - 1.0).abs()).sum();
-    r.coordinate(cs).abs() + (axis - r.u).norm() + lever * off_circle
+    r.coordinate(cs).abs() + lever * ((axis - r.u).norm() + off_circle)
 }
 
 /// How far a solution's pose is from the one wanted: tip distance plus axis angle (rad).
@@ -316,17 +324,17 @@ fn pose_error(m: &Machine, linear: &[f64; 3], actual: &[f64; 3], pose: &Pose, se
 
 /// The roots of f± (outer angle, branch) through the product's roots; `None` where the scan must
 /// search instead.
-fn resultant_roots(r: &Residual, scale: f64) -> Option<ArrayVec<(f64, i8), 16>> {
+fn resultant_roots(r: &Residual, scale: f64) -> Option<ArrayVec<(f64, Cs, i8), 16>> {
     if r.nearest_inner_axis() < NEAR_INNER_AXIS {
         return None;
     }
     let poly = Trig::interpolate(|a0| r.product(a0))?;
     let iso = poly.isolate()?;
-    let mut found: ArrayVec<(f64, i8), 16> = ArrayVec::new();
-    let mut add = |a: f64, sg: i8| {
+    let mut found: ArrayVec<(f64, Cs, i8), 16> = ArrayVec::new();
+    let mut add = |a: f64, z: Cs, sg: i8| {
         let a = wrap(a);
-        if !found.iter().any(|&(b, s)| s == sg && wrap(a - b).abs() < 1e-9) {
-            found.try_push((a, sg)).ok()
+        if !found.iter().any(|&(b, _, s)| s == sg && wrap(a - b).abs() < 1e-9) {
+            found.try_push((a, z, sg)).ok()
         } else {
             Some(())
         }
@@ -334,8 +342,8 @@ fn resultant_roots(r: &Residual, scale: f64) -> Option<ArrayVec<(f64, i8), 16>> 
     // Where the product's rounding hides how many roots there are (a double root; the
     // orientation near the inner axis, where its factor st1⁴ is tiny), the scan of f± searches.
     let mut scans: ArrayVec<(f64, f64), 64> = iso.unsure.iter().copied().collect();
-    for &(x, slope, lo, hi) in &iso.roots {
-        let mut got = settled(r, x, slope, (lo, hi), scale);
+    for &(x, z, slope, lo, hi) in &iso.roots {
+        let mut got = settled(r, x, z, slope, (lo, hi), scale);
         if got.is_empty() {
             // Next to a fold f± turns like √reach, so the polynomial's root (rounded to the
             // product's largest values) can sit where f is far from zero: bracket the product
@@ -345,20 +353,20 @@ fn resultant_roots(r: &Residual, scale: f64) -> Option<ArrayVec<(f64, i8), 16>> 
             if gl.signum() != gh.signum()
                 && let Some(x) = brent(|x| Some(g(x)), lo, hi, gl, gh)
             {
-                got = settled(r, x, f64::NAN, (lo, hi), scale);
+                got = settled(r, x, Cs::of(x), f64::NAN, (lo, hi), scale);
             }
         }
         if got.is_empty() {
             scans.try_push((lo, hi)).ok()?;
         }
-        for (a, sg) in got {
-            add(a, sg)?;
+        for (a, z, sg) in got {
+            add(a, z, sg)?;
         }
     }
     for &(lo, hi) in &scans {
         for sg in [1i8, -1] {
             for a in scan::local(r, sg, lo - 1e-9, hi + 1e-9, scale) {
-                add(a, sg)?;
+                add(a, Cs::of(a), sg)?;
             }
         }
     }
@@ -371,10 +379,13 @@ fn vanishes(f: &[f64; 2], k: usize, scale: f64) -> bool {
     f[k].abs() <= f[1 - k].abs() || f[k].abs() <= 1e-6 * scale
 }
 
-/// The roots of f± at a root `x` of the product alone in (lo, hi): the branch nearer zero (both
-/// on the fold), settled; `slope`: the product's g' at x, or NaN.
-fn settled(r: &Residual, x: f64, slope: f64, (lo, hi): (f64, f64), scale: f64) -> ArrayVec<(f64, i8), 2> {
-    let (f, st2, reach) = r.branches(x);
+/// The roots of f± at a root `x` (`z` its cos, sin) of the product alone in (lo, hi): the branch
+/// nearer zero (both on the fold), settled; `slope`: the product's g' at x, or NaN.
+fn settled(r: &Residual, x: f64, z: Cs, slope: f64, (lo, hi): (f64, f64), scale: f64) -> ArrayVec<(f64, Cs, i8), 2> {
+    // On the circle to rounding: the turns that carried z here each left an ulp or so, and a
+    // (cos, sin) off the circle tilts the orientation the inner pair is asked to reach.
+    let z = unit(z);
+    let (f, st2, reach) = r.branches(z);
     let mut out = ArrayVec::new();
     for (k, sg) in [1i8, -1].into_iter().enumerate() {
         if !vanishes(&f, k, scale) {
@@ -387,9 +398,9 @@ fn settled(r: &Residual, x: f64, slope: f64, (lo, hi): (f64, f64), scale: f64) -
         } else {
             f64::NAN
         };
-        let (a, fa, reach) = settle(|a| r.clamped(a, sg), x, (f[k], reach), d, (lo, hi), scale);
+        let (a, za, fa, reach) = settle(|z| r.clamped(z, sg), (x, z), (f[k], reach), d, (lo, hi), scale);
         if fa.abs() <= 1e-9 * scale && reaches(reach) {
-            out.push((a, sg));
+            out.push((a, za, sg));
         }
     }
     out
@@ -398,29 +409,31 @@ fn settled(r: &Residual, x: f64, slope: f64, (lo, hi): (f64, f64), scale: f64) -
 /// Newton's step on f from a root of the product, then secant steps, within the interval that
 /// holds the root alone: the product's rounding (its coefficients carry that of every sample)
 /// can leave its root a few ulps of the product away from f's. `slope`: f' at x, or NaN; `f`
-/// gives f and something else of the point (`px` at x), returned with the point settled on.
-fn settle<P: Copy>(f: impl Fn(f64) -> (f64, P), x: f64, (fx, px): (f64, P), slope: f64, (lo, hi): (f64, f64), scale: f64) -> (f64, f64, P) {
-    let (mut x, mut fx, mut px, mut d) = (x, fx, px, slope);
-    for _ in 0..4 {
+/// gives f and something else of the point (`px` at x) from its (cos, sin), returned with the
+/// point settled on. Each point's (cos, sin) is its neighbour's turned by the step.
+fn settle<P: Copy>(f: impl Fn(Cs) -> (f64, P), (x, z): (f64, Cs), (fx, px): (f64, P), slope: f64, (lo, hi): (f64, f64), scale: f64) -> (f64, Cs, f64, P) {
+    let (mut x, mut z, mut fx, mut px, mut d) = (x, z, fx, px, slope);
+    for _ in 0..8 {
         if !(fx.abs() > 1e-14 * scale) {
             break;
         }
         if !(d.is_finite() && d != 0.0) {
             let h = 1e-8 * (1.0 + x.abs());
-            d = (f(x + h).0 - fx) / h;
+            d = (f(turn(z, h)).0 - fx) / h;
         }
         let xn = x - fx / d;
         if !(lo..=hi).contains(&xn) {
             break;
         }
-        let (fn_, pn) = f(xn);
+        let zn = turn(z, xn - x);
+        let (fn_, pn) = f(zn);
         if fn_.abs() >= fx.abs() {
             break;
         }
         d = (fn_ - fx) / (xn - x);
-        (x, fx, px) = (xn, fn_, pn);
+        (x, z, fx, px) = (xn, zn, fn_, pn);
     }
-    (x, fx, px)
+    (x, z, fx, px)
 }
 
 /// Whether the pair's reach is that of an orientation it reaches (on the fold to rounding).
@@ -557,22 +570,23 @@ impl Trig {
         (a * c + b * s, b * c - a * s)
     }
 
-    /// The one root between `p` and `q`, where g is proven monotone, with |g'| ≥ `slope` and
-    /// |g''| ≤ `curve` there: Newton's steps, bisecting whenever a step would leave the bracket.
-    /// A step whose landing is provably within rounding of the root (curve · δ² / 2|g'|, δ the
-    /// distance to the root |g| / slope bounds) is taken without evaluating g there. Each
-    /// point's (cos, sin) is its neighbour's turned by the step ([`turn_small`]), or the
-    /// bracket's chord midpoint: no sincos.
-    fn newton(&self, p: &At, q: &At, slope: f64, curve: f64) -> (f64, f64) {
+    /// The one root between `p` and `q` (with its (cos, sin) and g' there), where g is proven
+    /// monotone, with |g'| ≥ `slope` and |g''| ≤ `curve` there: Newton's steps from the root of
+    /// the cubic through the ends' values and slopes, bisecting whenever a step would leave the
+    /// bracket. A step whose landing is provably within rounding of the root (curve · δ² / 2|g'|,
+    /// δ the distance to the root, which |g| over |g'| near the point bounds) is taken without
+    /// evaluating g there. Each point's (cos, sin) is its neighbour's turned by the step
+    /// ([`turn_small`]), or the bracket's chord midpoint: no sincos.
+    fn newton(&self, p: &At, q: &At, slope: f64, curve: f64) -> (f64, Cs, f64) {
         let (mut lo, mut hi) = ((p.x, p.z, p.g), (q.x, q.z, q.g));
-        let mut x = p.x - p.g * (q.x - p.x) / (q.g - p.g);
+        let mut x = p.x + (q.x - p.x) * hermite_root(p.g, p.d, q.g, q.d, q.x - p.x);
         let mut z = turn_small(p.z, x - p.x);
         let mut d = p.d;
         for _ in 0..32 {
             let g;
             (g, d) = self.slope_at(z);
             if g.abs() <= self.noise {
-                return (x, d);
+                return (x, z, d);
             }
             if g.signum() == lo.2.signum() {
                 lo = (x, z, g);
@@ -583,7 +597,10 @@ impl Trig {
             let mut next = x - g / d;
             let landed = if next > l && next < r {
                 z = turn_small(z, next - x);
-                let far = g / slope;
+                // |g'| between x and the root: `slope` over the bracket, or near x, where g''
+                // moves it little, |d| less that move over twice |g / d|, if that leaves half of it.
+                let near = d.abs() - 2.0 * curve * (g / d).abs();
+                let far = g / if near >= 0.5 * d.abs() { near.max(slope) } else { slope };
                 curve * far * far <= 4.0 * f64::EPSILON * (1.0 + next.abs()) * d.abs()
             } else {
                 next = 0.5 * (l + r);
@@ -591,17 +608,19 @@ impl Trig {
                 false
             };
             if landed || (next - x).abs() <= 4.0 * f64::EPSILON * (1.0 + x.abs()) {
-                return (next, d);
+                return (next, z, d);
             }
             x = next;
         }
-        (x, d)
+        (x, z, d)
     }
 
-    /// Every root on the circle, by subdivision: an interval is dropped where the bound on g''
-    /// proves g keeps its sign, and bracketed where it proves g monotone; where neither is
-    /// proven once the bound is down to rounding, the interval is unsure (a double root, roots
-    /// closer than rounding tells apart, or none). `None` past 32 of either.
+    /// Every root on the circle, by subdivision: an interval is dropped where the bounds on g''
+    /// or g'''' prove g keeps its sign, and bracketed where those on g'' or g⁽⁵⁾ prove g
+    /// monotone (each bound turned into one on g or g' by the chord or the cubic through the
+    /// ends, [`cubic_min`]); where neither is proven once the bound is down to rounding, the
+    /// interval is unsure (a double root, roots closer than rounding tells apart, or none).
+    /// `None` past 32 of either.
     fn isolate(&self) -> Option<Isolated<'_>> {
         let mut out = Isolated {
             t: self,
@@ -621,6 +640,7 @@ impl Trig {
             } else {
                 self.at_powers(OFFSET + step * i as f64, &GRID_POWERS[i])
             };
+            out.zero(&prev, step)?;
             out.interval(&prev, &cur, 0)?;
             prev = cur;
         }
@@ -684,51 +704,11 @@ fn circle<const N: usize>() -> [Powers; N] {
     std::array::from_fn(|i| powers(Cs::of(OFFSET + std::f64::consts::TAU * i as f64 / N as f64)))
 }
 
-/// The midpoint of the arc between two points of the unit circle (less than a half turn apart):
-/// the normalised sum of its ends.
-#[inline]
-fn chord_mid(p: Cs, q: Cs) -> Cs {
-    let (c, s) = (p.c + q.c, p.s + q.s);
-    let n = 1.0 / (c * c + s * s).sqrt();
-    Cs { c: c * n, s: s * n }
-}
-
-/// `z` turned by `h` (|h| ≤ 2π/20, within a grid interval): cos h and sin h by their Taylor
-/// series to h¹⁴ and h¹³, whose next terms are below 3e-20 there.
-#[inline]
-fn turn_small(z: Cs, h: f64) -> Cs {
-    debug_assert!(h.abs() <= std::f64::consts::TAU / GRID as f64, "{h}");
-    const S: [f64; 7] = [1.0, -1.0 / 6.0, 1.0 / 120.0, -1.0 / 5040.0, 1.0 / 362_880.0, -1.0 / 39_916_800.0, 1.0 / 6_227_020_800.0];
-    const C: [f64; 8] = [
-        1.0,
-        -1.0 / 2.0,
-        1.0 / 24.0,
-        -1.0 / 720.0,
-        1.0 / 40_320.0,
-        -1.0 / 3_628_800.0,
-        1.0 / 479_001_600.0,
-        -1.0 / 87_178_291_200.0,
-    ];
-    let h2 = h * h;
-    let s = h * S.iter().rev().fold(0.0, |acc, k| acc * h2 + k);
-    let c = C.iter().rev().fold(0.0, |acc, k| acc * h2 + k);
-    mul(z, Cs { c, s })
-}
-
-/// (cos, sin) of the sum of two angles.
-#[inline(always)]
-fn mul(p: Cs, q: Cs) -> Cs {
-    Cs {
-        c: p.c * q.c - p.s * q.s,
-        s: p.c * q.s + p.s * q.c,
-    }
-}
-
 /// What the isolation found.
 struct Isolated<'a> {
     t: &'a Trig,
-    /// A root, g' there, and an interval that holds it and no other.
-    roots: ArrayVec<(f64, f64, f64, f64), 32>,
+    /// A root, its (cos, sin), g' there, and an interval that holds it and no other.
+    roots: ArrayVec<(f64, Cs, f64, f64, f64), 32>,
     /// Intervals where rounding hides how many roots there are (adjacent ones merged).
     unsure: ArrayVec<(f64, f64), 32>,
 }
@@ -742,6 +722,14 @@ impl Isolated<'_> {
         Some(())
     }
 
+    /// A point where g is zero is a root whose interval is its neighbourhood (`h` either side).
+    fn zero(&mut self, p: &At, h: f64) -> Option<()> {
+        if p.g == 0.0 {
+            self.roots.try_push((p.x, p.z, p.d, p.x - h, p.x + h)).ok()?;
+        }
+        Some(())
+    }
+
     fn interval(&mut self, p: &At, q: &At, depth: u32) -> Option<()> {
         let (t, h) = (self.t, q.x - p.x);
         // |g''''| on the interval: g'''' leaves each end at most at the rate `crackle`, so it
@@ -751,19 +739,25 @@ impl Isolated<'_> {
         let jerk = min(0.5 * (p.j + q.j).abs() + 0.5 * snap * h, t.jerk) + t.noise_at[3];
         // |g''| on the interval: within the tent of the two ends' values, the same way.
         let c = 0.5 * (p.e + q.e).abs() + 0.5 * jerk * h + t.noise_at[2];
-        // A zero at the left end is a root whose interval is its neighbourhood.
-        let s0 = if p.g == 0.0 {
-            self.roots.try_push((p.x, p.d, p.x - h, q.x)).ok()?;
-            sign(p.d)
-        } else {
-            sign(p.g)
-        };
+        // A zero at the left end was taken as a root where the point was made ([`Self::zero`]).
+        let s0 = if p.g == 0.0 { sign(p.d) } else { sign(p.g) };
         let bend = 0.125 * c * h * h;
+        let h4 = (h * h) * (h * h);
         if s0 != sign(q.g) && q.g != 0.0 {
-            let slope = min(p.d.abs(), q.d.abs()) - t.noise_at[1] - 0.5 * c * h;
-            if sign(p.d) == sign(q.d) && slope > 0.0 {
-                let (r, d) = t.newton(p, q, slope, c);
-                return self.roots.try_push((r, d, p.x, q.x)).ok();
+            // |g'| from below: its least end less what |g''| lets it dip, or where that proves
+            // nothing, the cubic through g′'s and g″'s values at the ends less its error
+            // (|g⁽⁵⁾| h⁴/384) and that of the curvatures.
+            let sd = sign(p.d);
+            let mut slope = min(p.d.abs(), q.d.abs()) - t.noise_at[1] - 0.5 * c * h;
+            if !(slope > 0.0) {
+                slope = cubic_min(sd * p.d, sd * p.e, sd * q.d, sd * q.e, h)
+                    - t.crackle * h4 / 384.0
+                    - t.noise_at[1]
+                    - 0.25 * h * t.noise_at[2];
+            }
+            if sd == sign(q.d) && slope > 0.0 {
+                let (r, z, d) = t.newton(p, q, slope, c);
+                return self.roots.try_push((r, z, d, p.x, q.x)).ok();
             }
         } else {
             // |g| from below: the chord less the bend, or on each half the tangent at its end
@@ -772,7 +766,10 @@ impl Isolated<'_> {
             let chord = min(g0, g1);
             let left = g0 + (s0 * p.d - t.noise_at[1]) * 0.5 * h - bend;
             let right = g1 - (s0 * q.d + t.noise_at[1]) * 0.5 * h - bend;
-            if chord - bend > t.noise || min(chord, min(left, right)) > t.noise {
+            // Or the cubic through the ends' values and slopes, less its error (|g''''| h⁴/384)
+            // and that of the slopes.
+            let hermite = || cubic_min(g0, s0 * p.d, g1, s0 * q.d, h) - snap * h4 / 384.0 - 0.25 * h * t.noise_at[1];
+            if chord - bend > t.noise || min(chord, min(left, right)) > t.noise || hermite() > t.noise {
                 return Some(());
             }
         }
@@ -780,9 +777,46 @@ impl Isolated<'_> {
             return self.unsure(p.x, q.x);
         }
         let mid = t.at(0.5 * (p.x + q.x), chord_mid(p.z, q.z));
+        self.zero(&mid, 0.5 * h)?;
         self.interval(p, &mid, depth + 1)?;
         self.interval(&mid, q, depth + 1)
     }
+}
+
+/// The least value on [0, h] of the cubic with values `v0`, `v1` and slopes `d0`, `d1` at the
+/// ends (its rounding included): at an end or where its slope vanishes inside.
+fn cubic_min(v0: f64, d0: f64, v1: f64, d1: f64, h: f64) -> f64 {
+    let (m0, m1) = (h * d0, h * d1);
+    let c2 = 3.0 * (v1 - v0) - 2.0 * m0 - m1;
+    let c3 = 2.0 * (v0 - v1) + m0 + m1;
+    let mut lo = min(v0, v1);
+    let disc = c2 * c2 - 3.0 * c3 * m0;
+    if disc > 0.0 {
+        let q = -(c2 + sign(c2) * disc.sqrt());
+        for s in [q / (3.0 * c3), m0 / q] {
+            if s > 0.0 && s < 1.0 {
+                lo = min(lo, ((c3 * s + c2) * s + m0) * s + v0);
+            }
+        }
+    }
+    lo - 1e-14 * (v0.abs() + v1.abs() + m0.abs() + m1.abs())
+}
+
+/// Where on [0, 1] (as a fraction of `h`) the cubic with values `v0`, `v1` (of opposite signs)
+/// and slopes `d0`, `d1` at the ends crosses zero: a start for Newton's steps on the function it
+/// interpolates, within its error (|g⁗| h⁴ / 384) of the root. Newton's steps on the cubic from
+/// the chord's root, kept inside.
+fn hermite_root(v0: f64, d0: f64, v1: f64, d1: f64, h: f64) -> f64 {
+    let (m0, m1) = (h * d0, h * d1);
+    let c2 = 3.0 * (v1 - v0) - 2.0 * m0 - m1;
+    let c3 = 2.0 * (v0 - v1) + m0 + m1;
+    let mut s = v0 / (v0 - v1);
+    for _ in 0..4 {
+        let v = ((c3 * s + c2) * s + m0) * s + v0;
+        let d = (3.0 * c3 * s + 2.0 * c2) * s + m0;
+        s = (s - v / d).clamp(0.0, 1.0);
+    }
+    if s.is_finite() { s } else { v0 / (v0 - v1) }
 }
 
 /// ±1 by the sign bit: `signum` without its NaN test (the isolation's values are finite).
