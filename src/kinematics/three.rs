@@ -598,9 +598,11 @@ impl Trig {
             let landed = if next > l && next < r {
                 z = turn_small(z, next - x);
                 // |g'| between x and the root: `slope` over the bracket, or near x, where g''
-                // moves it little, |d| less that move over twice |g / d|, if that leaves half of it.
-                let near = d.abs() - 2.0 * curve * (g / d).abs();
-                let far = g / if near >= 0.5 * d.abs() { near.max(slope) } else { slope };
+                // moves it little, |d| (less its rounding) less that move over twice |g / d|, if
+                // that leaves half of it.
+                let least = d.abs() - self.noise_at[1];
+                let near = least - 2.0 * curve * (g / d).abs();
+                let far = g / if near >= 0.5 * least { near.max(slope) } else { slope };
                 curve * far * far <= 4.0 * f64::EPSILON * (1.0 + next.abs()) * d.abs()
             } else {
                 next = 0.5 * (l + r);
@@ -640,7 +642,6 @@ impl Trig {
             } else {
                 self.at_powers(OFFSET + step * i as f64, &GRID_POWERS[i])
             };
-            out.zero(&prev, step)?;
             out.interval(&prev, &cur, 0)?;
             prev = cur;
         }
@@ -722,14 +723,6 @@ impl Isolated<'_> {
         Some(())
     }
 
-    /// A point where g is zero is a root whose interval is its neighbourhood (`h` either side).
-    fn zero(&mut self, p: &At, h: f64) -> Option<()> {
-        if p.g == 0.0 {
-            self.roots.try_push((p.x, p.z, p.d, p.x - h, p.x + h)).ok()?;
-        }
-        Some(())
-    }
-
     fn interval(&mut self, p: &At, q: &At, depth: u32) -> Option<()> {
         let (t, h) = (self.t, q.x - p.x);
         // |g''''| on the interval: g'''' leaves each end at most at the rate `crackle`, so it
@@ -739,8 +732,9 @@ impl Isolated<'_> {
         let jerk = min(0.5 * (p.j + q.j).abs() + 0.5 * snap * h, t.jerk) + t.noise_at[3];
         // |g''| on the interval: within the tent of the two ends' values, the same way.
         let c = 0.5 * (p.e + q.e).abs() + 0.5 * jerk * h + t.noise_at[2];
-        // A zero at the left end was taken as a root where the point was made ([`Self::zero`]).
-        let s0 = if p.g == 0.0 { sign(p.d) } else { sign(p.g) };
+        // A computed zero proves nothing (the roots near it may be one or three): it counts by
+        // its sign bit, and the interval ending there is unsure once subdivided to rounding.
+        let s0 = sign(p.g);
         let bend = 0.125 * c * h * h;
         let h4 = (h * h) * (h * h);
         if s0 != sign(q.g) && q.g != 0.0 {
@@ -749,7 +743,7 @@ impl Isolated<'_> {
             // (|g⁽⁵⁾| h⁴/384) and that of the curvatures.
             let sd = sign(p.d);
             let mut slope = min(p.d.abs(), q.d.abs()) - t.noise_at[1] - 0.5 * c * h;
-            if !(slope > 0.0) {
+            if !(slope > 0.0) && sd == sign(q.d) {
                 slope = cubic_min(sd * p.d, sd * p.e, sd * q.d, sd * q.e, h)
                     - t.crackle * h4 / 384.0
                     - t.noise_at[1]
@@ -777,7 +771,6 @@ impl Isolated<'_> {
             return self.unsure(p.x, q.x);
         }
         let mid = t.at(0.5 * (p.x + q.x), chord_mid(p.z, q.z));
-        self.zero(&mid, 0.5 * h)?;
         self.interval(p, &mid, depth + 1)?;
         self.interval(&mid, q, depth + 1)
     }
@@ -804,7 +797,7 @@ fn cubic_min(v0: f64, d0: f64, v1: f64, d1: f64, h: f64) -> f64 {
 
 /// Where on [0, 1] (as a fraction of `h`) the cubic with values `v0`, `v1` (of opposite signs)
 /// and slopes `d0`, `d1` at the ends crosses zero: a start for Newton's steps on the function it
-/// interpolates, within its error (|g⁗| h⁴ / 384) of the root. Newton's steps on the cubic from
+/// interpolates, which it misses by at most |g⁗| h⁴ / 384 there. Newton's steps on the cubic from
 /// the chord's root, kept inside.
 fn hermite_root(v0: f64, d0: f64, v1: f64, d1: f64, h: f64) -> f64 {
     let (m0, m1) = (h * d0, h * d1);

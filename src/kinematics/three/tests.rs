@@ -350,6 +350,11 @@ fn the_isolation_brackets_every_root_and_drops_no_interval_that_holds_one() {
         };
         for &(x, z, d, lo, hi) in &iso.roots {
             assert!(roots.iter().any(|&r| near(x, d, r)), "case {case}: a root at {x} that g does not have: {roots:?}");
+            // Proven monotone there: the bracket holds one root, however close its neighbour (to
+            // the rounding of g over its slope at either end).
+            let tol = 16.0 * poly.noise / d.abs();
+            let held = |e: f64| roots.iter().filter(|&&r| inside(r, (lo - e, hi + e))).count();
+            assert!(held(tol) >= 1 && held(-tol) <= 1, "case {case}: ({lo}, {hi}) holds {} roots: {roots:?}", held(0.0));
             assert!((z.c - x.cos()).abs() < 1e-13 && (z.s - x.sin()).abs() < 1e-13, "case {case}: its (cos, sin) is not its angle's");
             assert!(inside(x, (lo, hi)), "case {case}: {x} outside its interval ({lo}, {hi})");
         }
