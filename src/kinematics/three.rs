@@ -579,7 +579,7 @@ impl Trig {
     /// ([`turn_small`]), or the bracket's chord midpoint: no sincos.
     fn newton(&self, p: &At, q: &At, slope: f64, curve: f64) -> (f64, Cs, f64) {
         let (mut lo, mut hi) = ((p.x, p.z, p.g), (q.x, q.z, q.g));
-        let mut x = p.x + (q.x - p.x) * hermite_root(p.g, p.d, q.g, q.d, q.x - p.x);
+        let mut x = p.x + (q.x - p.x) * Cubic::hermite(p.g, p.d, q.g, q.d, q.x - p.x).root();
         let mut z = turn_small(p.z, x - p.x);
         let mut d = p.d;
         for _ in 0..32 {
@@ -620,7 +620,7 @@ impl Trig {
     /// Every root on the circle, by subdivision: an interval is dropped where the bounds on g''
     /// or g'''' prove g keeps its sign, and bracketed where those on g'' or g⁽⁵⁾ prove g
     /// monotone (each bound turned into one on g or g' by the chord or the cubic through the
-    /// ends, [`cubic_min`]); where neither is proven once the bound is down to rounding, the
+    /// ends, [`Cubic::min`]); where neither is proven once the bound is down to rounding, the
     /// interval is unsure (a double root, roots closer than rounding tells apart, or none).
     /// `None` past 32 of either.
     fn isolate(&self) -> Option<Isolated<'_>> {
@@ -742,16 +742,18 @@ impl Isolated<'_> {
             // nothing, the cubic through g′'s and g″'s values at the ends less its error
             // (|g⁽⁵⁾| h⁴/384) and that of the curvatures.
             let sd = sign(p.d);
-            let mut slope = min(p.d.abs(), q.d.abs()) - t.noise_at[1] - 0.5 * c * h;
-            if !(slope > 0.0) && sd == sign(q.d) {
-                slope = cubic_min(sd * p.d, sd * p.e, sd * q.d, sd * q.e, h)
-                    - t.crackle * h4 / 384.0
-                    - t.noise_at[1]
-                    - 0.25 * h * t.noise_at[2];
-            }
-            if sd == sign(q.d) && slope > 0.0 {
-                let (r, z, d) = t.newton(p, q, slope, c);
-                return self.roots.try_push((r, z, d, p.x, q.x)).ok();
+            if sd == sign(q.d) {
+                let mut slope = min(p.d.abs(), q.d.abs()) - t.noise_at[1] - 0.5 * c * h;
+                if !(slope > 0.0) {
+                    slope = Cubic::hermite(sd * p.d, sd * p.e, sd * q.d, sd * q.e, h).min()
+                        - t.crackle * h4 / 384.0
+                        - t.noise_at[1]
+                        - 0.25 * h * t.noise_at[2];
+                }
+                if slope > 0.0 {
+                    let (r, z, d) = t.newton(p, q, slope, c);
+                    return self.roots.try_push((r, z, d, p.x, q.x)).ok();
+                }
             }
         } else {
             // |g| from below: the chord less the bend, or on each half the tangent at its end
@@ -762,7 +764,7 @@ impl Isolated<'_> {
             let right = g1 - (s0 * q.d + t.noise_at[1]) * 0.5 * h - bend;
             // Or the cubic through the ends' values and slopes, less its error (|g''''| h⁴/384)
             // and that of the slopes.
-            let hermite = || cubic_min(g0, s0 * p.d, g1, s0 * q.d, h) - snap * h4 / 384.0 - 0.25 * h * t.noise_at[1];
+            let hermite = || Cubic::hermite(g0, s0 * p.d, g1, s0 * q.d, h).min() - snap * h4 / 384.0 - 0.25 * h * t.noise_at[1];
             if chord - bend > t.noise || min(chord, min(left, right)) > t.noise || hermite() > t.noise {
                 return Some(());
             }
@@ -776,40 +778,63 @@ impl Isolated<'_> {
     }
 }
 
-/// The least value on [0, h] of the cubic with values `v0`, `v1` and slopes `d0`, `d1` at the
-/// ends (its rounding included): at an end or where its slope vanishes inside.
-fn cubic_min(v0: f64, d0: f64, v1: f64, d1: f64, h: f64) -> f64 {
-    let (m0, m1) = (h * d0, h * d1);
-    let c2 = 3.0 * (v1 - v0) - 2.0 * m0 - m1;
-    let c3 = 2.0 * (v0 - v1) + m0 + m1;
-    let mut lo = min(v0, v1);
-    let disc = c2 * c2 - 3.0 * c3 * m0;
-    if disc > 0.0 {
-        let q = -(c2 + sign(c2) * disc.sqrt());
-        for s in [q / (3.0 * c3), m0 / q] {
-            if s > 0.0 && s < 1.0 {
-                lo = min(lo, ((c3 * s + c2) * s + m0) * s + v0);
-            }
-        }
-    }
-    lo - 1e-14 * (v0.abs() + v1.abs() + m0.abs() + m1.abs())
+/// The cubic on an interval of width `h` with values `v0`, `v1` and slopes `d0`, `d1` at its
+/// ends (Hermite's), in powers of the fraction s ∈ [0, 1] of the interval.
+struct Cubic {
+    v0: f64,
+    v1: f64,
+    m0: f64,
+    c2: f64,
+    c3: f64,
+    /// The size of its terms, which its rounding follows.
+    size: f64,
 }
 
-/// Where on [0, 1] (as a fraction of `h`) the cubic with values `v0`, `v1` (of opposite signs)
-/// and slopes `d0`, `d1` at the ends crosses zero: a start for Newton's steps on the function it
-/// interpolates, which it misses by at most |g⁗| h⁴ / 384 there. Newton's steps on the cubic from
-/// the chord's root, kept inside.
-fn hermite_root(v0: f64, d0: f64, v1: f64, d1: f64, h: f64) -> f64 {
-    let (m0, m1) = (h * d0, h * d1);
-    let c2 = 3.0 * (v1 - v0) - 2.0 * m0 - m1;
-    let c3 = 2.0 * (v0 - v1) + m0 + m1;
-    let mut s = v0 / (v0 - v1);
-    for _ in 0..4 {
-        let v = ((c3 * s + c2) * s + m0) * s + v0;
-        let d = (3.0 * c3 * s + 2.0 * c2) * s + m0;
-        s = (s - v / d).clamp(0.0, 1.0);
+impl Cubic {
+    fn hermite(v0: f64, d0: f64, v1: f64, d1: f64, h: f64) -> Cubic {
+        let (m0, m1) = (h * d0, h * d1);
+        Cubic {
+            v0,
+            v1,
+            m0,
+            c2: 3.0 * (v1 - v0) - 2.0 * m0 - m1,
+            c3: 2.0 * (v0 - v1) + m0 + m1,
+            size: v0.abs() + v1.abs() + m0.abs() + m1.abs(),
+        }
     }
-    if s.is_finite() { s } else { v0 / (v0 - v1) }
+
+    fn at(&self, s: f64) -> f64 {
+        ((self.c3 * s + self.c2) * s + self.m0) * s + self.v0
+    }
+
+    /// Its least value (its rounding included): at an end or where its slope vanishes inside.
+    fn min(&self) -> f64 {
+        let (c2, c3, m0) = (self.c2, self.c3, self.m0);
+        let mut lo = min(self.v0, self.v1);
+        let disc = c2 * c2 - 3.0 * c3 * m0;
+        if disc > 0.0 {
+            let q = -(c2 + sign(c2) * disc.sqrt());
+            for s in [q / (3.0 * c3), m0 / q] {
+                if s > 0.0 && s < 1.0 {
+                    lo = min(lo, self.at(s));
+                }
+            }
+        }
+        lo - 1e-14 * self.size
+    }
+
+    /// Where it crosses zero (`v0`, `v1` of opposite signs), as a fraction of the interval: a
+    /// start for Newton's steps on the function it interpolates, which it misses by at most
+    /// |g⁗| h⁴ / 384 there. Newton's steps on the cubic from the chord's root, kept inside.
+    fn root(&self) -> f64 {
+        let chord = self.v0 / (self.v0 - self.v1);
+        let mut s = chord;
+        for _ in 0..4 {
+            let d = (3.0 * self.c3 * s + 2.0 * self.c2) * s + self.m0;
+            s = (s - self.at(s) / d).clamp(0.0, 1.0);
+        }
+        if s.is_finite() { s } else { chord }
+    }
 }
 
 /// ±1 by the sign bit: `signum` without its NaN test (the isolation's values are finite).
