@@ -553,10 +553,7 @@ impl World {
             _ => f64::INFINITY,
         };
         self.last = Some((*linear, *actual, *work_offset, tool_length));
-        // Rounded up: the sum is never short of the motion.
-        self.pending = (self.pending + moved) * (1.0 + 2.0 * f64::EPSILON);
-        let clear = |slack: f64| slack - self.pending > 1e-9 * (1.0 + slack.abs());
-        if clear(self.slack[0]) && (!stock || clear(self.slack[1])) {
+        if self.still_clear(moved, stock) {
             return;
         }
         // The links' poses only where a pair must be asked.
@@ -592,6 +589,43 @@ impl World {
         }
         self.slack = slack;
         self.pending = 0.0;
+    }
+
+    /// Adds `moved` to the motion since the last pass (rounded up: the sum is never short of
+    /// it); whether every pair is still clear by its bound less that sum.
+    fn still_clear(&mut self, moved: f64, stock: bool) -> bool {
+        self.pending = (self.pending + moved) * (1.0 + 2.0 * f64::EPSILON);
+        let clear = |slack: f64| slack - self.pending > 1e-9 * (1.0 + slack.abs());
+        clear(self.slack[0]) && (!stock || clear(self.slack[1]))
+    }
+
+    /// Whether a move from `from` (none: from wherever the machine is) starts where the last
+    /// check left the joints.
+    pub fn continues_from(&self, from: Option<(&[f64; 3], &[f64; 3])>) -> bool {
+        match (from, &self.last) {
+            (None, _) => true,
+            (Some((l, a)), Some((l0, a0, _, _))) => l == l0 && a == a0,
+            (Some(_), None) => false,
+        }
+    }
+
+    /// Whether the whole move from the joints last checked to `to` is clear by the pairs'
+    /// bounds, taken at once: the move's motion bounds the sum of its samples' (its linear part
+    /// and its turns add up along it, and no sample is farther out than an end). Where it is,
+    /// no sample needs a look; where not, nothing is counted and the samples are checked.
+    pub fn move_clear(&mut self, m: &Machine, to: (&[f64; 3], &[f64; 3]), tool_length: f64, work_offset: &Vec3, stock: bool) -> bool {
+        let Some((l0, a0, w0, t0)) = &self.last else { return false };
+        if w0 != work_offset || *t0 != tool_length {
+            return false;
+        }
+        let moved = self.motion(m, (l0, a0), to, tool_length, work_offset);
+        let before = self.pending;
+        if !self.still_clear(moved, stock) {
+            self.pending = before;
+            return false;
+        }
+        self.last = Some((*to.0, *to.1, *work_offset, tool_length));
+        true
     }
 
     /// How many samples the motion between two joint sets needs so that no body moves more than

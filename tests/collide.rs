@@ -733,23 +733,28 @@ fn skipping_pairs_that_cannot_have_closed_in_misses_nothing() {
         s ^= s << 17;
         (s >> 11) as f64 / (1u64 << 53) as f64
     };
-    let (mut steps, mut hits) = (0, 0);
+    let (mut steps, mut hits, mut whole) = (0, 0, 0);
     for p in library().iter() {
-        hits += walk_compare(p, 3000, &mut rnd);
+        let (h, w) = walk_compare(p, 3000, &mut rnd);
+        (hits, whole) = (hits + h, whole + w);
         steps += 3000;
     }
     assert!(hits > 1000, "the walks touched something only {hits} times in {steps} steps");
+    assert!(whole > steps / 20, "only {whole} of {steps} moves were taken whole");
     // Mesh bodies too: a closed table (a solid: wholly inside is a hit) and a head housing.
     let head = common::stl::box_triangles([-120.0, -120.0, 5.0], [120.0, 120.0, 200.0]);
     let dir = mesh_dir("walk", &[("table.stl", common::stl::binary(&table_stl())), ("head.stl", common::stl::binary(&head))]);
     let bodies = "[[body]]\nname = \"table mesh\"\non = \"C\"\nmesh = \"table.stl\"\n[[body]]\nname = \"head mesh\"\non = \"spindle\"\nmesh = \"head.stl\"\n";
     let p = kinepost::machines::parse_profile_in(&format!("{}\n{bodies}", shipped("spinner-u5-620")), "t", None, Some(&dir)).unwrap();
-    assert!(walk_compare(&p, 3000, &mut rnd) > 100, "the mesh walk touched too little");
+    assert!(walk_compare(&p, 3000, &mut rnd).0 > 100, "the mesh walk touched too little");
 }
 
 /// A random walk of `p`'s joints (small steps, and a jump now and then), checked by one World
-/// that remembers and by a fresh one at every step: the same hits. Returns how many.
-fn walk_compare(p: &Profile, n: usize, rnd: &mut impl FnMut() -> f64) -> usize {
+/// that remembers and by a fresh one at every step: the same hits. A third World takes each
+/// move whole where its bounds allow (`move_clear`): where it does, a fresh World finds nothing
+/// at the move's end or at points along it. Returns how many hits, and how many moves were taken
+/// whole.
+fn walk_compare(p: &Profile, n: usize, rnd: &mut impl FnMut() -> f64) -> (usize, usize) {
     use kinepost::collide::{ToolShape, World};
     let mut hits = 0;
     let m = &p.machine;
@@ -760,6 +765,16 @@ fn walk_compare(p: &Profile, n: usize, rnd: &mut impl FnMut() -> f64) -> usize {
     let wo = kinepost::kinematics::Vec3::zeros();
     let mut remembering = World::new(&g, &stock, &[], 2.0, 1e-3);
     remembering.set_tool(tool);
+    let mut whole = World::new(&g, &stock, &[], 2.0, 1e-3);
+    whole.set_tool(tool);
+    let fresh_hits = |lin: &[f64; 3], rot: &[f64; 3], stock_now: bool| {
+        let mut fresh = World::new(&g, &stock, &[], 2.0, 1e-3);
+        fresh.set_tool(tool);
+        let mut out = Vec::new();
+        fresh.check_at(m, lin, rot, len, &wo, stock_now, &mut out);
+        out
+    };
+    let mut taken_whole = 0;
     let (mut lin, mut rot) = ([0.0f64; 3], [0.0f64; 3]);
     for i in 0..3 {
         if let Some(l) = &m.linears[i] {
@@ -768,6 +783,7 @@ fn walk_compare(p: &Profile, n: usize, rnd: &mut impl FnMut() -> f64) -> usize {
     }
     for k in 0..n {
         let jump = k % 97 == 0;
+        let (lin0, rot0) = (lin, rot);
         for i in 0..3 {
             if let Some(l) = &m.linears[i] {
                 let step = if jump { l.max - l.min } else { 0.02 * (l.max - l.min) };
@@ -783,10 +799,21 @@ fn walk_compare(p: &Profile, n: usize, rnd: &mut impl FnMut() -> f64) -> usize {
         let mut fresh = World::new(&g, &stock, &[], 2.0, 1e-3);
         fresh.set_tool(tool);
         fresh.check_at(m, &lin, &rot, len, &wo, stock_now, &mut b);
+        assert!(whole.continues_from(Some((&lin0, &rot0))) || k == 0);
+        if whole.move_clear(m, (&lin, &rot), len, &wo, stock_now) {
+            taken_whole += 1;
+            for t in [0.25, 0.5, 0.75, 1.0] {
+                let along = |p: &[f64; 3], q: &[f64; 3]| std::array::from_fn::<f64, 3, _>(|i| p[i] + (q[i] - p[i]) * t);
+                let seen = fresh_hits(&along(&lin0, &lin), &along(&rot0, &rot), stock_now);
+                assert!(seen.is_empty(), "{} step {k}: taken whole, yet {seen:?} at {t} of the way", m.id);
+            }
+        } else {
+            whole.check_at(m, &lin, &rot, len, &wo, stock_now, &mut Vec::new());
+        }
         let key = |h: &kinepost::collide::Hit| (h.a.clone(), h.b.clone(), (h.dist * 1e9).round() as i64);
         let (ka, kb): (Vec<_>, Vec<_>) = (a.iter().map(key).collect(), b.iter().map(key).collect());
         assert_eq!(ka, kb, "{} step {k}: joints {lin:?} {rot:?}", m.id);
         hits += b.len();
     }
-    hits
+    (hits, taken_whole)
 }
