@@ -346,18 +346,26 @@ pub struct World {
     step: f64,
     reach: f64,
     tool: Option<ToolShape>,
+    /// Bit i set where rotary i turns the table side ([`joints_of`]).
+    table: u8,
+    /// Twice the rotaries' pivots' distances from the origin: in how far a body point can be
+    /// from an axis.
+    pivots: f64,
     /// Per pair, a lower bound on its bodies' distance: the last one measured, less how far
-    /// anything could move up to the last pass (`pending` is the rest). A pair still farther
-    /// than it must be is not queried again; most pairs stay clear for many blocks, and parry's
-    /// queries are the check's cost.
+    /// its bodies could move relative to each other up to the last pass (`since` is the rest).
+    /// A pair still farther than it must be is not queried again; most pairs stay clear for
+    /// many blocks, and parry's queries are the check's cost.
     lower: Vec<f64>,
-    /// How far anything can have moved since the last pass over the pairs (not yet taken off
-    /// `lower`).
-    pending: f64,
-    /// At the last pass, the least of `lower` less each pair's limit, over the pairs other than
-    /// the cutter against the stock, and over those: while `pending` stays below it, no pair
-    /// needs a query, and a block costs no pass.
-    slack: [f64; 2],
+    /// Per pair, its class: an index into `classes`.
+    class_of: Vec<u8>,
+    /// The pairs moved by the same joints share a bound on their motion, so that a head-side
+    /// body against a bed-fixed one counts only the linears.
+    classes: Vec<Class>,
+    /// The least of the classes' `limit`s: while every joint's motion together stays below it,
+    /// no class needs a look of its own.
+    least: [f64; 2],
+    /// The motion since the last pass over the pairs, joint by joint.
+    since: Since,
     /// The joints (linear; actual rotary angles), work offset and tool length of the last check.
     last: Option<([f64; 3], [f64; 3], Vec3, f64)>,
     /// The block before was a rapid (or there was none): see [`World::stock_at_rapid`].
@@ -387,8 +395,10 @@ fn turn(axis: &Vec3, pivot: &Vec3, angle: f64) -> Pose {
 }
 
 impl World {
-    /// The bodies of `g`, the job's stock and fixture boxes (in W), checked with `clearance`.
-    pub fn new(g: &Geometry, stock: &[Solid], fixtures: &[Solid], clearance: f64, cut_depth: f64) -> World {
+    /// The bodies of `g` on `m`, the job's stock and fixture boxes (in W), checked with
+    /// `clearance`.
+    pub fn new(m: &Machine, g: &Geometry, stock: &[Solid], fixtures: &[Solid], clearance: f64, cut_depth: f64) -> World {
+        let table = (0..m.rotaries.len()).filter(|&i| m.rotaries[i].mount == Mount::Table).fold(0, |t, i| t | 1 << i);
         let mut w = World {
             bodies: Vec::new(),
             pairs: Vec::new(),
@@ -398,9 +408,13 @@ impl World {
             reach: 0.0,
             tool: None,
             prev_rapid: true,
+            table,
+            pivots: 2.0 * m.rotaries.iter().map(|r| r.pivot.norm()).sum::<f64>(),
             lower: Vec::new(),
-            pending: 0.0,
-            slack: [f64::NEG_INFINITY; 2],
+            class_of: Vec::new(),
+            classes: Vec::new(),
+            least: [f64::NEG_INFINITY; 2],
+            since: Since::ZERO,
             last: None,
         };
         for b in &g.bodies {
@@ -478,19 +492,33 @@ impl World {
             }
         }
         self.lower = vec![f64::NEG_INFINITY; self.pairs.len()];
-        self.slack = [f64::NEG_INFINITY; 2];
+        (self.classes, self.class_of) = (Vec::new(), Vec::new());
+        for &(i, j, _) in &self.pairs {
+            let joints = joints_of(self.bodies[i].link, self.table) ^ joints_of(self.bodies[j].link, self.table);
+            let c = self.classes.iter().position(|k| k.weights == weights(joints)).unwrap_or_else(|| {
+                self.classes.push(Class {
+                    weights: weights(joints),
+                    limit: [f64::NEG_INFINITY; 2],
+                });
+                self.classes.len() - 1
+            });
+            self.class_of.push(c as u8);
+        }
+        self.least = [f64::NEG_INFINITY; 2];
         self.last = None;
     }
 
     /// How far any point of any body can move relative to any other between two joint sets (the
-    /// joints interpolated linearly between them): the linear move, and each rotary's turn times
-    /// the farthest a body point can be from its axis.
-    fn motion(&self, m: &Machine, from: (&[f64; 3], &[f64; 3]), to: (&[f64; 3], &[f64; 3]), tool_length: f64, wo: &Vec3) -> f64 {
+    /// joints interpolated linearly between them), joint by joint: the linear move, and each
+    /// rotary's turn times the farthest a body point can be from its axis.
+    fn motion(&self, m: &Machine, from: (&[f64; 3], &[f64; 3]), to: (&[f64; 3], &[f64; 3]), tool_length: f64, wo: &Vec3) -> Motion {
         let (a, b) = (Vec3::from(*from.0), Vec3::from(*to.0));
-        let pivots: f64 = m.rotaries.iter().map(|r| r.pivot.norm()).sum();
-        let far = self.reach + wo.norm() + a.norm().max(b.norm()) + tool_length.abs() + 2.0 * pivots;
-        let turned: f64 = (0..m.rotaries.len()).map(|i| (from.1[i] - to.1[i]).abs()).sum();
-        (a - b).norm() + turned * far
+        let far = self.reach + wo.norm() + a.norm_squared().max(b.norm_squared()).sqrt() + tool_length.abs() + self.pivots;
+        let mut by_joint = [(a - b).norm(), 0.0, 0.0, 0.0];
+        for i in 0..m.rotaries.len() {
+            by_joint[1 + i] = (from.1[i] - to.1[i]).abs() * far;
+        }
+        Motion { known: true, by_joint }
     }
 
     fn links(m: &Machine, linear: &[f64; 3], actual: &[f64; 3], tool_length: f64, work_offset: &Vec3) -> Links {
@@ -550,17 +578,19 @@ impl World {
             Some((l0, a0, w0, t0)) if w0 == work_offset && *t0 == tool_length => {
                 self.motion(m, (l0, a0), (linear, actual), tool_length, work_offset)
             }
-            _ => f64::INFINITY,
+            _ => Motion::UNKNOWN,
         };
         self.last = Some((*linear, *actual, *work_offset, tool_length));
-        if self.still_clear(moved, stock) {
+        self.since = self.since.plus(&moved);
+        if self.clear(&self.since, stock) {
             return;
         }
         // The links' poses only where a pair must be asked.
         let mut links = None;
-        let mut slack = [f64::INFINITY; 2];
+        let mut slack = [[f64::INFINITY; 2]; CLASSES];
         for (p, &(i, j, kind)) in self.pairs.iter().enumerate() {
-            self.lower[p] -= self.pending;
+            let c = usize::from(self.class_of[p]);
+            self.lower[p] -= self.since.of(&self.classes[c].weights);
             // Told below this distance: the clearance, or for the cutter the depth it may cut.
             let limit = if kind == 0 { self.clearance } else { -self.cut_depth };
             // Not above the limit (a NaN bound too): asked.
@@ -584,19 +614,24 @@ impl World {
                     }
                 };
             }
-            let class = usize::from(kind == 2);
-            slack[class] = slack[class].min(self.lower[p] - limit);
+            let s = &mut slack[c][usize::from(kind == 2)];
+            *s = s.min(self.lower[p] - limit);
         }
-        self.slack = slack;
-        self.pending = 0.0;
+        self.since = Since::ZERO;
+        self.least = [f64::INFINITY; 2];
+        for (class, [s0, s1]) in self.classes.iter_mut().zip(slack) {
+            // Clear while the motion stays below the slack less a margin (1e-9 of it).
+            let below = |s: f64| if s.is_finite() { s - 1e-9 * (1.0 + s.abs()) } else { s };
+            class.limit = [below(s0), below(s0).min(below(s1))];
+            self.least = [self.least[0].min(class.limit[0]), self.least[1].min(class.limit[1])];
+        }
     }
 
-    /// Adds `moved` to the motion since the last pass (rounded up: the sum is never short of
-    /// it); whether every pair is still clear by its bound less that sum.
-    fn still_clear(&mut self, moved: f64, stock: bool) -> bool {
-        self.pending = (self.pending + moved) * (1.0 + 2.0 * f64::EPSILON);
-        let clear = |slack: f64| slack - self.pending > 1e-9 * (1.0 + slack.abs());
-        clear(self.slack[0]) && (!stock || clear(self.slack[1]))
+    /// Whether every pair is still clear by its bound less the motion `since` the last pass:
+    /// all joints' motion against every class's limit at once, else class by class.
+    fn clear(&self, since: &Since, stock: bool) -> bool {
+        let s = usize::from(stock);
+        since.of(&[1.0; 4]) < self.least[s] || self.classes.iter().all(|c| since.of(&c.weights) < c.limit[s])
     }
 
     /// Whether a move from `from` (none: from wherever the machine is) starts where the last
@@ -618,12 +653,11 @@ impl World {
         if w0 != work_offset || *t0 != tool_length {
             return false;
         }
-        let moved = self.motion(m, (l0, a0), to, tool_length, work_offset);
-        let before = self.pending;
-        if !self.still_clear(moved, stock) {
-            self.pending = before;
+        let since = self.since.plus(&self.motion(m, (l0, a0), to, tool_length, work_offset));
+        if !self.clear(&since, stock) {
             return false;
         }
+        self.since = since;
         self.last = Some((*to.0, *to.1, *work_offset, tool_length));
         true
     }
@@ -631,10 +665,100 @@ impl World {
     /// How many samples the motion between two joint sets needs so that no body moves more than
     /// half its smallest size between them (at most [`MAX_SAMPLES`]).
     pub fn samples(&self, m: &Machine, from: (&[f64; 3], &[f64; 3]), to: (&[f64; 3], &[f64; 3]), tool_length: f64) -> usize {
-        let moved = self.motion(m, from, to, tool_length, &Vec3::zeros());
+        let moved = self.motion(m, from, to, tool_length, &Vec3::zeros()).total();
         let n = (moved / self.step.max(1e-6)).ceil();
         if n.is_finite() { (n as usize).clamp(1, MAX_SAMPLES) } else { MAX_SAMPLES }
     }
+}
+
+/// Bit 3 of a set of joints: the linears (bits 0–2: the rotaries).
+const LINEARS: u8 = 8;
+/// As many classes as sets of joints.
+const CLASSES: usize = 16;
+
+/// The joints that move link `l` relative to the bed (`table`: the rotaries on the table side).
+/// Each side's links are moved by a prefix of its chain and the two sides share no joint, so
+/// the joints between two links (those that move one relative to the other) are the two sets'
+/// symmetric difference.
+fn joints_of(l: Link, table: u8) -> u8 {
+    let upto = |i: usize| (2u8 << i) - 1;
+    let head = 7 & !table;
+    match l {
+        Link::Bed => 0,
+        Link::TableRotary(i) => table & upto(i),
+        Link::Table | Link::Stock | Link::Fixture => table,
+        Link::Ram => LINEARS,
+        Link::HeadRotary(i) => LINEARS | (head & upto(i)),
+        Link::Spindle | Link::Holder | Link::Cutter => LINEARS | head,
+    }
+}
+
+/// The pairs whose bodies move relative to each other by the same joints.
+struct Class {
+    /// 1 for each of [`Motion::by_joint`]'s terms that moves its pairs, else 0.
+    weights: [f64; 4],
+    /// Set at each pass from the least of its pairs' `lower` less each one's limit: its pairs
+    /// are clear while their motion since stays below `limit[0]`, or with the cutter against
+    /// the stock counted too, `limit[1]`.
+    limit: [f64; 2],
+}
+
+/// How far body points may have moved since the last pass over the pairs, joint by joint.
+#[derive(Clone, Copy)]
+struct Since {
+    /// As [`Motion::by_joint`], summed and rounded up: never short of the motion.
+    by_joint: [f64; 4],
+    /// Unknown (the first check, or another tool length or work offset since).
+    unknown: bool,
+}
+
+impl Since {
+    const ZERO: Since = Since {
+        by_joint: [0.0; 4],
+        unknown: false,
+    };
+
+    fn plus(&self, m: &Motion) -> Since {
+        let mut s = *self;
+        s.unknown |= !m.known;
+        for (a, d) in s.by_joint.iter_mut().zip(m.by_joint) {
+            *a = (*a + d) * (1.0 + 2.0 * f64::EPSILON);
+        }
+        s
+    }
+
+    /// The motion of points moved by the joints `w` weighs (a class's), rounded up.
+    fn of(&self, w: &[f64; 4]) -> f64 {
+        let d = &self.by_joint;
+        let sum = (w[0] * d[0] + w[1] * d[1] + w[2] * d[2] + w[3] * d[3]) * (1.0 + 4.0 * f64::EPSILON);
+        if self.unknown { f64::INFINITY } else { sum }
+    }
+}
+
+/// How far body points can move between two joint sets, by the joints that move them.
+struct Motion {
+    /// False: nothing known (no joints checked before, or another tool length or work offset).
+    known: bool,
+    /// The linear move, then per rotary its turn times the farthest a body point can be from
+    /// its axis.
+    by_joint: [f64; 4],
+}
+
+impl Motion {
+    const UNKNOWN: Motion = Motion {
+        known: false,
+        by_joint: [0.0; 4],
+    };
+
+    fn total(&self) -> f64 {
+        if self.known { self.by_joint.iter().sum() } else { f64::INFINITY }
+    }
+}
+
+/// A class's [`Class::weights`] for `joints` (bits as [`joints_of`]'s).
+fn weights(joints: u8) -> [f64; 4] {
+    let on = |bit: u8| if joints & bit != 0 { 1.0 } else { 0.0 };
+    [on(LINEARS), on(1), on(2), on(4)]
 }
 
 /// A pair's distance as far as it matters: apart (a lower bound, beyond `limit`), or touching

@@ -673,7 +673,7 @@ fn a_closed_mesh_is_a_solid_an_open_one_a_surface() {
         let p = kinepost::machines::parse_profile_in(&text, "t", None, Some(&dir)).unwrap();
         let g = p.geometry();
         assert!(matches!(&g.bodies[0].solid, Solid::Mesh(m) if m.is_solid() == solid), "{file}");
-        let mut w = World::new(&g, &[], &[], 2.0, 0.01);
+        let mut w = World::new(&p.machine, &g, &[], &[], 2.0, 0.01);
         w.set_tool(tool);
         let zero = kinepost::kinematics::Vec3::zeros();
         let at = |w: &mut World, z: f64| {
@@ -703,7 +703,7 @@ fn a_mesh_against_a_mesh() {
     let bodies = "[[body]]\nname = \"table mesh\"\non = \"C\"\nmesh = \"table.stl\"\n[[body]]\nname = \"head mesh\"\non = \"spindle\"\nmesh = \"head.stl\"\n";
     let p = kinepost::machines::parse_profile_in(&format!("{}\n{bodies}", shipped("spinner-u5-620")), "t", None, Some(&dir)).unwrap();
     let g = p.geometry();
-    let mut w = World::new(&g, &[], &[], 2.0, 0.01);
+    let mut w = World::new(&p.machine, &g, &[], &[], 2.0, 0.01);
     w.set_tool(ToolShape { length: 10.0, diameter: 10.0, corner_radius: 0.0, holder_diameter: 0.0, holder_length: 0.0 });
     let zero = kinepost::kinematics::Vec3::zeros();
     let mut at = |z: f64| {
@@ -749,6 +749,41 @@ fn skipping_pairs_that_cannot_have_closed_in_misses_nothing() {
     assert!(walk_compare(&p, 3000, &mut rnd).0 > 100, "the mesh walk touched too little");
 }
 
+/// One table rotary turning alone swings the stock's corner into a cutter standing 3 mm off its
+/// edge: the pairs it moves must be asked again even though no linear moved (the bounds are
+/// kept per set of joints that move a pair).
+#[test]
+fn a_rotary_turning_alone_is_counted_for_the_pairs_it_moves() {
+    use kinepost::collide::{Solid, ToolShape, World};
+    let p = shipped_profile("spinner-u5-620");
+    let (m, g) = (&p.machine, p.geometry());
+    let stock = [Solid::Box { min: [-40.0, -40.0, 0.0].into(), max: [40.0, 40.0, 30.0].into() }];
+    let len = m.default_tool_length;
+    let tool = ToolShape::default_for(len, true);
+    let wo = kinepost::kinematics::Vec3::zeros();
+    let tip = [40.0 + 0.5 * tool.diameter + 3.0, 0.0, 10.0];
+    let deg = std::f64::consts::PI / 180.0;
+    // B (index 0) and C (index 1), each alone from 0, in steps of a quarter degree.
+    for (i, end) in [(1, -50.0f64), (0, 10.0)] {
+        let mut remembering = World::new(m, &g, &stock, &[], 2.0, 1e-3);
+        remembering.set_tool(tool);
+        let mut touched = 0;
+        for k in 0..=(4.0 * end).abs() as usize {
+            let mut rot = [0.0; 3];
+            rot[i] = end.signum() * 0.25 * k as f64 * deg;
+            let (mut a, mut b) = (Vec::new(), Vec::new());
+            remembering.check_at(m, &tip, &rot, len, &wo, true, &mut a);
+            let mut fresh = World::new(m, &g, &stock, &[], 2.0, 1e-3);
+            fresh.set_tool(tool);
+            fresh.check_at(m, &tip, &rot, len, &wo, true, &mut b);
+            let names = |v: &[kinepost::collide::Hit]| v.iter().map(|h| format!("{}-{}", h.a, h.b)).collect::<Vec<_>>();
+            assert_eq!(names(&a), names(&b), "rotary {i} at {:.2}°", rot[i] / deg);
+            touched += b.iter().filter(|h| h.a == "cutter" && h.b == "stock").count();
+        }
+        assert!(touched > 0, "rotary {i} to {end}° never swung the stock into the cutter");
+    }
+}
+
 /// A random walk of `p`'s joints (small steps, and a jump now and then), checked by one World
 /// that remembers and by a fresh one at every step: the same hits. A third World takes each
 /// move whole where its bounds allow (`move_clear`): where it does, a fresh World finds nothing
@@ -763,12 +798,12 @@ fn walk_compare(p: &Profile, n: usize, rnd: &mut impl FnMut() -> f64) -> (usize,
     let len = m.default_tool_length;
     let tool = ToolShape::default_for(len, m.units == kinepost::kinematics::Units::Mm);
     let wo = kinepost::kinematics::Vec3::zeros();
-    let mut remembering = World::new(&g, &stock, &[], 2.0, 1e-3);
+    let mut remembering = World::new(m, &g, &stock, &[], 2.0, 1e-3);
     remembering.set_tool(tool);
-    let mut whole = World::new(&g, &stock, &[], 2.0, 1e-3);
+    let mut whole = World::new(m, &g, &stock, &[], 2.0, 1e-3);
     whole.set_tool(tool);
     let fresh_hits = |lin: &[f64; 3], rot: &[f64; 3], stock_now: bool| {
-        let mut fresh = World::new(&g, &stock, &[], 2.0, 1e-3);
+        let mut fresh = World::new(m, &g, &stock, &[], 2.0, 1e-3);
         fresh.set_tool(tool);
         let mut out = Vec::new();
         fresh.check_at(m, lin, rot, len, &wo, stock_now, &mut out);
@@ -784,19 +819,25 @@ fn walk_compare(p: &Profile, n: usize, rnd: &mut impl FnMut() -> f64) -> (usize,
     for k in 0..n {
         let jump = k % 97 == 0;
         let (lin0, rot0) = (lin, rot);
+        // Two steps in three move one joint alone: a pair that joint does not move need not be
+        // asked again, and one it does must be.
+        let alone = (k % 3 != 2).then_some((k / 3 + k % 3) % (3 + m.rotaries.len()));
+        let moves = |j: usize| alone.is_none_or(|a| a == j);
         for i in 0..3 {
-            if let Some(l) = &m.linears[i] {
+            if let Some(l) = m.linears[i].as_ref().filter(|_| moves(i)) {
                 let step = if jump { l.max - l.min } else { 0.02 * (l.max - l.min) };
                 lin[i] = (lin[i] + step * (rnd() - 0.5)).clamp(l.min, l.max);
             }
         }
-        for r in rot.iter_mut().take(m.rotaries.len()) {
-            *r += if jump { 3.0 } else { 0.05 } * (rnd() - 0.5);
+        for (i, r) in rot.iter_mut().enumerate().take(m.rotaries.len()) {
+            if moves(3 + i) {
+                *r += if jump { 3.0 } else { 0.05 } * (rnd() - 0.5);
+            }
         }
         let stock_now = k % 3 == 0;
         let (mut a, mut b) = (Vec::new(), Vec::new());
         remembering.check_at(m, &lin, &rot, len, &wo, stock_now, &mut a);
-        let mut fresh = World::new(&g, &stock, &[], 2.0, 1e-3);
+        let mut fresh = World::new(m, &g, &stock, &[], 2.0, 1e-3);
         fresh.set_tool(tool);
         fresh.check_at(m, &lin, &rot, len, &wo, stock_now, &mut b);
         assert!(whole.continues_from(Some((&lin0, &rot0))) || k == 0);

@@ -271,7 +271,7 @@ impl<'a, S: Sink + ?Sized> Emitter<'a, S> {
                 // The job gives stock and fixtures in the CL's units, known once the reader has
                 // looked ahead.
                 let k = |v: &[crate::collide::Solid]| v.iter().map(|s| s.scaled(src.scale)).collect::<Vec<_>>();
-                crate::collide::World::new(g, &k(&o.stock), &k(&o.fixtures), o.collision_clearance, o.tolerance.max(1e-3))
+                crate::collide::World::new(m, g, &k(&o.stock), &k(&o.fixtures), o.collision_clearance, o.tolerance.max(1e-3))
             }),
         }
     }
