@@ -367,7 +367,10 @@ pub struct World {
     /// The motion since the last pass over the pairs, joint by joint.
     since: Since,
     /// The joints (linear; actual rotary angles), work offset and tool length of the last check.
-    last: Option<([f64; 3], [f64; 3], Vec3, f64)>,
+    last: Option<([f64; 3], [f64; 3])>,
+    /// The work offset, tool length and the offset's length of the last check: another offset
+    /// or length moves the bodies unknowably.
+    frame: (Vec3, f64, f64),
     /// The block before was a rapid (or there was none): see [`World::stock_at_rapid`].
     prev_rapid: bool,
 }
@@ -416,6 +419,7 @@ impl World {
             least: [f64::NEG_INFINITY; 2],
             since: Since::ZERO,
             last: None,
+            frame: (Vec3::zeros(), 0.0, 0.0),
         };
         for b in &g.bodies {
             w.add(&b.name, b.link, &b.solid, 0.0);
@@ -511,9 +515,9 @@ impl World {
     /// How far any point of any body can move relative to any other between two joint sets (the
     /// joints interpolated linearly between them), joint by joint: the linear move, and each
     /// rotary's turn times the farthest a body point can be from its axis.
-    fn motion(&self, m: &Machine, from: (&[f64; 3], &[f64; 3]), to: (&[f64; 3], &[f64; 3]), tool_length: f64, wo: &Vec3) -> Motion {
+    fn motion(&self, m: &Machine, from: (&[f64; 3], &[f64; 3]), to: (&[f64; 3], &[f64; 3]), tool_length: f64, wo_norm: f64) -> Motion {
         let (a, b) = (Vec3::from(*from.0), Vec3::from(*to.0));
-        let far = self.reach + wo.norm() + a.norm_squared().max(b.norm_squared()).sqrt() + tool_length.abs() + self.pivots;
+        let far = self.reach + wo_norm + a.norm_squared().max(b.norm_squared()).sqrt() + tool_length.abs() + self.pivots;
         let mut by_joint = [(a - b).norm(), 0.0, 0.0, 0.0];
         for i in 0..m.rotaries.len() {
             by_joint[1 + i] = (from.1[i] - to.1[i]).abs() * far;
@@ -575,12 +579,13 @@ impl World {
         out: &mut Vec<Hit>,
     ) {
         let moved = match &self.last {
-            Some((l0, a0, w0, t0)) if w0 == work_offset && *t0 == tool_length => {
-                self.motion(m, (l0, a0), (linear, actual), tool_length, work_offset)
+            Some((l0, a0)) if self.in_frame(work_offset, tool_length) => self.motion(m, (l0, a0), (linear, actual), tool_length, self.frame.2),
+            _ => {
+                self.frame = (*work_offset, tool_length, work_offset.norm());
+                Motion::UNKNOWN
             }
-            _ => Motion::UNKNOWN,
         };
-        self.last = Some((*linear, *actual, *work_offset, tool_length));
+        self.last = Some((*linear, *actual));
         self.since = self.since.plus(&moved);
         if self.clear(&self.since, stock) {
             return;
@@ -634,38 +639,34 @@ impl World {
         since.of(&[1.0; 4]) < self.least[s] || self.classes.iter().all(|c| since.of(&c.weights) < c.limit[s])
     }
 
-    /// Whether a move from `from` (none: from wherever the machine is) starts where the last
-    /// check left the joints.
-    pub fn continues_from(&self, from: Option<(&[f64; 3], &[f64; 3])>) -> bool {
-        match (from, &self.last) {
-            (None, _) => true,
-            (Some((l, a)), Some((l0, a0, _, _))) => l == l0 && a == a0,
-            (Some(_), None) => false,
-        }
+    fn in_frame(&self, work_offset: &Vec3, tool_length: f64) -> bool {
+        self.frame.0 == *work_offset && self.frame.1 == tool_length
     }
 
-    /// Whether the whole move from the joints last checked to `to` is clear by the pairs'
-    /// bounds, taken at once: the move's motion bounds the sum of its samples' (its linear part
-    /// and its turns add up along it, and no sample is farther out than an end). Where it is,
-    /// no sample needs a look; where not, nothing is counted and the samples are checked.
-    pub fn move_clear(&mut self, m: &Machine, to: (&[f64; 3], &[f64; 3]), tool_length: f64, work_offset: &Vec3, stock: bool) -> bool {
-        let Some((l0, a0, w0, t0)) = &self.last else { return false };
-        if w0 != work_offset || *t0 != tool_length {
+    /// Whether the whole move from `from` (none: from wherever the machine is) to `to` is clear
+    /// by the pairs' bounds, taken at once, where it starts at the joints last checked: the
+    /// move's motion bounds the sum of its samples' (its linear part and its turns add up along
+    /// it, and no sample is farther out than an end). Where it is, no sample needs a look; where
+    /// not, nothing is counted and the samples are checked.
+    #[allow(clippy::too_many_arguments)]
+    pub fn move_clear(&mut self, m: &Machine, from: Option<(&[f64; 3], &[f64; 3])>, to: (&[f64; 3], &[f64; 3]), tool_length: f64, work_offset: &Vec3, stock: bool) -> bool {
+        let Some((l0, a0)) = &self.last else { return false };
+        if from.is_some_and(|(l, a)| l != l0 || a != a0) || !self.in_frame(work_offset, tool_length) {
             return false;
         }
-        let since = self.since.plus(&self.motion(m, (l0, a0), to, tool_length, work_offset));
+        let since = self.since.plus(&self.motion(m, (l0, a0), to, tool_length, self.frame.2));
         if !self.clear(&since, stock) {
             return false;
         }
         self.since = since;
-        self.last = Some((*to.0, *to.1, *work_offset, tool_length));
+        self.last = Some((*to.0, *to.1));
         true
     }
 
     /// How many samples the motion between two joint sets needs so that no body moves more than
     /// half its smallest size between them (at most [`MAX_SAMPLES`]).
     pub fn samples(&self, m: &Machine, from: (&[f64; 3], &[f64; 3]), to: (&[f64; 3], &[f64; 3]), tool_length: f64) -> usize {
-        let moved = self.motion(m, from, to, tool_length, &Vec3::zeros()).total();
+        let moved = self.motion(m, from, to, tool_length, 0.0).total();
         let n = (moved / self.step.max(1e-6)).ceil();
         if n.is_finite() { (n as usize).clamp(1, MAX_SAMPLES) } else { MAX_SAMPLES }
     }

@@ -840,8 +840,7 @@ fn walk_compare(p: &Profile, n: usize, rnd: &mut impl FnMut() -> f64) -> (usize,
         let mut fresh = World::new(m, &g, &stock, &[], 2.0, 1e-3);
         fresh.set_tool(tool);
         fresh.check_at(m, &lin, &rot, len, &wo, stock_now, &mut b);
-        assert!(whole.continues_from(Some((&lin0, &rot0))) || k == 0);
-        if whole.move_clear(m, (&lin, &rot), len, &wo, stock_now) {
+        if whole.move_clear(m, Some((&lin0, &rot0)), (&lin, &rot), len, &wo, stock_now) {
             taken_whole += 1;
             for t in [0.25, 0.5, 0.75, 1.0] {
                 let along = |p: &[f64; 3], q: &[f64; 3]| std::array::from_fn::<f64, 3, _>(|i| p[i] + (q[i] - p[i]) * t);

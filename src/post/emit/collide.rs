@@ -16,7 +16,7 @@ type Ends<'a> = (&'a [f64; 3], &'a [f64; 3]);
 fn sweep(world: &mut crate::collide::World, m: &Machine, from: Option<Ends>, to: Ends, len: f64, wo: &Vec3, stock: bool) -> (usize, Vec<Hit>) {
     let mut hits: Vec<Hit> = Vec::new();
     let (to_lin, to_act) = to;
-    if world.continues_from(from) && world.move_clear(m, to, len, wo, stock) {
+    if world.move_clear(m, from, to, len, wo, stock) {
         return (1, hits);
     }
     let n = from.map_or(1, |f| world.samples(m, f, to, len));
