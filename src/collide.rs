@@ -346,10 +346,11 @@ pub struct World {
     step: f64,
     reach: f64,
     tool: Option<ToolShape>,
-    /// Bit i set where rotary i turns the table side ([`joints_of`]).
+    /// Bit i set where rotary i turns the table side, and where it turns the head ([`joints_of`]).
     table: u8,
-    /// Twice the rotaries' pivots' distances from the origin: in how far a body point can be
-    /// from an axis.
+    head: u8,
+    /// Twice the sum of the rotaries' pivots' distances from the origin: in how far a body
+    /// point can be from an axis.
     pivots: f64,
     /// Per pair, a lower bound on its bodies' distance: the last one measured, less how far
     /// its bodies could move relative to each other up to the last pass (`since` is the rest).
@@ -366,7 +367,7 @@ pub struct World {
     least: [f64; 2],
     /// The motion since the last pass over the pairs, joint by joint.
     since: Since,
-    /// The joints (linear; actual rotary angles), work offset and tool length of the last check.
+    /// The joints (linear; actual rotary angles) of the last check.
     last: Option<([f64; 3], [f64; 3])>,
     /// The work offset, tool length and the offset's length of the last check: another offset
     /// or length moves the bodies unknowably.
@@ -401,7 +402,8 @@ impl World {
     /// The bodies of `g` on `m`, the job's stock and fixture boxes (in W), checked with
     /// `clearance`.
     pub fn new(m: &Machine, g: &Geometry, stock: &[Solid], fixtures: &[Solid], clearance: f64, cut_depth: f64) -> World {
-        let table = (0..m.rotaries.len()).filter(|&i| m.rotaries[i].mount == Mount::Table).fold(0, |t, i| t | 1 << i);
+        let table = (0..m.rotaries.len()).filter(|&i| m.rotaries[i].mount == Mount::Table).fold(0, |t, i| t | (1 << i));
+        let head = (0..m.rotaries.len()).filter(|&i| m.rotaries[i].mount == Mount::Head).fold(0, |t, i| t | (1 << i));
         let mut w = World {
             bodies: Vec::new(),
             pairs: Vec::new(),
@@ -412,6 +414,7 @@ impl World {
             tool: None,
             prev_rapid: true,
             table,
+            head,
             pivots: 2.0 * m.rotaries.iter().map(|r| r.pivot.norm()).sum::<f64>(),
             lower: Vec::new(),
             class_of: Vec::new(),
@@ -498,7 +501,8 @@ impl World {
         self.lower = vec![f64::NEG_INFINITY; self.pairs.len()];
         (self.classes, self.class_of) = (Vec::new(), Vec::new());
         for &(i, j, _) in &self.pairs {
-            let joints = joints_of(self.bodies[i].link, self.table) ^ joints_of(self.bodies[j].link, self.table);
+            let of = |k: usize| joints_of(self.bodies[k].link, self.table, self.head);
+            let joints = of(i) ^ of(j);
             let c = self.classes.iter().position(|k| k.weights == weights(joints)).unwrap_or_else(|| {
                 self.classes.push(Class {
                     weights: weights(joints),
@@ -593,9 +597,13 @@ impl World {
         // The links' poses only where a pair must be asked.
         let mut links = None;
         let mut slack = [[f64::INFINITY; 2]; CLASSES];
+        let mut moved = [0.0; CLASSES];
+        for (c, m) in self.classes.iter().zip(&mut moved) {
+            *m = self.since.of(&c.weights);
+        }
         for (p, &(i, j, kind)) in self.pairs.iter().enumerate() {
             let c = usize::from(self.class_of[p]);
-            self.lower[p] -= self.since.of(&self.classes[c].weights);
+            self.lower[p] -= moved[c];
             // Told below this distance: the clearance, or for the cutter the depth it may cut.
             let limit = if kind == 0 { self.clearance } else { -self.cut_depth };
             // Not above the limit (a NaN bound too): asked.
@@ -620,15 +628,15 @@ impl World {
                 };
             }
             let s = &mut slack[c][usize::from(kind == 2)];
-            *s = s.min(self.lower[p] - limit);
+            *s = least(*s, self.lower[p] - limit);
         }
         self.since = Since::ZERO;
         self.least = [f64::INFINITY; 2];
         for (class, [s0, s1]) in self.classes.iter_mut().zip(slack) {
             // Clear while the motion stays below the slack less a margin (1e-9 of it).
             let below = |s: f64| if s.is_finite() { s - 1e-9 * (1.0 + s.abs()) } else { s };
-            class.limit = [below(s0), below(s0).min(below(s1))];
-            self.least = [self.least[0].min(class.limit[0]), self.least[1].min(class.limit[1])];
+            class.limit = [below(s0), least(below(s0), below(s1))];
+            self.least = [least(self.least[0], class.limit[0]), least(self.least[1], class.limit[1])];
         }
     }
 
@@ -645,9 +653,9 @@ impl World {
 
     /// Whether the whole move from `from` (none: from wherever the machine is) to `to` is clear
     /// by the pairs' bounds, taken at once, where it starts at the joints last checked: the
-    /// move's motion bounds the sum of its samples' (its linear part and its turns add up along
-    /// it, and no sample is farther out than an end). Where it is, no sample needs a look; where
-    /// not, nothing is counted and the samples are checked.
+    /// move's motion bounds how far any body point goes at every point of the move, samples and
+    /// the stretches between them alike. Where it is, no sample needs a look; where not, nothing
+    /// is counted and the samples are checked.
     #[allow(clippy::too_many_arguments)]
     pub fn move_clear(&mut self, m: &Machine, from: Option<(&[f64; 3], &[f64; 3])>, to: (&[f64; 3], &[f64; 3]), tool_length: f64, work_offset: &Vec3, stock: bool) -> bool {
         let Some((l0, a0)) = &self.last else { return false };
@@ -674,16 +682,15 @@ impl World {
 
 /// Bit 3 of a set of joints: the linears (bits 0–2: the rotaries).
 const LINEARS: u8 = 8;
-/// As many classes as sets of joints.
+/// As many classes as sets of joints (four bits; [`weights`] tells them apart).
 const CLASSES: usize = 16;
 
-/// The joints that move link `l` relative to the bed (`table`: the rotaries on the table side).
-/// Each side's links are moved by a prefix of its chain and the two sides share no joint, so
-/// the joints between two links (those that move one relative to the other) are the two sets'
-/// symmetric difference.
-fn joints_of(l: Link, table: u8) -> u8 {
+/// The joints that move link `l` relative to the bed (`table`, `head`: the rotaries on each
+/// side). Each side's links are moved by a prefix of its chain and the two sides share no joint,
+/// so the joints between two links (those that move one relative to the other) are the two
+/// sets' symmetric difference.
+fn joints_of(l: Link, table: u8, head: u8) -> u8 {
     let upto = |i: usize| (2u8 << i) - 1;
-    let head = 7 & !table;
     match l {
         Link::Bed => 0,
         Link::TableRotary(i) => table & upto(i),
@@ -760,6 +767,12 @@ impl Motion {
 fn weights(joints: u8) -> [f64; 4] {
     let on = |bit: u8| if joints & bit != 0 { 1.0 } else { 0.0 };
     [on(LINEARS), on(1), on(2), on(4)]
+}
+
+/// The lesser, or NaN where either is (a NaN bound, from NaN joints, must keep its class from
+/// ever counting as clear).
+fn least(a: f64, b: f64) -> f64 {
+    if a.is_nan() || b.is_nan() { f64::NAN } else { a.min(b) }
 }
 
 /// A pair's distance as far as it matters: apart (a lower bound, beyond `limit`), or touching

@@ -739,6 +739,15 @@ fn skipping_pairs_that_cannot_have_closed_in_misses_nothing() {
         (hits, whole) = (hits + h, whole + w);
         steps += 3000;
     }
+    // A head rotary before a table one in the chain's numbering (dmg-dmc75v's B listed first).
+    let text = shipped_file("dmg-dmc75v");
+    let (c, b) = (text.find("[[rotary]]\nname = \"C\"").unwrap(), text.find("[[rotary]]\nname = \"B\"").unwrap());
+    let end = b + text[b..].find("\n\n").unwrap() + 1;
+    let swapped = format!("{}{}{}{}", &text[..c], &text[b..end], &text[c..b], &text[end..]).replace("\"dmg-dmc75v\"", "\"dmg-b-first\"");
+    let p = parse_profile(&swapped, "dmg-b-first", None).unwrap();
+    assert_eq!(p.machine.rotaries[0].name, 'B');
+    let (h, w) = walk_compare(&p, 3000, &mut rnd);
+    (hits, whole, steps) = (hits + h, whole + w, steps + 3000);
     assert!(hits > 1000, "the walks touched something only {hits} times in {steps} steps");
     assert!(whole > steps / 20, "only {whole} of {steps} moves were taken whole");
     // Mesh bodies too: a closed table (a solid: wholly inside is a hit) and a head housing.
@@ -840,7 +849,11 @@ fn walk_compare(p: &Profile, n: usize, rnd: &mut impl FnMut() -> f64) -> (usize,
         let mut fresh = World::new(m, &g, &stock, &[], 2.0, 1e-3);
         fresh.set_tool(tool);
         fresh.check_at(m, &lin, &rot, len, &wo, stock_now, &mut b);
-        if whole.move_clear(m, Some((&lin0, &rot0)), (&lin, &rot), len, &wo, stock_now) {
+        // A move that does not start where the last check left the joints is never taken whole.
+        let elsewhere = [lin0[0] + 1.0, lin0[1], lin0[2]];
+        assert!(!whole.move_clear(m, Some((&elsewhere, &rot0)), (&lin, &rot), len, &wo, stock_now));
+        let from = (k % 7 != 3).then_some((&lin0, &rot0));
+        if whole.move_clear(m, from, (&lin, &rot), len, &wo, stock_now) {
             taken_whole += 1;
             for t in [0.25, 0.5, 0.75, 1.0] {
                 let along = |p: &[f64; 3], q: &[f64; 3]| std::array::from_fn::<f64, 3, _>(|i| p[i] + (q[i] - p[i]) * t);
