@@ -337,9 +337,9 @@ struct Placed {
 /// The bodies of one post, built once, and the pairs that can touch.
 pub struct World {
     bodies: Vec<Placed>,
-    /// (a, b, kind): kind 0 any contact, 1 the cutter (depth only), 2 the cutter against stock
-    /// (rapids only).
-    pairs: Vec<(usize, usize, u8)>,
+    /// (a, b, kind, class): kind 0 any contact, 1 the cutter (depth only), 2 the cutter against
+    /// stock (rapids only); class an index into `classes`.
+    pairs: Vec<(usize, usize, u8, u8)>,
     clearance: f64,
     /// The depth a cutter may cut into what it touches (the chord tolerance).
     cut_depth: f64,
@@ -357,8 +357,6 @@ pub struct World {
     /// A pair still farther than it must be is not queried again; most pairs stay clear for
     /// many blocks, and parry's queries are the check's cost.
     lower: Vec<f64>,
-    /// Per pair, its class: an index into `classes`.
-    class_of: Vec<u8>,
     /// The pairs moved by the same joints share a bound on their motion, so that a head-side
     /// body against a bed-fixed one counts only the linears.
     classes: Vec<Class>,
@@ -402,8 +400,8 @@ impl World {
     /// The bodies of `g` on `m`, the job's stock and fixture boxes (in W), checked with
     /// `clearance`.
     pub fn new(m: &Machine, g: &Geometry, stock: &[Solid], fixtures: &[Solid], clearance: f64, cut_depth: f64) -> World {
-        let table = (0..m.rotaries.len()).filter(|&i| m.rotaries[i].mount == Mount::Table).fold(0, |t, i| t | (1 << i));
-        let head = (0..m.rotaries.len()).filter(|&i| m.rotaries[i].mount == Mount::Head).fold(0, |t, i| t | (1 << i));
+        let on = |mount: Mount| (0..m.rotaries.len()).filter(|&i| m.rotaries[i].mount == mount).fold(0, |t, i| t | (1 << i));
+        let (table, head) = (on(Mount::Table), on(Mount::Head));
         let mut w = World {
             bodies: Vec::new(),
             pairs: Vec::new(),
@@ -417,7 +415,6 @@ impl World {
             head,
             pivots: 2.0 * m.rotaries.iter().map(|r| r.pivot.norm()).sum::<f64>(),
             lower: Vec::new(),
-            class_of: Vec::new(),
             classes: Vec::new(),
             least: [f64::NEG_INFINITY; 2],
             since: Since::ZERO,
@@ -491,27 +488,16 @@ impl World {
         self.add("cutter", Link::Cutter, &cutter, t.corner_radius);
         self.tool = Some(t);
         self.pairs.clear();
+        self.classes.clear();
+        let of = |l: Link| joints_of(l, self.table, self.head);
         for (i, a) in self.bodies.iter().enumerate() {
             for (j, b) in self.bodies.iter().enumerate() {
                 if let Some(kind) = pair_kind(a.link, b.link) {
-                    self.pairs.push((i, j, kind));
+                    self.pairs.push((i, j, kind, class_of(&mut self.classes, of(a.link) ^ of(b.link))));
                 }
             }
         }
         self.lower = vec![f64::NEG_INFINITY; self.pairs.len()];
-        (self.classes, self.class_of) = (Vec::new(), Vec::new());
-        for &(i, j, _) in &self.pairs {
-            let of = |k: usize| joints_of(self.bodies[k].link, self.table, self.head);
-            let joints = of(i) ^ of(j);
-            let c = self.classes.iter().position(|k| k.weights == weights(joints)).unwrap_or_else(|| {
-                self.classes.push(Class {
-                    weights: weights(joints),
-                    limit: [f64::NEG_INFINITY; 2],
-                });
-                self.classes.len() - 1
-            });
-            self.class_of.push(c as u8);
-        }
         self.least = [f64::NEG_INFINITY; 2];
         self.last = None;
     }
@@ -601,8 +587,8 @@ impl World {
         for (c, m) in self.classes.iter().zip(&mut moved) {
             *m = self.since.of(&c.weights);
         }
-        for (p, &(i, j, kind)) in self.pairs.iter().enumerate() {
-            let c = usize::from(self.class_of[p]);
+        for (p, &(i, j, kind, c)) in self.pairs.iter().enumerate() {
+            let c = usize::from(c);
             self.lower[p] -= moved[c];
             // Told below this distance: the clearance, or for the cutter the depth it may cut.
             let limit = if kind == 0 { self.clearance } else { -self.cut_depth };
@@ -761,6 +747,19 @@ impl Motion {
     fn total(&self) -> f64 {
         if self.known { self.by_joint.iter().sum() } else { f64::INFINITY }
     }
+}
+
+/// The index in `classes` of the class moved by `joints` (bits as [`joints_of`]'s), added if new.
+fn class_of(classes: &mut Vec<Class>, joints: u8) -> u8 {
+    let w = weights(joints);
+    let c = classes.iter().position(|k| k.weights == w).unwrap_or_else(|| {
+        classes.push(Class {
+            weights: w,
+            limit: [f64::NEG_INFINITY; 2],
+        });
+        classes.len() - 1
+    });
+    c as u8
 }
 
 /// A class's [`Class::weights`] for `joints` (bits as [`joints_of`]'s).
