@@ -18,8 +18,9 @@ use std::sync::Arc;
 
 /// The most bodies a profile may give: a machine model, not a CAD assembly.
 pub const MAX_BODIES: usize = 64;
-/// The most samples of the motion between two blocks.
-const MAX_SAMPLES: usize = 64;
+/// The most samples of the motion between two blocks: a bound on one block's cost. A move that
+/// needs more is told (`collision_coarse`).
+pub const MAX_SAMPLES: usize = 4096;
 
 /// What a body moves with.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -658,11 +659,18 @@ impl World {
     }
 
     /// How many samples the motion between two joint sets needs so that no body moves more than
-    /// half its smallest size between them (at most [`MAX_SAMPLES`]).
-    pub fn samples(&self, m: &Machine, from: (&[f64; 3], &[f64; 3]), to: (&[f64; 3], &[f64; 3]), tool_length: f64) -> usize {
-        let moved = self.motion(m, from, to, tool_length, 0.0).total();
-        let n = (moved / self.step.max(1e-6)).ceil();
-        if n.is_finite() { (n as usize).clamp(1, MAX_SAMPLES) } else { MAX_SAMPLES }
+    /// half its smallest size between them, at most [`MAX_SAMPLES`]; where that cuts them, how
+    /// far a body may move between two and the half size it should have kept to. The work offset
+    /// carries the stock and fixtures away from the table's axes: a part far off them swings
+    /// farther.
+    pub fn samples(&self, m: &Machine, from: (&[f64; 3], &[f64; 3]), to: (&[f64; 3], &[f64; 3]), tool_length: f64, work_offset: &Vec3) -> (usize, Option<(f64, f64)>) {
+        let moved = self.motion(m, from, to, tool_length, work_offset.norm()).total();
+        let step = self.step.max(1e-6);
+        let n = (moved / step).ceil();
+        match n.is_finite() && n <= MAX_SAMPLES as f64 {
+            true => ((n as usize).max(1), None),
+            false => (MAX_SAMPLES, Some((moved / MAX_SAMPLES as f64, step))),
+        }
     }
 }
 

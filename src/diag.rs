@@ -62,6 +62,9 @@ pub enum Code {
     Collision,
     /// Two bodies come closer than the collision clearance.
     NearCollision,
+    /// The motion to a block needed more samples than the collision check takes for one block:
+    /// between them a body moves farther than half the smallest body's size.
+    CollisionCoarse,
 }
 
 impl Code {
@@ -103,6 +106,7 @@ impl Code {
             Code::UnknownWord => "unknown_word",
             Code::CutterComp => "cutter_comp",
             Code::Template => "template",
+            Code::CollisionCoarse => "collision_coarse",
         }
     }
 }

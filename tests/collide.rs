@@ -153,6 +153,29 @@ fn rapid_through_the_stock_is_a_collision_a_cut_is_not() {
     assert!(all.iter().all(|d| d.line == Some(lines[3])), "{all:#?}");
 }
 
+/// A rapid that tilts the table with the cutter just over a stock 0.01 mm thick would need more
+/// samples than one block takes: the block says its check was coarser than the step.
+#[test]
+fn a_move_with_too_few_samples_for_its_motion_says_so() {
+    let p = profile("spinner-u5-620", SPINNER);
+    let (text, lines) = cl("MM", 100.0, &[(true, at([0.0, 0.0, 5.0], UP)), (true, at([30.0, 0.0, 5.0], tilted(60.0)))]);
+    let sheet = Settings {
+        stock: Some("-50,-50,0,50,50,0.01".into()),
+        ..Default::default()
+    };
+    let (c, s) = run(&p, &text, sheet);
+    s.unwrap();
+    let coarse = hits(&c, Code::CollisionCoarse);
+    assert!(
+        coarse.iter().any(|d| d.line == Some(lines[1]) && d.severity == Severity::Warning && d.message.contains("0.005 mm")),
+        "{:#?}",
+        c.diags
+    );
+    // A stock of ordinary thickness under the same moves: enough samples, nothing to tell.
+    let (c, _) = run(&p, &text, Settings { stock: Some("-50,-50,0,50,50,4".into()), ..Default::default() });
+    assert!(hits(&c, Code::CollisionCoarse).is_empty(), "{:#?}", c.diags);
+}
+
 #[test]
 fn a_clean_program_with_its_stock_shows_nothing_and_off_checks_nothing() {
     let p = profile("spinner-u5-620", SPINNER);
@@ -791,6 +814,62 @@ fn a_rotary_turning_alone_is_counted_for_the_pairs_it_moves() {
         }
         assert!(touched > 0, "rotary {i} to {end}° never swung the stock into the cutter");
     }
+}
+
+/// The samples along a move keep every point of the stock within half its smallest size of where
+/// it stood at the sample before, wherever the work offset puts it: the table turns a part far
+/// off its axes while the tool stands near the machine's zero. The stock is the only body, so
+/// half its smallest size is the step the samples are counted by.
+#[test]
+fn the_samples_follow_a_part_the_work_offset_puts_far_off_the_axes() {
+    use kinepost::collide::{Geometry, Solid, World};
+    use kinepost::kinematics::{Setup, Vec3, controlled_point};
+    let p = shipped_profile("spinner-u5-620");
+    let m = &p.machine;
+    let (min, max) = (Vec3::new(-40.0, -40.0, 0.0), Vec3::new(40.0, 40.0, 30.0));
+    let world = World::new(m, &Geometry::default(), &[Solid::Box { min, max }], &[], 2.0, 1e-3);
+    let half = 15.0;
+    let len = m.default_tool_length;
+    let deg = std::f64::consts::PI / 180.0;
+    let lin = [0.0; 3];
+    let mut worst: f64 = 0.0;
+    for wo in [Vec3::zeros(), Vec3::new(1000.0, 0.0, 0.0), Vec3::new(300.0, -700.0, 50.0)] {
+        let setup = Setup::new(len, wo);
+        // (B, C) actual angles at the move's ends.
+        for (a, b) in [([0.0, 0.0], [0.0, 90.0]), ([0.0, 0.0], [30.0, -45.0]), ([-20.0, 170.0], [15.0, 10.0])] {
+            let (from, to) = ([a[0] * deg, a[1] * deg, 0.0], [b[0] * deg, b[1] * deg, 0.0]);
+            let (n, coarse) = world.samples(m, (&lin, &from), (&lin, &to), len, &wo);
+            assert_eq!(coarse, None, "{n} samples");
+            let at = |t: f64| std::array::from_fn::<f64, 3, _>(|i| from[i] + (to[i] - from[i]) * t);
+            for corner in 0..8 {
+                let c = Vec3::new(
+                    if corner & 1 == 0 { min.x } else { max.x },
+                    if corner & 2 == 0 { min.y } else { max.y },
+                    if corner & 4 == 0 { min.z } else { max.z },
+                );
+                for k in 0..n {
+                    let here = controlled_point(m, &at(k as f64 / n as f64), &c, &setup);
+                    for sub in 1..=8 {
+                        let t = (k as f64 + sub as f64 / 8.0) / n as f64;
+                        let d = (controlled_point(m, &at(t), &c, &setup) - here).norm();
+                        worst = worst.max(d / half);
+                        assert!(d <= half, "work offset {wo:?}, ({a:?}) to ({b:?}): corner {c:?} moves {d:.2} mm between {n} samples");
+                    }
+                }
+            }
+        }
+    }
+    // The bound is not so loose that the check would pass whatever it counted.
+    assert!(worst > 0.2, "the stock moved at most {worst} of a step between samples");
+    // A sheet 0.01 mm thick turned half a turn would need more samples than one block takes:
+    // the samples stop at the most, and say how far apart they are.
+    let sheet = [Solid::Box { min, max: Vec3::new(40.0, 40.0, 0.01) }];
+    let world = World::new(m, &Geometry::default(), &sheet, &[], 2.0, 1e-3);
+    let (from, to) = ([0.0; 3], [0.0, std::f64::consts::PI, 0.0]);
+    let (n, coarse) = world.samples(m, (&lin, &from), (&lin, &to), len, &Vec3::new(500.0, 0.0, 0.0));
+    assert_eq!(n, kinepost::collide::MAX_SAMPLES);
+    let (apart, step) = coarse.expect("too few samples for the motion are told");
+    assert!((step - 0.005).abs() < 1e-12 && apart > step, "{apart} {step}");
 }
 
 /// A random walk of `p`'s joints (small steps, and a jump now and then), checked by one World

@@ -12,14 +12,14 @@ use crate::post::Sink;
 type Ends<'a> = (&'a [f64; 3], &'a [f64; 3]);
 
 /// The samples along the move from `from` (none: the machine got to `to` some other way) to
-/// `to`, and the deepest hit per pair.
-fn sweep(world: &mut crate::collide::World, m: &Machine, from: Option<Ends>, to: Ends, len: f64, wo: &Vec3, stock: bool) -> (usize, Vec<Hit>) {
+/// `to`, the deepest hit per pair, and where the samples were too few (`World::samples`).
+fn sweep(world: &mut crate::collide::World, m: &Machine, from: Option<Ends>, to: Ends, len: f64, wo: &Vec3, stock: bool) -> (usize, Vec<Hit>, Option<(f64, f64)>) {
     let mut hits: Vec<Hit> = Vec::new();
     let (to_lin, to_act) = to;
     if world.move_clear(m, from, to, len, wo, stock) {
-        return (1, hits);
+        return (1, hits, None);
     }
-    let n = from.map_or(1, |f| world.samples(m, f, to, len));
+    let (n, coarse) = from.map_or((1, None), |f| world.samples(m, f, to, len, wo));
     for k in 1..=n {
         let t = k as f64 / n as f64;
         let (mut lin, mut act) = (*to_lin, *to_act);
@@ -31,7 +31,7 @@ fn sweep(world: &mut crate::collide::World, m: &Machine, from: Option<Ends>, to:
         }
         world.check_at(m, &lin, &act, len, wo, stock, &mut hits);
     }
-    (n, hits)
+    (n, hits, coarse)
 }
 
 impl<S: Sink + ?Sized> Emitter<'_, S> {
@@ -45,8 +45,19 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         // The move from the block before (not across a tool change: the machine went elsewhere).
         let from = prev.filter(|_| !self.tool_changed).map(|p| (&p.joints.linear, &p.actual));
         let to = (&to.joints.linear, &to.actual);
-        let (n, hits) = sweep(world, self.m, from, to, self.setup.tool_length, &self.setup.work_offset, stock);
+        let (n, hits, coarse) = sweep(world, self.m, from, to, self.setup.tool_length, &self.setup.work_offset, stock);
         let unit = self.m.units.as_str();
+        if let Some((apart, step)) = coarse {
+            diags.push(Diagnostic::new(
+                Code::CollisionCoarse,
+                Severity::Warning,
+                Some(line),
+                format!(
+                    "the move to this block was checked for collisions at {} samples, up to {apart:.3} {unit} of body motion apart (half the smallest body is {step:.3} {unit}): a thin body could pass between two unseen",
+                    crate::collide::MAX_SAMPLES
+                ),
+            ));
+        }
         for h in hits {
             let (code, severity, what) = if h.dist < 0.0 {
                 (Code::Collision, Severity::Error, format!("overlap by {:.3} {unit}", -h.dist))
