@@ -659,13 +659,19 @@ impl World {
     }
 
     /// How many samples the motion between two joint sets needs so that no body moves more than
-    /// half its smallest size between them, at most [`MAX_SAMPLES`]; where that cuts them, how
-    /// far a body may move between two and the half size it should have kept to. The work offset
-    /// carries the stock and fixtures away from the table's axes: a part far off them swings
-    /// farther.
+    /// half the smallest body's size between them (none passes through another unseen), nor
+    /// more than the clearance (an overlap between two leaves one of them closer than the
+    /// clearance, and one deeper than half of it overlapping), at most [`MAX_SAMPLES`]; where
+    /// that cuts them, how far a body may move between two and how far it should have. The work
+    /// offset carries the stock and fixtures away from the table's axes: a part far off them
+    /// swings farther.
     pub fn samples(&self, m: &Machine, from: (&[f64; 3], &[f64; 3]), to: (&[f64; 3], &[f64; 3]), tool_length: f64, work_offset: &Vec3) -> (usize, Option<(f64, f64)>) {
         let moved = self.motion(m, from, to, tool_length, work_offset.norm()).total();
-        let step = self.step.max(1e-6);
+        let step = match self.clearance > 0.0 {
+            true => self.step.min(self.clearance),
+            false => self.step,
+        }
+        .max(1e-6);
         let n = (moved / step).ceil();
         match n.is_finite() && n <= MAX_SAMPLES as f64 {
             true => ((n as usize).max(1), None),

@@ -115,8 +115,10 @@ fn table_table_plunge_into_the_table_and_holder_into_the_tilted_table() {
     let s = s.unwrap();
     assert_hit(&c, lines[2], "cutter", "table");
     assert_hit(&c, lines[5], "holder", "table");
+    // The rapid out of the plunge starts 5 mm in the table: its way out overlaps too.
+    assert_hit(&c, lines[3], "cutter", "table");
     for (i, l) in lines.iter().enumerate() {
-        if i != 2 && i != 5 {
+        if ![2, 3, 5].contains(&i) {
             assert!(
                 !hits(&c, Code::Collision).iter().any(|d| d.line == Some(*l)),
                 "a collision at line {l}: {:#?}",
@@ -151,6 +153,23 @@ fn rapid_through_the_stock_is_a_collision_a_cut_is_not() {
     // approach kinepost inserts before it) is a collision.
     let all = hits(&c, Code::Collision);
     assert!(all.iter().all(|d| d.line == Some(lines[3])), "{all:#?}");
+}
+
+/// A rapid that grazes the stock's corner with the cutter's side, 0.5 mm deep over 4.4 mm of its
+/// 40: samples half the cutter apart (5 mm) could fall either side of it. Kept within the
+/// clearance (2 mm), one lands in it.
+#[test]
+fn a_shallow_gouge_between_samples_is_found() {
+    let p = profile("spinner-u5-620", SPINNER);
+    let r = kinepost::collide::ToolShape::default_for(100.0, true).diameter / 2.0;
+    let (corner, out, along) = ([-50.0, 50.0], [-0.5f64.sqrt(), 0.5f64.sqrt()], [0.5f64.sqrt(), 0.5f64.sqrt()]);
+    // The cutter's axis passes r − 0.5 from the corner, outside the stock.
+    let q = [corner[0] + (r - 0.5) * out[0], corner[1] + (r - 0.5) * out[1]];
+    let pt = |s: f64| at([q[0] + s * along[0], q[1] + s * along[1], 30.0], UP);
+    let (text, lines) = cl("MM", 100.0, &[(true, pt(-22.5)), (true, pt(17.5))]);
+    let (c, s) = run(&p, &text, Settings { stock: Some("-50,-50,0,50,50,40".into()), ..Default::default() });
+    s.unwrap();
+    assert_hit(&c, lines[1], "cutter", "stock");
 }
 
 /// A rapid that tilts the table with the cutter just over a stock 0.01 mm thick would need more
@@ -598,8 +617,9 @@ fn a_mesh_on_the_table_rotary_is_checked_binary_and_ascii() {
         s.unwrap();
         assert_hit(&c, lines[2], "cutter", "table mesh");
         assert_hit(&c, lines[5], "holder", "table mesh");
+        assert_hit(&c, lines[3], "cutter", "table mesh");
         for (i, l) in lines.iter().enumerate() {
-            if i != 2 && i != 5 {
+            if ![2, 3, 5].contains(&i) {
                 assert!(hits(&c, Code::Collision).iter().all(|d| d.line != Some(*l)), "{file}: line {l}: {:#?}", hits(&c, Code::Collision));
             }
         }
@@ -818,8 +838,8 @@ fn a_rotary_turning_alone_is_counted_for_the_pairs_it_moves() {
 
 /// The samples along a move keep every point of the stock within half its smallest size of where
 /// it stood at the sample before, wherever the work offset puts it: the table turns a part far
-/// off its axes while the tool stands near the machine's zero. The stock is the only body, so
-/// half its smallest size is the step the samples are counted by.
+/// off its axes while the tool stands near the machine's zero. The stock is the only body and no
+/// clearance is asked, so half its smallest size is the step the samples are counted by.
 #[test]
 fn the_samples_follow_a_part_the_work_offset_puts_far_off_the_axes() {
     use kinepost::collide::{Geometry, Solid, World};
@@ -827,7 +847,7 @@ fn the_samples_follow_a_part_the_work_offset_puts_far_off_the_axes() {
     let p = shipped_profile("spinner-u5-620");
     let m = &p.machine;
     let (min, max) = (Vec3::new(-40.0, -40.0, 0.0), Vec3::new(40.0, 40.0, 30.0));
-    let world = World::new(m, &Geometry::default(), &[Solid::Box { min, max }], &[], 2.0, 1e-3);
+    let world = World::new(m, &Geometry::default(), &[Solid::Box { min, max }], &[], 0.0, 1e-3);
     let half = 15.0;
     let len = m.default_tool_length;
     let deg = std::f64::consts::PI / 180.0;
