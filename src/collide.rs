@@ -20,7 +20,7 @@ use std::sync::Arc;
 pub const MAX_BODIES: usize = 64;
 /// The most samples of the motion between two blocks: a bound on one block's cost. A move that
 /// needs more is told (`collision_coarse`).
-pub const MAX_SAMPLES: usize = 4096;
+pub const MAX_SAMPLES: usize = 16384;
 
 /// What a body moves with.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -504,12 +504,13 @@ impl World {
     }
 
     /// How far any point of any body can move relative to any other between two joint sets (the
-    /// joints interpolated linearly between them), joint by joint: the linear move, and each
-    /// rotary's turn times the farthest a body point can be from its axis.
-    fn motion(&self, m: &Machine, from: (&[f64; 3], &[f64; 3]), to: (&[f64; 3], &[f64; 3]), tool_length: f64, wo_norm: f64) -> Motion {
+    /// joints interpolated linearly between them, or the linears along a path no longer than
+    /// `path`), joint by joint: the linear move, and each rotary's turn times the farthest a body
+    /// point can be from its axis.
+    fn motion(&self, m: &Machine, from: (&[f64; 3], &[f64; 3]), to: (&[f64; 3], &[f64; 3]), tool_length: f64, wo_norm: f64, path: f64) -> Motion {
         let (a, b) = (Vec3::from(*from.0), Vec3::from(*to.0));
         let far = self.reach + wo_norm + a.norm_squared().max(b.norm_squared()).sqrt() + tool_length.abs() + self.pivots;
-        let mut by_joint = [(a - b).norm(), 0.0, 0.0, 0.0];
+        let mut by_joint = [(a - b).norm().max(path), 0.0, 0.0, 0.0];
         for i in 0..m.rotaries.len() {
             by_joint[1 + i] = (from.1[i] - to.1[i]).abs() * far;
         }
@@ -570,7 +571,7 @@ impl World {
         out: &mut Vec<Hit>,
     ) {
         let moved = match &self.last {
-            Some((l0, a0)) if self.in_frame(work_offset, tool_length) => self.motion(m, (l0, a0), (linear, actual), tool_length, self.frame.2),
+            Some((l0, a0)) if self.in_frame(work_offset, tool_length) => self.motion(m, (l0, a0), (linear, actual), tool_length, self.frame.2, 0.0),
             _ => {
                 self.frame = (*work_offset, tool_length, work_offset.norm());
                 Motion::UNKNOWN
@@ -642,14 +643,15 @@ impl World {
     /// by the pairs' bounds, taken at once, where it starts at the joints last checked: the
     /// move's motion bounds how far any body point goes at every point of the move, samples and
     /// the stretches between them alike. Where it is, no sample needs a look; where not, nothing
-    /// is counted and the samples are checked.
+    /// is counted and the samples are checked. `path`: how long the linears' path may be where
+    /// they do not move in a straight line (TCP: the control moves the tip straight).
     #[allow(clippy::too_many_arguments)]
-    pub fn move_clear(&mut self, m: &Machine, from: Option<(&[f64; 3], &[f64; 3])>, to: (&[f64; 3], &[f64; 3]), tool_length: f64, work_offset: &Vec3, stock: bool) -> bool {
+    pub fn move_clear(&mut self, m: &Machine, from: Option<(&[f64; 3], &[f64; 3])>, to: (&[f64; 3], &[f64; 3]), tool_length: f64, work_offset: &Vec3, stock: bool, path: f64) -> bool {
         let Some((l0, a0)) = &self.last else { return false };
         if from.is_some_and(|(l, a)| l != l0 || a != a0) || !self.in_frame(work_offset, tool_length) {
             return false;
         }
-        let since = self.since.plus(&self.motion(m, (l0, a0), to, tool_length, self.frame.2));
+        let since = self.since.plus(&self.motion(m, (l0, a0), to, tool_length, self.frame.2, path));
         if !self.clear(&since, stock) {
             return false;
         }
@@ -664,9 +666,10 @@ impl World {
     /// clearance, and one deeper than half of it overlapping), at most [`MAX_SAMPLES`]; where
     /// that cuts them, how far a body may move between two and how far it should have. The work
     /// offset carries the stock and fixtures away from the table's axes: a part far off them
-    /// swings farther.
-    pub fn samples(&self, m: &Machine, from: (&[f64; 3], &[f64; 3]), to: (&[f64; 3], &[f64; 3]), tool_length: f64, work_offset: &Vec3) -> (usize, Option<(f64, f64)>) {
-        let moved = self.motion(m, from, to, tool_length, work_offset.norm()).total();
+    /// swings farther. `path` as for [`World::move_clear`].
+    #[allow(clippy::too_many_arguments)]
+    pub fn samples(&self, m: &Machine, from: (&[f64; 3], &[f64; 3]), to: (&[f64; 3], &[f64; 3]), tool_length: f64, work_offset: &Vec3, path: f64) -> (usize, Option<(f64, f64)>) {
+        let moved = self.motion(m, from, to, tool_length, work_offset.norm(), path).total();
         let step = match self.clearance > 0.0 {
             true => self.step.min(self.clearance),
             false => self.step,

@@ -172,6 +172,29 @@ fn a_shallow_gouge_between_samples_is_found() {
     assert_hit(&c, lines[1], "cutter", "stock");
 }
 
+/// With TCP the control keeps the tip where it is while a feed turns C 60° (in one block: no
+/// rotary step limit); the joints' straight line would pull it 26.8 mm toward C's axis halfway,
+/// 200 mm from it. A fixture 15 mm inside the tip is clear on the path the control takes, and
+/// hit on the joints' line (joint mode, where the joints do move straight, linearizes the turn).
+#[test]
+fn a_tcp_move_is_checked_along_the_path_the_control_takes() {
+    let p = profile("spinner-u5-620", SPINNER);
+    let axis = |deg: f64| {
+        let (t, c) = (20f64.to_radians(), deg.to_radians());
+        [t.sin() * c.cos(), t.sin() * c.sin(), t.cos()]
+    };
+    let tip = [200.0, 0.0, 30.0];
+    let (text, _) = cl("MM", 100.0, &[(true, at(tip, axis(0.0))), (false, at(tip, axis(60.0)))]);
+    for mode in ["tcp", "joint"] {
+        let settings = Settings { fixtures: Some("150,-20,0,180,20,40".into()), mode: Some(mode.into()), ..Default::default() };
+        let mut o = settings.profile_options(&p, None).unwrap();
+        o.max_rotary_step = std::f64::consts::PI;
+        let mut c = Collect::default();
+        post::post(text.as_bytes(), &p.machine, &o, &mut c).unwrap();
+        assert_clean(&c, mode);
+    }
+}
+
 /// A rapid that tilts the table with the cutter just over a stock 0.01 mm thick would need more
 /// samples than one block takes: the block says its check was coarser than the step.
 #[test]
@@ -858,7 +881,7 @@ fn the_samples_follow_a_part_the_work_offset_puts_far_off_the_axes() {
         // (B, C) actual angles at the move's ends.
         for (a, b) in [([0.0, 0.0], [0.0, 90.0]), ([0.0, 0.0], [30.0, -45.0]), ([-20.0, 170.0], [15.0, 10.0])] {
             let (from, to) = ([a[0] * deg, a[1] * deg, 0.0], [b[0] * deg, b[1] * deg, 0.0]);
-            let (n, coarse) = world.samples(m, (&lin, &from), (&lin, &to), len, &wo);
+            let (n, coarse) = world.samples(m, (&lin, &from), (&lin, &to), len, &wo, 0.0);
             assert_eq!(coarse, None, "{n} samples");
             let at = |t: f64| std::array::from_fn::<f64, 3, _>(|i| from[i] + (to[i] - from[i]) * t);
             for corner in 0..8 {
@@ -886,7 +909,7 @@ fn the_samples_follow_a_part_the_work_offset_puts_far_off_the_axes() {
     let sheet = [Solid::Box { min, max: Vec3::new(40.0, 40.0, 0.01) }];
     let world = World::new(m, &Geometry::default(), &sheet, &[], 2.0, 1e-3);
     let (from, to) = ([0.0; 3], [0.0, std::f64::consts::PI, 0.0]);
-    let (n, coarse) = world.samples(m, (&lin, &from), (&lin, &to), len, &Vec3::new(500.0, 0.0, 0.0));
+    let (n, coarse) = world.samples(m, (&lin, &from), (&lin, &to), len, &Vec3::new(500.0, 0.0, 0.0), 0.0);
     assert_eq!(n, kinepost::collide::MAX_SAMPLES);
     let (apart, step) = coarse.expect("too few samples for the motion are told");
     assert!((step - 0.005).abs() < 1e-12 && apart > step, "{apart} {step}");
@@ -950,9 +973,9 @@ fn walk_compare(p: &Profile, n: usize, rnd: &mut impl FnMut() -> f64) -> (usize,
         fresh.check_at(m, &lin, &rot, len, &wo, stock_now, &mut b);
         // A move that does not start where the last check left the joints is never taken whole.
         let elsewhere = [lin0[0] + 1.0, lin0[1], lin0[2]];
-        assert!(!whole.move_clear(m, Some((&elsewhere, &rot0)), (&lin, &rot), len, &wo, stock_now));
+        assert!(!whole.move_clear(m, Some((&elsewhere, &rot0)), (&lin, &rot), len, &wo, stock_now, 0.0));
         let from = (k % 7 != 3).then_some((&lin0, &rot0));
-        if whole.move_clear(m, from, (&lin, &rot), len, &wo, stock_now) {
+        if whole.move_clear(m, from, (&lin, &rot), len, &wo, stock_now, 0.0) {
             taken_whole += 1;
             for t in [0.25, 0.5, 0.75, 1.0] {
                 let along = |p: &[f64; 3], q: &[f64; 3]| std::array::from_fn::<f64, 3, _>(|i| p[i] + (q[i] - p[i]) * t);

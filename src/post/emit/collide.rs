@@ -4,31 +4,62 @@
 use super::{At, Emitter};
 use crate::collide::{Hit, ToolShape};
 use crate::diag::{Code, Diagnostic, Severity};
-use crate::kinematics::Units;
-use crate::kinematics::{Machine, Vec3};
-use crate::post::Sink;
+use crate::kinematics::{self, Machine, Setup, Units, Vec3};
+use crate::post::{Mode, Sink};
 
 /// Joints at one end of a move: linears, actual rotary angles (radians).
 type Ends<'a> = (&'a [f64; 3], &'a [f64; 3]);
 
-/// The samples along the move from `from` (none: the machine got to `to` some other way) to
-/// `to`, the deepest hit per pair, and where the samples were too few (`World::samples`).
-fn sweep(world: &mut crate::collide::World, m: &Machine, from: Option<Ends>, to: Ends, len: f64, wo: &Vec3, stock: bool) -> (usize, Vec<Hit>, Option<(f64, f64)>) {
-    let mut hits: Vec<Hit> = Vec::new();
-    let (to_lin, to_act) = to;
-    if world.move_clear(m, from, to, len, wo, stock) {
-        return (1, hits, None);
-    }
-    let (n, coarse) = from.map_or((1, None), |f| world.samples(m, f, to, len, wo));
-    for k in 1..=n {
-        let t = k as f64 / n as f64;
-        let (mut lin, mut act) = (*to_lin, *to_act);
-        if let Some((p_lin, p_act)) = from.filter(|_| k < n) {
-            for i in 0..3 {
-                lin[i] = p_lin[i] + (to_lin[i] - p_lin[i]) * t;
-                act[i] = p_act[i] + (to_act[i] - p_act[i]) * t;
+/// How the machine moves between two blocks: the joints in a straight line, or with TCP the
+/// control moving the tip (X Y Z words, W) and the rotary words in a straight line and placing
+/// the linears for each, with its nominal kinematics.
+enum Way {
+    Joints,
+    Tcp { tip: [Vec3; 2], words: [[f64; 3]; 2], setup: Setup },
+}
+
+impl Way {
+    /// The joints a fraction `t` of the way from `a` to `b`.
+    fn at(&self, m: &Machine, a: Ends, b: Ends, t: f64) -> ([f64; 3], [f64; 3]) {
+        let lerp = |x: &[f64; 3], y: &[f64; 3]| std::array::from_fn(|i| x[i] + (y[i] - x[i]) * t);
+        match self {
+            Way::Joints => (lerp(a.0, b.0), lerp(a.1, b.1)),
+            Way::Tcp { tip, words, setup } => {
+                let w = lerp(&words[0], &words[1]);
+                let q = kinematics::controlled_point(m, &w, &(tip[0] + (tip[1] - tip[0]) * t), setup);
+                ([q.x, q.y, q.z], m.actual_angles(&w))
             }
         }
+    }
+
+    /// How long the linears' path can be beyond their chord (0: no longer): the tip's move and
+    /// each rotary word's turn times the farthest the controlled point can be from its axis.
+    fn path(&self, m: &Machine) -> f64 {
+        let Way::Tcp { tip, words, setup } = self else { return 0.0 };
+        let lever = tip[0].norm().max(tip[1].norm())
+            + setup.work_offset.norm()
+            + setup.tool_length.abs()
+            + 2.0 * m.rotaries.iter().map(|r| r.pivot.norm()).sum::<f64>();
+        let turn: f64 = (0..m.rotaries.len()).map(|i| (words[1][i] - words[0][i]).abs()).sum();
+        (tip[1] - tip[0]).norm() + turn * lever
+    }
+}
+
+/// The samples along the move from `from` (none: the machine got to `to` some other way) to
+/// `to`, the deepest hit per pair, and where the samples were too few (`World::samples`).
+#[allow(clippy::too_many_arguments)]
+fn sweep(world: &mut crate::collide::World, m: &Machine, from: Option<Ends>, to: Ends, way: &Way, len: f64, wo: &Vec3, stock: bool) -> (usize, Vec<Hit>, Option<(f64, f64)>) {
+    let mut hits: Vec<Hit> = Vec::new();
+    let path = from.map_or(0.0, |_| way.path(m));
+    if world.move_clear(m, from, to, len, wo, stock, path) {
+        return (1, hits, None);
+    }
+    let (n, coarse) = from.map_or((1, None), |f| world.samples(m, f, to, len, wo, path));
+    for k in 1..=n {
+        let (lin, act) = match from.filter(|_| k < n) {
+            Some(f) => way.at(m, f, to, k as f64 / n as f64),
+            None => (*to.0, *to.1),
+        };
         world.check_at(m, &lin, &act, len, wo, stock, &mut hits);
     }
     (n, hits, coarse)
@@ -43,9 +74,19 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         world.set_tool(tool);
         let stock = world.stock_at_rapid(rapid);
         // The move from the block before (not across a tool change: the machine went elsewhere).
-        let from = prev.filter(|_| !self.tool_changed).map(|p| (&p.joints.linear, &p.actual));
+        let prev = prev.filter(|_| !self.tool_changed);
+        let way = match (self.o.mode, prev) {
+            (Mode::Tcp, Some(p)) => Way::Tcp {
+                tip: [self.tcp_xyz(p), self.tcp_xyz(to)],
+                words: [p.joints.rotary, to.joints.rotary],
+                setup: self.setup,
+            },
+            _ => Way::Joints,
+        };
+        let Some(world) = self.world.as_mut() else { return };
+        let from = prev.map(|p| (&p.joints.linear, &p.actual));
         let to = (&to.joints.linear, &to.actual);
-        let (n, hits, coarse) = sweep(world, self.m, from, to, self.setup.tool_length, &self.setup.work_offset, stock);
+        let (n, hits, coarse) = sweep(world, self.m, from, to, &way, self.setup.tool_length, &self.setup.work_offset, stock);
         let unit = self.m.units.as_str();
         if let Some((apart, step)) = coarse {
             diags.push(Diagnostic::new(
