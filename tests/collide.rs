@@ -195,6 +195,22 @@ fn a_tcp_move_is_checked_along_the_path_the_control_takes() {
     }
 }
 
+/// A G2/G3 block is checked along its arc, not its chord: a half circle of radius 40 passes
+/// through a clamp standing where the chord (through the centre) does not go.
+#[test]
+fn an_arc_is_checked_along_the_arc() {
+    let p = profile("spinner-u5-620", SPINNER);
+    let text = "PARTNO/ARC\nUNITS/MM\nLOADTL/1,LENGTH,100\nSPINDL/6000,RPM,CLW\nFEDRAT/500,MMPM\nRAPID\nGOTO/40,0,50,0,0,1\nGOTO/40,0,10,0,0,1\nCIRCLE/0,0,10,0,0,1,40\nGOTO/-40,0,10,0,0,1\nGOTO/-40,0,50,0,0,1\nSPINDL/OFF\nFINI\n";
+    let clamp = Settings { fixtures: Some("-5,33,0,5,47,30".into()), ..Default::default() };
+    let (c, s) = run(&p, text, clamp);
+    s.unwrap();
+    assert!(c.nc.contains("G3"), "written as an arc: {}", c.nc);
+    assert_hit(&c, 10, "cutter", "fixture 1");
+    // Without the clamp, nothing.
+    let (c, _) = run(&p, text, Settings::default());
+    assert_clean(&c, "no clamp");
+}
+
 /// A rapid that tilts the table with the cutter just over a stock 0.01 mm thick would need more
 /// samples than one block takes: the block says its check was coarser than the step.
 #[test]

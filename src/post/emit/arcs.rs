@@ -72,6 +72,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                     words.push(' ');
                 }
                 self.arc_words = Some((ccw, words.trim_end().to_string(), length / pieces as f64));
+                self.arc_path = Some((a.pose.tip, b.pose.tip, *arc, [(i - 1) as f64, i as f64].map(|k| k / pieces as f64)));
                 if i == pieces {
                     return self.block(b, pt, false, diags, pt.inserted, None);
                 }
@@ -108,6 +109,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             let l = self.f.words(&cc).to_string();
             self.out(&l)?;
             self.arc_words = Some((ccw, if ccw { "DR+" } else { "DR-" }.to_string(), length));
+            self.arc_path = Some((a.pose.tip, b.pose.tip, *arc, [0.0, 1.0]));
             return self.block(b, pt, false, diags, pt.inserted, None);
         }
         // Chords: the arc swept in the part frame, tool axis fixed, linears from the rotaries.
@@ -161,7 +163,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
 
 /// The tip a fraction `t` along `arc` (a helix: the height along its normal in proportion to the
 /// angle) from `from` to `to`.
-fn helix_tip(from: Vec3, to: Vec3, arc: &ArcSpec, t: f64) -> Vec3 {
+pub(super) fn helix_tip(from: Vec3, to: Vec3, arc: &ArcSpec, t: f64) -> Vec3 {
     let k = arc.normal;
     let (ra, rb) = (from - arc.center, to - arc.center);
     let (h0, h1) = (k.dot(&ra), k.dot(&rb));

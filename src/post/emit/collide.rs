@@ -5,7 +5,7 @@ use super::{At, Emitter};
 use crate::collide::{Hit, ToolShape};
 use crate::diag::{Code, Diagnostic, Severity};
 use crate::kinematics::{self, Machine, Setup, Units, Vec3};
-use crate::post::{Mode, Sink};
+use crate::post::{ArcSpec, Mode, Sink};
 
 /// Joints at one end of a move: linears, actual rotary angles (radians).
 type Ends<'a> = (&'a [f64; 3], &'a [f64; 3]);
@@ -16,6 +16,9 @@ type Ends<'a> = (&'a [f64; 3], &'a [f64; 3]);
 enum Way {
     Joints,
     Tcp { tip: [Vec3; 2], words: [[f64; 3]; 2], setup: Setup },
+    /// G2/G3 (the rotaries still): the tip along the arc, fractions `f` of the whole arc from
+    /// `tips[0]` to `tips[1]`.
+    Arc { tips: [Vec3; 2], arc: ArcSpec, f: [f64; 2], actual: [f64; 3], setup: Setup },
 }
 
 impl Way {
@@ -29,12 +32,24 @@ impl Way {
                 let q = kinematics::controlled_point(m, &w, &(tip[0] + (tip[1] - tip[0]) * t), setup);
                 ([q.x, q.y, q.z], m.actual_angles(&w))
             }
+            Way::Arc { tips, arc, f, actual, setup } => {
+                let tip = super::arcs::helix_tip(tips[0], tips[1], arc, f[0] + (f[1] - f[0]) * t);
+                let q = kinematics::controlled_point(m, actual, &tip, setup);
+                ([q.x, q.y, q.z], *actual)
+            }
         }
     }
 
     /// How long the linears' path can be beyond their chord (0: no longer): the tip's move and
     /// each rotary word's turn times the farthest the controlled point can be from its axis.
     fn path(&self, m: &Machine) -> f64 {
+        if let Way::Arc { tips, arc, f, .. } = self {
+            // The arc's length (the rotaries still: the same in the machine), a little over.
+            let r = tips[0] - arc.center;
+            let (h, rise) = (arc.normal.dot(&r), arc.normal.dot(&(tips[1] - arc.center)));
+            let turn = (r - arc.normal * h).norm() * arc.sweep.abs();
+            return turn.hypot(rise - h) * (f[1] - f[0]).abs() * (1.0 + 1e-9);
+        }
         let Way::Tcp { tip, words, setup } = self else { return 0.0 };
         let lever = tip[0].norm().max(tip[1].norm())
             + setup.work_offset.norm()
@@ -75,8 +90,15 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         let stock = world.stock_at_rapid(rapid);
         // The move from the block before (not across a tool change: the machine went elsewhere).
         let prev = prev.filter(|_| !self.tool_changed);
-        let way = match (self.o.mode, prev) {
-            (Mode::Tcp, Some(p)) => Way::Tcp {
+        let way = match (self.arc_path.take(), self.o.mode, prev) {
+            (Some((from, end, arc, f)), _, Some(_)) => Way::Arc {
+                tips: [from, end],
+                arc,
+                f,
+                actual: to.actual,
+                setup: self.setup,
+            },
+            (_, Mode::Tcp, Some(p)) => Way::Tcp {
                 tip: [self.tcp_xyz(p), self.tcp_xyz(to)],
                 words: [p.joints.rotary, to.joints.rotary],
                 setup: self.setup,

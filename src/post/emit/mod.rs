@@ -125,6 +125,9 @@ pub(super) struct Emitter<'a, S: Sink + ?Sized> {
     /// Set for the next block: an arc (G3 when true) with its centre words, and its length
     /// (the time at F: a full circle's chord is none).
     pub(super) arc_words: Option<(bool, String, f64)>,
+    /// Set with `arc_words`: the tip's path for the collision check, the whole arc's start and
+    /// end tips and the stretch of it (fractions) the block takes.
+    pub(super) arc_path: Option<(Vec3, Vec3, crate::post::ArcSpec, [f64; 2])>,
     /// The active circular-interpolation plane word (G17/G18/G19).
     pub(super) plane: &'static str,
     /// Outer-rotary travel of the exact solutions and of what was written, at CL points: what
@@ -234,6 +237,7 @@ impl<'a, S: Sink + ?Sized> Emitter<'a, S> {
             stopped_coolant: None,
             coolant_deferred: false,
             arc_words: None,
+            arc_path: None,
             locked: [true; 3],
             plane: "G17",
             offsets: o
