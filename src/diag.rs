@@ -63,7 +63,7 @@ pub enum Code {
     /// Two bodies come closer than the collision clearance.
     NearCollision,
     /// The motion to a block needed more samples than the collision check takes for one block:
-    /// between them a body moves farther than half the smallest body's size.
+    /// between two a body moves farther than the clearance or half the smallest body's size.
     CollisionCoarse,
 }
 
