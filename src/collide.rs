@@ -460,6 +460,12 @@ impl World {
         check
     }
 
+    /// Twice the sum of the rotaries' pivots' distances from the origin: in how far a point can
+    /// be from an axis.
+    pub fn pivots(&self) -> f64 {
+        self.pivots
+    }
+
     /// Whether the profile gave any machine body (without one nothing is checked).
     pub fn is_empty(&self) -> bool {
         !self.bodies.iter().any(|b| !matches!(b.link, Link::Stock | Link::Fixture))

@@ -67,9 +67,12 @@ fn cl(units: &str, length: f64, pts: &[(bool, [f64; 6])]) -> (String, Vec<u32>) 
 }
 
 fn run(p: &Profile, text: &str, settings: Settings) -> (Collect, Result<Summary, post::Error>) {
-    let o = settings.profile_options(p, None).unwrap();
+    run_with(p, text, &settings.profile_options(p, None).unwrap())
+}
+
+fn run_with(p: &Profile, text: &str, o: &post::Options) -> (Collect, Result<Summary, post::Error>) {
     let mut sink = Collect::default();
-    let r = post::post(text.as_bytes(), &p.machine, &o, &mut sink);
+    let r = post::post(text.as_bytes(), &p.machine, o, &mut sink);
     (sink, r)
 }
 
@@ -189,8 +192,8 @@ fn a_tcp_move_is_checked_along_the_path_the_control_takes() {
         let settings = Settings { fixtures: Some("150,-20,0,180,20,40".into()), mode: Some(mode.into()), ..Default::default() };
         let mut o = settings.profile_options(&p, None).unwrap();
         o.max_rotary_step = std::f64::consts::PI;
-        let mut c = Collect::default();
-        post::post(text.as_bytes(), &p.machine, &o, &mut c).unwrap();
+        let (c, s) = run_with(&p, &text, &o);
+        s.unwrap();
         assert_clean(&c, mode);
     }
 }

@@ -71,8 +71,12 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                     crate::nc::write_fixed(&mut words, crate::nc::round_to(d[idx], dec), dec);
                     words.push(' ');
                 }
-                self.arc_words = Some((ccw, words.trim_end().to_string(), length / pieces as f64));
-                self.arc_path = Some((a.pose.tip, b.pose.tip, *arc, [(i - 1) as f64, i as f64].map(|k| k / pieces as f64)));
+                self.arc = Some(super::ArcBlock {
+                    ccw,
+                    words: words.trim_end().to_string(),
+                    length: length / pieces as f64,
+                    path: (a.pose.tip, b.pose.tip, *arc, [(i - 1) as f64, i as f64].map(|k| k / pieces as f64)),
+                });
                 if i == pieces {
                     return self.block(b, pt, false, diags, pt.inserted, None);
                 }
@@ -108,8 +112,12 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             }
             let l = self.f.words(&cc).to_string();
             self.out(&l)?;
-            self.arc_words = Some((ccw, if ccw { "DR+" } else { "DR-" }.to_string(), length));
-            self.arc_path = Some((a.pose.tip, b.pose.tip, *arc, [0.0, 1.0]));
+            self.arc = Some(super::ArcBlock {
+                ccw,
+                words: if ccw { "DR+" } else { "DR-" }.to_string(),
+                length,
+                path: (a.pose.tip, b.pose.tip, *arc, [0.0, 1.0]),
+            });
             return self.block(b, pt, false, diags, pt.inserted, None);
         }
         // Chords: the arc swept in the part frame, tool axis fixed, linears from the rotaries.

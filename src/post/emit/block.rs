@@ -48,7 +48,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         }
         let comp = match self.cutcom.idle() {
             true => None,
-            false => self.cutcom_words(&to, pt.line, !rapid && self.arc_words.is_some(), &mut diags)?,
+            false => self.cutcom_words(&to, pt.line, !rapid && self.arc.is_some(), &mut diags)?,
         };
         // Each word is rounded once, for the line and for the replay.
         let rounded = self.f.round_words(words);
@@ -73,13 +73,13 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             None => comment,
         };
         self.unlock_moving(&to.joints)?;
-        let arc = self.arc_words.take();
+        let arc = self.arc.take();
         let motion = match (&arc, rapid) {
             (_, true) => Motion::Rapid,
-            (Some((ccw, _, _)), false) => Motion::Arc { ccw: *ccw },
+            (Some(a), false) => Motion::Arc { ccw: a.ccw },
             (None, false) => Motion::Feed,
         };
-        let extra = arc.as_ref().map_or("", |(_, w, _)| w.as_str());
+        let extra = arc.as_ref().map_or("", |a| a.words.as_str());
         self.at = Some(to);
         self.tool_changed = false;
         self.last_line = pt.line;

@@ -41,8 +41,9 @@ impl Way {
     }
 
     /// How long the linears' path can be beyond their chord (0: no longer): the tip's move and
-    /// each rotary word's turn times the farthest the controlled point can be from its axis.
-    fn path(&self, m: &Machine) -> f64 {
+    /// each rotary word's turn times the farthest the controlled point can be from its axis
+    /// (`pivots`: [`crate::collide::World::pivots`]).
+    fn path(&self, m: &Machine, pivots: f64) -> f64 {
         if let Way::Arc { tips, arc, f, .. } = self {
             // The arc's length (the rotaries still: the same in the machine), a little over.
             let r = tips[0] - arc.center;
@@ -54,7 +55,7 @@ impl Way {
         let lever = tip[0].norm().max(tip[1].norm())
             + setup.work_offset.norm()
             + setup.tool_length.abs()
-            + 2.0 * m.rotaries.iter().map(|r| r.pivot.norm()).sum::<f64>();
+            + pivots;
         let turn: f64 = (0..m.rotaries.len()).map(|i| (words[1][i] - words[0][i]).abs()).sum();
         (tip[1] - tip[0]).norm() + turn * lever
     }
@@ -65,7 +66,7 @@ impl Way {
 #[allow(clippy::too_many_arguments)]
 fn sweep(world: &mut crate::collide::World, m: &Machine, from: Option<Ends>, to: Ends, way: &Way, len: f64, wo: &Vec3, stock: bool) -> (usize, Vec<Hit>, Option<(f64, f64)>) {
     let mut hits: Vec<Hit> = Vec::new();
-    let path = from.map_or(0.0, |_| way.path(m));
+    let path = from.map_or(0.0, |_| way.path(m, world.pivots()));
     if world.move_clear(m, from, to, len, wo, stock, path) {
         return (1, hits, None);
     }
@@ -90,7 +91,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         let stock = world.stock_at_rapid(rapid);
         // The move from the block before (not across a tool change: the machine went elsewhere).
         let prev = prev.filter(|_| !self.tool_changed);
-        let way = match (self.arc_path.take(), self.o.mode, prev) {
+        let way = match (self.arc.as_ref().map(|a| a.path), self.o.mode, prev) {
             (Some((from, end, arc, f)), _, Some(_)) => Way::Arc {
                 tips: [from, end],
                 arc,

@@ -43,8 +43,8 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                     None => {}
                 }
             }
-            let len = match &self.arc_words {
-                Some((_, _, l)) => *l,
+            let len = match &self.arc {
+                Some(a) => a.length,
                 None => prev.map_or(0.0, |p| (to.pose.tip - p.pose.tip).norm()),
             };
             let rot_moves =

@@ -52,6 +52,19 @@ pub(super) struct At {
     free: Option<u8>,
 }
 
+/// A block written as an arc (G2/G3, or Heidenhain's C after its CC).
+pub(super) struct ArcBlock {
+    /// G3 (Heidenhain DR+).
+    pub(super) ccw: bool,
+    /// The centre words (I J K, or DR±).
+    pub(super) words: String,
+    /// Its length along the helix: the time at F (a full circle's chord is none).
+    pub(super) length: f64,
+    /// The tip's path, for the collision check: the whole arc's start and end tips, the arc,
+    /// and the stretch of it (fractions) this block takes.
+    pub(super) path: (Vec3, Vec3, crate::post::ArcSpec, [f64; 2]),
+}
+
 pub(super) struct Emitter<'a, S: Sink + ?Sized> {
     pub(super) m: &'a Machine,
     pub(super) o: &'a Options,
@@ -122,12 +135,8 @@ pub(super) struct Emitter<'a, S: Sink + ?Sized> {
     pub(super) coolant_deferred: bool,
     /// Which clamped rotaries are locked now (a clamped axis is taken as locked at the start).
     pub(super) locked: [bool; 3],
-    /// Set for the next block: an arc (G3 when true) with its centre words, and its length
-    /// (the time at F: a full circle's chord is none).
-    pub(super) arc_words: Option<(bool, String, f64)>,
-    /// Set with `arc_words`: the tip's path for the collision check, the whole arc's start and
-    /// end tips and the stretch of it (fractions) the block takes.
-    pub(super) arc_path: Option<(Vec3, Vec3, crate::post::ArcSpec, [f64; 2])>,
+    /// Set for the next block: it is an arc.
+    pub(super) arc: Option<ArcBlock>,
     /// The active circular-interpolation plane word (G17/G18/G19).
     pub(super) plane: &'static str,
     /// Outer-rotary travel of the exact solutions and of what was written, at CL points: what
@@ -236,8 +245,7 @@ impl<'a, S: Sink + ?Sized> Emitter<'a, S> {
             stopped_spindle: None,
             stopped_coolant: None,
             coolant_deferred: false,
-            arc_words: None,
-            arc_path: None,
+            arc: None,
             locked: [true; 3],
             plane: "G17",
             offsets: o
