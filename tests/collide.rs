@@ -214,6 +214,72 @@ fn an_arc_is_checked_along_the_arc() {
     assert_clean(&c, "no clamp");
 }
 
+/// On the way between blocks a touching pair may be told by its last measure: off by at most the
+/// spacing or a quarter of that measure (a third of the distance), and the same pairs told,
+/// colliding or near, as a fresh check finds at every sample. A move
+/// through the table, down into it and out again past the clearance (2 mm), the table tilting on
+/// the way; a plunge 40 mm deep, the depth growing as fast as the tool moves; then straight down
+/// in steps of 0.3 mm, the holder coming within the clearance and into the table (a bound that
+/// moves across 0 must not be told).
+#[test]
+fn on_the_way_an_overlap_may_be_told_by_its_last_measure() {
+    use kinepost::collide::{Hit, Solid, ToolShape, World};
+    use kinepost::kinematics::{Setup, Vec3, controlled_point};
+    let p = profile("spinner-u5-620", SPINNER);
+    let (m, g) = (&p.machine, p.geometry());
+    let stock = [Solid::Box { min: [-40.0, -40.0, 0.0].into(), max: [40.0, 40.0, 30.0].into() }];
+    let len = 100.0;
+    let tool = ToolShape::default_for(len, true);
+    let setup = Setup::new(len, Vec3::zeros());
+    let spacing = 2.0;
+    let world = || {
+        let mut w = World::new(m, &g, &stock, &[], spacing, 1e-3);
+        w.set_tool(tool);
+        w
+    };
+    let mut along = world();
+    let (mut bounded, mut overlaps) = (0, 0);
+    let through = (0..=800).map(|k| {
+        let t = k as f64 / 800.0;
+        let depth = 1.0 - (2.0 * t - 1.0).abs();
+        let tip = Vec3::new(-250.0 + 500.0 * t, -60.0 + 120.0 * t, 50.0 - 130.0 * depth);
+        (tip, [(20.0 * t).to_radians(), (45.0 * t).to_radians(), 0.0])
+    });
+    let plunge = (0..=80).map(|k| (Vec3::new(-100.0, 0.0, -5.0 - 0.5 * k as f64), [0.0; 3]));
+    // The holder's end is 60 mm above the tip.
+    let down = (0..=30).map(|k| (Vec3::new(100.0, 0.0, -55.0 - 0.3 * k as f64), [0.0; 3]));
+    for (k, (tip, actual)) in through.chain(plunge).chain(down).enumerate() {
+        let lin: [f64; 3] = controlled_point(m, &actual, &tip, &setup).into();
+        let (mut told, mut exact): (Vec<Hit>, Vec<Hit>) = (Vec::new(), Vec::new());
+        along.check_on_the_way(m, &lin, &actual, len, &Vec3::zeros(), true, &mut told);
+        world().check_at(m, &lin, &actual, len, &Vec3::zeros(), true, &mut exact);
+        let pairs = |v: &[Hit]| v.iter().map(|h| (h.a.clone(), h.b.clone(), h.dist < 0.0)).collect::<Vec<_>>();
+        assert_eq!(pairs(&told), pairs(&exact), "sample {k}");
+        for (a, b) in told.iter().zip(&exact) {
+            let off = (a.dist - b.dist).abs();
+            assert!(off <= spacing.max(b.dist.abs() / 3.0) + 1e-9, "sample {k}: {a:?} against {b:?}");
+            bounded += usize::from(off > 1e-9);
+            overlaps += usize::from(b.dist < 0.0);
+        }
+    }
+    // Deep enough for long that many overlaps are told by an earlier measure.
+    assert!(overlaps > 200 && bounded * 5 > overlaps, "{bounded} of {overlaps} told by an earlier measure");
+}
+
+/// A tool of length 0 (the gauge point at the spindle nose) has no cutter or holder to check:
+/// the spindle's own bodies are checked, at the spacing they need (the housing starts 5 mm
+/// above the gauge point: 10 mm into the table).
+#[test]
+fn a_tool_of_no_length_leaves_the_spindle_nose_checked() {
+    let p = profile("spinner-u5-620", SPINNER);
+    let (text, lines) = cl("MM", 0.0, &[(true, at([0.0, 0.0, 100.0], UP)), (true, at([150.0, 0.0, 100.0], tilted(30.0))), (false, at([0.0, 0.0, -15.0], UP))]);
+    let (c, s) = run(&p, &text, Settings::default());
+    s.unwrap();
+    assert!(hits(&c, Code::CollisionCoarse).is_empty(), "{:#?}", hits(&c, Code::CollisionCoarse));
+    assert_hit(&c, lines[2], "spindle housing", "table");
+    assert!(!c.diags.iter().any(|d| d.message.contains("cutter") || d.message.contains("holder")), "{:#?}", c.diags);
+}
+
 /// A rapid that tilts the table with the cutter just over a stock 0.01 mm thick would need more
 /// samples than one block takes: the block says its check was coarser than the step.
 #[test]

@@ -76,7 +76,10 @@ fn sweep(world: &mut crate::collide::World, m: &Machine, from: Option<Ends>, to:
             Some(f) => way.at(m, f, to, k as f64 / n as f64),
             None => (*to.0, *to.1),
         };
-        world.check_at(m, &lin, &act, len, wo, stock, &mut hits);
+        match k < n {
+            true => world.check_on_the_way(m, &lin, &act, len, wo, stock, &mut hits),
+            false => world.check_at(m, &lin, &act, len, wo, stock, &mut hits),
+        }
     }
     (n, hits, coarse)
 }
