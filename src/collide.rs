@@ -588,7 +588,7 @@ impl World {
 
     /// As [`World::check_at`], at a sample on the way between two blocks, where a pair found
     /// touching may be told by its last measure (see [`settled`]): within the sample spacing, or
-    /// a quarter of the distance, of its distance there.
+    /// a quarter of the measure told (a third of the distance there), of its distance there.
     #[allow(clippy::too_many_arguments)]
     pub fn check_on_the_way(&mut self, m: &Machine, linear: &[f64; 3], actual: &[f64; 3], tool_length: f64, work_offset: &Vec3, stock: bool, out: &mut Vec<Hit>) {
         self.check(m, (linear, actual), tool_length, work_offset, stock, true, out);
