@@ -266,6 +266,43 @@ fn on_the_way_an_overlap_may_be_told_by_its_last_measure() {
     assert!(overlaps > 200 && bounded * 5 > overlaps, "{bounded} of {overlaps} told by an earlier measure");
 }
 
+/// A hole written as a canned cycle is checked as the control drills it: a bottom 5 mm into the
+/// table, and the move across to the next hole of the same cycle at its return level (35 mm)
+/// through a clamp 40 mm tall standing between them. Each on its hole's one cycle block; the
+/// same holes expanded into moves find the same.
+#[test]
+fn a_canned_cycle_is_checked_down_the_hole_and_across_to_the_next() {
+    let p = profile("spinner-u5-620", SPINNER);
+    let holes = |top: f64| {
+        format!(
+            "PARTNO/HOLES\nUNITS/MM\nLOADTL/1,LENGTH,100\nSPINDL/6000,RPM,CLW\nFEDRAT/500,MMPM\nRAPID\nGOTO/-60,0,60,0,0,1\nCYCLE/DRILL,FEDTO,5,MMPM,200,RAPTO,3,RTRCTO,{}\nGOTO/-60,0,{top},0,0,1\nGOTO/60,0,{top},0,0,1\nCYCLE/OFF\nSPINDL/OFF\nFINI\n",
+            35.0 - top
+        )
+    };
+    let clamp = || Settings { fixtures: Some("-10,-20,0,10,20,40".into()), ..Default::default() };
+    for cycles in ["canned", "expand"] {
+        let with = |s: Settings| Settings { cycles: Some(cycles.into()), ..s };
+        // Into the table (the holes' tops on it), nothing in between.
+        let (c, s) = run(&p, &holes(0.0), with(Settings::default()));
+        s.unwrap();
+        assert_hit(&c, 9, "cutter", "table");
+        if cycles == "canned" {
+            assert!(c.nc.contains("G81"), "{}", c.nc);
+            // Down, and back out of it: one diagnostic for the pair, the deepest.
+            let table = hits(&c, Code::Collision).into_iter().filter(|d| d.line == Some(9) && d.message.contains("cutter and table")).count();
+            assert_eq!(table, 1, "{:#?}", c.diags);
+        }
+        // 10 mm above the table: clear, until the clamp stands between the holes.
+        let (c, s) = run(&p, &holes(10.0), with(Settings::default()));
+        s.unwrap();
+        assert_clean(&c, cycles);
+        let (c, s) = run(&p, &holes(10.0), with(clamp()));
+        s.unwrap();
+        assert_hit(&c, 10, "cutter", "fixture 1");
+        assert!(!hits(&c, Code::Collision).iter().any(|d| d.line == Some(9)), "{cycles}: {:#?}", hits(&c, Code::Collision));
+    }
+}
+
 /// A tool of length 0 (the gauge point at the spindle nose) has no cutter or holder to check:
 /// the spindle's own bodies are checked, at the spacing they need (the housing starts 5 mm
 /// above the gauge point: 10 mm into the table).

@@ -4,7 +4,8 @@
 use super::{At, Emitter};
 use crate::collide::{Hit, ToolShape};
 use crate::diag::{Code, Diagnostic, Severity};
-use crate::kinematics::{self, Machine, Setup, Units, Vec3};
+use crate::kinematics::{self, Machine, Pose, Setup, Units, Vec3};
+use crate::nc::Canned;
 use crate::post::{ArcSpec, Mode, Sink};
 
 /// Joints at one end of a move: linears, actual rotary angles (radians).
@@ -140,6 +141,49 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             }));
             diags.push(d);
         }
+    }
+
+    /// A canned hole's strokes as the control makes them: down to the R plane (rapid), to the
+    /// bottom (feed), back to the level it returns to (rapid, G98's start or G99's R), and where
+    /// the cycle goes on from the hole before (`from`), across at that level. One diagnostic per
+    /// pair, the deepest, for the cycle's one block.
+    pub(super) fn hole_collisions(&mut self, from: Option<&At>, start: &At, cb: &Canned, line: u32, diags: &mut Vec<Diagnostic>) {
+        if self.world.is_none() {
+            return;
+        }
+        let lift = cb.z_start.max(cb.z_r) - cb.z_start;
+        let top = self.along(start, lift);
+        let mut found = Vec::new();
+        let first = match from {
+            Some(p) => {
+                let across = self.along(p, lift);
+                self.collisions(Some(&across), &top, true, line, &mut found);
+                top
+            }
+            None => *start,
+        };
+        let (r, bottom) = (self.along(start, cb.z_r - cb.z_start), self.along(start, cb.z_bottom - cb.z_start));
+        self.collisions(Some(&first), &r, true, line, &mut found);
+        self.collisions(Some(&r), &bottom, false, line, &mut found);
+        self.collisions(Some(&bottom), &top, true, line, &mut found);
+        for d in found {
+            let same = |e: &Diagnostic| e.code == d.code && e.bodies.as_ref().map(|b| (&b.a, &b.b)) == d.bodies.as_ref().map(|b| (&b.a, &b.b));
+            match diags.iter_mut().find(|e| same(e)) {
+                Some(e) if e.bodies.as_ref().zip(d.bodies.as_ref()).is_some_and(|(a, b)| b.distance < a.distance) => *e = d,
+                Some(_) => {}
+                None => diags.push(d),
+            }
+        }
+    }
+
+    /// `at` with the tip moved `by` along the tool axis, the rotaries standing.
+    fn along(&self, at: &At, by: f64) -> At {
+        let tip = at.pose.tip + at.pose.axis.normalize() * by;
+        let q = kinematics::controlled_point(self.m, &at.actual, &tip, &self.setup);
+        let mut to = *at;
+        to.joints.linear = [q.x, q.y, q.z];
+        to.pose = Pose { tip, axis: at.pose.axis };
+        to
     }
 
     /// The tool in the spindle: the tool table's diameter, corner radius and holder where it

@@ -104,6 +104,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
     /// unless this hole continues it), then the cycle block.
     pub(super) fn canned_hole(&mut self, c: Committed, h: Hole, mut cb: Canned, start: At) -> Result<(), Error> {
         let pt = c.pt.clone();
+        let before = self.at;
         self.cycle_in_plane(&mut cb, &start);
         let modal = match (self.cycle_on, self.at) {
             (Some(on), Some(at)) => {
@@ -137,7 +138,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         };
         self.at = Some(at);
         self.positioned = false;
-        self.canned_block(&pt, &h, cb, at, modal)
+        self.canned_block(&pt, &h, cb, at, before.filter(|_| modal))
     }
 
     /// A cycle's words moved into the tilted plane in force, when the tool stands on its
@@ -151,8 +152,9 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         true
     }
 
-    pub(super) fn canned_block(&mut self, pt: &MotionPt, h: &Hole, cb: Canned, at: At, modal: bool) -> Result<(), Error> {
-        let m = self.m;
+    /// The cycle's block; `from`: the hole before, where this one goes on with its cycle.
+    pub(super) fn canned_block(&mut self, pt: &MotionPt, h: &Hole, cb: Canned, at: At, from: Option<At>) -> Result<(), Error> {
+        let (m, modal) = (self.m, from.is_some());
         let lines = self.f.canned(&cb, modal);
         let Some((call, def)) = lines.split_last() else {
             return Ok(());
@@ -188,11 +190,12 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             None => (replay.tip - want).norm(),
         };
         let ax_dev = angle_between(&replay.axis, &u).to_degrees();
-        let diags: Vec<Diagnostic> = self
+        let mut diags: Vec<Diagnostic> = self
             .replayed(pt.line, tip_dev, ax_dev, "the cycle's bottom misses the hole")
             .into_iter()
             .chain(self.spindle_standing(pt.line))
             .collect();
+        self.hole_collisions(from.as_ref(), &at, &cb, pt.line, &mut diags);
         for d in &diags {
             self.count(d);
             self.flag(d)?;
