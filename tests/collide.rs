@@ -301,6 +301,13 @@ fn a_canned_cycle_is_checked_down_the_hole_and_across_to_the_next() {
         assert_hit(&c, 10, "cutter", "fixture 1");
         assert!(!hits(&c, Code::Collision).iter().any(|d| d.line == Some(9)), "{cycles}: {:#?}", hits(&c, Code::Collision));
     }
+    // The holder (Ø40, 60 mm above the tip) comes 1 mm over a clamp at R and 1 mm into its side
+    // at the bottom: the cycle's block tells the pair once, as the collision it is.
+    let side = Settings { cycles: Some("canned".into()), fixtures: Some("-41,-20,0,-30,20,72".into()), ..Default::default() };
+    let (c, s) = run(&p, &holes(10.0), side);
+    s.unwrap();
+    let told: Vec<_> = c.diags.iter().filter(|d| d.line == Some(9) && d.message.contains("holder and fixture 1")).collect();
+    assert!(told.len() == 1 && told[0].code == Code::Collision, "{told:#?}");
 }
 
 /// A tool of length 0 (the gauge point at the spindle nose) has no cutter or holder to check:

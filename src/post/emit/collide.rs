@@ -146,7 +146,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
     /// A canned hole's strokes as the control makes them: down to the R plane (rapid), to the
     /// bottom (feed), back to the level it returns to (rapid, G98's start or G99's R), and where
     /// the cycle goes on from the hole before (`from`), across at that level. One diagnostic per
-    /// pair, the deepest, for the cycle's one block.
+    /// pair, the deepest (a collision where any stroke overlaps), for the cycle's one block.
     pub(super) fn hole_collisions(&mut self, from: Option<&At>, start: &At, cb: &Canned, line: u32, diags: &mut Vec<Diagnostic>) {
         if self.world.is_none() {
             return;
@@ -167,9 +167,15 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         self.collisions(Some(&r), &bottom, false, line, &mut found);
         self.collisions(Some(&bottom), &top, true, line, &mut found);
         for d in found {
-            let same = |e: &Diagnostic| e.code == d.code && e.bodies.as_ref().map(|b| (&b.a, &b.b)) == d.bodies.as_ref().map(|b| (&b.a, &b.b));
-            match diags.iter_mut().find(|e| same(e)) {
-                Some(e) if e.bodies.as_ref().zip(d.bodies.as_ref()).is_some_and(|(a, b)| b.distance < a.distance) => *e = d,
+            // A pair near on one stroke and overlapping on another is the one collision.
+            let Some(b) = d.bodies.as_deref() else {
+                if !diags.iter().any(|e| e.code == d.code && e.message == d.message) {
+                    diags.push(d);
+                }
+                continue;
+            };
+            match diags.iter_mut().find(|e| e.bodies.as_deref().is_some_and(|e| e.a == b.a && e.b == b.b)) {
+                Some(e) if e.bodies.as_deref().is_some_and(|e| b.distance < e.distance) => *e = d,
                 Some(_) => {}
                 None => diags.push(d),
             }
