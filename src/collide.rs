@@ -844,7 +844,7 @@ use Gap::{Apart, Touching};
 /// Where a touching pair's last measured distance still tells it well enough that it need not
 /// be asked again: its bodies moved at most `measured − lower` since, so it is within that of
 /// the distance now. Enough: what it tells is sure (within `limit`; overlapping or not, the
-/// bound either way) and that is at most the sample spacing, or a quarter of the distance where
+/// bound either way) and that is at most the sample spacing, or a quarter of the measure where
 /// more (an overlap of 40 mm plunging on is still a collision of about 40). A pair overlapping
 /// at every sample of a long move cost a penetration query at each: 99% of the time of a
 /// program posted under the table.

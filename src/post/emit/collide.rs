@@ -62,33 +62,53 @@ impl Way {
     }
 }
 
+/// What the samples of one block's moves found: the deepest hit per pair, how many samples,
+/// and where they were too few (`World::samples`) the coarsest.
+#[derive(Default)]
+struct Found {
+    samples: usize,
+    hits: Vec<Hit>,
+    coarse: Option<(f64, f64)>,
+}
+
 /// The samples along the move from `from` (none: the machine got to `to` some other way) to
-/// `to`, the deepest hit per pair, and where the samples were too few (`World::samples`).
+/// `to`, into `found`.
 #[allow(clippy::too_many_arguments)]
-fn sweep(world: &mut crate::collide::World, m: &Machine, from: Option<Ends>, to: Ends, way: &Way, len: f64, wo: &Vec3, stock: bool) -> (usize, Vec<Hit>, Option<(f64, f64)>) {
-    let mut hits: Vec<Hit> = Vec::new();
+fn sweep(world: &mut crate::collide::World, m: &Machine, from: Option<Ends>, to: Ends, way: &Way, len: f64, wo: &Vec3, stock: bool, found: &mut Found) {
     let path = from.map_or(0.0, |_| way.path(m, world.pivots()));
     if world.move_clear(m, from, to, len, wo, stock, path) {
-        return (1, hits, None);
+        found.samples += 1;
+        return;
     }
     let (n, coarse) = from.map_or((1, None), |f| world.samples(m, f, to, len, wo, path));
+    if coarse.is_some_and(|(apart, _)| found.coarse.is_none_or(|(was, _)| apart > was)) {
+        found.coarse = coarse;
+    }
+    found.samples += n;
+    let hits = &mut found.hits;
     for k in 1..=n {
         let (lin, act) = match from.filter(|_| k < n) {
             Some(f) => way.at(m, f, to, k as f64 / n as f64),
             None => (*to.0, *to.1),
         };
         match k < n {
-            true => world.check_on_the_way(m, &lin, &act, len, wo, stock, &mut hits),
-            false => world.check_at(m, &lin, &act, len, wo, stock, &mut hits),
+            true => world.check_on_the_way(m, &lin, &act, len, wo, stock, hits),
+            false => world.check_at(m, &lin, &act, len, wo, stock, hits),
         }
     }
-    (n, hits, coarse)
 }
 
 impl<S: Sink + ?Sized> Emitter<'_, S> {
     /// Diagnostics of the bodies that overlap (`collision`, an error) or come closer than the
     /// clearance (`near_collision`, a warning) at `to` or on the way from `prev`.
     pub(super) fn collisions(&mut self, prev: Option<&At>, to: &At, rapid: bool, line: u32, diags: &mut Vec<Diagnostic>) {
+        let mut found = Found::default();
+        self.sweep_to(prev, to, rapid, &mut found);
+        self.tell(found, line, diags);
+    }
+
+    /// The move to `to` from `prev` (a rapid or not), its samples checked into `found`.
+    fn sweep_to(&mut self, prev: Option<&At>, to: &At, rapid: bool, found: &mut Found) {
         let tool = self.tool_shape();
         let Some(world) = self.world.as_mut() else { return };
         world.set_tool(tool);
@@ -113,9 +133,13 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         let Some(world) = self.world.as_mut() else { return };
         let from = prev.map(|p| (&p.joints.linear, &p.actual));
         let to = (&to.joints.linear, &to.actual);
-        let (n, hits, coarse) = sweep(world, self.m, from, to, &way, self.setup.tool_length, &self.setup.work_offset, stock);
+        sweep(world, self.m, from, to, &way, self.setup.tool_length, &self.setup.work_offset, stock, found);
+    }
+
+    /// What `found` found, as diagnostics of the block at `line`.
+    fn tell(&self, found: Found, line: u32, diags: &mut Vec<Diagnostic>) {
         let unit = self.m.units.as_str();
-        if let Some((apart, step)) = coarse {
+        if let Some((apart, step)) = found.coarse {
             diags.push(Diagnostic::new(
                 Code::CollisionCoarse,
                 Severity::Warning,
@@ -126,13 +150,13 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                 ),
             ));
         }
-        for h in hits {
+        for h in found.hits {
             let (code, severity, what) = if h.dist < 0.0 {
                 (Code::Collision, Severity::Error, format!("overlap by {:.3} {unit}", -h.dist))
             } else {
                 (Code::NearCollision, Severity::Warning, format!("{:.3} {unit} apart", h.dist))
             };
-            let on = if n > 1 { "at or on the way to this block" } else { "at this block" };
+            let on = if found.samples > 1 { "at or on the way to this block" } else { "at this block" };
             let mut d = Diagnostic::new(code, severity, Some(line), format!("{} and {}: {what} {on}", h.a, h.b));
             d.bodies = Some(Box::new(crate::diag::Bodies {
                 a: h.a,
@@ -146,40 +170,28 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
     /// A canned hole's strokes as the control makes them: down to the R plane (rapid), to the
     /// bottom (feed), back to the level it returns to (rapid, G98's start or G99's R), and where
     /// the cycle goes on from the hole before (`from`), across at that level. One diagnostic per
-    /// pair, the deepest (a collision where any stroke overlaps), for the cycle's one block.
+    /// pair, the deepest of all the strokes (a collision where any overlaps), for the cycle's one
+    /// block.
     pub(super) fn hole_collisions(&mut self, from: Option<&At>, start: &At, cb: &Canned, line: u32, diags: &mut Vec<Diagnostic>) {
         if self.world.is_none() {
             return;
         }
         let lift = cb.z_start.max(cb.z_r) - cb.z_start;
         let top = self.along(start, lift);
-        let mut found = Vec::new();
+        let mut found = Found::default();
         let first = match from {
             Some(p) => {
                 let across = self.along(p, lift);
-                self.collisions(Some(&across), &top, true, line, &mut found);
+                self.sweep_to(Some(&across), &top, true, &mut found);
                 top
             }
             None => *start,
         };
         let (r, bottom) = (self.along(start, cb.z_r - cb.z_start), self.along(start, cb.z_bottom - cb.z_start));
-        self.collisions(Some(&first), &r, true, line, &mut found);
-        self.collisions(Some(&r), &bottom, false, line, &mut found);
-        self.collisions(Some(&bottom), &top, true, line, &mut found);
-        for d in found {
-            // A pair near on one stroke and overlapping on another is the one collision.
-            let Some(b) = d.bodies.as_deref() else {
-                if !diags.iter().any(|e| e.code == d.code && e.message == d.message) {
-                    diags.push(d);
-                }
-                continue;
-            };
-            match diags.iter_mut().find(|e| e.bodies.as_deref().is_some_and(|e| e.a == b.a && e.b == b.b)) {
-                Some(e) if e.bodies.as_deref().is_some_and(|e| b.distance < e.distance) => *e = d,
-                Some(_) => {}
-                None => diags.push(d),
-            }
-        }
+        self.sweep_to(Some(&first), &r, true, &mut found);
+        self.sweep_to(Some(&r), &bottom, false, &mut found);
+        self.sweep_to(Some(&bottom), &top, true, &mut found);
+        self.tell(found, line, diags);
     }
 
     /// `at` with the tip moved `by` along the tool axis, the rotaries standing.
