@@ -605,7 +605,17 @@ impl Store {
                     .execute(&self.pool)
                     .await?;
                 }
-                Ok(j) => return Ok(Some(j)),
+                Ok(j) => {
+                    if j.attempts > 1 {
+                        // A run before this one that did not end (its replica killed, or cut off
+                        // by a restart) left its temporaries: they are not this run's.
+                        self.remove_outputs(&Job {
+                            attempts: j.attempts - 1,
+                            ..j.clone()
+                        });
+                    }
+                    return Ok(Some(j));
+                }
                 Err(e) => {
                     let id: String = r.try_get("id")?;
                     tracing::error!(job = %id, error = %e, "a claimed job's row cannot be read: failed");
