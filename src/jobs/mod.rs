@@ -350,7 +350,7 @@ impl Queue {
         // Read once: the label and the handling must agree even if a cancel lands in between.
         let cancelled = cancel.load(Ordering::Relaxed);
         let end = match result {
-            Ok(Ok(s)) => End::Succeeded(s),
+            Ok(Ok(s)) => End::Succeeded(Box::new(s)),
             Ok(Err(_)) if cancelled => End::Cancelled,
             Ok(Err(Failed::Fault(cause))) => End::Fault(cause),
             Ok(Err(Failed::Job(msg))) => End::Failed(msg),
@@ -412,7 +412,7 @@ impl Queue {
 
 /// How a run ended, to be recorded.
 enum End {
-    Succeeded(Summary),
+    Succeeded(Box<Summary>),
     Cancelled,
     /// The job's own fault.
     Failed(String),
