@@ -190,10 +190,14 @@ struct Tmpfs(std::path::PathBuf);
 
 impl Tmpfs {
     fn mount(tag: &str) -> Option<Tmpfs> {
+        Tmpfs::sized(tag, "4m")
+    }
+
+    fn sized(tag: &str, size: &str) -> Option<Tmpfs> {
         let dir = std::env::temp_dir().join(format!("kinepost-full-{}-{tag}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let ok = std::process::Command::new("mount")
-            .args(["-t", "tmpfs", "-o", "size=4m", "tmpfs"])
+            .args(["-t", "tmpfs", "-o", &format!("size={size}"), "tmpfs"])
             .arg(&dir)
             .stderr(std::process::Stdio::null())
             .status()
@@ -222,6 +226,11 @@ async fn a_full_disk_refuses_uploads_fails_jobs_cleanly_and_recovers() {
     let Some(fs) = Tmpfs::mount("jobs") else { return };
     let mut cfg = common::cfg();
     cfg.data_dir = fs.0.join("data");
+    // Two runs, not five: the job store shares the 4 MiB with the spool here, and each run's
+    // progress grows its write-ahead log, which a full disk does not let it grow (the job would
+    // then wait, `running`, until there is room).
+    cfg.job_retry_backoff = Duration::from_millis(50);
+    cfg.job_max_attempts = 2;
     let base = common::server(cfg.clone()).await;
     // No kept-alive connections: the server answers the refused upload before reading it all and
     // then closes that connection, which a pooled client might pick for the next request.
@@ -247,7 +256,8 @@ async fn a_full_disk_refuses_uploads_fails_jobs_cleanly_and_recovers() {
             .is_empty()
     );
 
-    // A job whose input fits but whose outputs do not: failed, its NC never served.
+    // A job whose input fits but whose outputs do not: run again (a full disk is no fault of the
+    // job's), up to the service's bound (2 here), then failed with the cause; its NC never served.
     let mid = common::generated("dmg-dmc75v", 30_000, 5);
     assert!(mid.len() < 5 << 19, "the input fits");
     let r = c
@@ -258,8 +268,11 @@ async fn a_full_disk_refuses_uploads_fails_jobs_cleanly_and_recovers() {
         .unwrap();
     assert_eq!(r.status(), 202);
     let id = r.json::<Value>().await.unwrap()["id"].as_str().unwrap().to_string();
-    let j = common::wait_job(&c, &base, &id, "failed", Duration::from_secs(60)).await;
+    let j = common::wait_job(&c, &base, &id, "failed", Duration::from_secs(120)).await;
     assert!(j["error"].as_str().unwrap().contains("No space left"), "{j}");
+    assert!(j["error"].as_str().unwrap().contains("attempt 2 of 2"), "{j}");
+    assert_eq!(j["attempts"], 2, "{j}");
+    assert!(j["last_cause"].as_str().unwrap().contains("No space left"), "{j}");
     assert_eq!(c.get(format!("{base}/v1/jobs/{id}/nc")).status_ok().await, 409);
     // Its diagnostics, cut short by the full disk, end with the error record as served (the
     // block store closed at the failure, or rebuilt up to its last whole record).
@@ -286,6 +299,112 @@ async fn a_full_disk_refuses_uploads_fails_jobs_cleanly_and_recovers() {
     assert_eq!(r.status(), 202);
     let id = r.json::<Value>().await.unwrap()["id"].as_str().unwrap().to_string();
     common::wait_job(&c, &base, &id, "succeeded", Duration::from_secs(60)).await;
+}
+
+/// Fills a directory's disk to the last byte (again): the filler file, to be removed to make
+/// room again.
+fn fill(dir: &std::path::Path) -> std::path::PathBuf {
+    use std::io::Write;
+    let path = dir.join("filler");
+    let mut f = std::fs::OpenOptions::new().create(true).append(true).open(&path).unwrap();
+    let chunk = vec![0u8; 64 << 10];
+    while f.write_all(&chunk).is_ok() {}
+    // What is left under a chunk, a byte at a time would be slow: a page is all a tmpfs has.
+    while f.write_all(&chunk[..4096]).is_ok() {}
+    path
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_spool_full_for_a_moment_fails_no_job() {
+    let Some(fs) = Tmpfs::sized("spool", "24m") else { return };
+    let mut cfg = common::cfg();
+    cfg.spool_dir = Some(fs.0.join("spool"));
+    cfg.workers = 2;
+    cfg.job_retry_backoff = Duration::from_millis(500);
+    let base = common::server(cfg.clone()).await;
+    let c = reqwest::Client::new();
+
+    let mut ids = Vec::new();
+    for seed in 0..4 {
+        let r = c
+            .post(format!("{base}/v1/jobs?machine=dmg-dmc75v"))
+            .body(common::generated("dmg-dmc75v", 20_000, seed))
+            .send()
+            .await
+            .unwrap();
+        assert_eq!(r.status(), 202);
+        ids.push(r.json::<Value>().await.unwrap()["id"].as_str().unwrap().to_string());
+    }
+    // Two jobs are writing their outputs when the spool fills.
+    let t0 = Instant::now();
+    loop {
+        let j = common::get_json(&c, &format!("{base}/v1/jobs?state=running")).await;
+        let writing = j["jobs"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|j| j["progress"]["blocks"].as_u64() > Some(500));
+        if writing.count() == 2 {
+            break;
+        }
+        assert!(t0.elapsed() < Duration::from_secs(60), "no two jobs running: {j}");
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    let filler = fill(&fs.0);
+    // Full for a while: the runs stopped by it go back to the queue, naming the cause.
+    let t0 = Instant::now();
+    let requeued = loop {
+        let mut requeued = Vec::new();
+        for id in &ids {
+            let j = common::get_json(&c, &format!("{base}/v1/jobs/{id}")).await;
+            assert_ne!(j["state"], "failed", "{j}");
+            if j["last_cause"].as_str().is_some_and(|c| c.contains("No space left")) {
+                requeued.push(j);
+            }
+        }
+        if requeued.len() >= 2 {
+            break requeued;
+        }
+        assert!(
+            t0.elapsed() < Duration::from_secs(30),
+            "no run stopped by the full spool went back to the queue"
+        );
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    };
+    for j in &requeued {
+        assert!(j["attempts"].as_i64().unwrap() >= 1, "{j}");
+    }
+    // What the stopped runs wrote went with them: filled again, and held full a while longer
+    // (the runs started meanwhile are stopped by it too).
+    for _ in 0..10 {
+        fill(&fs.0);
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+    tokio::time::sleep(Duration::from_secs(1)).await;
+    std::fs::remove_file(&filler).unwrap();
+
+    // Room again: every job succeeds, the retried ones with their cause and attempts shown.
+    let mut retried = 0;
+    for id in &ids {
+        let j = common::wait_job(&c, &base, id, "succeeded", Duration::from_secs(180)).await;
+        if j["attempts"].as_i64().unwrap() > 1 {
+            retried += 1;
+            assert!(j["last_cause"].as_str().unwrap().contains("No space left"), "{j}");
+        }
+        assert_eq!(c.get(format!("{base}/v1/jobs/{id}/nc")).status_ok().await, 200);
+        let diag = c.get(format!("{base}/v1/jobs/{id}/diagnostics")).text_ok().await;
+        let last: Value = serde_json::from_str(diag.lines().last().unwrap()).unwrap();
+        assert_eq!(last["type"], "summary", "{last}");
+    }
+    assert!(retried >= 2, "{retried} jobs ran again");
+    // No attempt's partial outputs left behind.
+    let left: Vec<String> = std::fs::read_dir(fs.0.join("spool"))
+        .unwrap()
+        .flatten()
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .filter(|f| f.ends_with(".tmp") || f.ends_with(".partial"))
+        .collect();
+    assert!(left.is_empty(), "{left:?}");
 }
 
 /// A job store SQLite cannot read (not a database; a database with damaged pages) stops the

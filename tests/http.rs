@@ -83,7 +83,7 @@ async fn metrics_are_valid_openmetrics_with_every_series_from_the_start() {
     for st in ["queued", "running", "succeeded", "failed", "cancelled"] {
         start.push(format!("kinepost_jobs{{state=\"{st}\"}} 0"));
     }
-    for outcome in ["succeeded", "failed", "cancelled"] {
+    for outcome in ["succeeded", "failed", "cancelled", "retried"] {
         start.push(format!("kinepost_job_duration_seconds_count{{outcome=\"{outcome}\"}} 0"));
         start.push(format!("kinepost_job_duration_seconds_bucket{{le=\"+Inf\",outcome=\"{outcome}\"}} 0"));
     }

@@ -94,6 +94,11 @@ impl Drop for Replica {
 }
 
 fn replica(db: &TestDb, spool: &std::path::Path, tag: &str) -> Replica {
+    replica_at(&db.url, spool, tag)
+}
+
+/// A replica on the database at `url`.
+fn replica_at(url: &str, spool: &std::path::Path, tag: &str) -> Replica {
     let data = std::env::temp_dir().join(format!("kinepost-replica-{}-{tag}", std::process::id()));
     let _ = std::fs::remove_dir_all(&data);
     let spool = spool.to_str().unwrap().to_string();
@@ -101,7 +106,7 @@ fn replica(db: &TestDb, spool: &std::path::Path, tag: &str) -> Replica {
         &data,
         &[
             "--database-url",
-            &db.url,
+            url,
             "--spool-dir",
             &spool,
             "--workers",
@@ -617,4 +622,293 @@ async fn a_restarting_replica_sweeps_only_its_own_and_expired_spool_files() {
     assert_eq!(common::spool_names(&spool), want);
     let _ = std::fs::remove_dir_all(&spool);
     let _ = std::fs::remove_dir_all(&data);
+}
+
+/// A PostgreSQL server of this test's own (Debian's binaries, a data directory in a temporary
+/// one, a free loopback port), to be stopped and started again: the machine's shared server is
+/// other tests' too. As root, its commands run as the `postgres` user (initdb refuses root).
+struct PrivatePg {
+    bin: std::path::PathBuf,
+    dir: std::path::PathBuf,
+    port: u16,
+}
+
+impl PrivatePg {
+    fn start() -> Option<PrivatePg> {
+        let bin = std::fs::read_dir("/usr/lib/postgresql")
+            .into_iter()
+            .flatten()
+            .flatten()
+            .map(|e| e.path().join("bin"))
+            .filter(|b| b.join("pg_ctl").exists())
+            .max();
+        let Some(bin) = bin else {
+            assert!(
+                std::env::var("KINEPOST_REQUIRE_POSTGRES").is_err(),
+                "KINEPOST_REQUIRE_POSTGRES is set but no /usr/lib/postgresql/*/bin/pg_ctl"
+            );
+            eprintln!("SKIPPED: no PostgreSQL server binaries in /usr/lib/postgresql/*/bin");
+            return None;
+        };
+        let dir = std::env::temp_dir().join(format!("kinepost-pg-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        let port = std::net::TcpListener::bind("127.0.0.1:0")
+            .unwrap()
+            .local_addr()
+            .unwrap()
+            .port();
+        let pg = PrivatePg { bin, dir, port };
+        if pg.as_root() {
+            assert!(
+                std::process::Command::new("chown")
+                    .arg("postgres:")
+                    .arg(&pg.dir)
+                    .status()
+                    .unwrap()
+                    .success()
+            );
+        }
+        let data = pg.dir.join("data");
+        pg.run(
+            "initdb",
+            &["-D", data.to_str().unwrap(), "-U", "postgres", "--auth=trust", "-E", "UTF8"],
+        );
+        pg.up();
+        Some(pg)
+    }
+
+    fn as_root(&self) -> bool {
+        use std::os::unix::fs::MetadataExt;
+        std::fs::metadata("/proc/self").is_ok_and(|m| m.uid() == 0)
+    }
+
+    /// One of the server's commands, as its user, to its end (its output to the log).
+    fn run(&self, cmd: &str, args: &[&str]) {
+        let exe = self.bin.join(cmd);
+        let mut c = if self.as_root() {
+            let mut c = std::process::Command::new("runuser");
+            c.args(["-u", "postgres", "--"]).arg(exe);
+            c
+        } else {
+            std::process::Command::new(exe)
+        };
+        let log = std::fs::OpenOptions::new()
+            .create(true)
+            .append(true)
+            .open(self.dir.join("commands.log"))
+            .unwrap();
+        let out = c.args(args).stdout(log.try_clone().unwrap()).stderr(log).status().unwrap();
+        assert!(
+            out.success(),
+            "{cmd} {args:?}: {out}; see {}",
+            self.dir.join("commands.log").display()
+        );
+    }
+
+    fn ctl(&self, args: &[&str]) {
+        let data = self.dir.join("data");
+        let mut all = vec!["-D", data.to_str().unwrap(), "-w", "-t", "60"];
+        all.extend_from_slice(args);
+        self.run("pg_ctl", &all);
+    }
+
+    fn up(&self) {
+        let opts = format!(
+            "-p {} -k {} -c listen_addresses=127.0.0.1 -c fsync=off",
+            self.port,
+            self.dir.display()
+        );
+        let log = self.dir.join("server.log");
+        self.ctl(&["-o", &opts, "-l", log.to_str().unwrap(), "start"]);
+    }
+
+    /// A fast shutdown, as an administrator's restart makes one: every session is ended with
+    /// "terminating connection due to administrator command" (57P01), transactions rolled back.
+    fn down(&self) {
+        self.ctl(&["-m", "fast", "stop"]);
+    }
+
+    fn url(&self) -> String {
+        format!("postgres://postgres@127.0.0.1:{}/postgres", self.port)
+    }
+}
+
+impl Drop for PrivatePg {
+    fn drop(&mut self) {
+        let data = self.dir.join("data");
+        let _ = std::process::Command::new(if self.as_root() { "runuser" } else { "sh" })
+            .args(if self.as_root() {
+                vec!["-u", "postgres", "--"]
+            } else {
+                vec!["-c", "exec \"$0\" \"$@\""]
+            })
+            .arg(self.bin.join("pg_ctl"))
+            .args(["-D", data.to_str().unwrap(), "-m", "immediate", "-w", "stop"])
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::null())
+            .status();
+        let _ = std::fs::remove_dir_all(&self.dir);
+    }
+}
+
+/// What the clients saw while the database went away.
+#[derive(Default)]
+struct Seen {
+    /// Idempotency key → job id, for every submission answered 202.
+    accepted: std::collections::BTreeMap<String, String>,
+    /// Status → count, every answer of every route asked.
+    statuses: std::collections::BTreeMap<u16, usize>,
+    /// Answers that were neither success nor 503 with Retry-After.
+    wrong: Vec<String>,
+}
+
+/// One client: submits job after job (a 503 asked again with its key after its Retry-After,
+/// shortened) and reads each one back, until `stop`.
+async fn submitter(
+    bases: Vec<String>,
+    tag: usize,
+    stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
+    seen: std::sync::Arc<std::sync::Mutex<Seen>>,
+) {
+    let c = reqwest::Client::builder().timeout(Duration::from_secs(60)).build().unwrap();
+    let mut k = 0u64;
+    while !stop.load(std::sync::atomic::Ordering::Relaxed) {
+        let key = format!("restart-{tag}-{k}");
+        let base = &bases[k as usize % bases.len()];
+        let body = common::generated("dmg-dmc75v", 150, k * 16 + tag as u64);
+        loop {
+            let r = c
+                .post(format!("{base}/v1/jobs?machine=dmg-dmc75v"))
+                .header("idempotency-key", &key)
+                .body(body.clone())
+                .send()
+                .await
+                .unwrap();
+            let (status, retry) = (r.status().as_u16(), r.headers().contains_key("retry-after"));
+            let text = r.text().await.unwrap();
+            {
+                let mut s = seen.lock().unwrap();
+                *s.statuses.entry(status).or_default() += 1;
+                match status {
+                    202 => {
+                        let id = serde_json::from_str::<Value>(&text).unwrap()["id"]
+                            .as_str()
+                            .unwrap()
+                            .to_string();
+                        s.accepted.insert(key.clone(), id);
+                        break;
+                    }
+                    503 if retry => {}
+                    _ => s.wrong.push(format!("POST {key}: {status} (Retry-After: {retry}) {text}")),
+                }
+            }
+            if stop.load(std::sync::atomic::Ordering::Relaxed) {
+                break;
+            }
+            tokio::time::sleep(Duration::from_millis(200)).await;
+        }
+        // And reads: the job, the list, a profile's versions (the catalog's table).
+        let id = seen.lock().unwrap().accepted.get(&key).cloned();
+        let reads = [
+            id.map(|id| format!("{base}/v1/jobs/{id}")),
+            Some(format!("{base}/v1/jobs?limit=5")),
+            Some(format!("{base}/v1/machines/dmg-dmc75v/versions")),
+        ];
+        for url in reads.into_iter().flatten() {
+            let r = c.get(&url).send().await.unwrap();
+            let (status, retry) = (r.status().as_u16(), r.headers().contains_key("retry-after"));
+            let mut s = seen.lock().unwrap();
+            *s.statuses.entry(status).or_default() += 1;
+            if !(status == 200 || status == 503 && retry) {
+                let body = format!("GET {url}: {status} (Retry-After: {retry})");
+                s.wrong.push(body);
+            }
+        }
+        k += 1;
+    }
+}
+
+/// Waits (30 s at most) until more than `before` submissions were accepted: the pools reconnected.
+async fn accepted_more(accepted: &impl Fn() -> usize, before: usize, after: &str) {
+    let t0 = Instant::now();
+    while accepted() <= before {
+        assert!(t0.elapsed() < Duration::from_secs(30), "nothing accepted in 30 s after {after}: the pools did not reconnect");
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+}
+
+/// The database restarted under two replicas while clients submit and read: every answer is a
+/// success or a 503 with Retry-After, never a 500; every job accepted runs once and succeeds
+/// (those cut off by the restart run again); the pools reconnect by themselves. Restarted twice:
+/// a fast restart, and a stop longer than a pool waits for a connection.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+#[ignore = "needs PostgreSQL: KINEPOST_TEST_DATABASE_URL=postgres://… cargo test -- --ignored"]
+async fn a_database_restart_mid_submission_answers_no_500_and_fails_no_job() {
+    let Some(pg) = PrivatePg::start() else { return };
+    let spool = std::env::temp_dir().join(format!("kinepost-restart-spool-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&spool);
+    let a = replica_at(&pg.url(), &spool, "restart-a");
+    let b = replica_at(&pg.url(), &spool, "restart-b");
+    let bases = vec![a.base.clone(), b.base.clone()];
+
+    let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let seen = std::sync::Arc::new(std::sync::Mutex::new(Seen::default()));
+    let clients: Vec<_> = (0..4)
+        .map(|t| tokio::spawn(submitter(bases.clone(), t, stop.clone(), seen.clone())))
+        .collect();
+    let accepted = || seen.lock().unwrap().accepted.len();
+    accepted_more(&accepted, 0, "the start").await;
+    // A restart as an administrator makes one, mid-submission.
+    let before = accepted();
+    tokio::task::block_in_place(|| {
+        pg.down();
+        pg.up();
+    });
+    accepted_more(&accepted, before, "the restart").await;
+    // Down for longer than a pool waits for a connection (10 s).
+    let before = accepted();
+    tokio::task::block_in_place(|| {
+        pg.down();
+        std::thread::sleep(Duration::from_secs(12));
+        pg.up();
+    });
+    accepted_more(&accepted, before, "the second restart").await;
+    stop.store(true, std::sync::atomic::Ordering::Relaxed);
+    for c in clients {
+        c.await.unwrap();
+    }
+
+    let (accepted, statuses, wrong) = {
+        let s = seen.lock().unwrap();
+        (s.accepted.clone(), s.statuses.clone(), s.wrong.clone())
+    };
+    eprintln!("{} accepted; answers by status: {statuses:?}", accepted.len());
+    assert!(
+        wrong.is_empty(),
+        "answers neither a success nor a 503 with Retry-After: {wrong:#?}"
+    );
+    assert!(
+        statuses.get(&503).is_some_and(|n| *n > 0),
+        "no 503 seen: the restarts came to nothing"
+    );
+    // Every accepted job runs and succeeds; one job per key.
+    let c = reqwest::Client::new();
+    let mut failed = Vec::new();
+    let mut ran_again = 0;
+    for id in accepted.values() {
+        let j = common::wait_finished(&c, &a.base, id, Duration::from_secs(180)).await;
+        if j["state"] != "succeeded" {
+            failed.push(j);
+        } else if j["attempts"].as_i64().unwrap() > 1 {
+            ran_again += 1;
+        }
+    }
+    eprintln!("{ran_again} jobs ran again");
+    assert!(failed.is_empty(), "jobs failed: {failed:#?}");
+    let list = common::get_json(&c, &format!("{}/v1/jobs?limit=500", a.base)).await;
+    let listed = list["jobs"].as_array().unwrap().len();
+    assert_eq!(listed, accepted.len(), "jobs in the store, one per key accepted");
+    drop((a, b));
+    let _ = std::fs::remove_dir_all(&spool);
 }

@@ -213,6 +213,14 @@ pub struct ServeArgs {
     /// Seconds without a report after which another replica takes a running job over.
     #[arg(long, env = "KINEPOST_JOB_LEASE_SECS", default_value_t = 30.0, allow_hyphen_values = true)]
     pub job_lease_secs: f64,
+    /// Runs a job may have, counting those that a fault outside the job ended (the spool full or
+    /// failing, the database not answering, a replica that stopped); then it fails.
+    #[arg(long, env = "KINEPOST_JOB_MAX_ATTEMPTS", default_value_t = 5)]
+    pub job_max_attempts: u32,
+    /// Seconds before a job runs again after such a fault, doubled before each next run (at
+    /// most 300).
+    #[arg(long, env = "KINEPOST_JOB_RETRY_SECS", default_value_t = 2.0, allow_hyphen_values = true)]
+    pub job_retry_secs: f64,
     /// Seconds requests in flight get after SIGTERM before the server stops anyway (jobs
     /// running then resume on the next start).
     #[arg(long, env = "KINEPOST_SHUTDOWN_GRACE", default_value_t = 60.0, allow_hyphen_values = true)]
@@ -554,6 +562,11 @@ fn serve(cli: &Cli, a: &ServeArgs) -> Result<(), String> {
         spool_dir: a.spool_dir.clone(),
         job_lease: seconds("job-lease-secs", a.job_lease_secs, 1.0, 86400.0, 1.0)?,
         shutdown_grace: seconds("shutdown-grace", a.shutdown_grace, 0.0, 86400.0, 1.0)?,
+        job_max_attempts: match a.job_max_attempts {
+            1..=100 => a.job_max_attempts,
+            n => return Err(format!("--job-max-attempts {n}: expected 1 to 100")),
+        },
+        job_retry_backoff: seconds("job-retry-secs", a.job_retry_secs, 0.0, 300.0, 1.0)?,
         post_budget: a.budget.budget()?,
         post_threads: kinepost::post::threads(Some(a.post_threads)).map_err(|e| format!("--post-{e}"))?,
         job_threads: match a.job_threads {

@@ -275,6 +275,7 @@ impl From<crate::machines::Error> for ApiError {
             E::Precondition { .. } => ApiError::PreconditionFailed(e.to_string()),
             E::ReadOnly => ApiError::Forbidden(e.to_string()),
             E::NoSpace(_) => ApiError::InsufficientStorage(e.to_string()),
+            E::Unavailable(_) => ApiError::Busy(e.to_string()),
             E::Io { .. } | E::Store(_) => ApiError::Internal(e.to_string()),
         }
     }

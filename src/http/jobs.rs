@@ -39,8 +39,14 @@ pub struct JobView {
     pub created_ms: i64,
     pub started_ms: Option<i64>,
     pub finished_ms: Option<i64>,
-    /// Runs started; more than one: a restart cut a run off and it ran again from the start.
+    /// Runs started; more than one: a run was cut off (its replica stopped) or a fault outside
+    /// the job ended it (the spool full or failing, the database not answering), and the job ran
+    /// again from the start, after a backoff. At most the service's `--job-max-attempts`.
     pub attempts: i64,
+    /// Why the last run that did not end went back to the queue, when one did.
+    pub last_cause: Option<String>,
+    /// A job queued again after such a run: not run before this time (Unix ms).
+    pub retry_after_ms: Option<i64>,
     /// The node (replica) that runs or ran it.
     pub node: Option<String>,
     pub progress: JobProgress,
@@ -118,6 +124,8 @@ impl From<Job> for JobView {
             started_ms: j.started_ms,
             finished_ms: j.finished_ms,
             attempts: j.attempts,
+            last_cause: j.cause,
+            retry_after_ms: j.not_before_ms.filter(|_| j.state == JobState::Queued),
             node: j.owner,
             progress: JobProgress {
                 input_bytes: j.input_bytes,
@@ -167,6 +175,8 @@ impl From<jobs::Error> for ApiError {
             jobs::Error::Upload(m) => upload_error(m),
             e @ jobs::Error::NoSpace(_) => ApiError::InsufficientStorage(e.to_string()),
             jobs::Error::Machines(m) => m.into(),
+            // The database restarting, a lost connection, a pool without one to give: not now.
+            e if e.not_now() => ApiError::Busy(format!("the job store is not answering now, retry: {e}")),
             e @ (jobs::Error::Db(_) | jobs::Error::Io(_) | jobs::Error::Corrupt(_) | jobs::Error::Open { .. }) => {
                 ApiError::Internal(e.to_string())
             }
@@ -197,7 +207,7 @@ fn job_id(id: &str) -> Result<&str, ApiError> {
         (status = 415, description = "Unsupported media type", body = super::error::Problem, content_type = "application/problem+json"),
         (status = 429, description = "This client has its limit of jobs queued or running (Retry-After)", body = super::error::Problem, content_type = "application/problem+json"),
         (status = 507, description = "The spool's disk is full: not accepted (Retry-After)", body = super::error::Problem, content_type = "application/problem+json"),
-        (status = 503, description = "Queue full (Retry-After)", body = super::error::Problem, content_type = "application/problem+json"),
+        (status = 503, description = "Queue full, or the job store not answering now: a database restarting, a lost connection (Retry-After)", body = super::error::Problem, content_type = "application/problem+json"),
     ),
     tag = "jobs"
 )]

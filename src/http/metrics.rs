@@ -52,7 +52,8 @@ pub struct Metrics {
     cl_points: Counter,
     blocks: Counter,
     posts: Histogram,
-    /// Job run durations by outcome (succeeded, failed, cancelled).
+    /// Job run durations by outcome (succeeded, failed, cancelled; retried: a fault outside the
+    /// job ended the run and it was queued again).
     job_runs: Family<OutcomeLabel, Histogram, fn() -> Histogram>,
 }
 
@@ -70,6 +71,7 @@ impl Default for Metrics {
         for st in JobState::ALL.into_iter().filter(|s| s.finished()) {
             let _ = m.job_runs.get_or_create(&OutcomeLabel { outcome: st.as_str() });
         }
+        let _ = m.job_runs.get_or_create(&OutcomeLabel { outcome: "retried" });
         m.registered()
     }
 }

@@ -87,6 +87,10 @@ pub struct Config {
     /// why one each under load); a job's 0: two where a core is idle (`jobs::Config::threads`).
     pub post_threads: usize,
     pub job_threads: usize,
+    /// Runs a job may have when faults outside it (the spool, the store, a replica) end them.
+    pub job_max_attempts: u32,
+    /// The pause before a job runs again after such a fault, doubled before each next run.
+    pub job_retry_backoff: Duration,
 }
 
 impl Config {
@@ -103,6 +107,8 @@ impl Config {
             lease: self.job_lease,
             budget: self.post_budget,
             threads: self.job_threads,
+            max_attempts: self.job_max_attempts,
+            retry_backoff: self.job_retry_backoff,
         }
     }
 }
@@ -136,6 +142,8 @@ impl Default for Config {
             post_budget: crate::post::Budget::default(),
             post_threads: 1,
             job_threads: 0,
+            job_max_attempts: 5,
+            job_retry_backoff: Duration::from_secs(2),
         }
     }
 }

@@ -87,6 +87,42 @@ pub struct Config {
     /// Threads a job's post runs on (`post::threads`); 0: two while this node runs fewer jobs
     /// than it has cores, else one ([`Queue::threads_for_next`]).
     pub threads: usize,
+    /// Runs a job may have, counting those a fault outside it ended (a full spool, the store
+    /// not answering, a replica that stopped): after that many it fails with the last cause.
+    pub max_attempts: u32,
+    /// The pause before a job's second run after such a fault, doubled before each next one
+    /// (at most [`MAX_BACKOFF`]).
+    pub retry_backoff: Duration,
+}
+
+pub use store::MAX_BACKOFF;
+
+impl Error {
+    /// The store does not answer now (a lost connection, a restarting database, a pool with no
+    /// connection to give): asked again later, the same thing may succeed.
+    pub fn not_now(&self) -> bool {
+        match self {
+            Error::Db(e) => crate::machines::catalog::not_now(e),
+            Error::Machines(crate::machines::Error::Unavailable(_)) => true,
+            _ => false,
+        }
+    }
+}
+
+/// How a run ended without its program.
+#[derive(Debug)]
+enum Failed {
+    /// The job's own fault (its input, its settings, its budget): it fails, naming it.
+    Job(String),
+    /// A cause outside the job (the spool, the store): it runs again.
+    Fault(String),
+}
+
+/// An operating system's error on a spool file (a full disk, an I/O error), as opposed to one
+/// the engine made up (a cancel, a budget, a thread that stopped): the former is no fault of
+/// the job's.
+fn os_fault(e: &std::io::Error) -> bool {
+    e.raw_os_error().is_some() || matches!(e.kind(), std::io::ErrorKind::StorageFull | std::io::ErrorKind::QuotaExceeded)
 }
 
 /// The store plus the workers' shared state: which jobs run here, and their cancel flags.
@@ -214,7 +250,7 @@ impl Queue {
 
     async fn worker(self: Arc<Self>) {
         loop {
-            match self.store.claim().await {
+            match self.store.claim(self.config.max_attempts.into()).await {
                 Ok(Some(job)) => self.run(job).await,
                 Ok(None) => {
                     let _ = tokio::time::timeout(Duration::from_secs(2), self.wake.notified()).await;
@@ -262,12 +298,12 @@ impl Queue {
             Some(v) => self.machines.version(&job.machine, v).await,
             None => self.machines.get(&job.machine).map(|c| c.item),
         }
-        .map_err(|e| format!("machine {:?}: {e}", job.machine));
+        .map_err(|e| catalog_failed(e, format!("machine {:?}", job.machine)));
         // And the machine's tool table it was submitted with, if it took one.
         let tools = match job.settings.machine_tools_version {
             Some(v) => match self.machines.tools.version(&job.machine, v).await {
                 Ok(t) => Ok(Some((t, format!("THE MACHINE'S TOOL TABLE V{v}")))),
-                Err(e) => Err(format!("machine {:?}: tool table version {v}: {e}", job.machine)),
+                Err(e) => Err(catalog_failed(e, format!("machine {:?}: tool table version {v}", job.machine))),
             },
             None => Ok(None),
         };
@@ -275,7 +311,12 @@ impl Queue {
         let dialect = match (&profile, job.settings.dialect_version) {
             (Ok(p), Some(v)) => {
                 let id = job.settings.dialect.clone().unwrap_or_else(|| p.machine.controller.clone());
-                self.machines.dialects.version(&id, v).await.map(Some).map_err(|e| format!("dialect {id:?} version {v}: {e}"))
+                self.machines
+                    .dialects
+                    .version(&id, v)
+                    .await
+                    .map(Some)
+                    .map_err(|e| catalog_failed(e, format!("dialect {id:?} version {v}")))
             }
             _ => Ok(None),
         };
@@ -308,26 +349,96 @@ impl Queue {
         let secs = started.elapsed().as_secs_f64();
         // Read once: the label and the handling must agree even if a cancel lands in between.
         let cancelled = cancel.load(Ordering::Relaxed);
-        let label = match &result {
-            Ok(Ok(_)) => "succeeded",
-            Ok(Err(_)) if cancelled => "cancelled",
-            _ => "failed",
+        let end = match result {
+            Ok(Ok(s)) => End::Succeeded(Box::new(s)),
+            Ok(Err(_)) if cancelled => End::Cancelled,
+            Ok(Err(Failed::Fault(cause))) => End::Fault(cause),
+            Ok(Err(Failed::Job(msg))) => End::Failed(msg),
+            Err(join) => End::Failed(format!("the engine stopped: {join}")),
         };
         if let Some(f) = self.observer.get() {
-            f(label, secs);
+            f(end.label(), secs);
         }
-        let outcome = match result {
-            Ok(Ok(s)) => self.store.succeed(&job, &s).await,
-            Ok(Err(_)) if cancelled => {
-                self.store.remove_outputs(&job);
-                Ok(())
+        self.record(&job, end).await;
+    }
+
+    /// Records how a run ended. A store that does not answer now (a lost connection, a
+    /// restarting database, a full disk under SQLite) is asked again for some 16 s;
+    /// after that the job stays `running` under this node's lapsing lease, and is run again
+    /// when the store is back. A run that cannot publish its outputs (the spool) goes back to
+    /// the queue like one the spool stopped midway.
+    async fn record(&self, job: &Job, mut end: End) {
+        const PAUSES_MS: [u64; 7] = [0, 250, 500, 1000, 2000, 4000, 8000];
+        let mut last = None;
+        for pause in PAUSES_MS {
+            tokio::time::sleep(Duration::from_millis(pause)).await;
+            let r = match &end {
+                End::Succeeded(s) => self.store.succeed(job, s).await,
+                End::Cancelled => {
+                    self.store.remove_outputs(job);
+                    Ok(())
+                }
+                End::Failed(msg) => self.store.fail(job, msg).await,
+                End::Fault(cause) => {
+                    let (max, first) = (self.config.max_attempts.into(), self.config.retry_backoff);
+                    match self.store.retry(job, cause, max, first).await {
+                        Ok(true) => {
+                            tracing::warn!(job = %job.id, attempt = job.attempts, error = %cause, "a run failed for a cause outside the job: queued again");
+                            Ok(())
+                        }
+                        r => r.map(drop),
+                    }
+                }
+            };
+            match r {
+                Ok(()) => return,
+                Err(Error::Io(e)) if matches!(end, End::Succeeded(_)) && os_fault(&e) => {
+                    end = End::Fault(format!("job spool: publishing the outputs: {e}"));
+                }
+                Err(e) if e.not_now() || matches!(&e, Error::Db(d) if crate::machines::catalog::disk_full(d)) => {
+                    last = Some(e);
+                }
+                Err(e) => {
+                    tracing::error!(job = %job.id, error = %e, "recording a job's end");
+                    return;
+                }
             }
-            Ok(Err(msg)) => self.store.fail(&job, &msg).await,
-            Err(join) => self.store.fail(&job, &format!("the engine stopped: {join}")).await,
-        };
-        if let Err(e) = outcome {
-            tracing::error!(job = %id, error = %e, "recording a job's end");
         }
+        if let Some(e) = last {
+            tracing::error!(job = %job.id, error = %e, "the job store did not answer: the job runs again once its lease lapses");
+        }
+    }
+}
+
+/// How a run ended, to be recorded.
+enum End {
+    Succeeded(Box<Summary>),
+    Cancelled,
+    /// The job's own fault.
+    Failed(String),
+    /// A cause outside the job: queued again (bounded).
+    Fault(String),
+}
+
+impl End {
+    /// The outcome as the metrics count it.
+    fn label(&self) -> &'static str {
+        match self {
+            End::Succeeded(_) => "succeeded",
+            End::Cancelled => "cancelled",
+            End::Failed(_) => "failed",
+            End::Fault(_) => "retried",
+        }
+    }
+}
+
+/// A profile, tool table or dialect version the job needs and the catalog did not give: the
+/// store not answering (or its disk) is no fault of the job's; anything else (gone, damaged) is.
+fn catalog_failed(e: crate::machines::Error, what: String) -> Failed {
+    use crate::machines::Error as E;
+    match e {
+        e @ (E::Unavailable(_) | E::NoSpace(_) | E::Io { .. }) => Failed::Fault(format!("{what}: {e}")),
+        e => Failed::Job(format!("{what}: {e}")),
     }
 }
 
@@ -414,7 +525,7 @@ impl Sink for JobSink<'_> {
 }
 
 /// One job on a blocking thread: spool input → `.tmp` outputs, fsynced. The error is the
-/// message a user reads in the job's `error`.
+/// message a user reads in the job's `error` (or its `last_cause`, when it runs again).
 fn execute(
     profile: Arc<Profile>,
     tools: Option<(Arc<crate::machines::tools::ToolTable>, String)>,
@@ -424,19 +535,25 @@ fn execute(
     (budget, threads): (post::Budget, usize),
     cancel: &AtomicBool,
     progress: &Arc<Progress>,
-) -> Result<Summary, String> {
+) -> Result<Summary, Failed> {
     let paths = store::Paths::new(spool, &job.id, job.attempts);
-    let mut opts = job.settings.profile_options_with(&profile, tools, &|id| match &dialect {
-        Some(d) if d.name == id => Some(d.clone()),
-        _ => crate::nc::dialect(id),
-    })?;
+    let mut opts = job
+        .settings
+        .profile_options_with(&profile, tools, &|id| match &dialect {
+            Some(d) if d.name == id => Some(d.clone()),
+            _ => crate::nc::dialect(id),
+        })
+        .map_err(Failed::Job)?;
     opts.budget = budget;
     opts.threads = threads;
     opts.header.push(format!("JOB {}", job.id));
     if let Some(f) = &job.filename {
         opts.header.push(format!("SOURCE {f}"));
     }
-    let io = |e: std::io::Error| format!("job spool: {e}");
+    let io = |e: std::io::Error| {
+        let msg = format!("job spool: {e}");
+        if os_fault(&e) { Failed::Fault(msg) } else { Failed::Job(msg) }
+    };
     if opts.setup_offsets {
         // The spool can be read twice: the header lists the offsets the program selects.
         let first = std::io::BufReader::new(std::fs::File::open(&paths.input).map_err(io)?);
@@ -476,7 +593,12 @@ fn execute(
             let _ = sink.blocks.record(&Record::Error {
                 error: ErrorBody::from_engine(&e),
             });
-            Err(msg)
+            // A spool file the system failed (full, an I/O error) is no fault of the job's.
+            Err(if e.io().is_some_and(os_fault) {
+                Failed::Fault(msg)
+            } else {
+                Failed::Job(msg)
+            })
         }
     };
     let (nc, _) = sink.files.into_inner().map_err(io)?;

@@ -5,9 +5,11 @@
 //! and start-up recovery (one node may requeue every running job; replicas go by leases).
 
 mod accept;
+mod retry;
 mod sweep;
 
 pub use accept::Submission;
+pub use retry::MAX_BACKOFF;
 
 use super::Error;
 use crate::post::{Settings, Summary};
@@ -80,8 +82,14 @@ pub struct Job {
     pub finished_ms: Option<i64>,
     pub bytes_read: u64,
     pub blocks: u64,
-    /// Runs started: more than one means a restart cut a run off.
+    /// Runs started: more than one means a run was cut off (a replica stopped) or failed for a
+    /// cause outside the job, and the job went back to the queue.
     pub attempts: i64,
+    /// Why the last run that did not finish went back to the queue (a full spool, the store
+    /// not answering, a replica that stopped reporting).
+    pub cause: Option<String>,
+    /// A job queued again after such a run is not claimed before this time (the backoff).
+    pub not_before_ms: Option<i64>,
     /// The node running it (or that ran it last).
     pub owner: Option<String>,
     pub summary: Option<serde_json::Value>,
@@ -107,6 +115,8 @@ impl Job {
             bytes_read: 0,
             blocks: 0,
             attempts: 0,
+            cause: None,
+            not_before_ms: None,
             owner: None,
             summary: None,
             error: None,
@@ -206,16 +216,20 @@ const SCHEMA: &str = "CREATE TABLE IF NOT EXISTS jobs (
     nc_bytes BIGINT,
     owner TEXT,
     heartbeat_ms BIGINT,
-    client TEXT
+    client TEXT,
+    cause TEXT,
+    not_before_ms BIGINT
 );
 CREATE INDEX IF NOT EXISTS jobs_state ON jobs (state, created_ms)";
 
 /// Columns added after the first release of the table, for stores made before them.
-const ADDED: [(&str, &str); 4] = [
+const ADDED: [(&str, &str); 6] = [
     ("machine_version", "BIGINT"),
     ("owner", "TEXT"),
     ("heartbeat_ms", "BIGINT"),
     ("client", "TEXT"),
+    ("cause", "TEXT"),
+    ("not_before_ms", "BIGINT"),
 ];
 
 fn now_ms() -> i64 {
@@ -245,6 +259,8 @@ fn row_job(r: &AnyRow) -> Result<Job, Error> {
         bytes_read: u("bytes_read")?,
         blocks: u("blocks")?,
         attempts: r.try_get("attempts")?,
+        cause: r.try_get("cause")?,
+        not_before_ms: r.try_get("not_before_ms")?,
         summary: summary.and_then(|s| serde_json::from_str(&s).ok()),
         error: r.try_get("error")?,
         nc_bytes: r.try_get::<Option<i64>, _>("nc_bytes")?.map(|v| v.max(0) as u64),
@@ -507,7 +523,8 @@ impl Store {
             return Ok(0);
         }
         let n = sqlx::query(
-            "UPDATE jobs SET state = 'queued', started_ms = NULL, bytes_read = 0, blocks = 0 WHERE state = 'running'",
+            "UPDATE jobs SET state = 'queued', started_ms = NULL, bytes_read = 0, blocks = 0,
+                 cause = 'its run was cut off by a restart of this node' WHERE state = 'running'",
         )
         .execute(&self.pool)
         .await?
@@ -568,12 +585,37 @@ impl Store {
     /// Takes the oldest queued job, or a running one whose owner stopped reporting (a replica
     /// that died). SQLite serializes writers; PostgreSQL skips rows another replica is claiming,
     /// so two workers never get one job. A row that cannot be read is failed, naming why, and
-    /// the next one taken: it would otherwise be claimed again and again.
-    pub(super) async fn claim(&self) -> Result<Option<Job>, Error> {
+    /// the next one taken: it would otherwise be claimed again and again. So is a job whose runs
+    /// were cut off more than `max_attempts` times (each took its replica down, perhaps).
+    pub(super) async fn claim(&self, max_attempts: i64) -> Result<Option<Job>, Error> {
         loop {
             let Some(r) = self.claim_row().await? else { return Ok(None) };
             match row_job(&r) {
-                Ok(j) => return Ok(Some(j)),
+                Ok(j) if j.attempts > max_attempts => {
+                    let cause = j.cause.as_deref().unwrap_or("cut off");
+                    let why = format!("run {} times without an end, not run again: {cause}", j.attempts - 1);
+                    tracing::error!(job = %j.id, error = %why, "a job's runs keep being cut off: failed");
+                    sqlx::query(
+                        "UPDATE jobs SET state = 'failed', finished_ms = $1, error = $2 WHERE id = $3 AND state = 'running' AND owner = $4",
+                    )
+                    .bind(now_ms())
+                    .bind(&why)
+                    .bind(&j.id)
+                    .bind(&self.node)
+                    .execute(&self.pool)
+                    .await?;
+                }
+                Ok(j) => {
+                    if j.attempts > 1 {
+                        // A run before this one that did not end (its replica killed, or cut off
+                        // by a restart) left its temporaries: they are not this run's.
+                        self.remove_outputs(&Job {
+                            attempts: j.attempts - 1,
+                            ..j.clone()
+                        });
+                    }
+                    return Ok(Some(j));
+                }
                 Err(e) => {
                     let id: String = r.try_get("id")?;
                     tracing::error!(job = %id, error = %e, "a claimed job's row cannot be read: failed");
@@ -595,12 +637,19 @@ impl Store {
         };
         let now = now_ms();
         let stale = now - self.lease.as_millis().min(i64::MAX as u128) as i64;
+        // A job queued again after a fault waits out its backoff; a run taken over says whose.
         let sql = format!(
             "UPDATE jobs SET state = 'running', started_ms = $1, heartbeat_ms = $1, owner = $2, attempts = attempts + 1,
-                 bytes_read = 0, blocks = 0
-             WHERE id = (SELECT id FROM jobs WHERE state = 'queued' OR (state = 'running' AND heartbeat_ms < $3)
+                 bytes_read = 0, blocks = 0, not_before_ms = NULL,
+                 cause = CASE WHEN state = 'running'
+                              THEN 'its run on ' || COALESCE(owner, 'another node') || ' stopped reporting (the lease ran out)'
+                              ELSE cause END
+             WHERE id = (SELECT id FROM jobs
+                         WHERE (state = 'queued' AND (not_before_ms IS NULL OR not_before_ms <= $1))
+                            OR (state = 'running' AND heartbeat_ms < $3)
                          ORDER BY created_ms, id LIMIT 1 {lock})
-               AND (state = 'queued' OR (state = 'running' AND heartbeat_ms < $3))
+               AND ((state = 'queued' AND (not_before_ms IS NULL OR not_before_ms <= $1))
+                    OR (state = 'running' AND heartbeat_ms < $3))
              RETURNING *"
         );
         let r = sqlx::query(sqlx::AssertSqlSafe(sql))
@@ -642,10 +691,18 @@ impl Store {
             return Ok(());
         }
         let p = Paths::new(&self.spool, id, job.attempts);
-        tokio::fs::rename(&p.nc_tmp, &p.nc).await?;
-        tokio::fs::rename(&p.blocks_tmp, &p.blocks).await?;
-        tokio::fs::rename(&p.preview_tmp, &p.preview).await?;
-        tokio::fs::rename(&p.lines_tmp, &p.lines).await?;
+        for (tmp, published) in [
+            (&p.nc_tmp, &p.nc),
+            (&p.blocks_tmp, &p.blocks),
+            (&p.preview_tmp, &p.preview),
+            (&p.lines_tmp, &p.lines),
+        ] {
+            // Asked again after the store did not answer: what this run renamed stays renamed.
+            if !tokio::fs::try_exists(tmp).await? && tokio::fs::try_exists(published).await? {
+                continue;
+            }
+            tokio::fs::rename(tmp, published).await?;
+        }
         sync_dir(&self.spool)?;
         let nc_bytes = tokio::fs::metadata(&p.nc).await?.len();
         sqlx::query(

@@ -257,9 +257,38 @@ pub(crate) fn disk_full(e: &sqlx::Error) -> bool {
     }
 }
 
+/// A database error that means "not now", not "no": the connection went (reset, closed, the
+/// server shut down or restarting: PostgreSQL's class 08 and 57P01–57P03), the pool had no
+/// connection to give in time, too many clients, or the server asks for the transaction again
+/// (serialization failure, deadlock; SQLite busy or locked). The same request asked again later
+/// may well succeed, so the service answers 503 with `Retry-After` and a job's run goes back to
+/// the queue, where any other error is the request's or the job's own. PostgreSQL's codes are
+/// always five characters, SQLite's are its numeric (extended) result codes: the two never meet.
+pub(crate) fn not_now(e: &sqlx::Error) -> bool {
+    match e {
+        sqlx::Error::Database(d) => d.code().is_some_and(|c| {
+            c.starts_with("08")
+                || matches!(
+                    c.as_ref(),
+                    "57P01" | "57P02" | "57P03" | "40001" | "40P01" | "53300" | "5" | "6" | "261" | "262" | "517" | "773"
+                )
+        }),
+        sqlx::Error::Io(_)
+        | sqlx::Error::Tls(_)
+        | sqlx::Error::Protocol(_)
+        | sqlx::Error::PoolTimedOut
+        | sqlx::Error::PoolClosed
+        | sqlx::Error::WorkerCrashed => true,
+        _ => false,
+    }
+}
+
 fn db_err(e: sqlx::Error) -> Error {
     if disk_full(&e) {
         return Error::NoSpace(e.to_string());
+    }
+    if not_now(&e) {
+        return Error::Unavailable(e.to_string());
     }
     Error::Store(e.to_string())
 }

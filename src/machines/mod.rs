@@ -35,6 +35,10 @@ pub enum Error {
     ReadOnly,
     #[error("machine store: {0}")]
     Store(String),
+    /// The store does not answer now (a lost connection, a restarting database): asked again
+    /// later, the same request may succeed.
+    #[error("the machine store is not answering now: {0}")]
+    Unavailable(String),
     /// The store's disk is full: the write was not made.
     #[error("no room for the profile in the machine store: {0}")]
     NoSpace(String),

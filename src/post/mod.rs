@@ -53,6 +53,17 @@ pub enum Error {
     Budget(String),
 }
 
+impl Error {
+    /// The I/O error that ended the run, reading the CL or writing the output, where one did: a
+    /// caller tells a failing file from a fault of the input by it.
+    pub fn io(&self) -> Option<&std::io::Error> {
+        match self {
+            Error::Io(e) | Error::Read(source::Error::Read(crate::cl::Error::Io(e))) => Some(e),
+            _ => None,
+        }
+    }
+}
+
 impl From<source::Error> for Error {
     fn from(e: source::Error) -> Self {
         match e {
