@@ -5,6 +5,7 @@
 //! naming line, column and what was expected, and reading goes on.
 
 mod cycle;
+pub mod drive;
 mod fast;
 mod flow;
 mod foreign;
