@@ -2829,3 +2829,20 @@ fn catia_circle_statements_are_arcs_and_an_unresolvable_form_an_error() {
     assert_eq!(s.errors, 1);
     assert!(!sink.diags.iter().any(|d| d.code == Code::UnknownRecord), "{:?}", sink.diags);
 }
+
+/// Words other CAM systems write (Creo's `REMARK` and `PPWORD`, NX's NURBS data `KNOT` and
+/// `CNTRL`, a display's `CAMERA`) are known for what they are: an unknown_record warning on each
+/// line (72 to 1 559 in a file) drowned the diagnostics that matter.
+#[test]
+fn other_cam_systems_informational_words_are_known() {
+    let m = machine("vmc-3axis");
+    let plain = "UNITS/MM\nFEDRAT/100,MMPM\nGOTO/0,0,1\nGOTO/1,0,1\n";
+    let (want, _) = run(&m, plain.as_bytes(), &Options::new(&m));
+    for w in ["REMARK/ROUGH THE POCKET", "PPWORD/SPINDL,1", "KNOT/0,0,1,1", "CNTRL/0,0,5,1", "CAMERA/1,0,0"] {
+        let cl = plain.replace("GOTO/1,0,1", &format!("{w}\nGOTO/1,0,1"));
+        let (sink, _) = run(&m, cl.as_bytes(), &Options::new(&m));
+        assert!(sink.diags.iter().all(|d| d.line != Some(4)), "{w}: {:?}", sink.diags);
+        let body = |nc: &str| nc.lines().filter(|l| !l.contains("DATE")).map(str::to_string).collect::<Vec<_>>();
+        assert_eq!(body(&sink.nc), body(&want.nc), "{w}");
+    }
+}

@@ -132,6 +132,11 @@ pub const VOCABULARY: &[Word] = &[
     info("PLABEL", "PLABEL/ON", "plotter output"),
     info("PPLOT", "PPLOT/ON", "plotter output"),
     info("DELETE", "DELETE/10", "tape delete codes"),
+    info("REMARK", "REMARK/ROUGH THE POCKET", "Creo's remark for the listing: PPRINT is what reaches the NC"),
+    info("PPWORD", "PPWORD/SPINDL,1", "Creo's declaration of a post word for the APT processor"),
+    info("KNOT", "KNOT/0,0,0,0,1,1,1,1", "NX's NURBS knot vector: part of the NURBS record, which is told"),
+    info("CNTRL", "CNTRL/0,0,5,1", "NX's NURBS control point: part of the NURBS record, which is told"),
+    info("CAMERA", "CAMERA/1,0,0,0,0,0,1", "a view for the CAM's display"),
     // Told: could change the machine; not acted on.
     told("ORIGIN", "ORIGIN/100,0,0", Warning, "the origin of the output: NX writes it as information, an ISO post would shift the words by it; not applied (set the job's work_offset or the control's work offset)"),
     told("TRANS", "TRANS/100,0,0", Error, "a shift of the output words a post would apply: not applied (set the job's work_offset or the control's work offset)"),
