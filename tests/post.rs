@@ -2846,3 +2846,17 @@ fn other_cam_systems_informational_words_are_known() {
         assert_eq!(body(&sink.nc), body(&want.nc), "{w}");
     }
 }
+
+/// CATIA's positional `CYCLE/DRILL,depth,,feed,clearance` (the feed unit left out: a
+/// continuation line that starts with `,`) is read by its own rule: depth 10, feed 100, R 3. The
+/// CAMWorks rule took the feed for the clearance (R 100) and the hole went at the FEDRAT's 500.
+#[test]
+fn catias_positional_cycle_with_an_empty_field_is_read_by_position() {
+    let m = machine("vmc-3axis");
+    let cl = "UNITS/MM\nFEDRAT/500,MMPM\nGOTO/5,5,20\nCYCLE/DRILL,  10.000000,$\n,  100.000000,  3.0000\n\
+              GOTO/5,5,0\nCYCLE/OFF\nGOTO/5,5,20\n";
+    let (sink, _) = run(&m, cl.as_bytes(), &fanuc(&m, Mode::Joint));
+    let want = "G0 Z3.000 (CYCLE)\nG1 Z0.000 F100.0 (CYCLE)\nZ-10.000 (CYCLE)\nG0 Z3.000 (CYCLE)\n";
+    assert!(sink.nc.contains(want), "{}", sink.nc);
+    assert!(!sink.diags.iter().any(|d| d.code == Code::BadRecord), "{:?}", sink.diags);
+}
