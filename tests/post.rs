@@ -2860,3 +2860,26 @@ fn catias_positional_cycle_with_an_empty_field_is_read_by_position() {
     assert!(sink.nc.contains(want), "{}", sink.nc);
     assert!(!sink.diags.iter().any(|d| d.code == Code::BadRecord), "{:?}", sink.diags);
 }
+
+/// A word told again and again (an unknown record, a word kinepost does not act on: 72 to 1 559
+/// lines of one in a file) is told once, at its first line, and its count once at the end: one
+/// warning per line drowned the diagnostics that matter.
+#[test]
+fn a_repeated_word_is_told_once_with_its_count() {
+    let m = machine("vmc-3axis");
+    let mut cl = String::from("UNITS/MM\nFEDRAT/100,MMPM\nSPINDL/1000\nGOTO/0,0,1\n");
+    for i in 0..50 {
+        cl += &format!("FOOWORD/{i}\nSWITCH/{i}\nGOTO/{},0,1\n", i + 1);
+    }
+    let (sink, s) = run(&m, cl.as_bytes(), &Options::new(&m));
+    for (code, first) in [(Code::UnknownRecord, 5), (Code::IgnoredRecord, 6)] {
+        let told: Vec<_> = sink.diags.iter().filter(|d| d.code == code && d.line == Some(first)).collect();
+        let all = sink.diags.iter().filter(|d| d.code == code && d.severity >= Severity::Warning).count();
+        assert_eq!(all, 1, "{:?}", sink.diags);
+        assert!(
+            told.len() == 2 && told[1].severity == Severity::Info && told[1].message.contains("50 records in all, the first at line"),
+            "{told:?}"
+        );
+    }
+    assert_eq!(s.warnings, 2, "{:?}", sink.diags);
+}

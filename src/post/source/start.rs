@@ -31,7 +31,8 @@ pub(super) fn look_ahead<R: BufRead>(
     let mut first_diag: Option<Diagnostic> = None;
     // A lathe's record before the first move, where it stands: a turning program.
     let mut lathe: Option<(u32, &str)> = None;
-    while ahead.len() < UNITS_LOOKAHEAD {
+    // Statements bound it too: a word told once is not an event each time it comes.
+    while ahead.len() < UNITS_LOOKAHEAD && reader.statements() < UNITS_LOOKAHEAD as u64 {
         let decided = units_seen || moved && (cl_units.is_some() || feed_hint.is_some());
         if cl && decided && moved || !cl && reader.nc_seen().blocks >= NC_VERDICT {
             break;
