@@ -2883,3 +2883,17 @@ fn a_repeated_word_is_told_once_with_its_count() {
     }
     assert_eq!(s.warnings, 2, "{:?}", sink.diags);
 }
+
+/// `GOHOME` is honoured, not an error and nothing: without a point, the tool up to the top of Z
+/// travel and the next move positioning from there; with one, a rapid to it.
+#[test]
+fn gohome_goes_home() {
+    let m = machine("vmc-3axis");
+    let cl = "UNITS/MM\nLOADTL/1\nFEDRAT/100,MMPM\nGOTO/0,0,1\nGOTO/10,0,1\nGOHOME\nGOTO/20,0,1\nGOTO/30,0,1\n\
+              GOHOME/50,50,100\nEND\n";
+    let (sink, s) = run(&m, cl.as_bytes(), &fanuc(&m, Mode::Joint));
+    let top = m.linears[2].as_ref().unwrap().max;
+    let want = format!("X10.000\nG0 Z{top:.3} (RETRACT)\nX20.000\nZ51.000\nG1 Z1.000\nX30.000\nG0 X50.000 Y50.000 Z100.000\n");
+    assert!(sink.nc.contains(&want), "{}", sink.nc);
+    assert_eq!(s.errors, 0, "{:?}", sink.diags);
+}

@@ -170,6 +170,8 @@ pub enum Record {
     End,
     /// A motion statement with its geometry (`TLON,GOFWD/(CIRCLE/…),ON,(LINE/…)`).
     Drive(super::drive::Drive),
+    /// `GOHOME[/x,y,z[,i,j,k]]`: at rapid to the point, or (none given) to the machine's home.
+    GoHome { p: Option<[f64; 3]>, axis: Option<[f64; 3]> },
     /// `INDIRV/i,j,k` (`point`: `INDIRP/x,y,z`, towards it): the next drive's direction.
     InDir { v: [f64; 3], point: bool },
     /// Recognised and not acted on: informational, or told where it stands
@@ -241,6 +243,11 @@ fn parse_general(stmt: &str, line: u32, diags: &mut Vec<Diagnostic>) -> Option<R
     let st = Stmt::new(stmt, line);
     match st.major.as_str() {
         "GOTO" | "GODLTA" | "FROM" => motion(&st, diags),
+        "GOHOME" if st.args.is_empty() => Some(Record::GoHome { p: None, axis: None }),
+        "GOHOME" => match motion(&st, diags)? {
+            Record::From { p, axis } => Some(Record::GoHome { p: Some(p), axis }),
+            _ => None,
+        },
         "TLAXIS" => tool_axis(&st, diags),
         "ROTABL" => rotary_table(&st, diags),
         "RAPID" => Some(Record::Rapid),

@@ -151,6 +151,11 @@ pub enum ProgEvent {
         line: u32,
     },
     Operation(String),
+    /// `GOHOME` without a point: up to the top of Z travel (the machine's home as far as a
+    /// profile says one), the next move positioning from there.
+    Home {
+        line: u32,
+    },
     Diag(Diagnostic),
     End,
 }
@@ -555,6 +560,16 @@ impl<R: BufRead> Source<R> {
                 self.rapid_next |= from;
                 return self.motion(line, Vec3::from(p));
             }
+            // A point: a rapid there, as any rapid is written (rotaries turned at the top of
+            // Z). None: the machine's home.
+            Record::GoHome { p: Some(p), axis } => {
+                if !self.motion_axis(axis, line) {
+                    return None;
+                }
+                self.rapid_next = true;
+                return self.motion(line, Vec3::from(p));
+            }
+            Record::GoHome { p: None, .. } => self.out.push_back(Item::Event(ProgEvent::Home { line })),
             Record::GoDelta { d, axis } => {
                 if !self.motion_axis(axis, line) {
                     return None;
