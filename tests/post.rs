@@ -2897,3 +2897,16 @@ fn gohome_goes_home() {
     assert!(sink.nc.contains(&want), "{}", sink.nc);
     assert_eq!(s.errors, 0, "{:?}", sink.diags);
 }
+
+/// Text after the program's `END` that is no record (CATIA's demo ends in a stray line of
+/// letters) is no part of the program: an info, not an unknown_record warning.
+#[test]
+fn text_after_the_end_is_no_unknown_record() {
+    let m = machine("vmc-3axis");
+    let cl = "UNITS/MM\nLOADTL/1\nSPINDL/1000\nFEDRAT/100,MMPM\nGOTO/0,0,1\nGOTO/1,0,1\nEND\nY43ewsdrjckhvl\n";
+    let (sink, s) = run(&m, cl.as_bytes(), &Options::new(&m));
+    let d = sink.only(Code::IgnoredRecord);
+    assert!(d.line == Some(8) && d.severity == Severity::Info && d.message.contains("after the program's END"), "{d}");
+    assert!(!sink.diags.iter().any(|d| d.code == Code::UnknownRecord), "{:?}", sink.diags);
+    assert_eq!(s.warnings, 0, "{:?}", sink.diags);
+}

@@ -67,6 +67,9 @@ pub struct Reader<R> {
     nc: NcSeen,
     /// Statements read (records, bad records, unknown ones).
     statements: u64,
+    /// The line of the program's `END`/`FINI`: text after it that is no record is no part of
+    /// the program (CATIA's demo ends in a stray line of letters).
+    end: Option<u32>,
     /// A word told again and again (an unknown record, a word not acted on: 72 to 1 559 lines of
     /// one in a file) is told once, at its first line, and its count at the end: by message,
     /// its code, first line and count.
@@ -89,6 +92,7 @@ impl<R: BufRead> Reader<R> {
             consumed: 0,
             nc: NcSeen::default(),
             statements: 0,
+            end: None,
             repeats: Default::default(),
         }
     }
@@ -339,7 +343,15 @@ impl<R: BufRead> Reader<R> {
             if rec.is_none() && diags.iter().any(|d| d.code == Code::UnknownRecord) {
                 self.nc.note(&self.pending, line);
             }
-            for d in diags {
+            if matches!(rec, Some(Record::End)) {
+                self.end.get_or_insert(line);
+            }
+            for mut d in diags {
+                if let (Some(end), Code::UnknownRecord) = (self.end, d.code) {
+                    d.code = Code::IgnoredRecord;
+                    d.severity = Severity::Info;
+                    d.message = format!("{} (after the program's END at line {end}: no part of the program)", d.message);
+                }
                 if self.repeated(&d) {
                     continue;
                 }
