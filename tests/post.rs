@@ -2828,6 +2828,11 @@ fn catia_circle_statements_are_arcs_and_an_unresolvable_form_an_error() {
     assert!(d.message.contains("C1") && d.message.contains("not written"), "{d}");
     assert_eq!(s.errors, 1);
     assert!(!sink.diags.iter().any(|d| d.code == Code::UnknownRecord), "{:?}", sink.diags);
+    // At rapid no arc is written: points on it, never the chord across.
+    let cl = "UNITS/MM\nLOADTL/1\nGOTO/0,0,5\nGOTO/5,0,5\nRAPID\nTLON,GOFWD/(CIRCLE/5,5,0,5),ON,(LINE/0,5,0,10,5,0)\n\
+              FEDRAT/100,MMPM\nGOTO/10,10,5\n";
+    let (sink, _) = run(&m, cl.as_bytes(), &fanuc(&m, Mode::Joint));
+    assert!(sink.nc.contains("X7.500 Y0.670\n") && sink.nc.contains("X10.000 Y5.000\n"), "{}", sink.nc);
 }
 
 /// Words other CAM systems write (Creo's `REMARK` and `PPWORD`, NX's NURBS data `KNOT` and

@@ -36,9 +36,35 @@ impl<R: BufRead> Source<R> {
         let fwd = self.indir.take().or(self.last_dir);
         match self.resolve_drive(&d, fwd) {
             Ok((end, arc, tangent)) => {
-                if let Some((center, axis, radius)) = arc {
-                    self.circle = Some((center.into(), axis.into(), Some(radius)));
-                    (self.circle_cw, self.circle_turns, self.circle_sweep) = (false, 1, None);
+                let rapid = self.rapid_next || self.feed.is_none();
+                match (arc, self.tip) {
+                    // No arc is written at rapid: points on it, 5° apart, so that the path is
+                    // the circle's, never the chord across it.
+                    (Some((center, axis, _)), Some(start)) if rapid => {
+                        let (a, b) = (start - center, end - center);
+                        let mut sweep = axis.dot(&a.cross(&b)).atan2(a.dot(&b));
+                        if sweep <= 1e-9 {
+                            sweep += TAU;
+                        }
+                        let n = (sweep / 5f64.to_radians()).ceil().max(1.0) as usize;
+                        let asked = self.rapid_next;
+                        for i in 1..n {
+                            let turn = nalgebra::Rotation3::from_axis_angle(
+                                &nalgebra::Unit::new_normalize(axis),
+                                sweep * i as f64 / n as f64,
+                            );
+                            self.rapid_next = asked;
+                            if let Some(pt) = self.motion(line, center + turn * a) {
+                                self.out.push_back(super::Item::Motion(pt));
+                            }
+                        }
+                        self.rapid_next = asked;
+                    }
+                    (Some((center, axis, radius)), _) => {
+                        self.circle = Some((center.into(), axis.into(), Some(radius)));
+                        (self.circle_cw, self.circle_turns, self.circle_sweep) = (false, 1, None);
+                    }
+                    _ => {}
                 }
                 let pt = self.motion(line, end);
                 self.last_dir = Some(tangent);
