@@ -2828,6 +2828,18 @@ fn catia_circle_statements_are_arcs_and_an_unresolvable_form_an_error() {
     assert!(d.message.contains("C1") && d.message.contains("not written"), "{d}");
     assert_eq!(s.errors, 1);
     assert!(!sink.diags.iter().any(|d| d.code == Code::UnknownRecord), "{:?}", sink.diags);
+    // The tool beside the circle by its radius (Ø2), the other ways round, the other stops.
+    for (drive, arc) in [
+        ("TLLFT,GOFWD/(CIRCLE/5,5,10,6),ON,(LINE/0,5,10,10,5,10)", "G3 X10.000 Y5.000 Z10.000 I0.000 J5.000"),
+        ("TLRGT,GOFWD/(CIRCLE/5,5,10,4),PAST,(PLANE/0,1,0,4)", "G3 X10.000 Y5.000 Z10.000 I0.000 J5.000"),
+        ("TLON,GOFWD/(CIRCLE/5,5,10,5),TANTO,(CIRCLE/5,15,10,5)", "G3 X5.000 Y10.000 Z10.000 I0.000 J5.000"),
+        ("TLON,GOBACK/(CIRCLE/5,5,10,5),ON,(LINE/0,5,10,10,5,10)", "G2 X0.000 Y5.000 Z10.000 I0.000 J5.000"),
+        ("TLON,GORGT/(CIRCLE/10,0,10,5),ON,(LINE/10,-10,10,10,10,10)", "G3 X10.000 Y-5.000 Z10.000 I5.000 J0.000"),
+    ] {
+        let cl = format!("UNITS/MM\nCUTTER/2\nLOADTL/1\nFEDRAT/100,MMPM\nGOTO/0,0,10\nGOTO/5,0,10\n{drive}\nGOTO/20,20,10\n");
+        let (sink, s) = run(&m, cl.as_bytes(), &fanuc(&m, Mode::Joint));
+        assert!(sink.nc.contains(&format!("{arc}\n")) && s.errors == 0, "{drive}\n{}", sink.nc);
+    }
     // At rapid no arc is written: points on it, never the chord across.
     let cl = "UNITS/MM\nLOADTL/1\nGOTO/0,0,5\nGOTO/5,0,5\nRAPID\nTLON,GOFWD/(CIRCLE/5,5,0,5),ON,(LINE/0,5,0,10,5,0)\n\
               FEDRAT/100,MMPM\nGOTO/10,10,5\n";
