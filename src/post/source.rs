@@ -596,21 +596,7 @@ impl<R: BufRead> Source<R> {
                 corner_radius,
                 length,
                 turning,
-            } => {
-                if let Some(t) = turning {
-                    self.turning = t;
-                    self.lathe(t, line, "a lathe tool");
-                }
-                if let Some(d) = diameter.filter(|d| d.is_finite() && *d > 0.0) {
-                    self.diameter_mm = Some(d * self.cl_units.factor_to(Units::Mm));
-                    let r = corner_radius.filter(|r| r.is_finite() && *r >= 0.0 && *r <= d / 2.0).unwrap_or(0.0);
-                    self.out.push_back(Item::Event(ProgEvent::Cutter {
-                        diameter: d * self.scale,
-                        corner_radius: r * self.scale,
-                    }));
-                }
-                self.tool_length(length, line);
-            }
+            } => self.tool_data(diameter, corner_radius, length, turning, line),
             Record::Multax(on) => {
                 if !on {
                     self.axis = self.to_program(Vec3::z());
@@ -701,6 +687,24 @@ impl<R: BufRead> Source<R> {
             Record::Ignored(_) => {}
         }
         None
+    }
+
+    /// `TLDATA`, `CUTTER`, `TOOLNO`, `TURRET`: the cutter (its diameter turns a surface speed
+    /// into RPM and shapes the collision check), its length, and whether it is a lathe's.
+    fn tool_data(&mut self, diameter: Option<f64>, corner_radius: Option<f64>, length: Option<f64>, turning: Option<bool>, line: u32) {
+        if let Some(t) = turning {
+            self.turning = t;
+            self.lathe(t, line, "a lathe tool");
+        }
+        if let Some(d) = diameter.filter(|d| d.is_finite() && *d > 0.0) {
+            self.diameter_mm = Some(d * self.cl_units.factor_to(Units::Mm));
+            let r = corner_radius.filter(|r| r.is_finite() && *r >= 0.0 && *r <= d / 2.0).unwrap_or(0.0);
+            self.out.push_back(Item::Event(ProgEvent::Cutter {
+                diameter: d * self.scale,
+                corner_radius: r * self.scale,
+            }));
+        }
+        self.tool_length(length, line);
     }
 
     /// What a motion record does before its point: the index frame resolved if it changed, and
