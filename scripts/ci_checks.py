@@ -138,6 +138,9 @@ def main():
                     if o.get('type') == 'summary':
                         counts = o['summary']['counts']
                 replays += 1
+                # CATIA's lathe demos: a turning program is refused (exit 2, code turning), nothing written.
+                if p.returncode == 2 and 'a turning program' in p.stderr and 'lathe' in f:
+                    continue
                 # Exit 1: written with error diagnostics (outside travel and the like), expected here.
                 if p.returncode not in (0, 1) or counts.get('verify_deviation'):
                     fails.append(f'replay {os.path.basename(f)} {mid} {mode}: exit {p.returncode}, '

@@ -65,6 +65,8 @@ pub enum Code {
     /// The motion to a block needed more samples than the collision check takes for one block:
     /// between two a body moves farther than the clearance or half the smallest body's size.
     CollisionCoarse,
+    /// A turning (lathe) program or operation: kinepost posts milling.
+    Turning,
 }
 
 impl Code {
@@ -107,6 +109,7 @@ impl Code {
             Code::CutterComp => "cutter_comp",
             Code::Template => "template",
             Code::CollisionCoarse => "collision_coarse",
+            Code::Turning => "turning",
         }
     }
 }

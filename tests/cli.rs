@@ -318,11 +318,11 @@ fn post_exits_0_clean_1_with_errors_2_refused() {
     };
     let good = write(
         "good.cl",
-        "UNITS/MM\nLOADTL/1\nSPINDL/1000\nGOTO/10,20,30,0,0,1\nGOTO/10,25,30,0,0,1\nFINI\n",
+        "FEDRAT/500,MMPM\nLOADTL/1\nSPINDL/1000\nGOTO/10,20,30,0,0,1\nGOTO/10,25,30,0,0,1\nFINI\n",
     );
     let bad = write(
         "bad.cl",
-        "UNITS/MM\nLOADTL/1\nSPINDL/1000\nGOTO/10,20,30,0,0,1\nGOTO/9000,20,30,0,0,1\nFINI\n",
+        "FEDRAT/500,MMPM\nLOADTL/1\nSPINDL/1000\nGOTO/10,20,30,0,0,1\nGOTO/9000,20,30,0,0,1\nFINI\n",
     );
     let nc = dir.join("out.nc");
     let post = |cl: &str, extra: &[&str]| {

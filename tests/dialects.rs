@@ -1231,8 +1231,9 @@ fn a_program_with_errors_says_so_in_its_own_text() {
     let lib = Library::load_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap();
     let m = &lib.get("vmc-3axis").unwrap().machine;
     // Line 5 is far outside X travel; line 6 tilts the tool (no solution on three axes).
-    let bad = "UNITS/MM\nLOADTL/1\nSPINDL/1000\nGOTO/10,20,30,0,0,1\nGOTO/9000,20,30,0,0,1\nGOTO/10,20,30,0.5,0,0.866\nGOTO/10,25,30,0,0,1\nFINI\n";
-    let good = "UNITS/MM\nLOADTL/1\nSPINDL/1000\nGOTO/10,20,30,0,0,1\nGOTO/10,25,30,0,0,1\nFINI\n";
+    // (FEDRAT in mm a minute says the units: a program with no feed at all is an error too.)
+    let bad = "FEDRAT/500,MMPM\nLOADTL/1\nSPINDL/1000\nGOTO/10,20,30,0,0,1\nGOTO/9000,20,30,0,0,1\nGOTO/10,20,30,0.5,0,0.866\nGOTO/10,25,30,0,0,1\nFINI\n";
+    let good = "FEDRAT/500,MMPM\nLOADTL/1\nSPINDL/1000\nGOTO/10,20,30,0,0,1\nGOTO/10,25,30,0,0,1\nFINI\n";
     for d in ["fanuc", "haas", "linuxcnc", "siemens", "heidenhain"] {
         let s = |cl: &str| {
             let settings = post::Settings {

@@ -319,7 +319,7 @@ async fn a_spindle_speed_for_a_cl_without_one() {
 async fn a_program_with_errors_says_so_in_the_streamed_text() {
     let base = server(cfg()).await;
     let c = reqwest::Client::new();
-    let cl = "UNITS/MM\nLOADTL/1\nSPINDL/1000\nGOTO/10,20,30,0,0,1\nGOTO/9000,20,30,0,0,1\nFINI\n";
+    let cl = "FEDRAT/500,MMPM\nLOADTL/1\nSPINDL/1000\nGOTO/10,20,30,0,0,1\nGOTO/9000,20,30,0,0,1\nFINI\n";
     let nc = c
         .post(format!("{base}/v1/post?machine=vmc-3axis"))
         .header("content-type", "text/plain")

@@ -125,12 +125,12 @@ async fn unreachable_poses_and_limits_name_line_and_axis() {
     let c = reqwest::Client::new();
     for (cl, code, needle) in [
         (
-            "UNITS/MM\nGOTO/0,0,10,0,0,1\nGOTO/0,0,10,0,0.5,0.8660254\n",
+            "FEDRAT/500,MMPM\nGOTO/0,0,10,0,0,1\nGOTO/0,0,10,0,0.5,0.8660254\n",
             "unreachable",
             "30.0",
         ),
         (
-            "UNITS/MM\nGOTO/0,0,10,0,0,1\nGOTO/900,0,10,0,0,1\n",
+            "FEDRAT/500,MMPM\nGOTO/0,0,10,0,0,1\nGOTO/900,0,10,0,0,1\n",
             "limit_violation",
             "X = 900",
         ),

@@ -446,7 +446,7 @@ fn units_apply_from_their_line_wherever_they_sit() {
     }
     assert!(compared > 1000, "{compared}");
     // Before the record, mm (the profile's, assumed); after it, inch.
-    assert!(early[&2].contains("X2.000"), "{}", early[&2]);
+    assert!(early[&2].contains("Z1.000"), "{}", early[&2]);
     assert_ne!(early[&4000], late[&4000]);
 }
 
@@ -1258,7 +1258,7 @@ fn a_point_far_outside_travel_is_one_error_not_a_flood_of_blocks() {
 
 /// A surface speed is turned into RPM at the cutter's diameter (a mill's S word is RPM): it was
 /// written as S300 for 300 ft/min, an eighth of the speed a ½-inch cutter needs. A lathe tool
-/// (TURRET, TOOLNO/…,TURN) or no diameter: written as S with a warning, as before.
+/// (refused now, see below) or no diameter: written as S with a warning, as before.
 #[test]
 fn surface_speed_becomes_rpm_at_the_cutters_diameter() {
     let s_words = |nc: &str| -> Vec<String> {
@@ -1284,17 +1284,7 @@ fn surface_speed_becomes_rpm_at_the_cutters_diameter() {
             "S6366",
             Severity::Info,
         ),
-        // A lathe tool: its diameter is not what the surface speed is about.
-        (
-            "UNITS/MM\nCUTTER/0.8\nTURRET/1\nSPINDL/120,SFM\nFEDRAT/500,MMPM\n",
-            "S120",
-            Severity::Warning,
-        ),
-        (
-            "UNITS/MM\nCUTTER/0.8\nTOOLNO/1,TURN,1\nSPINDL/120,SFM\nFEDRAT/500,MMPM\n",
-            "S120",
-            Severity::Warning,
-        ),
+        // (A lathe tool's program is refused: `a_turning_program_is_refused_never_milled`.)
         ("UNITS/MM\nSPINDL/120,SFM\nFEDRAT/500,MMPM\n", "S120", Severity::Warning),
     ];
     for (head, want, sev) in cases {
@@ -2327,11 +2317,14 @@ fn the_length_offset_register_is_the_one_the_cl_names() {
     let (sink, _) = run(&m, again.as_bytes(), &fanuc(&m, Mode::Joint));
     assert_eq!(sink.nc.matches(" M6").count(), 1, "{}", sink.nc);
     assert!(sink.nc.contains("\nG43 H35\n"), "{}", sink.nc);
+    // A register that cannot be written is told, and the change written with the tool's own
+    // (a dropped change left the last tool cutting at this one's length).
     for bad in ["ADJUST,2.5", "ADJUST,0", "OSETNO,X", "ADJUST"] {
         let (sink, _) = run(&m, cl.replace("ADJUST,25", bad).as_bytes(), &fanuc(&m, Mode::Joint));
         let d = sink.first(Code::BadRecord);
-        assert_eq!((d.severity, d.line), (Severity::Error, Some(2)), "{bad}: {d}");
-        assert!(!sink.nc.contains("T5 M6"), "{bad}: {}", sink.nc);
+        let sev = if bad == "ADJUST,0" { Severity::Warning } else { Severity::Error };
+        assert_eq!((d.severity, d.line), (sev, Some(2)), "{bad}: {d}");
+        assert!(sink.nc.contains("T5 M6\n") && sink.nc.contains("\nG43 H5\n"), "{bad}: {}", sink.nc);
     }
 }
 
@@ -2662,4 +2655,275 @@ fn records_that_change_the_machine_change_the_nc_or_are_told() {
     }
     let (sink, _) = run(&m, cl("CUTCOM/ ON ").as_bytes(), &Options::new(&m));
     assert!(sink.diags.iter().any(|d| d.line == Some(7) && d.severity == Severity::Error && d.code == Code::CutterComp));
+}
+
+/// Issue 57: CL files from CAM systems kinepost had not seen. A turning program (a lathe tool,
+/// `MODE/TURN`) was posted as milling, exit 0: `T1 M6`, `S70 M4` and a 190 mm plunge with a
+/// turning insert. It is refused before anything is written, saying kinepost posts milling; a
+/// turning operation inside a milling program is an error at its record, its moves not written.
+#[test]
+fn a_turning_program_is_refused_never_milled() {
+    let m = machine("vmc-3axis");
+    let moves = "FEDRAT/0.1,MMPR\nSPINDL/500,SFM,CCLW\nGOTO/17,0,2\nGOTO/17,0,-190\n";
+    for (head, line) in [
+        // CATIA's tool change: TOOLNO over three lines, then LOADTL.
+        (
+            "$$*CATIA0\nCUTTER/0.8\nTOOLNO/1,TURN,1,0,3,0.4,$\n0,0,0.1,MMPR,500,SFM,$\nCCLW,ON,0,NOTE\nLOADTL/1,1,1\n",
+            3,
+        ),
+        ("UNITS/MM\nCUTTER/0.8\nTURRET/1,OSETNO,1,SETOOL,0,0,0\n", 3),
+        ("UNITS/MM\nMODE/TURN\nLOADTL/1\n", 2),
+        ("UNITS/MM\nTLDATA/TURN,0.8,55,0\nLOADTL/1\n", 2),
+    ] {
+        let cl = format!("{head}{moves}");
+        let mut sink = Collect::default();
+        match post::post(cl.as_bytes(), &m, &Options::new(&m), &mut sink) {
+            Err(post::Error::NotCl(d)) => {
+                assert_eq!((d.code, d.line), (Code::Turning, Some(line)), "{cl}\n{d}");
+                assert!(d.message.contains("kinepost posts milling"), "{d}");
+            }
+            other => panic!("{cl}: {other:?}\n{}", sink.nc),
+        }
+        assert!(sink.nc.is_empty(), "nothing written:\n{}", sink.nc);
+    }
+    // A milling program with a turning operation in it: told at the lathe tool, its moves not
+    // written, the milling tool after it cuts again.
+    let cl = "UNITS/MM\nLOADTL/1\nFEDRAT/100,MMPM\nGOTO/0,0,5\nGOTO/10,0,5\nTOOLNO/2,TURN\nLOADTL/2\n\
+              GOTO/20,0,5\nGOTO/30,0,5\nLOADTL/3\nGOTO/40,0,5\nGOTO/50,0,5\n";
+    let (sink, s) = run(&m, cl.as_bytes(), &Options::new(&m));
+    let d = sink.only(Code::Turning);
+    assert_eq!((d.severity, d.line), (Severity::Error, Some(6)), "{d}");
+    assert!(d.message.contains("from line 8"), "{d}");
+    assert!(s.errors >= 1);
+    assert!(!sink.nc.contains("X20.") && !sink.nc.contains("X30."), "{}", sink.nc);
+    assert!(sink.nc.contains("X40.") && sink.nc.contains("X50."), "{}", sink.nc);
+}
+
+/// A tool change is never dropped: NX's `LOAD/TOOL,3,ADJUST,0` was an error and no change at
+/// all, T2 cutting on at T3's length. The register that cannot be written is told, and the
+/// change written with the tool's own.
+#[test]
+fn a_tool_change_with_an_unwritable_register_is_written_with_the_tools_own() {
+    let m = machine("vmc-3axis");
+    for (adjust, sev) in [("0", Severity::Warning), ("X", Severity::Error), ("-4", Severity::Error)] {
+        let cl = format!("UNITS/MM\nLOADTL/2\nFEDRAT/100,MMPM\nGOTO/0,0,5\nLOAD/TOOL,3,ADJUST,{adjust}\nGOTO/10,0,5\n");
+        let (sink, _) = run(&m, cl.as_bytes(), &Options::new(&m));
+        assert!(sink.nc.contains("T3 M6\nG43 H3\n"), "{cl}\n{}", sink.nc);
+        let d = sink.only(Code::BadRecord);
+        assert_eq!((d.line, d.severity), (Some(5), sev), "{d}");
+        assert!(d.message.contains("the tool's own length offset"), "{d}");
+    }
+}
+
+/// A program with no feed at all (a bare GOTO list) cuts at rapid wherever it touches: an
+/// error, not only the warning at its first unfed move. One rapid approach before the first
+/// FEDRAT stays a warning.
+#[test]
+fn a_program_with_no_feed_at_all_is_an_error() {
+    let m = machine("vmc-3axis");
+    let (sink, s) = run(&m, b"UNITS/MM\nGOTO/0,0,5\nGOTO/0,0,-1\nGOTO/30,0,-1\n", &Options::new(&m));
+    let errors: Vec<_> = sink
+        .diags
+        .iter()
+        .filter(|d| d.code == Code::NoFeed && d.severity == Severity::Error)
+        .collect();
+    assert!(errors.len() == 1 && errors[0].line == Some(3), "{:?}", sink.diags);
+    assert_eq!(s.errors, 1);
+    assert!(sink.nc.contains("ERROR NO_FEED"), "{}", sink.nc);
+    let (sink, s) = run(
+        &m,
+        b"UNITS/MM\nGOTO/0,0,5\nGOTO/0,0,2\nFEDRAT/100,MMPM\nGOTO/30,0,-1\n",
+        &Options::new(&m),
+    );
+    assert_eq!((s.errors, sink.only(Code::NoFeed).severity), (0, Severity::Warning));
+}
+
+/// A feed unit that contradicts the file's UNITS (Fusion: `UNITS/INCHES`, `FEDRAT/35.,MMPM`) is
+/// told at its line once, and the slower of the two readings taken: 35 mm/min, not 35 in/min;
+/// 10 mm/min under `UNITS/MM` with `IPM`, not 254.
+#[test]
+fn a_feed_unit_that_contradicts_units_is_told_and_the_slower_reading_taken() {
+    let m = machine("vmc-3axis");
+    for (cl, f) in [
+        (
+            "UNITS/INCHES\nFEDRAT/35.,MMPM\nGOTO/0,0,1\nGOTO/1,0,1\nFEDRAT/30,MMPM\nGOTO/2,0,1\n",
+            "F35.0",
+        ),
+        (
+            "UNITS/MM\nFEDRAT/10,IPM\nGOTO/0,0,1\nGOTO/1,0,1\nFEDRAT/30,MMPM\nGOTO/2,0,1\n",
+            "F10.0",
+        ),
+    ] {
+        let (sink, _) = run(&m, cl.as_bytes(), &Options::new(&m));
+        assert!(sink.nc.contains(f) && sink.nc.contains("F30.0"), "{cl}\n{}", sink.nc);
+        let d = sink.only(Code::UnitsAssumed);
+        assert_eq!((d.line, d.severity), (Some(2), Severity::Warning), "{d}");
+        assert!(d.message.contains("slower"), "{d}");
+    }
+    // The unit a file's own UNITS agrees with, or the only one it gives: nothing to tell.
+    let (sink, _) = run(
+        &m,
+        b"UNITS/INCHES\nFEDRAT/35.,IPM\nGOTO/0,0,1\nGOTO/1,0,1\n",
+        &Options::new(&m),
+    );
+    assert!(
+        sink.nc.contains("F889.0") && !sink.diags.iter().any(|d| d.code == Code::UnitsAssumed),
+        "{}",
+        sink.nc
+    );
+}
+
+/// The first move onto a cutting point approaches on a 3-axis machine as on the 5-axis ones:
+/// over the point at the top of Z, at rapid to the clearance above it, then at feed. It went at
+/// rapid straight onto the feed point (`G0 X10. Y20. Z5.`).
+#[test]
+fn the_first_move_onto_a_cutting_point_approaches_through_the_clearance_on_three_axes() {
+    let m = machine("vmc-3axis");
+    let (sink, _) = run(
+        &m,
+        b"LOADTL/1\nFEDRAT/300,MMPM\nGOTO/10,20,5\nGOTO/30,20,5\n",
+        &fanuc(&m, Mode::Joint),
+    );
+    let after = sink.nc.split("G43 H1\n").nth(1).unwrap();
+    let top = m.linears[2].as_ref().unwrap().max;
+    let want = format!("G0 X10.000 Y20.000 Z{top:.3} (APPROACH)\nZ55.000\nG94 G1 Z5.000 F300.0\nX30.000\n");
+    assert!(after.starts_with(&want), "{}", sink.nc);
+}
+
+/// An operator's instruction on a stop is kept as a comment before its M0 / M1 (CATIA's
+/// `STOP/(INSTALL TEST STRIP …)` became a bare M0).
+#[test]
+fn a_stops_instruction_is_kept_before_its_m0() {
+    let m = machine("vmc-3axis");
+    let cl =
+        "UNITS/MM\nFEDRAT/100,MMPM\nGOTO/0,0,1\nSTOP/(INSTALL TEST STRIP 3)\nGOTO/1,0,1\nOPSTOP/CHECK THE BORE\nGOTO/2,0,1\n";
+    let (sink, _) = run(&m, cl.as_bytes(), &fanuc(&m, Mode::Joint));
+    assert!(sink.nc.contains("(INSTALL TEST STRIP 3)\nM0\n"), "{}", sink.nc);
+    assert!(sink.nc.contains("(CHECK THE BORE)\nM1\n"), "{}", sink.nc);
+}
+
+/// CATIA's circle statements (APT source geometry: `INDIRV`, then `TLON,GOFWD/(CIRCLE/…),ON,
+/// (LINE/…)` over `$` lines) are the arcs they describe, from the current point the way the
+/// tool goes to where the check surface stops it; each was an unknown record, the arc missing
+/// and the program `ERRORS 0`. A form that cannot be resolved (a surface named, not written) is
+/// an error at its line, and no straight move in its place.
+#[test]
+fn catia_circle_statements_are_arcs_and_an_unresolvable_form_an_error() {
+    let m = machine("vmc-3axis");
+    let cl = "UNITS/MM\nCUTTER/10\nLOADTL/1\nFEDRAT/500,MMPM\nGOTO/0,0,5\nGOTO/5,0,5\n\
+              TLON,GOFWD/ (CIRCLE/ 5.00000, 5.00000, 0.00000,$\n 5.00000), ON, (LINE/ 0.00000, 5.00000, 0.00000,$\n\
+              10.00000, 5.00000, 0.00000)\nGOTO/10,10,5\n\
+              INDIRV/0,1,0\nTLON,GOFWD/(CIRCLE/15,10,0,5),ON,(LINE/20,0,0,20,20,0)\n\
+              INDIRV/0,-1,0\nTLON,GOFWD/(CIRCLE/25,10,0,5),TO,(LINE/30,0,0,30,20,0)\n\
+              TLON,GOFWD/(CIRCLE/25,10,0,5),ON,C1\nGOTO/40,0,5\n";
+    let (sink, s) = run(&m, cl.as_bytes(), &fanuc(&m, Mode::Joint));
+    // Counter-clockwise from (5,0) (the tool came along +X) to the line y = 5: a quarter.
+    assert!(sink.nc.contains("X5.000\nG3 X10.000 Y5.000 Z5.000 I0.000 J5.000\nG1 Y10.000\n"), "{}", sink.nc);
+    // INDIRV up from (10,10): clockwise over the top to x = 20.
+    assert!(sink.nc.contains("G2 X20.000 Y10.000 Z5.000 I5.000 J0.000\n"), "{}", sink.nc);
+    // Down from (20,10) counter-clockwise; TO the line x = 30 stops the Ø10 tool's centre at x = 25.
+    assert!(sink.nc.contains("G3 X25.000 Y5.000 Z5.000 I5.000 J0.000\n"), "{}", sink.nc);
+    let d = sink.only(Code::BadRecord);
+    assert_eq!((d.line, d.severity), (Some(15), Severity::Error), "{d}");
+    assert!(d.message.contains("C1") && d.message.contains("not written"), "{d}");
+    assert_eq!(s.errors, 1);
+    assert!(!sink.diags.iter().any(|d| d.code == Code::UnknownRecord), "{:?}", sink.diags);
+    // The tool beside the circle by its radius (Ø2), the other ways round, the other stops.
+    for (drive, arc) in [
+        ("TLLFT,GOFWD/(CIRCLE/5,5,10,6),ON,(LINE/0,5,10,10,5,10)", "G3 X10.000 Y5.000 Z10.000 I0.000 J5.000"),
+        ("TLRGT,GOFWD/(CIRCLE/5,5,10,4),PAST,(PLANE/0,1,0,4)", "G3 X10.000 Y5.000 Z10.000 I0.000 J5.000"),
+        ("TLON,GOFWD/(CIRCLE/5,5,10,5),TANTO,(CIRCLE/5,15,10,5)", "G3 X5.000 Y10.000 Z10.000 I0.000 J5.000"),
+        ("TLON,GOBACK/(CIRCLE/5,5,10,5),ON,(LINE/0,5,10,10,5,10)", "G2 X0.000 Y5.000 Z10.000 I0.000 J5.000"),
+        ("TLON,GORGT/(CIRCLE/10,0,10,5),ON,(LINE/10,-10,10,10,10,10)", "G3 X10.000 Y-5.000 Z10.000 I5.000 J0.000"),
+    ] {
+        let cl = format!("UNITS/MM\nCUTTER/2\nLOADTL/1\nFEDRAT/100,MMPM\nGOTO/0,0,10\nGOTO/5,0,10\n{drive}\nGOTO/20,20,10\n");
+        let (sink, s) = run(&m, cl.as_bytes(), &fanuc(&m, Mode::Joint));
+        assert!(sink.nc.contains(&format!("{arc}\n")) && s.errors == 0, "{drive}\n{}", sink.nc);
+    }
+    // At rapid no arc is written: points on it, never the chord across.
+    let cl = "UNITS/MM\nLOADTL/1\nGOTO/0,0,5\nGOTO/5,0,5\nRAPID\nTLON,GOFWD/(CIRCLE/5,5,0,5),ON,(LINE/0,5,0,10,5,0)\n\
+              FEDRAT/100,MMPM\nGOTO/10,10,5\n";
+    let (sink, _) = run(&m, cl.as_bytes(), &fanuc(&m, Mode::Joint));
+    assert!(sink.nc.contains("X7.500 Y0.670\n") && sink.nc.contains("X10.000 Y5.000\n"), "{}", sink.nc);
+}
+
+/// Words other CAM systems write (Creo's `REMARK` and `PPWORD`, NX's NURBS data `KNOT` and
+/// `CNTRL`, a display's `CAMERA`) are known for what they are: an unknown_record warning on each
+/// line (72 to 1 559 in a file) drowned the diagnostics that matter.
+#[test]
+fn other_cam_systems_informational_words_are_known() {
+    let m = machine("vmc-3axis");
+    let plain = "UNITS/MM\nFEDRAT/100,MMPM\nGOTO/0,0,1\nGOTO/1,0,1\n";
+    let (want, _) = run(&m, plain.as_bytes(), &Options::new(&m));
+    for w in ["REMARK/ROUGH THE POCKET", "PPWORD/SPINDL,1", "KNOT/0,0,1,1", "CNTRL/0,0,5,1", "CAMERA/1,0,0"] {
+        let cl = plain.replace("GOTO/1,0,1", &format!("{w}\nGOTO/1,0,1"));
+        let (sink, _) = run(&m, cl.as_bytes(), &Options::new(&m));
+        assert!(sink.diags.iter().all(|d| d.line != Some(4)), "{w}: {:?}", sink.diags);
+        let body = |nc: &str| nc.lines().filter(|l| !l.contains("DATE")).map(str::to_string).collect::<Vec<_>>();
+        assert_eq!(body(&sink.nc), body(&want.nc), "{w}");
+    }
+}
+
+/// CATIA's positional `CYCLE/DRILL,depth,,feed,clearance` (the feed unit left out: a
+/// continuation line that starts with `,`) is read by its own rule: depth 10, feed 100, R 3. The
+/// CAMWorks rule took the feed for the clearance (R 100) and the hole went at the FEDRAT's 500.
+#[test]
+fn catias_positional_cycle_with_an_empty_field_is_read_by_position() {
+    let m = machine("vmc-3axis");
+    let cl = "UNITS/MM\nFEDRAT/500,MMPM\nGOTO/5,5,20\nCYCLE/DRILL,  10.000000,$\n,  100.000000,  3.0000\n\
+              GOTO/5,5,0\nCYCLE/OFF\nGOTO/5,5,20\n";
+    let (sink, _) = run(&m, cl.as_bytes(), &fanuc(&m, Mode::Joint));
+    let want = "G0 Z3.000 (CYCLE)\nG1 Z0.000 F100.0 (CYCLE)\nZ-10.000 (CYCLE)\nG0 Z3.000 (CYCLE)\n";
+    assert!(sink.nc.contains(want), "{}", sink.nc);
+    assert!(!sink.diags.iter().any(|d| d.code == Code::BadRecord), "{:?}", sink.diags);
+}
+
+/// A word told again and again (an unknown record, a word kinepost does not act on: 72 to 1 559
+/// lines of one in a file) is told once, at its first line, and its count once at the end: one
+/// warning per line drowned the diagnostics that matter.
+#[test]
+fn a_repeated_word_is_told_once_with_its_count() {
+    let m = machine("vmc-3axis");
+    let mut cl = String::from("UNITS/MM\nFEDRAT/100,MMPM\nSPINDL/1000\nGOTO/0,0,1\n");
+    for i in 0..50 {
+        cl += &format!("FOOWORD/{i}\nSWITCH/{i}\nGOTO/{},0,1\n", i + 1);
+    }
+    let (sink, s) = run(&m, cl.as_bytes(), &Options::new(&m));
+    for (code, first) in [(Code::UnknownRecord, 5), (Code::IgnoredRecord, 6)] {
+        let told: Vec<_> = sink.diags.iter().filter(|d| d.code == code && d.line == Some(first)).collect();
+        let all = sink.diags.iter().filter(|d| d.code == code && d.severity >= Severity::Warning).count();
+        assert_eq!(all, 1, "{:?}", sink.diags);
+        assert!(
+            told.len() == 2 && told[1].severity == Severity::Info && told[1].message.contains("50 records in all, the first at line"),
+            "{told:?}"
+        );
+    }
+    assert_eq!(s.warnings, 2, "{:?}", sink.diags);
+}
+
+/// `GOHOME` is honoured, not an error and nothing: without a point, the tool up to the top of Z
+/// travel and the next move positioning from there; with one, a rapid to it.
+#[test]
+fn gohome_goes_home() {
+    let m = machine("vmc-3axis");
+    let cl = "UNITS/MM\nLOADTL/1\nFEDRAT/100,MMPM\nGOTO/0,0,1\nGOTO/10,0,1\nGOHOME\nGOTO/20,0,1\nGOTO/30,0,1\n\
+              GOHOME/50,50,100\nEND\n";
+    let (sink, s) = run(&m, cl.as_bytes(), &fanuc(&m, Mode::Joint));
+    let top = m.linears[2].as_ref().unwrap().max;
+    let want = format!("X10.000\nG0 Z{top:.3} (RETRACT)\nX20.000\nZ51.000\nG1 Z1.000\nX30.000\nG0 X50.000 Y50.000 Z100.000\n");
+    assert!(sink.nc.contains(&want), "{}", sink.nc);
+    assert_eq!(s.errors, 0, "{:?}", sink.diags);
+}
+
+/// Text after the program's `END` that is no record (CATIA's demo ends in a stray line of
+/// letters) is no part of the program: an info, not an unknown_record warning.
+#[test]
+fn text_after_the_end_is_no_unknown_record() {
+    let m = machine("vmc-3axis");
+    let cl = "UNITS/MM\nLOADTL/1\nSPINDL/1000\nFEDRAT/100,MMPM\nGOTO/0,0,1\nGOTO/1,0,1\nEND\nY43ewsdrjckhvl\n";
+    let (sink, s) = run(&m, cl.as_bytes(), &Options::new(&m));
+    let d = sink.only(Code::IgnoredRecord);
+    assert!(d.line == Some(8) && d.severity == Severity::Info && d.message.contains("after the program's END"), "{d}");
+    assert!(!sink.diags.iter().any(|d| d.code == Code::UnknownRecord), "{:?}", sink.diags);
+    assert_eq!(s.warnings, 0, "{:?}", sink.diags);
 }

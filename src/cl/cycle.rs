@@ -27,8 +27,10 @@ pub(super) fn parse_cycle(args: &[Arg], line: u32, rest_col: u32, diags: &mut Ve
         peck: None,
         dwell: None,
     };
-    let positional = cycle_keywords(args, line, &mut p, diags);
-    cycle_positional(&mut p, &positional);
+    if !iso_positional(args, &mut p) {
+        let positional = cycle_keywords(args, line, &mut p, diags);
+        cycle_positional(&mut p, &positional);
+    }
     let warn = |diags: &mut Vec<Diagnostic>, msg: String| {
         diags.push(Diagnostic::new(Code::BadRecord, Severity::Warning, Some(line), msg).at(rest_col));
     };
@@ -79,6 +81,38 @@ fn cycle_keywords(args: &[Arg], line: u32, p: &mut CycleParams, diags: &mut Vec<
         i += 1;
     }
     positional
+}
+
+/// CATIA's (ISO 4343's) positional form, `CYCLE/DRILL,depth,[unit],feed,clearance[,retract]`,
+/// where an empty field (a continuation line that starts with `,`) is the feed unit left out:
+/// read by position, not by the CAMWorks rule, which took the feed for the clearance. Only a
+/// record of numbers, one empty field or unit word second, is this form.
+fn iso_positional(args: &[Arg], p: &mut CycleParams) -> bool {
+    let rest = args.get(1..).unwrap_or_default();
+    let unit = rest.get(1).map(Arg::word);
+    let is_unit = |w: &str| matches!(w, "" | "MMPM" | "IPM" | "MMPR" | "IPR");
+    let v: Vec<Option<f64>> = rest.iter().map(|a| num(a.text)).collect();
+    let empty_field = rest.iter().any(|a| a.text.trim().is_empty());
+    if !empty_field || !(4..=5).contains(&rest.len()) || !unit.as_deref().is_some_and(is_unit) {
+        return false;
+    }
+    let Some(numbers) = [v[0], v[2], v[3]].into_iter().collect::<Option<Vec<f64>>>() else {
+        return false;
+    };
+    let retract = v.get(4).copied();
+    if retract.is_some_and(|r| r.is_none()) {
+        return false;
+    }
+    let (f_unit, units) = match unit.as_deref() {
+        Some("MMPR") => (FeedUnit::PerRev, Some(Units::Mm)),
+        Some("IPR") => (FeedUnit::PerRev, Some(Units::Inch)),
+        Some("MMPM") => (FeedUnit::PerMinute, Some(Units::Mm)),
+        Some("IPM") => (FeedUnit::PerMinute, Some(Units::Inch)),
+        _ => (FeedUnit::PerMinute, None),
+    };
+    (p.depth, p.feed, p.rapid_to) = (numbers[0], Some((numbers[1], f_unit, units)), numbers[2]);
+    p.retract_to = retract.flatten();
+    true
 }
 
 /// CAMWorks: DRILL,G98,depth,PECKING,a,b,MMPM,feed,clear,retract — positional around keywords:

@@ -5,6 +5,7 @@
 //! naming line, column and what was expected, and reading goes on.
 
 mod cycle;
+pub mod drive;
 mod fast;
 mod flow;
 mod foreign;
@@ -21,6 +22,9 @@ pub use record::{CoolantCmd, CycleKind, CycleParams, Dwell, FeedUnit, Record, Sp
 
 use crate::diag::{Code, Diagnostic, Severity};
 use std::io::BufRead;
+
+/// Distinct repeated diagnostics counted (`Reader::repeats`); past these, each is told as it comes.
+const MAX_REPEATS: usize = 1024;
 
 /// Longest statement (after joining `$` continuations) kept; longer ones are reported and skipped.
 pub const MAX_STATEMENT: usize = 64 * 1024;
@@ -61,6 +65,15 @@ pub struct Reader<R> {
     consumed: u64,
     /// Unknown records that read as NC: what the input is when it is no CL.
     nc: NcSeen,
+    /// Statements read (records, bad records, unknown ones).
+    statements: u64,
+    /// The line of the program's `END`/`FINI`: text after it that is no record is no part of
+    /// the program (CATIA's demo ends in a stray line of letters).
+    end: Option<u32>,
+    /// A word told again and again (an unknown record, a word not acted on: 72 to 1 559 lines of
+    /// one in a file) is told once, at its first line, and its count at the end: by message,
+    /// its code, first line and count.
+    repeats: std::collections::HashMap<String, (Code, u32, u64)>,
 }
 
 impl<R: BufRead> Reader<R> {
@@ -78,6 +91,9 @@ impl<R: BufRead> Reader<R> {
             started: false,
             consumed: 0,
             nc: NcSeen::default(),
+            statements: 0,
+            end: None,
+            repeats: Default::default(),
         }
     }
 
@@ -87,6 +103,11 @@ impl<R: BufRead> Reader<R> {
 
     pub fn bytes_read(&self) -> u64 {
         self.consumed
+    }
+
+    /// Statements read so far.
+    pub fn statements(&self) -> u64 {
+        self.statements
     }
 
     /// The unknown records so far that read as NC.
@@ -150,6 +171,7 @@ impl<R: BufRead> Reader<R> {
                 if !self.pending.is_empty() {
                     self.flush();
                 }
+                self.tally();
                 continue;
             }
             self.line_no += 1;
@@ -254,6 +276,7 @@ impl<R: BufRead> Reader<R> {
         self.input.consume(end + 1);
         self.consumed += (end + 1) as u64;
         self.line_no += 1;
+        self.statements += 1;
         Ok(Some(Statement {
             line: self.line_no,
             record,
@@ -315,16 +338,58 @@ impl<R: BufRead> Reader<R> {
             )));
         } else {
             let mut diags = Vec::new();
+            self.statements += 1;
             let rec = parse_statement(&self.pending, line, &mut diags);
             if rec.is_none() && diags.iter().any(|d| d.code == Code::UnknownRecord) {
                 self.nc.note(&self.pending, line);
             }
-            self.queue.extend(diags.into_iter().map(Event::Diagnostic));
+            if matches!(rec, Some(Record::End)) {
+                self.end.get_or_insert(line);
+            }
+            for mut d in diags {
+                if let (Some(end), Code::UnknownRecord) = (self.end, d.code) {
+                    d.code = Code::IgnoredRecord;
+                    d.severity = Severity::Info;
+                    d.message = format!("{} (after the program's END at line {end}: no part of the program)", d.message);
+                }
+                if self.repeated(&d) {
+                    continue;
+                }
+                self.queue.push_back(Event::Diagnostic(d));
+            }
             if let Some(record) = rec {
                 self.queue.push_back(Event::Statement(Statement { line, record }));
             }
         }
         self.pending.clear();
+    }
+}
+
+impl<R: BufRead> Reader<R> {
+    /// Whether `d` repeats a warning or info about a word already told (then it is counted).
+    /// Errors are each told: each one is something missing from the program, at its place.
+    fn repeated(&mut self, d: &Diagnostic) -> bool {
+        if !matches!(d.code, Code::UnknownRecord | Code::IgnoredRecord) || d.severity == Severity::Error {
+            return false;
+        }
+        if let Some(r) = self.repeats.get_mut(&d.message) {
+            r.2 += 1;
+            return true;
+        }
+        if self.repeats.len() < MAX_REPEATS {
+            self.repeats.insert(d.message.clone(), (d.code, d.line.unwrap_or(0), 1));
+        }
+        false
+    }
+
+    /// At the end: how many times each word told once came, where it came more than once.
+    fn tally(&mut self) {
+        let mut told: Vec<_> = self.repeats.drain().filter(|(_, r)| r.2 > 1).collect();
+        told.sort_by_key(|(_, r)| r.1);
+        for (message, (code, first, n)) in told {
+            let msg = format!("{message} ({n} records in all, the first at line {first}: told there only)");
+            self.queue.push_back(Event::Diagnostic(Diagnostic::new(code, Severity::Info, Some(first), msg)));
+        }
     }
 }
 

@@ -148,8 +148,11 @@ pub enum Record {
     PartNo(String),
     /// Text to pass through as an NC comment (PPRINT, INSERT).
     Comment(String),
-    /// `STOP` (a program stop) or `OPSTOP` (`optional`: the operator's optional stop).
-    Stop { optional: bool },
+    /// `STOP` (a program stop) or `OPSTOP` (`optional`: the operator's optional stop), with
+    /// the operator's instruction where the record gives one (`STOP/(INSTALL TEST STRIP)`).
+    Stop { optional: bool, text: String },
+    /// `MODE/TURN` or `MODE/LATHE` (`turning`), `MODE/MILL`: what the program's moves are.
+    Mode { turning: bool },
     /// `AUXFUN/n` (`M`) or `PREFUN/n` (`G`): a machine function the CAM passes to the control.
     Function { letter: char, code: String },
     /// `OPSKIP/ON|OFF`: the blocks between are skipped with the operator's block delete.
@@ -165,6 +168,12 @@ pub enum Record {
     /// words (Creo's `CUTCOM_GEOMETRY_TYPE` comment).
     PathMeaning { centre: bool, said: String },
     End,
+    /// A motion statement with its geometry (`TLON,GOFWD/(CIRCLE/…),ON,(LINE/…)`).
+    Drive(super::drive::Drive),
+    /// `GOHOME[/x,y,z[,i,j,k]]`: at rapid to the point, or (none given) to the machine's home.
+    GoHome { p: Option<[f64; 3]>, axis: Option<[f64; 3]> },
+    /// `INDIRV/i,j,k` (`point`: `INDIRP/x,y,z`, towards it): the next drive's direction.
+    InDir { v: [f64; 3], point: bool },
     /// Recognised and not acted on: informational, or told where it stands
     /// ([`super::vocabulary`]).
     Ignored(String),
@@ -234,6 +243,11 @@ fn parse_general(stmt: &str, line: u32, diags: &mut Vec<Diagnostic>) -> Option<R
     let st = Stmt::new(stmt, line);
     match st.major.as_str() {
         "GOTO" | "GODLTA" | "FROM" => motion(&st, diags),
+        "GOHOME" if st.args.is_empty() => Some(Record::GoHome { p: None, axis: None }),
+        "GOHOME" => match motion(&st, diags)? {
+            Record::From { p, axis } => Some(Record::GoHome { p: Some(p), axis }),
+            _ => None,
+        },
         "TLAXIS" => tool_axis(&st, diags),
         "ROTABL" => rotary_table(&st, diags),
         "RAPID" => Some(Record::Rapid),
@@ -253,7 +267,11 @@ fn parse_general(stmt: &str, line: u32, diags: &mut Vec<Diagnostic>) -> Option<R
             Some("OFF")
         ))),
         "DELAY" | "DWELL" => delay(&st, diags),
-        _ => informational(&st, diags),
+        "INDIRV" | "INDIRP" => super::drive::indir(&st, diags),
+        m => match super::drive::drive_major(m) {
+            Some((side, go, word)) => super::drive::drive(&st, side, go, word, diags),
+            None => informational(&st, diags),
+        },
     }
 }
 
@@ -264,7 +282,7 @@ pub(super) struct Stmt<'a> {
     pub(super) lead: u32,
     /// The major word upper-cased, inner runs of blanks made one (`TOOL PATH`).
     pub(super) major: String,
-    rest: &'a str,
+    pub(super) rest: &'a str,
     /// Column (1-based) where `rest` begins: where a record with no usable argument is blamed.
     pub(super) rest_col: u32,
     pub(super) args: Vec<Arg<'a>>,
@@ -505,7 +523,7 @@ fn load_tool(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
                 i += 1;
             }
             "ADJUST" | "OSETNO" => {
-                adjust = Some(length_offset(st, i, &w, diags)?);
+                adjust = length_offset(st, i, &w, diags);
                 i += 1;
             }
             _ => match num(args[i].text) {
@@ -532,19 +550,26 @@ fn load_tool(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
     })
 }
 
-/// The length offset register after `ADJUST` or `OSETNO` (the word at `i`): the one the CAM
-/// system named, since another register's length is a crash (or a cut in the air), never a
-/// default.
+/// The length offset register after `ADJUST` or `OSETNO` (the word at `i`), the one the CAM
+/// system named. One that cannot be written is told and `None`: the change is still written,
+/// with the tool's own register, since a dropped change leaves the last tool cutting at the
+/// new one's length (NX's `LOAD/TOOL,3,ADJUST,0`: T2 ran on, 25.4 mm too deep). `ADJUST,0`
+/// names no register (NX writes it for "none"): a warning; anything else unreadable an error.
 fn length_offset(st: &Stmt, i: usize, w: &str, diags: &mut Vec<Diagnostic>) -> Option<u32> {
     let (text, col) = st.args.get(i + 1).map_or(("", st.args[i].col), |a| (a.text.trim(), a.col));
     match num(text) {
         Some(x) if (1.0..1e6).contains(&x) && x.fract() == 0.0 => Some(x as u32),
-        _ => {
+        x => {
+            let (sev, why) = if x == Some(0.0) {
+                (Severity::Warning, "names no register")
+            } else {
+                (Severity::Error, "is not a length offset number from 1 to 999999")
+            };
             let msg = format!(
-                "{}: {w} {text:?} is not a length offset number from 1 to 999999: no tool change written",
+                "{}: {w} {text:?} {why}: the tool change is written with the tool's own length offset",
                 st.major
             );
-            st.bad(diags, col, msg);
+            diags.push(Diagnostic::new(Code::BadRecord, sev, Some(st.line), msg).at(col));
             None
         }
     }
@@ -711,8 +736,11 @@ fn informational(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
         "INFORMATION" | "DATE" | "CURRENT" | "NODE" | "TOOL" if is_nx_listing(st.s) => Some(Record::Ignored("NX LISTING".into())),
         "PARTNO" => Some(Record::PartNo(st.rest.trim().to_string())),
         "PPRINT" | "INSERT" => Some(Record::Comment(st.rest.trim().to_string())),
-        "STOP" => Some(Record::Stop { optional: false }),
-        "OPSTOP" => Some(Record::Stop { optional: true }),
+        "STOP" | "OPSTOP" => Some(Record::Stop {
+            optional: st.major == "OPSTOP",
+            text: stop_text(st.rest),
+        }),
+        "MODE" => mode(st),
         "FINI" | "END" => Some(Record::End),
         "CUTCOM" => super::flow::cutcom(st, diags),
         "OPSKIP" => super::flow::block_skip(st, diags),
@@ -735,6 +763,24 @@ fn informational(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
             diags.push(Diagnostic::new(Code::UnknownRecord, Severity::Warning, Some(st.line), msg).at(st.lead + 1));
             None
         }
+    }
+}
+
+/// An operator's instruction on a stop: CATIA writes it in parentheses, which an NC comment
+/// cannot hold.
+fn stop_text(rest: &str) -> String {
+    let t = rest.trim();
+    let t = t.strip_prefix('(').and_then(|t| t.strip_suffix(')')).unwrap_or(t);
+    t.trim().to_string()
+}
+
+/// `MODE/TURN|LATHE` says the moves are a lathe's, `MODE/MILL` a mill's; other modes (a
+/// listing's) are informational.
+fn mode(st: &Stmt) -> Option<Record> {
+    match st.args.first().map(Arg::word).as_deref() {
+        Some("TURN" | "LATHE") => Some(Record::Mode { turning: true }),
+        Some("MILL") => Some(Record::Mode { turning: false }),
+        _ => Some(Record::Ignored("MODE".into())),
     }
 }
 

@@ -10,8 +10,11 @@ use crate::kinematics::{Pose, Units, Vec3};
 use nalgebra::Matrix3;
 use std::collections::VecDeque;
 use std::io::BufRead;
+use start::{Start, look_ahead};
 
+mod drive;
 mod frames;
+mod start;
 mod moves;
 mod spindle;
 
@@ -148,6 +151,11 @@ pub enum ProgEvent {
         line: u32,
     },
     Operation(String),
+    /// `GOHOME` without a point: up to the top of Z travel (the machine's home as far as a
+    /// profile says one), the next move positioning from there.
+    Home {
+        line: u32,
+    },
     Diag(Diagnostic),
     End,
 }
@@ -177,9 +185,28 @@ pub struct Source<R> {
     /// tool, whose surface speed is about the part's diameter).
     diameter_mm: Option<f64>,
     turning: bool,
+    /// The record that made the moves a lathe's (line, what it is), while it holds: kinepost
+    /// posts milling, so those moves are told and not written.
+    lathe: Option<(u32, &'static str)>,
+    /// `lathe` was set since the last motion or tool change: the tool change it describes is
+    /// still to come.
+    lathe_fresh: bool,
+    /// The first move under `lathe` was told.
+    lathe_told: bool,
+    /// A feed was programmed somewhere: without one, every move was a rapid (`no_feed`).
+    fed: bool,
+    /// The first move written at rapid for want of a feed.
+    first_unfed: Option<u32>,
+    /// A `UNITS` record is in force: a feed unit that contradicts it is told (once).
+    units_declared: bool,
+    feed_unit_told: bool,
     circle: Option<([f64; 3], [f64; 3], Option<f64>)>,
     circle_cw: bool,
     circle_turns: u32,
+    /// The direction of the last move (CL frame), and the one `INDIRV` gives the next drive
+    /// statement: which way it goes.
+    last_dir: Option<Vec3>,
+    indir: Option<Vec3>,
     /// `MOVARC`'s sweep (radians): which way round the arc goes.
     circle_sweep: Option<f64>,
     /// The clearance plane (`CLEARP`) in the part frame, profile units: unit normal, offset.
@@ -221,88 +248,6 @@ pub enum Error {
     NotCl(Diagnostic),
 }
 
-/// What the look-ahead found: the units the CL starts in, and whether it is CL at all.
-struct Start {
-    ahead: VecDeque<Event>,
-    units: Units,
-    source: &'static str,
-}
-
-/// Reads ahead to the units the CL starts in: a UNITS record before the first motion decides
-/// them; one after motion applies from its line only (the same program wherever it sits), so
-/// the start is the caller's `cl_units`, else the first unit-bearing FEDRAT before it, else the
-/// profile's, assumed. Input with no CL record in the look-ahead is refused here, before
-/// anything is written.
-fn look_ahead<R: BufRead>(reader: &mut Reader<R>, profile_units: Units, cl_units: Option<Units>) -> Result<Start, Error> {
-    let mut ahead = VecDeque::new();
-    let (mut units_rec, mut units_seen, mut moved, mut cl) = (None, false, false, false);
-    let mut feed_hint: Option<Units> = None;
-    let mut first_diag: Option<Diagnostic> = None;
-    while ahead.len() < UNITS_LOOKAHEAD {
-        let decided = units_seen || moved && (cl_units.is_some() || feed_hint.is_some());
-        if cl && decided || !cl && reader.nc_seen().blocks >= NC_VERDICT {
-            break;
-        }
-        let Some(ev) = reader.next_event()? else { break };
-        match &ev {
-            Event::Statement(s) => {
-                // `END` alone is no evidence: Heidenhain's `END PGM` reads as one.
-                cl |= !matches!(s.record, Record::End);
-                match &s.record {
-                    Record::Units(u) if !units_seen => {
-                        units_seen = true;
-                        units_rec = (!moved).then_some(*u);
-                    }
-                    Record::Feedrate { units: Some(u), .. } if !units_seen && feed_hint.is_none() => feed_hint = Some(*u),
-                    Record::Goto { .. } | Record::GoDelta { .. } | Record::From { .. } => moved = true,
-                    _ => {}
-                }
-            }
-            // A record the reader knew but could not read is CL all the same.
-            Event::Diagnostic(d) => {
-                cl |= d.code == Code::BadRecord;
-                first_diag.get_or_insert_with(|| d.clone());
-            }
-        }
-        ahead.push_back(ev);
-    }
-    if !cl {
-        return Err(Error::NotCl(not_cl(reader, first_diag, ahead.len())));
-    }
-    let (units, source) = units_rec
-        .map(|u| (u, "UNITS record"))
-        .or(cl_units.map(|u| (u, "option")))
-        .or(feed_hint.map(|u| (u, "FEDRAT unit")))
-        .unwrap_or((profile_units, "assumed: the profile's"));
-    Ok(Start { ahead, units, source })
-}
-
-/// Why input with no CL record is refused: what it looks like, where.
-fn not_cl<R: BufRead>(reader: &Reader<R>, first: Option<Diagnostic>, read: usize) -> Diagnostic {
-    let what = "not CL data (APT/CLSF): post the CL file the CAM system wrote, not an NC program";
-    let (line, message) = match (&reader.nc_seen().first, first) {
-        (Some((kind, line, text)), _) => (
-            Some(*line),
-            format!(
-                "this looks like {} ({} at line {line}), {what}",
-                kind.name(),
-                crate::text::quote(text)
-            ),
-        ),
-        (None, Some(d)) => {
-            let within = if read >= UNITS_LOOKAHEAD {
-                format!(" in its first {read} statements")
-            } else {
-                String::new()
-            };
-            let at = d.line.map(|l| format!("line {l}: ")).unwrap_or_default();
-            (d.line, format!("nothing in the input is CL data{within} ({at}{})", d.message))
-        }
-        (None, None) => (None, "the input holds no CL data: it is empty (or comments only)".into()),
-    };
-    Diagnostic::new(Code::NotCl, Severity::Error, line, message)
-}
-
 impl<R: BufRead> Source<R> {
     /// `cl_units`: the caller's statement of the CL units where the file makes none before its
     /// first motion.
@@ -336,10 +281,19 @@ impl<R: BufRead> Source<R> {
             feed: None,
             diameter_mm: None,
             turning: false,
+            lathe: None,
+            lathe_fresh: false,
+            lathe_told: false,
+            fed: false,
+            first_unfed: None,
+            units_declared: source == "UNITS record",
+            feed_unit_told: false,
             circle: None,
             circle_cw: false,
             circle_turns: 1,
             circle_sweep: None,
+            last_dir: None,
+            indir: None,
             clearance: None,
             cycle: None,
             table: [0.0; 3],
@@ -431,6 +385,7 @@ impl<R: BufRead> Source<R> {
                     Some(e) => e,
                     None => {
                         self.ended = true;
+                        self.at_end();
                         continue;
                     }
                 },
@@ -509,6 +464,34 @@ impl<R: BufRead> Source<R> {
         }
     }
 
+    /// The end of the CL: what only the whole program shows.
+    fn at_end(&mut self) {
+        if let (false, Some(line)) = (self.fed, self.first_unfed) {
+            // One rapid approach is a program's right; a program with no feed at all cuts at
+            // rapid wherever it touches the part.
+            self.diag(
+                Code::NoFeed,
+                Severity::Error,
+                line,
+                format!("no FEDRAT in the whole program: every move was written at rapid (the first that may cut at line {line}); a cut at rapid breaks the tool"),
+            );
+        }
+    }
+
+    /// `MODE/TURN`, a lathe tool (`turning`), or their milling counterparts: the moves after a
+    /// lathe's are told once and not written, up to a milling tool or mode.
+    fn lathe(&mut self, turning: bool, line: u32, what: &'static str) {
+        if !turning {
+            self.lathe = None;
+            return;
+        }
+        if self.lathe.is_none() {
+            self.lathe = Some((line, what));
+            self.lathe_told = false;
+        }
+        self.lathe_fresh = true;
+    }
+
     /// UNITS: from its line on. After motion a change is told: the points before it keep the
     /// units they were read in.
     fn units(&mut self, u: Units, line: u32) {
@@ -523,11 +506,27 @@ impl<R: BufRead> Source<R> {
         }
         self.cl_units = u;
         self.scale = u.factor_to(self.profile_units);
+        self.units_declared = true;
     }
 
     /// FEDRAT: in profile units, within the F word's range.
     fn feedrate(&mut self, value: f64, unit: FeedUnit, units: Option<Units>, line: u32) {
-        let f = units.map_or(self.scale, |u| u.factor_to(self.profile_units));
+        self.fed = true;
+        let mut f = units.map_or(self.scale, |u| u.factor_to(self.profile_units));
+        if let Some(u) = units.filter(|u| self.units_declared && *u != self.cl_units) {
+            // Fusion writes `UNITS/INCHES` with `FEDRAT/35.,MMPM`: one of the two is wrong, and
+            // the file does not say which. The slower reading is the one that breaks nothing.
+            f = f.min(self.scale);
+            if !std::mem::replace(&mut self.feed_unit_told, true) {
+                let (said, declared) = (u.as_str(), self.cl_units.as_str());
+                let taken = if f == self.scale { declared } else { said };
+                let msg = format!(
+                    "FEDRAT in {said} per {} where UNITS says {declared}: {value} taken in {taken}, the slower reading (and so every such feed of the program)",
+                    if unit == FeedUnit::PerRev { "revolution" } else { "minute" }
+                );
+                self.diag(Code::UnitsAssumed, Severity::Warning, line, msg);
+            }
+        }
         let mut v = value * f;
         // Beyond the F word's range (a typo, a unit mix-up): an error where the CL says
         // it, and the control's largest F, the slower side (it overflowed to F0).
@@ -561,6 +560,16 @@ impl<R: BufRead> Source<R> {
                 self.rapid_next |= from;
                 return self.motion(line, Vec3::from(p));
             }
+            // A point: a rapid there, as any rapid is written (rotaries turned at the top of
+            // Z). None: the machine's home.
+            Record::GoHome { p: Some(p), axis } => {
+                if !self.motion_axis(axis, line) {
+                    return None;
+                }
+                self.rapid_next = true;
+                return self.motion(line, Vec3::from(p));
+            }
+            Record::GoHome { p: None, .. } => self.out.push_back(Item::Event(ProgEvent::Home { line })),
             Record::GoDelta { d, axis } => {
                 if !self.motion_axis(axis, line) {
                     return None;
@@ -574,6 +583,11 @@ impl<R: BufRead> Source<R> {
             Record::Spindle(c) => self.spindle(c, line),
             Record::Coolant(c) => self.out.push_back(Item::Event(ProgEvent::Coolant(c))),
             Record::LoadTool { number, length, adjust } => {
+                // A tool change after a turning operation's moves is a new tool: a lathe's only
+                // if its own records say so (they come before the LOADTL, as CATIA writes them).
+                if !std::mem::take(&mut self.lathe_fresh) {
+                    self.lathe = None;
+                }
                 self.tool_length(length, line);
                 self.out.push_back(Item::Event(ProgEvent::Tool { number, adjust, line }));
             }
@@ -582,20 +596,7 @@ impl<R: BufRead> Source<R> {
                 corner_radius,
                 length,
                 turning,
-            } => {
-                if let Some(t) = turning {
-                    self.turning = t;
-                }
-                if let Some(d) = diameter.filter(|d| d.is_finite() && *d > 0.0) {
-                    self.diameter_mm = Some(d * self.cl_units.factor_to(Units::Mm));
-                    let r = corner_radius.filter(|r| r.is_finite() && *r >= 0.0 && *r <= d / 2.0).unwrap_or(0.0);
-                    self.out.push_back(Item::Event(ProgEvent::Cutter {
-                        diameter: d * self.scale,
-                        corner_radius: r * self.scale,
-                    }));
-                }
-                self.tool_length(length, line);
-            }
+            } => self.tool_data(diameter, corner_radius, length, turning, line),
             Record::Multax(on) => {
                 if !on {
                     self.axis = self.to_program(Vec3::z());
@@ -607,7 +608,14 @@ impl<R: BufRead> Source<R> {
                 self.frame_pending |= self.set_axis(a, line) && self.table != [0.0; 3];
             }
             Record::Delay(dwell) => self.out.push_back(Item::Event(ProgEvent::Dwell { dwell, line })),
-            Record::Stop { optional } => self.out.push_back(Item::Event(ProgEvent::Stop { optional, line })),
+            Record::Stop { optional, text } => {
+                // The operator's instruction is the point of the stop: kept, as PPRINT is.
+                if !text.is_empty() {
+                    self.out.push_back(Item::Event(ProgEvent::Comment(text)));
+                }
+                self.out.push_back(Item::Event(ProgEvent::Stop { optional, line }))
+            }
+            Record::Mode { turning } => self.lathe(turning, line, "MODE/TURN"),
             Record::Function { letter, code } => {
                 self.out.push_back(Item::Event(ProgEvent::Function { letter, code, line }))
             }
@@ -674,9 +682,29 @@ impl<R: BufRead> Source<R> {
                 self.end_line.get_or_insert(line);
                 self.out.push_back(Item::Event(ProgEvent::End));
             }
+            Record::Drive(d) => return self.drive(line, d),
+            Record::InDir { v, point } => self.indir(v, point, line),
             Record::Ignored(_) => {}
         }
         None
+    }
+
+    /// `TLDATA`, `CUTTER`, `TOOLNO`, `TURRET`: the cutter (its diameter turns a surface speed
+    /// into RPM and shapes the collision check), its length, and whether it is a lathe's.
+    fn tool_data(&mut self, diameter: Option<f64>, corner_radius: Option<f64>, length: Option<f64>, turning: Option<bool>, line: u32) {
+        if let Some(t) = turning {
+            self.turning = t;
+            self.lathe(t, line, "a lathe tool");
+        }
+        if let Some(d) = diameter.filter(|d| d.is_finite() && *d > 0.0) {
+            self.diameter_mm = Some(d * self.cl_units.factor_to(Units::Mm));
+            let r = corner_radius.filter(|r| r.is_finite() && *r >= 0.0 && *r <= d / 2.0).unwrap_or(0.0);
+            self.out.push_back(Item::Event(ProgEvent::Cutter {
+                diameter: d * self.scale,
+                corner_radius: r * self.scale,
+            }));
+        }
+        self.tool_length(length, line);
     }
 
     /// What a motion record does before its point: the index frame resolved if it changed, and
@@ -723,6 +751,19 @@ impl<R: BufRead> Source<R> {
     /// A move to `p` (CL units): a drilling cycle's moves are queued here; a plain move (with the
     /// arc it ends, if any) comes back.
     fn motion(&mut self, line: u32, p: Vec3) -> Option<MotionPt> {
+        self.lathe_fresh = false;
+        if let Some((at, what)) = self.lathe {
+            self.rapid_next = false;
+            self.circle = None;
+            if std::mem::replace(&mut self.lathe_told, true) {
+                return None;
+            }
+            let msg = format!(
+                "a turning operation ({what} at line {at}): kinepost posts milling, and a lathe's moves on a mill are a crash; its moves (from line {line}) are not written"
+            );
+            self.diag(Code::Turning, Severity::Error, at, msg);
+            return None;
+        }
         let asked = std::mem::take(&mut self.rapid_next);
         // The first move positions at rapid anyway; a later one with no feed yet is most
         // likely an approach, but if the CAM system meant a cut, G0 through stock is a crash.
@@ -736,6 +777,9 @@ impl<R: BufRead> Source<R> {
             );
         }
         let rapid = asked || self.feed.is_none();
+        if !asked && self.feed.is_none() && self.cycle.is_none() && self.tip.is_some() {
+            self.first_unfed.get_or_insert(line);
+        }
         if let Some(c) = self.cycle {
             self.hole(line, p, c);
             self.tip = Some(p);
@@ -749,6 +793,9 @@ impl<R: BufRead> Source<R> {
         };
         let mut pt = self.motion_pt(line, p, rapid, false, None);
         pt.arc = arc.map(Box::new);
+        if let Some(d) = self.tip.and_then(|t| (p - t).try_normalize(1e-12)) {
+            self.last_dir = Some(d);
+        }
         self.tip = Some(p);
         Some(pt)
     }

@@ -227,7 +227,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             }
             _ => {}
         }
-        if self.at.is_none() && !self.m.rotaries.is_empty() {
+        if self.at.is_none() {
             self.approach(target, &pt, diags)?;
             self.positioned = pt.rapid;
             return Ok(());

@@ -177,6 +177,11 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             ProgEvent::CutterComp { comp, line, turns } => self.cutter_comp(comp, line, turns),
             ProgEvent::PathMeaning { centre, said, line } => self.path_meaning(centre, said, line),
             ProgEvent::Diag(dg) => self.note(dg)?,
+            ProgEvent::Home { .. } => {
+                // Where a tool change leaves the machine: the next move positions from there.
+                self.retract_up()?;
+                self.tool_changed |= self.at.is_some();
+            }
             ProgEvent::End => {}
         }
         Ok(())
