@@ -110,4 +110,3 @@ pub fn plain_floor(path: &std::path::Path, out: impl Write) -> u64 {
     }
     n
 }
-

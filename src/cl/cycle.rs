@@ -13,8 +13,12 @@ pub(super) fn parse_cycle(args: &[Arg], line: u32, rest_col: u32, diags: &mut Ve
         "OFF" => return Some(Record::CycleOff),
         "INIT" | "ON" | "" => return Some(Record::Ignored("CYCLE".into())),
         "DRILL" | "FACE" | "CSINK" => CycleKind::Drill,
-        "DEEP" | "DEEP2" | "BRKCHP" | "PECK" => CycleKind::Deep,
-        "TAP" | "RGDTAP" => CycleKind::Tap,
+        "DEEP" | "DEEP2" | "PECK" => CycleKind::Deep,
+        "BRKCHP" => CycleKind::BreakChip,
+        "TAP" | "RGDTAP" => CycleKind::Tap {
+            rigid: first == "RGDTAP",
+            left: false,
+        },
         "BORE" | "REAM" => CycleKind::Bore,
         _ => CycleKind::Other,
     };
@@ -26,6 +30,7 @@ pub(super) fn parse_cycle(args: &[Arg], line: u32, rest_col: u32, diags: &mut Ve
         feed: None,
         peck: None,
         dwell: None,
+        shift: None,
     };
     let positional = cycle_keywords(args, line, &mut p, diags);
     cycle_positional(&mut p, &positional);
@@ -47,6 +52,20 @@ pub(super) fn parse_cycle(args: &[Arg], line: u32, rest_col: u32, diags: &mut Ve
     Some(Record::Cycle(p))
 }
 
+/// A cycle's kind changed by a word after its first: `DRILL,DEEP`, `BORE,DRAG`, `TAP,LEFT`.
+fn with_word(kind: CycleKind, word: &str) -> CycleKind {
+    match (kind, word) {
+        (CycleKind::Drill, "DEEP") => CycleKind::Deep,
+        (CycleKind::Drill | CycleKind::Deep, "BRKCHP") => CycleKind::BreakChip,
+        (CycleKind::Bore, "DRAG") => CycleKind::BoreStop,
+        (CycleKind::Bore, "NODRAG" | "ORIENT") => CycleKind::BoreOrient,
+        (CycleKind::Bore, "BACK") => CycleKind::BoreBack,
+        (CycleKind::Tap { rigid, .. }, "LEFT" | "CCLW") => CycleKind::Tap { rigid, left: true },
+        (CycleKind::Tap { left, .. }, "RIGID") => CycleKind::Tap { rigid: true, left },
+        (k, _) => k,
+    }
+}
+
 /// Sets the values a keyword names (the number after it) and returns the numbers no keyword
 /// names, in order.
 fn cycle_keywords(args: &[Arg], line: u32, p: &mut CycleParams, diags: &mut Vec<Diagnostic>) -> Vec<f64> {
@@ -65,6 +84,11 @@ fn cycle_keywords(args: &[Arg], line: u32, p: &mut CycleParams, diags: &mut Vec<
             "RTRCTO" => p.retract_to = next(),
             "1STPECK" | "STEP" => p.peck = next(),
             "DWELL" => p.dwell = next(),
+            "SHIFT" => p.shift = next(),
+            // The words that say which cycle (NX: `DRILL,DEEP`, `BORE,DRAG`, `TAP,LEFT` …).
+            "DEEP" | "BRKCHP" | "DRAG" | "NODRAG" | "ORIENT" | "BACK" | "LEFT" | "CCLW" | "RIGID" => {
+                p.kind = with_word(p.kind, &k);
+            }
             "MMPM" | "IPM" | "MMPR" | "IPR" => {
                 let unit = if k.ends_with("PR") {
                     FeedUnit::PerRev

@@ -46,13 +46,58 @@ pub enum CoolantCmd {
     Off,
 }
 
+/// What a hole cycle does, as a control runs it. A tap and a bore that stops or orients the
+/// spindle cannot be written as moves (a rapid out of a tap snaps it, a turning bar drawn out of
+/// a bore marks the wall): they are only ever the control's own cycles.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum CycleKind {
+    /// `DRILL`, `FACE`, `CSINK` (a spot drill with a `DWELL`).
     Drill,
+    /// `DEEP`, `DEEP2`, `PECK`: pecks with a full retract.
     Deep,
-    Tap,
+    /// `BRKCHP`: pecks with a short retract that breaks the chip.
+    BreakChip,
+    /// `TAP` (a floating holder) and `RGDTAP` (`rigid`, the spindle synchronised with Z);
+    /// `left`: a left-hand thread (`LEFT`/`CCLW` in the record, or the spindle turning CCW).
+    Tap {
+        rigid: bool,
+        left: bool,
+    },
+    /// `BORE`, `REAM`: feed in, feed out (a `DWELL` at the bottom where given).
     Bore,
+    /// `BORE,DRAG`: feed in, the spindle stopped at the bottom, rapid out.
+    BoreStop,
+    /// `BORE,NODRAG` / `ORIENT`: fine bore, the spindle oriented at the bottom and the bar
+    /// shifted off the wall (`SHIFT`) before it rapids out.
+    BoreOrient,
+    /// `BORE,BACK`: back boring, from below the part upward.
+    BoreBack,
     Other,
+}
+
+impl CycleKind {
+    /// Only ever the control's cycle: never written as moves.
+    pub fn canned_only(self) -> bool {
+        matches!(
+            self,
+            CycleKind::Tap { .. } | CycleKind::BoreStop | CycleKind::BoreOrient | CycleKind::BoreBack
+        )
+    }
+
+    /// What a person calls it, for messages.
+    pub fn name(self) -> &'static str {
+        match self {
+            CycleKind::Drill | CycleKind::Other => "drilling",
+            CycleKind::Deep => "deep drilling",
+            CycleKind::BreakChip => "chip-breaking drilling",
+            CycleKind::Tap { rigid: true, .. } => "rigid tapping",
+            CycleKind::Tap { .. } => "tapping",
+            CycleKind::Bore => "boring",
+            CycleKind::BoreStop => "boring with a spindle stop",
+            CycleKind::BoreOrient => "fine boring",
+            CycleKind::BoreBack => "back boring",
+        }
+    }
 }
 
 /// A drilling cycle: every GOTO while it is on is a hole at that point.
@@ -68,6 +113,8 @@ pub struct CycleParams {
     pub feed: Option<(f64, FeedUnit, Option<Units>)>,
     pub peck: Option<f64>,
     pub dwell: Option<f64>,
+    /// A fine bore's shift off the wall at the bottom (`SHIFT`).
+    pub shift: Option<f64>,
 }
 
 #[derive(Clone, Debug, PartialEq)]
@@ -149,27 +196,38 @@ pub enum Record {
     /// Text to pass through as an NC comment (PPRINT, INSERT).
     Comment(String),
     /// `STOP` (a program stop) or `OPSTOP` (`optional`: the operator's optional stop).
-    Stop { optional: bool },
+    Stop {
+        optional: bool,
+    },
     /// `AUXFUN/n` (`M`) or `PREFUN/n` (`G`): a machine function the CAM passes to the control.
-    Function { letter: char, code: String },
+    Function {
+        letter: char,
+        code: String,
+    },
     /// `OPSKIP/ON|OFF`: the blocks between are skipped with the operator's block delete.
     BlockSkip(bool),
     /// `SELCTL/n`: tool `n` readied for the next change.
     Preselect(u32),
     /// NX's `MSYS`: the operation's machine coordinate system (origin, X and Y axes, all in
     /// NX's absolute frame; unit and square); the points and axes after it are in it.
-    Mcs { origin: [f64; 3], x: [f64; 3], y: [f64; 3] },
+    Mcs {
+        origin: [f64; 3],
+        x: [f64; 3],
+        y: [f64; 3],
+    },
     /// `CUTCOM`: cutter radius compensation on (a side, a register) or off.
     CutterComp(super::flow::CutterComp),
     /// The CL says whether its path is the tool centre (`centre`) or the contour: `said`, its
     /// words (Creo's `CUTCOM_GEOMETRY_TYPE` comment).
-    PathMeaning { centre: bool, said: String },
+    PathMeaning {
+        centre: bool,
+        said: String,
+    },
     End,
     /// Recognised and not acted on: informational, or told where it stands
     /// ([`super::vocabulary`]).
     Ignored(String),
 }
-
 
 pub(super) struct Arg<'a> {
     pub(super) text: &'a str,
@@ -722,7 +780,9 @@ fn informational(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
         "MSYS" => super::frames::msys(st, diags),
         // SOLIDWORKS CAM's vendor records: tool and path parameters for its own posts.
         m if m.starts_with("CSI_") => Some(Record::Ignored(m.to_string())),
-        m if let Some(w) = super::vocabulary::word(m) && w.treatment != Treatment::Honoured => {
+        m if let Some(w) = super::vocabulary::word(m)
+            && w.treatment != Treatment::Honoured =>
+        {
             if let Treatment::Told(sev, why) = w.treatment {
                 let msg = format!("{m}: {why}");
                 diags.push(Diagnostic::new(Code::IgnoredRecord, sev, Some(st.line), msg).at(st.lead + 1));

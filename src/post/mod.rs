@@ -25,8 +25,8 @@ pub use emit::linearize::{NONLINEAR_SAMPLES, seg_dist};
 pub use policy::{Prefer, Retract, RotaryFeed, Unwind};
 pub use settings::{Budget, MAX_SPINDLE_SPEED, Mode, Options, Settings, parse_triple, threads};
 pub use sink::{AxisStats, AxisWords, BlockInfo, Sink, Summary, TextSink, ToolUse};
-pub use tools::LengthFrom;
 pub use source::{ArcSpec, Hole, HolePart, Item, MotionPt, ProgEvent, Source};
+pub use tools::LengthFrom;
 
 use crate::diag::Diagnostic;
 use crate::kinematics::{Machine, Setup};
@@ -103,7 +103,9 @@ fn run<R: BufRead + Send, S: Sink + ?Sized>(
     }
     let mut direct = Direct { apply, summary: None };
     plan.produce(&mut direct)?;
-    direct.summary.ok_or_else(|| Error::Io(std::io::Error::other("the post ended without its end")))
+    direct
+        .summary
+        .ok_or_else(|| Error::Io(std::io::Error::other("the post ended without its end")))
 }
 
 /// What the reading and planning half asks of the emitting half, in the order a single thread
@@ -215,7 +217,9 @@ impl<R: BufRead> Plan<'_, R> {
             // after the tool change it belongs to is written (the retract is the old tool's).
             let lengths = &mut self.lengths;
             let step = match &item {
-                Item::Event(ProgEvent::ToolLength { length, line }) if o.tool_length.is_none() => lengths.cl_length(*length, *line),
+                Item::Event(ProgEvent::ToolLength { length, line }) if o.tool_length.is_none() => {
+                    lengths.cl_length(*length, *line)
+                }
                 Item::Event(ProgEvent::Tool { number, line, .. }) => lengths.tool(*number, *line),
                 Item::Motion(_) if lengths.waiting() => lengths.motion(),
                 _ => tools::Step::default(),

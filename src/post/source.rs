@@ -40,12 +40,14 @@ pub struct MotionPt {
     pub hole: Option<Box<HolePart>>,
 }
 
-/// The points of one hole, in order: `Start` (canned output only: rapid, above the hole at the
-/// higher of the clearance and retract heights, carrying the cycle), then the R plane, `Top`
-/// (the CL GOTO), the bottom and the retract, those three `Rest`.
+/// The points of one hole, in order: `Start` (canned output, and every tap or stopping bore:
+/// rapid, above the hole at the higher of the clearance and retract heights, carrying the
+/// cycle), then the R plane (`Clear` where it starts a hole written as moves), `Top` (the CL
+/// GOTO), the bottom and the retract, those three `Rest`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum HolePart {
     Start(Hole),
+    Clear,
     Top,
     Rest,
 }
@@ -63,6 +65,8 @@ pub struct Hole {
     pub peck: Option<f64>,
     /// Seconds at the bottom.
     pub dwell: Option<f64>,
+    /// A fine bore's shift off the wall, profile units.
+    pub shift: Option<f64>,
     /// Feed in profile units per minute or per rev (None: no feed, the expansion rapids).
     pub feed: Option<(f64, FeedUnit)>,
 }
@@ -466,7 +470,6 @@ impl<R: BufRead> Source<R> {
         self.out.push_back(Item::Event(ProgEvent::Diag(d)));
     }
 
-
     fn set_axis(&mut self, a: [f64; 3], line: u32) -> bool {
         let v = Vec3::from(a);
         let n = v.norm();
@@ -546,7 +549,6 @@ impl<R: BufRead> Source<R> {
         self.feed = Some((v, unit));
     }
 
-
     /// One record: a plain move comes back (to go after whatever the record queued), everything
     /// else is queued here.
     fn statement(&mut self, line: u32, rec: Record) -> Option<MotionPt> {
@@ -588,7 +590,9 @@ impl<R: BufRead> Source<R> {
                 }
                 if let Some(d) = diameter.filter(|d| d.is_finite() && *d > 0.0) {
                     self.diameter_mm = Some(d * self.cl_units.factor_to(Units::Mm));
-                    let r = corner_radius.filter(|r| r.is_finite() && *r >= 0.0 && *r <= d / 2.0).unwrap_or(0.0);
+                    let r = corner_radius
+                        .filter(|r| r.is_finite() && *r >= 0.0 && *r <= d / 2.0)
+                        .unwrap_or(0.0);
                     self.out.push_back(Item::Event(ProgEvent::Cutter {
                         diameter: d * self.scale,
                         corner_radius: r * self.scale,
@@ -608,9 +612,7 @@ impl<R: BufRead> Source<R> {
             }
             Record::Delay(dwell) => self.out.push_back(Item::Event(ProgEvent::Dwell { dwell, line })),
             Record::Stop { optional } => self.out.push_back(Item::Event(ProgEvent::Stop { optional, line })),
-            Record::Function { letter, code } => {
-                self.out.push_back(Item::Event(ProgEvent::Function { letter, code, line }))
-            }
+            Record::Function { letter, code } => self.out.push_back(Item::Event(ProgEvent::Function { letter, code, line })),
             Record::Preselect(tool) => self.out.push_back(Item::Event(ProgEvent::Preselect { tool, line })),
             Record::BlockSkip(on) => self.out.push_back(Item::Event(ProgEvent::BlockSkip { on, line })),
             Record::Mcs { origin, x, y } => self.mcs(origin, x, y, line),
@@ -655,7 +657,7 @@ impl<R: BufRead> Source<R> {
             Record::Cycle(c) => {
                 self.cycle = Some(c);
                 // Canned output says per hole what it could not write as a cycle.
-                if self.canned_cycles {
+                if self.canned_cycles || c.kind.canned_only() {
                     return None;
                 }
                 self.diag(
@@ -814,20 +816,36 @@ impl<R: BufRead> Source<R> {
                 Severity::Error,
                 line,
                 format!(
-                    "{} cycle without a feed (no FEDRAT and none in the CYCLE record): its holes are written at rapid to depth",
-                    match c.kind {
-                        CycleKind::Tap => "tapping",
-                        CycleKind::Deep => "deep drilling",
-                        CycleKind::Bore => "boring",
-                        CycleKind::Drill | CycleKind::Other => "drilling",
+                    "{} cycle without a feed (no FEDRAT and none in the CYCLE record): its holes are {}",
+                    c.kind.name(),
+                    match c.kind.canned_only() {
+                        true => "not machined",
+                        false => "written at rapid to depth",
                     }
                 ),
             );
         }
+        let mut c = c;
+        if c.rapid_to < 0.0 {
+            // The R plane below the hole's top would rapid into the part: the safe side is the
+            // top itself, the feed starting there.
+            self.diag(
+                Code::BadRecord,
+                Severity::Error,
+                line,
+                format!(
+                    "CYCLE: RAPTO {} is below the hole's top: the tool would rapid into the part; written from the top",
+                    c.rapid_to
+                ),
+            );
+            c.rapid_to = 0.0;
+            c.retract_to = c.retract_to.map(|r| r.max(0.0));
+        }
         // Rapid to the R plane, feed through the hole's point (the CL GOTO) to depth, rapid out.
         let rapid = self.feed.is_none();
         let retract = c.retract_to.unwrap_or(c.rapid_to);
-        if self.canned_cycles {
+        // A tap, or a bore that stops or orients the spindle, is only ever the control's cycle.
+        if self.canned_cycles || c.kind.canned_only() {
             // Canned output: the cycle waits above the hole at the higher of R and the retract
             // height (G98's initial level), so the approach goes there first.
             let start = retract.max(c.rapid_to);
@@ -838,6 +856,7 @@ impl<R: BufRead> Source<R> {
                 start: start * self.scale,
                 peck: c.peck.map(|x| x * self.scale),
                 dwell: c.dwell,
+                shift: c.shift.map(|x| x * self.scale),
                 feed: self.feed,
             };
             self.push(line, p + u * start, true, true, Some("CYCLE"));
@@ -848,7 +867,7 @@ impl<R: BufRead> Source<R> {
             }
         } else {
             self.push(line, clear, true, true, Some("CYCLE"));
-            self.mark(HolePart::Rest);
+            self.mark(HolePart::Clear);
         }
         self.push(line, p, rapid, false, Some("CYCLE"));
         self.mark(HolePart::Top);
@@ -856,7 +875,14 @@ impl<R: BufRead> Source<R> {
             self.push(line, p - u * c.depth, rapid, true, Some("CYCLE"));
             self.mark(HolePart::Rest);
         }
-        self.push(line, p + u * retract, true, true, Some("CYCLE"));
+        // Expanded, the dwell at the bottom is a dwell (a canned hole's cycle has its own).
+        if let Some(t) = c.dwell.filter(|t| *t > 0.0 && !self.canned_cycles && !c.kind.canned_only()) {
+            let dwell = Dwell::Seconds(t);
+            self.out.push_back(Item::Event(ProgEvent::Dwell { dwell, line }));
+        }
+        // A bore or ream comes out as it went in, at the feed: a rapid would mark the wall.
+        let out_rapid = rapid || !matches!(c.kind, CycleKind::Bore);
+        self.push(line, p + u * retract, out_rapid, true, Some("CYCLE"));
         self.mark(HolePart::Rest);
         self.feed = saved;
     }
