@@ -75,31 +75,6 @@ pub enum CycleKind {
     Other,
 }
 
-impl CycleKind {
-    /// Only ever the control's cycle: never written as moves.
-    pub fn canned_only(self) -> bool {
-        matches!(
-            self,
-            CycleKind::Tap { .. } | CycleKind::BoreStop | CycleKind::BoreOrient | CycleKind::BoreBack
-        )
-    }
-
-    /// What a person calls it, for messages.
-    pub fn name(self) -> &'static str {
-        match self {
-            CycleKind::Drill | CycleKind::Other => "drilling",
-            CycleKind::Deep => "deep drilling",
-            CycleKind::BreakChip => "chip-breaking drilling",
-            CycleKind::Tap { rigid: true, .. } => "rigid tapping",
-            CycleKind::Tap { .. } => "tapping",
-            CycleKind::Bore => "boring",
-            CycleKind::BoreStop => "boring with a spindle stop",
-            CycleKind::BoreOrient => "fine boring",
-            CycleKind::BoreBack => "back boring",
-        }
-    }
-}
-
 /// A drilling cycle: every GOTO while it is on is a hole at that point.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct CycleParams {

@@ -655,7 +655,7 @@ impl<R: BufRead> Source<R> {
             Record::Clearance(plane) => self.clearance(plane),
             Record::Retract => self.retract(line),
             Record::Cycle(c) => {
-                self.cycle = Some(c);
+                self.cycle = Some(self.r_at_or_above_top(c, line));
                 // Canned output says per hole what it could not write as a cycle.
                 if self.canned_cycles || c.kind.canned_only() {
                     return None;
@@ -799,6 +799,25 @@ impl<R: BufRead> Source<R> {
         })
     }
 
+    /// A cycle's R plane below the hole's top would rapid into the part: the safe side is the
+    /// top itself, the feed starting there; an error at the CYCLE record.
+    fn r_at_or_above_top(&mut self, mut c: CycleParams, line: u32) -> CycleParams {
+        if c.rapid_to < 0.0 {
+            self.diag(
+                Code::BadRecord,
+                Severity::Error,
+                line,
+                format!(
+                    "CYCLE: RAPTO {} is below the hole's top: the tool would rapid into the part; written from the top",
+                    c.rapid_to
+                ),
+            );
+            c.rapid_to = 0.0;
+            c.retract_to = c.retract_to.map(|r| r.max(0.0));
+        }
+        c
+    }
+
     fn hole(&mut self, line: u32, p: Vec3, c: CycleParams) {
         // Along the tool axis, in the CL's frame (the points go into the part frame as pushed).
         let u = self.to_cl(self.axis);
@@ -824,22 +843,6 @@ impl<R: BufRead> Source<R> {
                     }
                 ),
             );
-        }
-        let mut c = c;
-        if c.rapid_to < 0.0 {
-            // The R plane below the hole's top would rapid into the part: the safe side is the
-            // top itself, the feed starting there.
-            self.diag(
-                Code::BadRecord,
-                Severity::Error,
-                line,
-                format!(
-                    "CYCLE: RAPTO {} is below the hole's top: the tool would rapid into the part; written from the top",
-                    c.rapid_to
-                ),
-            );
-            c.rapid_to = 0.0;
-            c.retract_to = c.retract_to.map(|r| r.max(0.0));
         }
         // Rapid to the R plane, feed through the hole's point (the CL GOTO) to depth, rapid out.
         let rapid = self.feed.is_none();

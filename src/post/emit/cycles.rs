@@ -144,7 +144,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             CycleKind::Bore => CannedKind::Bore,
             CycleKind::BoreStop => CannedKind::BoreStop,
             CycleKind::BoreOrient => CannedKind::FineBore,
-            CycleKind::BoreBack => return Err("back boring is not written as a cycle by kinepost"),
+            CycleKind::BoreBack => return Err("kinepost writes no back boring cycle yet"),
             CycleKind::Other => return Err("the CL's cycle is not one kinepost knows as a canned cycle"),
         })
     }
