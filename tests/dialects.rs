@@ -1652,3 +1652,101 @@ fn an_r_plane_below_the_holes_top_is_an_error() {
     );
     assert!(sink.blocks.iter().all(|b| !b.rapid || b.tip[2] >= -1e-6), "{}", sink.nc);
 }
+
+/// A tap's feed is its pitch times the speed (the CL's feed per revolution is the pitch, a
+/// feed per minute over the speed gives it), its hand the record's or the spindle's; a tap with
+/// no speed turning, or a left-hand one with the spindle turning clockwise, is an error.
+#[test]
+fn a_taps_feed_is_its_pitch_times_the_speed_and_its_hand_the_spindles() {
+    let tap = |d: &str, spindle: &str, cycle: &str| {
+        let cl = format!(
+            "UNITS/MM\nLOADTL/1\n{spindle}\nRAPID\nGOTO/10,20,40,0,0,1\n{cycle},FEDTO,12,RAPTO,3\nGOTO/10,20,0\nCYCLE/OFF\nEND\n"
+        );
+        post_cl("vmc-3axis", d, Mode::Joint, false, &cl)
+    };
+    let (cw, ccw) = ("SPINDL/RPM,800,CLW", "SPINDL/RPM,800,CCLW");
+    // (dialect, rigid right-hand, rigid left-hand, floating right, floating left): words each holds.
+    let cases: [(&str, [&[&str]; 4]); 5] = [
+        (
+            "fanuc",
+            [
+                &["M29 S800", "G84 ", "F1000.0"],
+                &["M29 S800", "G74 ", "F1000.0"],
+                &["G84 ", "F1000.0"],
+                &["G74 ", "F1000.0"],
+            ],
+        ),
+        (
+            "haas",
+            [
+                &["G84 ", "F1000.0"],
+                &["G74 ", "F1000.0"],
+                &["G84 ", "F1000.0"],
+                &["G74 ", "F1000.0"],
+            ],
+        ),
+        (
+            "linuxcnc",
+            [
+                &["G33.1 Z-12.000 K1.2500"],
+                &["M4", "G33.1 Z-12.000 K1.2500"],
+                &["G84 ", "F1000.0"],
+                &["G74 ", "F1000.0"],
+            ],
+        ),
+        (
+            "siemens",
+            [
+                &["CYCLE84(", ",3,,1.2500,0,800,800)"],
+                &["CYCLE84(", ",4,,-1.2500,0,800,800)"],
+                &["F1000.0", "CYCLE840(", ",4,3,1)"],
+                &["F1000.0", "CYCLE840(", ",3,4,1)"],
+            ],
+        ),
+        (
+            "heidenhain",
+            [
+                &["CYCL DEF 207", "Q239=+1.2500"],
+                &["CYCL DEF 207", "Q239=-1.2500"],
+                &["CYCL DEF 206", "Q206=+1000.0"],
+                &["M4", "CYCL DEF 206", "Q206=+1000.0"],
+            ],
+        ),
+    ];
+    for (d, [rigid, rigid_left, float, float_left]) in cases {
+        for (spindle, cycle, want) in [
+            (cw, "CYCLE/RGDTAP,MMPR,1.25", rigid),
+            (cw, "CYCLE/RGDTAP,MMPM,1000", rigid),
+            (ccw, "CYCLE/RGDTAP,MMPR,1.25", rigid_left),
+            (cw, "CYCLE/TAP,MMPR,1.25", float),
+            (ccw, "CYCLE/TAP,LEFT,MMPR,1.25", float_left),
+            (ccw, "CYCLE/TAP,MMPR,1.25", float_left),
+        ] {
+            let (sink, sum) = tap(d, spindle, cycle);
+            assert_eq!((sum.errors, sum.canned_holes), (0, 1), "{d} {cycle}\n{}", sink.nc);
+            for w in want {
+                assert!(sink.nc.contains(w), "{d} {spindle} {cycle}: no {w:?}\n{}", sink.nc);
+            }
+        }
+        for (spindle, cycle, says) in [
+            (
+                cw,
+                "CYCLE/TAP,LEFT,MMPR,1.25",
+                "left-hand tap with the spindle turning clockwise",
+            ),
+            ("SPINDL/OFF", "CYCLE/RGDTAP,MMPR,1.25", "no spindle speed"),
+            (cw, "CYCLE/TAP", "no feed"),
+        ] {
+            let (sink, sum) = tap(d, spindle, cycle);
+            let r = sink.diags.iter().find(|x| x.code == kinepost::diag::Code::CycleRefused);
+            let r = r.unwrap_or_else(|| panic!("{d} {cycle}: {:?}\n{}", sink.diags, sink.nc));
+            assert!(r.message.contains(says) && r.line == Some(7), "{d} {cycle}: {r}");
+            assert_eq!(sum.canned_holes, 0, "{d} {cycle}");
+            assert!(
+                sink.blocks.iter().all(|b| b.tip[2] >= -1e-6),
+                "{d} {cycle}: into the hole\n{}",
+                sink.nc
+            );
+        }
+    }
+}
