@@ -318,8 +318,9 @@ pub struct PostArgs {
     /// Default 0: exact.
     #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
     pub singular_tolerance: f64,
-    /// Drilling cycles as the control's canned cycles (G81/G82/G83, CYCLE81–83, CYCL DEF 200)
-    /// where the hole runs along the machine's Z; default: expanded into moves.
+    /// Hole cycles as the control's canned cycles (G81–G89, CYCLE81–89, CYCL DEF 200–207) where
+    /// the hole runs along the machine's Z; default: expanded into moves (taps and bores that
+    /// stop the spindle are always cycles, or an error).
     #[arg(long)]
     pub canned_cycles: bool,
     /// Fixed-axis (3+2) runs in a tilted working plane (G68.2 + G53.1, G254, CYCLE800, PLANE

@@ -53,10 +53,10 @@ impl Cycles {
     pub fn describe(self) -> &'static str {
         match self {
             Cycles::Iso { dwell_ms: true, .. } => {
-                "G81/G82/G83/G73/G84/G74/G85/G86/G89/G76 with G98/G99 R plane, G80 cancels; dwell P in ms"
+                "G73, G74, G76, G81–G89 as the control has them, G98/G99 R plane, G80 cancels; dwell P in ms"
             }
             Cycles::Iso { dwell_ms: false, .. } => {
-                "G81/G82/G83/G73/G84/G74/G85/G86/G89 with G98/G99 R plane, G80 cancels; dwell P in seconds"
+                "G73, G74, G76, G81–G89 as the control has them, G98/G99 R plane, G80 cancels; dwell P in seconds"
             }
             Cycles::Siemens => "MCALL CYCLE81/82/83/84/840/85/86/89, bare MCALL cancels",
             Cycles::Heidenhain => "CYCL DEF 200/201/202/203/206/207, called with M99",

@@ -248,8 +248,9 @@ pub struct Settings {
     pub singular_tolerance: Option<f64>,
     /// Units of the CL when the file does not say: `mm` or `inch`.
     pub cl_units: Option<String>,
-    /// Drilling cycles: `expand` (default: moves) or `canned` (G81/G82/G83, CYCLE81–83, CYCL DEF
-    /// 200 where the hole runs along the machine's Z).
+    /// Hole cycles: `expand` (default: moves; taps and bores that stop the spindle are cycles
+    /// even so) or `canned` (G81–G89, CYCLE81–89, CYCL DEF 200–207 where the hole runs along
+    /// the machine's Z).
     #[serde(default)]
     pub cycles: Option<String>,
     /// 3+2 work: `positioning` (default: 5-axis positioning, machine coordinates) or `tilted`
