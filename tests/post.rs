@@ -2732,3 +2732,69 @@ fn records_that_change_the_machine_change_the_nc_or_are_told() {
             .any(|d| d.line == Some(7) && d.severity == Severity::Error && d.code == Code::CutterComp)
     );
 }
+
+/// The NC lines of `sink` that are feed blocks, by index into its program's lines.
+fn feed_lines(sink: &Collect) -> Vec<usize> {
+    let (mut k, mut feeds) = (0, Vec::new());
+    for (i, l) in sink.nc.lines().enumerate() {
+        if k < sink.texts.len() && l == sink.texts[k] {
+            if !sink.blocks[k].rapid {
+                feeds.push(i);
+            }
+            k += 1;
+        }
+    }
+    feeds
+}
+
+/// Clamps per operation: the NX variable-axis file on haas-umc750 (TCP and joint) was locked
+/// after its approach (`M12`/`M10` before the first feed, the first blocks happening not to turn
+/// a rotary) and unlocked three blocks into the cut, a stop with a dwell mid-surface. A rotary
+/// that turns while an operation cuts is unlocked before its first move and stays so: no clamp
+/// word between the first and the last feed move. A 3+2 operation (the SOLIDWORKS CAM boss
+/// file, read in place: GPL) locks once per orientation.
+#[test]
+fn clamps_hold_for_a_whole_operation_never_between_feed_moves() {
+    let lib = Library::load_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap();
+    let p = lib.get("haas-umc750").unwrap();
+    let clamp = |l: &str| ["M10", "M11", "M12", "M13"].iter().any(|w| l.starts_with(w));
+    for mode in [Mode::Tcp, Mode::Joint] {
+        let mut o = Options::new(&p.machine);
+        o.mode = mode;
+        o.clamps = p.clamps();
+        let (sink, _) = run(
+            &p.machine,
+            &std::fs::read(data("nx_clsf_mech491_variable_axis_inch_5ax.cls")).unwrap(),
+            &o,
+        );
+        let feeds = feed_lines(&sink);
+        let lines: Vec<&str> = sink.nc.lines().collect();
+        let (first, last) = (feeds[0], *feeds.last().unwrap());
+        let inside: Vec<&&str> = lines[first..=last].iter().filter(|l| clamp(l)).collect();
+        assert!(
+            inside.is_empty(),
+            "{mode:?}: {inside:?} between feed lines {first} and {last}"
+        );
+        assert!(
+            lines[..first].iter().any(|l| l.starts_with("M13")),
+            "{mode:?}: B unlocked before"
+        );
+        assert!(
+            lines[last..].iter().any(|l| l.starts_with("M12")),
+            "{mode:?}: locked at the end"
+        );
+    }
+    let boss = Path::new(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../shared/corpus/swcam_apt_boss_3plus2.apt"
+    ));
+    let Ok(cl) = std::fs::read(boss) else { return };
+    let o = Options {
+        clamps: p.clamps(),
+        ..Options::new(&p.machine)
+    };
+    let (sink, _) = run(&p.machine, &cl, &o);
+    let words: Vec<&str> = sink.nc.lines().filter(|l| clamp(l)).collect();
+    // One orientation change (to B90): B unlocked to turn, locked for the operation once.
+    assert_eq!(words, ["M13 (B UNLOCK)", "M12 (B LOCK)"], "{words:?}");
+}

@@ -135,6 +135,8 @@ pub(super) struct Emitter<'a, S: Sink + ?Sized> {
     pub(super) coolant_deferred: bool,
     /// Which clamped rotaries are locked now (a clamped axis is taken as locked at the start).
     pub(super) locked: [bool; 3],
+    /// The operation ahead turns a rotary while cutting: no clamp is locked until it ends.
+    pub(super) cut_turns: bool,
     /// Set for the next block: it is an arc.
     pub(super) arc: Option<ArcBlock>,
     /// The active circular-interpolation plane word (G17/G18/G19).
@@ -246,6 +248,7 @@ impl<'a, S: Sink + ?Sized> Emitter<'a, S> {
             stopped_coolant: None,
             coolant_deferred: false,
             arc: None,
+            cut_turns: false,
             locked: [true; 3],
             plane: "G17",
             offsets: o

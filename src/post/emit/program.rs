@@ -103,6 +103,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         self.cutcom_end("the program's end")?;
         self.leave_plane(false)?;
         self.retract_up()?;
+        self.cut_turns = false;
         self.lock_all()?;
         // TCP: X Y Z are the tip, and the retract above went the clearance along the tool axis;
         // machine Z home takes the spindle clear of the part whatever comes next.
