@@ -2798,3 +2798,41 @@ fn clamps_hold_for_a_whole_operation_never_between_feed_moves() {
     // One orientation change (to B90): B unlocked to turn, locked for the operation once.
     assert_eq!(words, ["M13 (B UNLOCK)", "M12 (B LOCK)"], "{words:?}");
 }
+
+/// A 30° cone that starts with the tool vertical (the singular pose: C free) on spinner-u5-620
+/// was cut with B+ whatever was preferred: from the singular start the B− branch cost the free C
+/// a half turn it never makes (the machine positions onto the start, C turned where the cut
+/// needs it). A preference holds from a singular start as anywhere else.
+#[test]
+fn a_preference_holds_from_a_singular_start() {
+    let m = machine("spinner-u5-620");
+    let mut cl = String::from("UNITS/MM\nLOADTL/1\nSPINDL/RPM,3000,CLW\nRAPID\nGOTO/20,0,30,0,0,1\nFEDRAT/MMPM,500\n");
+    // Tilting from vertical to 30° about Y, then around the cone.
+    for k in 1..=6 {
+        let t = (5.0 * k as f64).to_radians();
+        cl += &format!("GOTO/20,0,30,{},0,{}\n", t.sin(), t.cos());
+    }
+    for k in 1..=24 {
+        let a = (15.0 * k as f64).to_radians();
+        let t = 30f64.to_radians();
+        cl += &format!(
+            "GOTO/{},{},30,{},{},{}\n",
+            20.0 * a.cos(),
+            20.0 * a.sin(),
+            t.sin() * a.cos(),
+            t.sin() * a.sin(),
+            t.cos()
+        );
+    }
+    cl += "END\n";
+    for side in ["B-", "B+"] {
+        let mut o = Options::new(&m);
+        o.prefer = Some(kinepost::post::Prefer::parse(side, &m).unwrap());
+        let (sink, sum) = run(&m, cl.as_bytes(), &o);
+        assert_eq!(sum.errors, 0, "{side}\n{}", sink.nc);
+        let b: Vec<f64> = sink.blocks.iter().filter_map(|x| x.joints.0[4]).collect();
+        let sign = if side == "B-" { -1.0 } else { 1.0 };
+        assert!(b.iter().all(|v| v * sign >= -1e-6), "{side}: {b:?}\n{}", sink.nc);
+        assert!(b.iter().any(|v| v.abs() > 29.0), "{side}: {b:?}");
+    }
+}
