@@ -2836,3 +2836,46 @@ fn a_preference_holds_from_a_singular_start() {
         assert!(b.iter().any(|v| v.abs() > 29.0), "{side}: {b:?}");
     }
 }
+
+/// Tool preload: right after each tool change, the next tool the CL loads (`preselect` `next`,
+/// the default, on a CL read twice): `T2` after `T1 M6` and before `T2 M6`. A streamed CL is
+/// read once: readied where the CL says `SELCTL`, and said. `cl`: only `SELCTL`; `off`: none.
+#[test]
+fn the_next_tool_is_readied_right_after_each_tool_change() {
+    let m = machine("vmc-3axis");
+    let cl = "UNITS/MM\nLOADTL/1\nSPINDL/RPM,3000,CLW\nFEDRAT/MMPM,500\nRAPID\nGOTO/0,0,50,0,0,1\nGOTO/10,0,0\n\
+              LOADTL/2\nRAPID\nGOTO/0,0,50\nGOTO/20,0,0\nSELCTL/9\nLOADTL/7\nGOTO/20,0,10\nEND\n";
+    let seekable = |p: Option<&str>| {
+        let mut o = Options::new(&m);
+        if let Some(p) = p {
+            o.preselect = post::Preselect::parse(p).unwrap();
+        }
+        let mut sink = Collect::default();
+        post::post_seekable(std::io::Cursor::new(cl.as_bytes()), &m, &o, &mut sink).unwrap();
+        sink
+    };
+    let lines = |nc: &str| nc.lines().map(str::to_string).collect::<Vec<_>>();
+    let at = |l: &[String], w: &str| l.iter().position(|x| x == w).unwrap_or_else(|| panic!("no {w}: {l:?}"));
+    let l = lines(&seekable(None).nc);
+    let (t1, t2, t7) = (at(&l, "T1 M6"), at(&l, "T2 M6"), at(&l, "T7 M6"));
+    assert_eq!(at(&l, "T2"), t1 + 1, "{l:?}");
+    assert_eq!(at(&l, "T7"), t2 + 1, "{l:?}");
+    // The CL's own SELCTL/9 is still written where it stands (between T2 M6 and T7 M6).
+    assert!((t2..t7).contains(&at(&l, "T9")), "{l:?}");
+    // Read once: only the CL's SELCTL, and why.
+    let (sink, _) = run(&m, cl.as_bytes(), &Options::new(&m));
+    let l = lines(&sink.nc);
+    assert!(
+        !l.iter().any(|x| x == "T2" || x == "T7") && l.iter().any(|x| x == "T9"),
+        "{l:?}"
+    );
+    assert!(sink.diags.iter().any(|d| d.message.contains("read once")), "{:?}", sink.diags);
+    let l = lines(&seekable(Some("cl")).nc);
+    assert!(
+        !l.iter().any(|x| x == "T2" || x == "T7") && l.iter().any(|x| x == "T9"),
+        "{l:?}"
+    );
+    let l = lines(&seekable(Some("off")).nc);
+    assert!(!l.iter().any(|x| x == "T2" || x == "T7" || x == "T9"), "{l:?}");
+    assert!(post::Preselect::parse("later").is_err());
+}

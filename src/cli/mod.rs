@@ -359,6 +359,10 @@ pub struct PostArgs {
     /// given.
     #[arg(long)]
     pub unwind: Option<String>,
+    /// Which tool is readied while another cuts: next (the default: right after each tool
+    /// change, the next tool the CL loads), cl (where the CL says SELCTL) or off.
+    #[arg(long)]
+    pub preselect: Option<String>,
     /// The collision check against the profile's bodies: on (the default) or off.
     #[arg(long)]
     pub collisions: Option<String>,
@@ -466,6 +470,26 @@ pub fn open_input(path: &str) -> Result<Box<dyn std::io::BufRead + Send>, String
         let f = std::fs::File::open(path).map_err(|e| format!("{path}: {e}"))?;
         Ok(Box::new(std::io::BufReader::with_capacity(1 << 16, f)))
     }
+}
+
+/// A post of the CL at `path`: a file is read twice where that readies the next tool
+/// (`post::post_seekable`), standard input once.
+fn post_input<S: kinepost::post::Sink + ?Sized>(
+    path: &str,
+    m: &kinepost::kinematics::Machine,
+    o: &kinepost::post::Options,
+    sink: &mut S,
+) -> Result<Result<kinepost::post::Summary, kinepost::post::Error>, String> {
+    if path == "-" {
+        return Ok(kinepost::post::post(open_input(path)?, m, o, sink));
+    }
+    let f = std::fs::File::open(path).map_err(|e| format!("{path}: {e}"))?;
+    Ok(kinepost::post::post_seekable(
+        std::io::BufReader::with_capacity(1 << 16, f),
+        m,
+        o,
+        sink,
+    ))
 }
 
 fn lint(input: &str, verbose: bool) -> Result<(), String> {
@@ -771,6 +795,7 @@ fn post_cmd(
         prefer: a.prefer.clone(),
         feed_mode: a.feed_mode.clone(),
         unwind: a.unwind.clone(),
+        preselect: a.preselect.clone(),
         collisions: a.collisions.clone(),
         collision_clearance: a.collision_clearance,
         threads: Some(a.threads),
@@ -802,7 +827,6 @@ fn post_cmd(
         o.header
             .extend(post::setups::header_lines(open_input(&a.input)?, m, &o).unwrap_or_default());
     }
-    let input = open_input(&a.input)?;
     let out: Box<dyn Write> = match &a.output {
         Some(p) => Box::new(std::fs::File::create(p).map_err(|e| format!("{}: {e}", p.display()))?),
         None => Box::new(std::io::stdout().lock()),
@@ -815,7 +839,7 @@ fn post_cmd(
     };
     let mut sink = kinepost::output::FileSink::new(out, diag);
     sink.echo_warnings = true;
-    let res = post::post(input, m, &o, &mut sink);
+    let res = post_input(&a.input, m, &o, &mut sink)?;
     // Input that is no CL is refused before the program begins: there is nothing to mark.
     if let Err(e) = &res
         && !matches!(e, post::Error::NotCl(_))
