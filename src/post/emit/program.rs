@@ -374,13 +374,17 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
     }
 
     /// `preselect` `next`: right after a tool change, the next tool the CL loads readied (the
-    /// first pass's order); on a CL read once (a stream) the order is not known: said once, and
-    /// `SELCTL` is written as the CL says.
+    /// first pass's order); on a CL read once (a stream) the order is not known: said once at
+    /// the second change, and `SELCTL` is written as the CL says.
     fn preselect_next(&mut self, line: u32) -> Result<(), Error> {
         if self.o.preselect != Preselect::Next || self.o.dialect.tool_preselect.is_empty() {
             return Ok(());
         }
         let Some(order) = &self.load_order else {
+            // Said at the second change: the tool it loads was not readied after the first.
+            if self.changes < 2 {
+                return Ok(());
+            }
             let why = "the CL is read once here (a stream), so the next tool is not known: readied where the CL says SELCTL";
             return self
                 .say_once(why, Code::IgnoredRecord, Some(line), "preselect next")
