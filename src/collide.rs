@@ -70,10 +70,7 @@ impl Link {
     }
 
     fn head_side(self) -> bool {
-        matches!(
-            self,
-            Link::Ram | Link::HeadRotary(_) | Link::Spindle | Link::Holder | Link::Cutter
-        )
+        matches!(self, Link::Ram | Link::HeadRotary(_) | Link::Spindle | Link::Holder | Link::Cutter)
     }
 }
 
@@ -175,10 +172,7 @@ impl PartialEq for Mesh {
 
 impl std::fmt::Debug for Mesh {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("Mesh")
-            .field("file", &self.file)
-            .field("triangles", &self.triangles().len())
-            .finish()
+        f.debug_struct("Mesh").field("file", &self.file).field("triangles", &self.triangles().len()).finish()
     }
 }
 
@@ -188,10 +182,7 @@ impl Solid {
         match *self {
             // Meshes are the machine's, in profile units already: never a job's solid.
             Solid::Mesh(ref m) => Solid::Mesh(m.clone()),
-            Solid::Box { min, max } => Solid::Box {
-                min: min * k,
-                max: max * k,
-            },
+            Solid::Box { min, max } => Solid::Box { min: min * k, max: max * k },
             Solid::Cylinder { from, to, radius } => Solid::Cylinder {
                 from: from * k,
                 to: to * k,
@@ -216,10 +207,7 @@ impl Solid {
             }
             Solid::Mesh(m) => {
                 if !(finite(&m.min) && finite(&m.max)) {
-                    return Err(format!(
-                        "every coordinate must be finite and within ±{}",
-                        crate::kinematics::MAX_COORD
-                    ));
+                    return Err(format!("every coordinate must be finite and within ±{}", crate::kinematics::MAX_COORD));
                 }
                 if (m.max - m.min).max() <= 0.0 {
                     return Err("its triangles all sit at one point".into());
@@ -418,11 +406,7 @@ impl World {
     /// The bodies of `g` on `m`, the job's stock and fixture boxes (in W), checked with
     /// `clearance`.
     pub fn new(m: &Machine, g: &Geometry, stock: &[Solid], fixtures: &[Solid], clearance: f64, cut_depth: f64) -> World {
-        let on = |mount: Mount| {
-            (0..m.rotaries.len())
-                .filter(|&i| m.rotaries[i].mount == mount)
-                .fold(0, |t, i| t | (1 << i))
-        };
+        let on = |mount: Mount| (0..m.rotaries.len()).filter(|&i| m.rotaries[i].mount == mount).fold(0, |t, i| t | (1 << i));
         let (table, head) = (on(Mount::Table), on(Mount::Head));
         let mut w = World {
             bodies: Vec::new(),
@@ -531,8 +515,7 @@ impl World {
         for (i, a) in self.bodies.iter().enumerate() {
             for (j, b) in self.bodies.iter().enumerate() {
                 if let Some(kind) = pair_kind(a.link, b.link) {
-                    self.pairs
-                        .push((i, j, kind, class_of(&mut self.classes, of(a.link) ^ of(b.link))));
+                    self.pairs.push((i, j, kind, class_of(&mut self.classes, of(a.link) ^ of(b.link))));
                 }
             }
         }
@@ -546,15 +529,7 @@ impl World {
     /// joints interpolated linearly between them, or the linears along a path no longer than
     /// `path`), joint by joint: the linear move, and each rotary's turn times the farthest a body
     /// point can be from its axis.
-    fn motion(
-        &self,
-        m: &Machine,
-        from: (&[f64; 3], &[f64; 3]),
-        to: (&[f64; 3], &[f64; 3]),
-        tool_length: f64,
-        wo_norm: f64,
-        path: f64,
-    ) -> Motion {
+    fn motion(&self, m: &Machine, from: (&[f64; 3], &[f64; 3]), to: (&[f64; 3], &[f64; 3]), tool_length: f64, wo_norm: f64, path: f64) -> Motion {
         let (a, b) = (Vec3::from(*from.0), Vec3::from(*to.0));
         let far = self.reach + wo_norm + a.norm_squared().max(b.norm_squared()).sqrt() + tool_length.abs() + self.pivots;
         let mut by_joint = [(a - b).norm().max(path), 0.0, 0.0, 0.0];
@@ -607,16 +582,7 @@ impl World {
     /// Hits at one set of joints (linears; actual rotary angles, radians), the deepest per pair
     /// into `out` (a pair already there keeps its deeper one).
     #[allow(clippy::too_many_arguments)]
-    pub fn check_at(
-        &mut self,
-        m: &Machine,
-        linear: &[f64; 3],
-        actual: &[f64; 3],
-        tool_length: f64,
-        work_offset: &Vec3,
-        stock: bool,
-        out: &mut Vec<Hit>,
-    ) {
+    pub fn check_at(&mut self, m: &Machine, linear: &[f64; 3], actual: &[f64; 3], tool_length: f64, work_offset: &Vec3, stock: bool, out: &mut Vec<Hit>) {
         self.check(m, (linear, actual), tool_length, work_offset, stock, false, out);
     }
 
@@ -624,34 +590,14 @@ impl World {
     /// touching may be told by its last measure (see [`settled`]): within the sample spacing, or
     /// a quarter of the measure told (a third of the distance there), of its distance there.
     #[allow(clippy::too_many_arguments)]
-    pub fn check_on_the_way(
-        &mut self,
-        m: &Machine,
-        linear: &[f64; 3],
-        actual: &[f64; 3],
-        tool_length: f64,
-        work_offset: &Vec3,
-        stock: bool,
-        out: &mut Vec<Hit>,
-    ) {
+    pub fn check_on_the_way(&mut self, m: &Machine, linear: &[f64; 3], actual: &[f64; 3], tool_length: f64, work_offset: &Vec3, stock: bool, out: &mut Vec<Hit>) {
         self.check(m, (linear, actual), tool_length, work_offset, stock, true, out);
     }
 
     #[allow(clippy::too_many_arguments)]
-    fn check(
-        &mut self,
-        m: &Machine,
-        (linear, actual): (&[f64; 3], &[f64; 3]),
-        tool_length: f64,
-        work_offset: &Vec3,
-        stock: bool,
-        on_the_way: bool,
-        out: &mut Vec<Hit>,
-    ) {
+    fn check(&mut self, m: &Machine, (linear, actual): (&[f64; 3], &[f64; 3]), tool_length: f64, work_offset: &Vec3, stock: bool, on_the_way: bool, out: &mut Vec<Hit>) {
         let moved = match &self.last {
-            Some((l0, a0)) if self.in_frame(work_offset, tool_length) => {
-                self.motion(m, (l0, a0), (linear, actual), tool_length, self.frame.2, 0.0)
-            }
+            Some((l0, a0)) if self.in_frame(work_offset, tool_length) => self.motion(m, (l0, a0), (linear, actual), tool_length, self.frame.2, 0.0),
             _ => {
                 self.frame = (*work_offset, tool_length, work_offset.norm());
                 Motion::UNKNOWN
@@ -735,23 +681,12 @@ impl World {
     /// is counted and the samples are checked. `path`: how long the linears' path may be where
     /// they do not move in a straight line (TCP: the control moves the tip straight).
     #[allow(clippy::too_many_arguments)]
-    pub fn move_clear(
-        &mut self,
-        m: &Machine,
-        from: Option<(&[f64; 3], &[f64; 3])>,
-        to: (&[f64; 3], &[f64; 3]),
-        tool_length: f64,
-        work_offset: &Vec3,
-        stock: bool,
-        path: f64,
-    ) -> bool {
+    pub fn move_clear(&mut self, m: &Machine, from: Option<(&[f64; 3], &[f64; 3])>, to: (&[f64; 3], &[f64; 3]), tool_length: f64, work_offset: &Vec3, stock: bool, path: f64) -> bool {
         let Some((l0, a0)) = &self.last else { return false };
         if from.is_some_and(|(l, a)| l != l0 || a != a0) || !self.in_frame(work_offset, tool_length) {
             return false;
         }
-        let since = self
-            .since
-            .plus(&self.motion(m, (l0, a0), to, tool_length, self.frame.2, path));
+        let since = self.since.plus(&self.motion(m, (l0, a0), to, tool_length, self.frame.2, path));
         if !self.clear(&since, stock) {
             return false;
         }
@@ -778,15 +713,7 @@ impl World {
     /// offset carries the stock and fixtures away from the table's axes: a part far off them
     /// swings farther. `path` as for [`World::move_clear`].
     #[allow(clippy::too_many_arguments)]
-    pub fn samples(
-        &self,
-        m: &Machine,
-        from: (&[f64; 3], &[f64; 3]),
-        to: (&[f64; 3], &[f64; 3]),
-        tool_length: f64,
-        work_offset: &Vec3,
-        path: f64,
-    ) -> (usize, Option<(f64, f64)>) {
+    pub fn samples(&self, m: &Machine, from: (&[f64; 3], &[f64; 3]), to: (&[f64; 3], &[f64; 3]), tool_length: f64, work_offset: &Vec3, path: f64) -> (usize, Option<(f64, f64)>) {
         let moved = self.motion(m, from, to, tool_length, work_offset.norm(), path).total();
         let step = self.spacing();
         let n = (moved / step).ceil();
@@ -876,11 +803,7 @@ impl Motion {
     };
 
     fn total(&self) -> f64 {
-        if self.known {
-            self.by_joint.iter().sum()
-        } else {
-            f64::INFINITY
-        }
+        if self.known { self.by_joint.iter().sum() } else { f64::INFINITY }
     }
 }
 
@@ -942,9 +865,7 @@ fn distance(bi: &Placed, bj: &Placed, pi: &Pose, pj: &Pose, centres: f64, limit:
         return Apart(spheres);
     }
     let (a, b) = (bi.shape.compute_aabb(pi), bj.shape.compute_aabb(pj));
-    let boxes = (0..3)
-        .map(|k| (a.mins[k] - b.maxs[k]).max(b.mins[k] - a.maxs[k]))
-        .fold(f64::MIN, f64::max);
+    let boxes = (0..3).map(|k| (a.mins[k] - b.maxs[k]).max(b.mins[k] - a.maxs[k])).fold(f64::MIN, f64::max);
     if boxes > limit {
         return Apart(boxes);
     }

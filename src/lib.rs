@@ -1,8 +1,8 @@
 //! kinepost: a 5-axis CNC postprocessor. See ARCHITECTURE.md for the map.
 
 pub mod calib;
-pub mod cl;
 pub mod collide;
+pub mod cl;
 pub mod diag;
 pub mod http;
 pub mod jobs;

@@ -29,11 +29,7 @@ pub fn write_path(m: &Machine, points: usize, seed: u64, tool_length: f64, out: 
     writeln!(out, "SPINDL/6000,RPM,CLW")?;
     writeln!(out, "COOLNT/FLOOD")?;
     let ph = |k: u64| {
-        ((seed
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(k.wrapping_mul(1442695040888963407)))
-            >> 11) as f64
-            / (1u64 << 53) as f64
+        ((seed.wrapping_mul(6364136223846793005).wrapping_add(k.wrapping_mul(1442695040888963407))) >> 11) as f64 / (1u64 << 53) as f64
             * TAU
     };
     for n in 0..points {
@@ -80,11 +76,7 @@ fn joints(m: &Machine, t: f64, ph: &impl Fn(u64) -> f64) -> Joints {
             None if spins => -PI + 2.0 * TAU * t,
             None => 0.9 * SWING * wave,
             Some((lo, hi)) => {
-                let (lo, hi, k) = if spins {
-                    (lo, hi, 0.7)
-                } else {
-                    (lo.max(-SWING), hi.min(SWING), 0.9)
-                };
+                let (lo, hi, k) = if spins { (lo, hi, 0.7) } else { (lo.max(-SWING), hi.min(SWING), 0.9) };
                 0.5 * (lo + hi) + 0.5 * k * (hi - lo) * wave
             }
         };
@@ -98,13 +90,7 @@ fn joints(m: &Machine, t: f64, ph: &impl Fn(u64) -> f64) -> Joints {
 fn leaves_lean_alone(m: &Machine, k: usize) -> bool {
     let r = &m.rotaries[k];
     let along_z = r.axis.z.abs() > 1.0 - 1e-12;
-    let same = |mount: Mount| {
-        m.rotaries
-            .iter()
-            .enumerate()
-            .filter(move |(_, q)| q.mount == mount)
-            .map(|(i, _)| i)
-    };
+    let same = |mount: Mount| m.rotaries.iter().enumerate().filter(move |(_, q)| q.mount == mount).map(|(i, _)| i);
     along_z
         && match r.mount {
             Mount::Table => same(Mount::Table).last() == Some(k),
@@ -141,12 +127,7 @@ fn lean_at_most(m: &Machine, setup: &Setup, j: &mut Joints, max: f64) {
 /// of W's z axis and between two heights above its top, both a fraction of the machine's
 /// smallest half-travel. A machine lacking a linear only lifts the tip with Z.
 fn place_tip(m: &Machine, setup: &Setup, j: &mut Joints, t: f64, ph: &impl Fn(u64) -> f64) {
-    let scale = m
-        .linears
-        .iter()
-        .flatten()
-        .map(|l| 0.5 * (l.max - l.min))
-        .fold(f64::INFINITY, f64::min);
+    let scale = m.linears.iter().flatten().map(|l| 0.5 * (l.max - l.min)).fold(f64::INFINITY, f64::min);
     if !scale.is_finite() {
         return;
     }
@@ -174,11 +155,7 @@ fn place_tip(m: &Machine, setup: &Setup, j: &mut Joints, t: f64, ph: &impl Fn(u6
     }
     // A machine whose travel cannot hold the part there (a turning axis far from W's origin)
     // keeps the joints' own path.
-    let inside = m
-        .linears
-        .iter()
-        .zip(l)
-        .all(|(a, v)| a.as_ref().is_none_or(|a| (a.min..=a.max).contains(&v)));
+    let inside = m.linears.iter().zip(l).all(|(a, v)| a.as_ref().is_none_or(|a| (a.min..=a.max).contains(&v)));
     if inside {
         j.linear = l;
     }

@@ -138,18 +138,12 @@ fn ik_converts_explicit_units() {
     let (sa, sb) = (&a["solutions"][0], &b["solutions"][0]);
     for k in ["X", "Y", "Z", "B", "C"] {
         // 25.4 × (1 / 25.4) is 1 less an ulp.
-        assert!(
-            (sa[k].as_f64().unwrap() - sb[k].as_f64().unwrap()).abs() < 1e-12,
-            "{k}: {sa} {sb}"
-        );
+        assert!((sa[k].as_f64().unwrap() - sb[k].as_f64().unwrap()).abs() < 1e-12, "{k}: {sa} {sb}");
     }
     for k in ["branch", "within_limits", "singular", "free_axis"] {
         assert_eq!(sa[k], sb[k], "{k}");
     }
-    assert_eq!(
-        a["solutions"].as_array().unwrap().len(),
-        b["solutions"].as_array().unwrap().len()
-    );
+    assert_eq!(a["solutions"].as_array().unwrap().len(), b["solutions"].as_array().unwrap().len());
 }
 
 #[test]
@@ -350,10 +344,7 @@ fn post_exits_0_clean_1_with_errors_2_refused() {
     assert_eq!(code, 2, "{err}");
     let text = std::fs::read_to_string(&nc).unwrap();
     let last = text.lines().last().unwrap();
-    assert!(
-        last.starts_with("(KINEPOST: NOT FIT TO RUN, CUT SHORT: ERROR[LIMIT_VIOLATION] LINE 5"),
-        "{text}"
-    );
+    assert!(last.starts_with("(KINEPOST: NOT FIT TO RUN, CUT SHORT: ERROR[LIMIT_VIOLATION] LINE 5"), "{text}");
     // Over its time bound: refused, and the file cut short says so.
     let (code, _, err) = post(&good, &["--max-post-seconds", "0.000001"]);
     assert_eq!(code, 2, "{err}");
@@ -447,15 +438,7 @@ fn the_service_log_is_one_format_and_plain_in_a_file() {
     for format in ["json", "text"] {
         let data = std::env::temp_dir().join(format!("kinepost-log-{format}-{}", std::process::id()));
         let mut child = Command::new(env!("CARGO_BIN_EXE_kinepost"))
-            .args([
-                "serve",
-                "--bind",
-                "127.0.0.1:0",
-                "--log-format",
-                format,
-                "--data-dir",
-                data.to_str().unwrap(),
-            ])
+            .args(["serve", "--bind", "127.0.0.1:0", "--log-format", format, "--data-dir", data.to_str().unwrap()])
             .env("KINEPOST_MACHINES", concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))
             .stderr(std::process::Stdio::piped())
             .spawn()
@@ -463,10 +446,7 @@ fn the_service_log_is_one_format_and_plain_in_a_file() {
         let mut err = BufReader::new(child.stderr.take().unwrap());
         let mut first = String::new();
         err.read_line(&mut first).unwrap();
-        Command::new("kill")
-            .args(["-TERM", &child.id().to_string()])
-            .status()
-            .unwrap();
+        Command::new("kill").args(["-TERM", &child.id().to_string()]).status().unwrap();
         child.wait().unwrap();
         let mut lines = vec![first];
         lines.extend(err.lines().map(Result::unwrap));
@@ -487,13 +467,7 @@ fn the_service_log_is_one_format_and_plain_in_a_file() {
 fn the_images_health_check_follows_the_bind_address() {
     use std::io::{BufRead, BufReader};
     let dockerfile = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/Dockerfile")).unwrap();
-    let cmd = dockerfile
-        .split("HEALTHCHECK")
-        .nth(1)
-        .unwrap()
-        .lines()
-        .find(|l| l.trim_start().starts_with("CMD ["))
-        .unwrap();
+    let cmd = dockerfile.split("HEALTHCHECK").nth(1).unwrap().lines().find(|l| l.trim_start().starts_with("CMD [")).unwrap();
     let args: Vec<String> = serde_json::from_str(&cmd[cmd.find('[').unwrap()..]).unwrap();
     assert_eq!(args[..2], ["bash", "-c"]);
     let data = std::env::temp_dir().join(format!("kinepost-health-{}", std::process::id()));
@@ -505,22 +479,8 @@ fn the_images_health_check_follows_the_bind_address() {
         .unwrap();
     let mut line = String::new();
     BufReader::new(child.stderr.take().unwrap()).read_line(&mut line).unwrap();
-    let port = line
-        .split("listening on http://127.0.0.1:")
-        .nth(1)
-        .unwrap()
-        .split(|c: char| !c.is_ascii_digit())
-        .next()
-        .unwrap()
-        .to_string();
-    let health = |bind: &str| {
-        Command::new("bash")
-            .args(["-c", &args[2]])
-            .env("KINEPOST_BIND", bind)
-            .status()
-            .unwrap()
-            .success()
-    };
+    let port = line.split("listening on http://127.0.0.1:").nth(1).unwrap().split(|c: char| !c.is_ascii_digit()).next().unwrap().to_string();
+    let health = |bind: &str| Command::new("bash").args(["-c", &args[2]]).env("KINEPOST_BIND", bind).status().unwrap().success();
     let (wild, lo) = (health(&format!("0.0.0.0:{port}")), health(&format!("127.0.0.1:{port}")));
     let elsewhere = health("0.0.0.0:1");
     child.kill().unwrap();

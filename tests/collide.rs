@@ -16,9 +16,7 @@ fn shipped_file(id: &str) -> String {
 /// A shipped profile's text without its geometry (the file ends with it).
 fn shipped(id: &str) -> String {
     let text = shipped_file(id);
-    let cut = text
-        .find("\n# Geometry for the collision check")
-        .or_else(|| text.find("\n[[body]]"));
+    let cut = text.find("\n# Geometry for the collision check").or_else(|| text.find("\n[[body]]"));
     text[..cut.unwrap_or(text.len())].to_string()
 }
 
@@ -52,10 +50,7 @@ box = [-160.0, -160.0, 300.0, 160.0, 400.0, 900.0]
 
 /// A CL: header, then points `(rapid, x y z i j k)`; returns the text and each point's line.
 fn cl(units: &str, length: f64, pts: &[(bool, [f64; 6])]) -> (String, Vec<u32>) {
-    let mut s = format!(
-        "PARTNO/COLLIDE\nUNITS/{units}\nLOADTL/1,LENGTH,{length}\nSPINDL/6000,RPM,CLW\nFEDRAT/500,{}\n",
-        if units == "MM" { "MMPM" } else { "IPM" }
-    );
+    let mut s = format!("PARTNO/COLLIDE\nUNITS/{units}\nLOADTL/1,LENGTH,{length}\nSPINDL/6000,RPM,CLW\nFEDRAT/500,{}\n", if units == "MM" { "MMPM" } else { "IPM" });
     let mut lines = Vec::new();
     let mut line = 5;
     for (rapid, p) in pts {
@@ -90,11 +85,7 @@ fn assert_hit(c: &Collect, line: u32, a: &str, b: &str) {
     let found = hits(c, Code::Collision)
         .into_iter()
         .any(|d| d.line == Some(line) && d.message.contains(a) && d.message.contains(b) && d.severity == Severity::Error);
-    assert!(
-        found,
-        "no collision of {a} and {b} at line {line}: {:#?}",
-        hits(c, Code::Collision)
-    );
+    assert!(found, "no collision of {a} and {b} at line {line}: {:#?}", hits(c, Code::Collision));
 }
 
 fn tilted(deg: f64) -> [f64; 3] {
@@ -179,14 +170,7 @@ fn a_shallow_gouge_between_samples_is_found() {
     let q = [corner[0] + (r - 0.5) * out[0], corner[1] + (r - 0.5) * out[1]];
     let pt = |s: f64| at([q[0] + s * along[0], q[1] + s * along[1], 30.0], UP);
     let (text, lines) = cl("MM", 100.0, &[(true, pt(-22.5)), (true, pt(17.5))]);
-    let (c, s) = run(
-        &p,
-        &text,
-        Settings {
-            stock: Some("-50,-50,0,50,50,40".into()),
-            ..Default::default()
-        },
-    );
+    let (c, s) = run(&p, &text, Settings { stock: Some("-50,-50,0,50,50,40".into()), ..Default::default() });
     s.unwrap();
     assert_hit(&c, lines[1], "cutter", "stock");
 }
@@ -205,11 +189,7 @@ fn a_tcp_move_is_checked_along_the_path_the_control_takes() {
     let tip = [200.0, 0.0, 30.0];
     let (text, _) = cl("MM", 100.0, &[(true, at(tip, axis(0.0))), (false, at(tip, axis(60.0)))]);
     for mode in ["tcp", "joint"] {
-        let settings = Settings {
-            fixtures: Some("150,-20,0,180,20,40".into()),
-            mode: Some(mode.into()),
-            ..Default::default()
-        };
+        let settings = Settings { fixtures: Some("150,-20,0,180,20,40".into()), mode: Some(mode.into()), ..Default::default() };
         let mut o = settings.profile_options(&p, None).unwrap();
         o.max_rotary_step = std::f64::consts::PI;
         let (c, s) = run_with(&p, &text, &o);
@@ -224,10 +204,7 @@ fn a_tcp_move_is_checked_along_the_path_the_control_takes() {
 fn an_arc_is_checked_along_the_arc() {
     let p = profile("spinner-u5-620", SPINNER);
     let text = "PARTNO/ARC\nUNITS/MM\nLOADTL/1,LENGTH,100\nSPINDL/6000,RPM,CLW\nFEDRAT/500,MMPM\nRAPID\nGOTO/40,0,50,0,0,1\nGOTO/40,0,10,0,0,1\nCIRCLE/0,0,10,0,0,1,40\nGOTO/-40,0,10,0,0,1\nGOTO/-40,0,50,0,0,1\nSPINDL/OFF\nFINI\n";
-    let clamp = Settings {
-        fixtures: Some("-5,33,0,5,47,30".into()),
-        ..Default::default()
-    };
+    let clamp = Settings { fixtures: Some("-5,33,0,5,47,30".into()), ..Default::default() };
     let (c, s) = run(&p, text, clamp);
     s.unwrap();
     assert!(c.nc.contains("G3"), "written as an arc: {}", c.nc);
@@ -250,10 +227,7 @@ fn on_the_way_an_overlap_may_be_told_by_its_last_measure() {
     use kinepost::kinematics::{Setup, Vec3, controlled_point};
     let p = profile("spinner-u5-620", SPINNER);
     let (m, g) = (&p.machine, p.geometry());
-    let stock = [Solid::Box {
-        min: [-40.0, -40.0, 0.0].into(),
-        max: [40.0, 40.0, 30.0].into(),
-    }];
+    let stock = [Solid::Box { min: [-40.0, -40.0, 0.0].into(), max: [40.0, 40.0, 30.0].into() }];
     let len = 100.0;
     let tool = ToolShape::default_for(len, true);
     let setup = Setup::new(len, Vec3::zeros());
@@ -283,19 +257,13 @@ fn on_the_way_an_overlap_may_be_told_by_its_last_measure() {
         assert_eq!(pairs(&told), pairs(&exact), "sample {k}");
         for (a, b) in told.iter().zip(&exact) {
             let off = (a.dist - b.dist).abs();
-            assert!(
-                off <= spacing.max(b.dist.abs() / 3.0) + 1e-9,
-                "sample {k}: {a:?} against {b:?}"
-            );
+            assert!(off <= spacing.max(b.dist.abs() / 3.0) + 1e-9, "sample {k}: {a:?} against {b:?}");
             bounded += usize::from(off > 1e-9);
             overlaps += usize::from(b.dist < 0.0);
         }
     }
     // Deep enough for long that many overlaps are told by an earlier measure.
-    assert!(
-        overlaps > 200 && bounded * 5 > overlaps,
-        "{bounded} of {overlaps} told by an earlier measure"
-    );
+    assert!(overlaps > 200 && bounded * 5 > overlaps, "{bounded} of {overlaps} told by an earlier measure");
 }
 
 /// A hole written as a canned cycle is checked as the control drills it: a bottom 5 mm into the
@@ -311,15 +279,9 @@ fn a_canned_cycle_is_checked_down_the_hole_and_across_to_the_next() {
             35.0 - top
         )
     };
-    let clamp = || Settings {
-        fixtures: Some("-10,-20,0,10,20,40".into()),
-        ..Default::default()
-    };
+    let clamp = || Settings { fixtures: Some("-10,-20,0,10,20,40".into()), ..Default::default() };
     for cycles in ["canned", "expand"] {
-        let with = |s: Settings| Settings {
-            cycles: Some(cycles.into()),
-            ..s
-        };
+        let with = |s: Settings| Settings { cycles: Some(cycles.into()), ..s };
         // Into the table (the holes' tops on it), nothing in between.
         let (c, s) = run(&p, &holes(0.0), with(Settings::default()));
         s.unwrap();
@@ -327,10 +289,7 @@ fn a_canned_cycle_is_checked_down_the_hole_and_across_to_the_next() {
         if cycles == "canned" {
             assert!(c.nc.contains("G81"), "{}", c.nc);
             // Down, and back out of it: one diagnostic for the pair, the deepest.
-            let table = hits(&c, Code::Collision)
-                .into_iter()
-                .filter(|d| d.line == Some(9) && d.message.contains("cutter and table"))
-                .count();
+            let table = hits(&c, Code::Collision).into_iter().filter(|d| d.line == Some(9) && d.message.contains("cutter and table")).count();
             assert_eq!(table, 1, "{:#?}", c.diags);
         }
         // 10 mm above the table: clear, until the clamp stands between the holes.
@@ -340,26 +299,14 @@ fn a_canned_cycle_is_checked_down_the_hole_and_across_to_the_next() {
         let (c, s) = run(&p, &holes(10.0), with(clamp()));
         s.unwrap();
         assert_hit(&c, 10, "cutter", "fixture 1");
-        assert!(
-            !hits(&c, Code::Collision).iter().any(|d| d.line == Some(9)),
-            "{cycles}: {:#?}",
-            hits(&c, Code::Collision)
-        );
+        assert!(!hits(&c, Code::Collision).iter().any(|d| d.line == Some(9)), "{cycles}: {:#?}", hits(&c, Code::Collision));
     }
     // The holder (Ø40, 60 mm above the tip) comes 1 mm over a clamp at R and 1 mm into its side
     // at the bottom: the cycle's block tells the pair once, as the collision it is.
-    let side = Settings {
-        cycles: Some("canned".into()),
-        fixtures: Some("-41,-20,0,-30,20,72".into()),
-        ..Default::default()
-    };
+    let side = Settings { cycles: Some("canned".into()), fixtures: Some("-41,-20,0,-30,20,72".into()), ..Default::default() };
     let (c, s) = run(&p, &holes(10.0), side);
     s.unwrap();
-    let told: Vec<_> = c
-        .diags
-        .iter()
-        .filter(|d| d.line == Some(9) && d.message.contains("holder and fixture 1"))
-        .collect();
+    let told: Vec<_> = c.diags.iter().filter(|d| d.line == Some(9) && d.message.contains("holder and fixture 1")).collect();
     assert!(told.len() == 1 && told[0].code == Code::Collision, "{told:#?}");
 }
 
@@ -369,30 +316,12 @@ fn a_canned_cycle_is_checked_down_the_hole_and_across_to_the_next() {
 #[test]
 fn a_tool_of_no_length_leaves_the_spindle_nose_checked() {
     let p = profile("spinner-u5-620", SPINNER);
-    let (text, lines) = cl(
-        "MM",
-        0.0,
-        &[
-            (true, at([0.0, 0.0, 100.0], UP)),
-            (true, at([150.0, 0.0, 100.0], tilted(30.0))),
-            (false, at([0.0, 0.0, -15.0], UP)),
-        ],
-    );
+    let (text, lines) = cl("MM", 0.0, &[(true, at([0.0, 0.0, 100.0], UP)), (true, at([150.0, 0.0, 100.0], tilted(30.0))), (false, at([0.0, 0.0, -15.0], UP))]);
     let (c, s) = run(&p, &text, Settings::default());
     s.unwrap();
-    assert!(
-        hits(&c, Code::CollisionCoarse).is_empty(),
-        "{:#?}",
-        hits(&c, Code::CollisionCoarse)
-    );
+    assert!(hits(&c, Code::CollisionCoarse).is_empty(), "{:#?}", hits(&c, Code::CollisionCoarse));
     assert_hit(&c, lines[2], "spindle housing", "table");
-    assert!(
-        !c.diags
-            .iter()
-            .any(|d| d.message.contains("cutter") || d.message.contains("holder")),
-        "{:#?}",
-        c.diags
-    );
+    assert!(!c.diags.iter().any(|d| d.message.contains("cutter") || d.message.contains("holder")), "{:#?}", c.diags);
 }
 
 /// A rapid that tilts the table with the cutter just over a stock 0.01 mm thick would need more
@@ -400,11 +329,7 @@ fn a_tool_of_no_length_leaves_the_spindle_nose_checked() {
 #[test]
 fn a_move_with_too_few_samples_for_its_motion_says_so() {
     let p = profile("spinner-u5-620", SPINNER);
-    let (text, lines) = cl(
-        "MM",
-        100.0,
-        &[(true, at([0.0, 0.0, 5.0], UP)), (true, at([30.0, 0.0, 5.0], tilted(60.0)))],
-    );
+    let (text, lines) = cl("MM", 100.0, &[(true, at([0.0, 0.0, 5.0], UP)), (true, at([30.0, 0.0, 5.0], tilted(60.0)))]);
     let sheet = Settings {
         stock: Some("-50,-50,0,50,50,0.01".into()),
         ..Default::default()
@@ -413,21 +338,12 @@ fn a_move_with_too_few_samples_for_its_motion_says_so() {
     s.unwrap();
     let coarse = hits(&c, Code::CollisionCoarse);
     assert!(
-        coarse
-            .iter()
-            .any(|d| d.line == Some(lines[1]) && d.severity == Severity::Warning && d.message.contains("0.005 mm")),
+        coarse.iter().any(|d| d.line == Some(lines[1]) && d.severity == Severity::Warning && d.message.contains("0.005 mm")),
         "{:#?}",
         c.diags
     );
     // A stock of ordinary thickness under the same moves: enough samples, nothing to tell.
-    let (c, _) = run(
-        &p,
-        &text,
-        Settings {
-            stock: Some("-50,-50,0,50,50,4".into()),
-            ..Default::default()
-        },
-    );
+    let (c, _) = run(&p, &text, Settings { stock: Some("-50,-50,0,50,50,4".into()), ..Default::default() });
     assert!(hits(&c, Code::CollisionCoarse).is_empty(), "{:#?}", c.diags);
 }
 
@@ -447,17 +363,9 @@ fn a_clean_program_with_its_stock_shows_nothing_and_off_checks_nothing() {
     let (c, s) = run(&p, &text, with_stock);
     s.unwrap();
     assert!(hits(&c, Code::Collision).is_empty(), "{:#?}", hits(&c, Code::Collision));
-    assert!(
-        hits(&c, Code::NearCollision).is_empty(),
-        "{:#?}",
-        hits(&c, Code::NearCollision)
-    );
+    assert!(hits(&c, Code::NearCollision).is_empty(), "{:#?}", hits(&c, Code::NearCollision));
 
-    let (crash, _) = cl(
-        "MM",
-        100.0,
-        &[(true, at([0.0, 0.0, 100.0], UP)), (false, at([0.0, 0.0, -5.0], UP))],
-    );
+    let (crash, _) = cl("MM", 100.0, &[(true, at([0.0, 0.0, 100.0], UP)), (false, at([0.0, 0.0, -5.0], UP))]);
     let off = Settings {
         collisions: Some("off".into()),
         ..Default::default()
@@ -479,20 +387,12 @@ fn a_near_miss_is_a_warning() {
     // The holder's rim passes 1 mm above the table top: within the 2 mm clearance.
     let t = 80f64.to_radians();
     let z = 1.0 + 20.0 * t.sin() - 60.0 * t.cos();
-    let (text, lines) = cl(
-        "MM",
-        100.0,
-        &[
-            (true, at([0.0, 0.0, 100.0], tilted(80.0))),
-            (false, at([0.0, 0.0, z.max(6.0)], tilted(80.0))),
-        ],
-    );
+    let (text, lines) = cl("MM", 100.0, &[(true, at([0.0, 0.0, 100.0], tilted(80.0))), (false, at([0.0, 0.0, z.max(6.0)], tilted(80.0)))]);
     let (c, s) = run(&p, &text, Settings::default());
     s.unwrap();
     let near = hits(&c, Code::NearCollision);
     assert!(
-        near.iter()
-            .any(|d| d.line == Some(lines[1]) && d.message.contains("holder") && d.severity == Severity::Warning),
+        near.iter().any(|d| d.line == Some(lines[1]) && d.message.contains("holder") && d.severity == Severity::Warning),
         "{near:#?} {:#?}",
         hits(&c, Code::Collision)
     );
@@ -525,12 +425,7 @@ box = [-3.0, -3.0, 7.0, 3.0, 3.0, 12.0]
     let (text, lines) = cl(
         "INCHES",
         3.0,
-        &[
-            (true, at([0.0, 0.0, 6.0], UP)),
-            (false, at([0.0, 0.0, 2.0], UP)),
-            (true, at([0.0, 0.0, 6.0], side)),
-            (false, at([0.0, 0.0, 0.5], side)),
-        ],
+        &[(true, at([0.0, 0.0, 6.0], UP)), (false, at([0.0, 0.0, 2.0], UP)), (true, at([0.0, 0.0, 6.0], side)), (false, at([0.0, 0.0, 0.5], side))],
     );
     let (c, s) = run(&p, &text, Settings::default());
     s.unwrap();
@@ -560,12 +455,7 @@ cylinder = { from = [0.0, 0.0, 5.0], to = [0.0, 0.0, 100.0], radius = 70.0 }
     let (text, lines) = cl(
         "MM",
         100.0,
-        &[
-            (true, at([0.0, 0.0, 200.0], UP)),
-            (false, at([0.0, 0.0, 30.0], UP)),
-            (true, at([0.0, 0.0, 200.0], [-1.0, 0.0, 0.0])),
-            (false, at([0.0, 0.0, 30.0], [-1.0, 0.0, 0.0])),
-        ],
+        &[(true, at([0.0, 0.0, 200.0], UP)), (false, at([0.0, 0.0, 30.0], UP)), (true, at([0.0, 0.0, 200.0], [-1.0, 0.0, 0.0])), (false, at([0.0, 0.0, 30.0], [-1.0, 0.0, 0.0]))],
     );
     let (c, s) = run(&p, &text, Settings::default());
     s.unwrap();
@@ -588,15 +478,7 @@ on = "B"
 cylinder = { from = [0.0, 0.0, -200.0], to = [0.0, 0.0, -60.0], radius = 150.0 }
 "#,
     );
-    let (text, lines) = cl(
-        "MM",
-        100.0,
-        &[
-            (true, at([0.0, 0.0, 100.0], UP)),
-            (false, at([0.0, 0.0, 10.0], UP)),
-            (false, at([0.0, 0.0, -8.0], UP)),
-        ],
-    );
+    let (text, lines) = cl("MM", 100.0, &[(true, at([0.0, 0.0, 100.0], UP)), (false, at([0.0, 0.0, 10.0], UP)), (false, at([0.0, 0.0, -8.0], UP))]);
     let (c, s) = run(&p, &text, Settings::default());
     s.unwrap();
     assert_hit(&c, lines[2], "cutter", "table");
@@ -618,15 +500,7 @@ on = "B"
 cylinder = { from = [-80.0, 0.0, 150.0], to = [80.0, 0.0, 150.0], radius = 60.0 }
 "#,
     );
-    let (text, lines) = cl(
-        "MM",
-        100.0,
-        &[
-            (true, at([0.0, 0.0, 300.0], UP)),
-            (false, at([0.0, 0.0, 50.0], UP)),
-            (false, at([0.0, 0.0, -10.0], UP)),
-        ],
-    );
+    let (text, lines) = cl("MM", 100.0, &[(true, at([0.0, 0.0, 300.0], UP)), (false, at([0.0, 0.0, 50.0], UP)), (false, at([0.0, 0.0, -10.0], UP))]);
     let (c, s) = run(&p, &text, Settings::default());
     s.unwrap();
     assert_hit(&c, lines[2], "cutter", "table");
@@ -636,32 +510,20 @@ cylinder = { from = [-80.0, 0.0, 150.0], to = [80.0, 0.0, 150.0], radius = 60.0 
 #[test]
 fn bad_bodies_and_settings_are_refused_naming_the_key() {
     let id = "spinner-u5-620";
-    let bad = |b: &str| {
-        parse_profile(&format!("{}\n{b}", shipped(id)), id, None)
-            .unwrap_err()
-            .to_string()
-    };
+    let bad = |b: &str| parse_profile(&format!("{}\n{b}", shipped(id)), id, None).unwrap_err().to_string();
     assert!(bad("[[body]]\nname = \"t\"\non = \"Q\"\nbox = [0.0,0.0,0.0,1.0,1.0,1.0]\n").contains("body[0].on"));
     assert!(bad("[[body]]\nname = \"t\"\non = \"bed\"\nbox = [0.0,0.0,0.0,-1.0,1.0,1.0]\n").contains("body[0].box"));
     assert!(bad("[[body]]\nname = \"t\"\non = \"bed\"\n").contains("body[0]"));
     let p = profile(id, SPINNER);
     for s in [
-        Settings {
-            collisions: Some("maybe".into()),
-            ..Default::default()
-        },
-        Settings {
-            stock: Some("1,2,3".into()),
-            ..Default::default()
-        },
-        Settings {
-            collision_clearance: Some(-1.0),
-            ..Default::default()
-        },
+        Settings { collisions: Some("maybe".into()), ..Default::default() },
+        Settings { stock: Some("1,2,3".into()), ..Default::default() },
+        Settings { collision_clearance: Some(-1.0), ..Default::default() },
     ] {
         assert!(s.profile_options(&p, None).is_err());
     }
 }
+
 
 // The shipped profiles' own geometry (machines/*.toml).
 
@@ -674,17 +536,8 @@ fn shipped_profile(id: &str) -> Profile {
 }
 
 fn assert_clean(c: &Collect, what: &str) {
-    let found: Vec<_> = c
-        .diags
-        .iter()
-        .filter(|d| matches!(d.code, Code::Collision | Code::NearCollision))
-        .collect();
-    assert!(
-        found.is_empty(),
-        "{what}: {} collisions or near ones, first {:#?}",
-        found.len(),
-        &found[..found.len().min(3)]
-    );
+    let found: Vec<_> = c.diags.iter().filter(|d| matches!(d.code, Code::Collision | Code::NearCollision)).collect();
+    assert!(found.is_empty(), "{what}: {} collisions or near ones, first {:#?}", found.len(), &found[..found.len().min(3)]);
 }
 
 /// Every shipped profile carries its machine's bodies, and the generated paths (the tool leaning
@@ -699,10 +552,7 @@ fn every_shipped_profile_has_geometry_and_its_generated_path_is_clear() {
         kinepost::testgen::write_path(m, n, 5, m.default_tool_length, &mut cl).unwrap();
         let text = String::from_utf8(cl).unwrap();
         for mode in ["joint", "tcp"] {
-            let s = Settings {
-                mode: Some(mode.into()),
-                ..Default::default()
-            };
+            let s = Settings { mode: Some(mode.into()), ..Default::default() };
             let (c, sum) = run(p, &text, s);
             let sum = sum.unwrap();
             assert_clean(&c, &format!("{} {mode}", m.id));
@@ -723,40 +573,16 @@ fn the_table_top_is_w_origin_on_every_rotary_table_profile() {
         if !m.rotaries.iter().any(|r| r.mount == kinepost::kinematics::Mount::Table) || turning.contains(&m.id.as_str()) {
             continue;
         }
-        let (units, k) = if m.units == kinepost::kinematics::Units::Mm {
-            ("MM", 1.0)
-        } else {
-            ("INCHES", 0.04)
-        };
+        let (units, k) = if m.units == kinepost::kinematics::Units::Mm { ("MM", 1.0) } else { ("INCHES", 0.04) };
         let len = m.default_tool_length;
-        let (text, lines) = cl(
-            units,
-            len,
-            &[
-                (true, at([0.0, 0.0, 100.0 * k], UP)),
-                (false, at([0.0, 0.0, 5.0 * k], UP)),
-                (false, at([0.0, 0.0, -k], UP)),
-            ],
-        );
+        let (text, lines) = cl(units, len, &[(true, at([0.0, 0.0, 100.0 * k], UP)), (false, at([0.0, 0.0, 5.0 * k], UP)), (false, at([0.0, 0.0, -k], UP))]);
         let (c, s) = run(p, &text, Settings::default());
         s.unwrap();
-        let hit = |l: u32| {
-            hits(&c, Code::Collision)
-                .into_iter()
-                .filter(move |d| d.line == Some(l))
-                .collect::<Vec<_>>()
-        };
-        assert!(
-            hit(lines[1]).is_empty(),
-            "{}: 5 above the table top {:#?}",
-            m.id,
-            hit(lines[1])
-        );
+        let hit = |l: u32| hits(&c, Code::Collision).into_iter().filter(move |d| d.line == Some(l)).collect::<Vec<_>>();
+        assert!(hit(lines[1]).is_empty(), "{}: 5 above the table top {:#?}", m.id, hit(lines[1]));
         let below = hit(lines[2]);
         assert!(
-            below
-                .iter()
-                .any(|d| d.message.starts_with("cutter and table") || d.message.starts_with("cutter and platter")),
+            below.iter().any(|d| d.message.starts_with("cutter and table") || d.message.starts_with("cutter and platter")),
             "{}: 1 below the table top {below:#?}",
             m.id
         );
@@ -771,70 +597,22 @@ fn the_shipped_geometry_catches_each_kinds_crash() {
     let side = [-1.0, 0.0, 0.0];
     let cases: [(&str, &str, f64, Vec<(bool, [f64; 6])>, &str, &str); 5] = [
         // Head-table: the swivel head swung level, 30 mm above the table.
-        (
-            "dmg-dmc75v",
-            "MM",
-            100.0,
-            vec![
-                (true, at([0.0, 0.0, 300.0], UP)),
-                (true, at([0.0, 0.0, 300.0], side)),
-                (false, at([0.0, 0.0, 30.0], side)),
-            ],
-            "b head",
-            "table",
-        ),
+        ("dmg-dmc75v", "MM", 100.0, vec![(true, at([0.0, 0.0, 300.0], UP)), (true, at([0.0, 0.0, 300.0], side)), (false, at([0.0, 0.0, 30.0], side))], "b head", "table"),
         // Head-head: the tool plunged into the fixed table (its top at z = -18 in).
-        (
-            "fryer-5x-45",
-            "INCHES",
-            3.0,
-            vec![(true, at([0.0, 0.0, -10.0], UP)), (false, at([0.0, 0.0, -18.5], UP))],
-            "cutter",
-            "table",
-        ),
+        ("fryer-5x-45", "INCHES", 3.0, vec![(true, at([0.0, 0.0, -10.0], UP)), (false, at([0.0, 0.0, -18.5], UP))], "cutter", "table"),
         // Table-table: the holder into the table tilted 85°.
-        (
-            "spinner-u5-620",
-            "MM",
-            100.0,
-            vec![
-                (true, at([0.0, 0.0, 100.0], tilted(85.0))),
-                (false, at([0.0, 0.0, 6.0], tilted(85.0))),
-            ],
-            "holder",
-            "table",
-        ),
+        ("spinner-u5-620", "MM", 100.0, vec![(true, at([0.0, 0.0, 100.0], tilted(85.0))), (false, at([0.0, 0.0, 6.0], tilted(85.0)))], "holder", "table"),
         // A 4th axis: the tool into its faceplate.
-        (
-            "vmc-4axis-a",
-            "MM",
-            100.0,
-            vec![(true, at([-315.0, 0.0, 200.0], UP)), (false, at([-315.0, 0.0, 50.0], UP))],
-            "cutter",
-            "faceplate",
-        ),
+        ("vmc-4axis-a", "MM", 100.0, vec![(true, at([-315.0, 0.0, 200.0], UP)), (false, at([-315.0, 0.0, 50.0], UP))], "cutter", "faceplate"),
         // The turning axis: the tool into the faceplate at X's end.
-        (
-            "htm50200-horizontal",
-            "MM",
-            100.0,
-            vec![
-                (true, at([-1900.0, -1600.0, 50.0], UP)),
-                (false, at([-2000.0, -1600.0, -100.0], UP)),
-            ],
-            "cutter",
-            "faceplate",
-        ),
+        ("htm50200-horizontal", "MM", 100.0, vec![(true, at([-1900.0, -1600.0, 50.0], UP)), (false, at([-2000.0, -1600.0, -100.0], UP))], "cutter", "faceplate"),
     ];
     for (id, units, len, pts, a, b) in cases {
         let p = shipped_profile(id);
         let (text, lines) = cl(units, len, &pts);
         let (c, s) = run(&p, &text, Settings::default());
         s.unwrap();
-        assert!(
-            !hits(&c, Code::Collision).iter().any(|d| d.line == Some(lines[0])),
-            "{id}: the start collides"
-        );
+        assert!(!hits(&c, Code::Collision).iter().any(|d| d.line == Some(lines[0])), "{id}: the start collides");
         assert_hit(&c, *lines.last().unwrap(), a, b);
     }
 }
@@ -845,30 +623,14 @@ fn the_shipped_geometry_catches_each_kinds_crash() {
 fn the_cutter_is_the_cls_tldata() {
     let p = shipped_profile("spinner-u5-620");
     let base = "PARTNO/T\nUNITS/MM\nLOADTL/1,LENGTH,100\nSPINDL/6000,RPM,CLW\nFEDRAT/500,MMPM\nRAPID\nGOTO/0,0,100,0,0,1\nGOTO/0,0,20,0,0,1\nSPINDL/OFF\nFINI\n";
-    let fixture = Settings {
-        fixtures: Some("10,-50,0,60,50,50".into()),
-        ..Default::default()
-    };
+    let fixture = Settings { fixtures: Some("10,-50,0,60,50,50".into()), ..Default::default() };
     let (c, s) = run(&p, base, fixture.clone());
     s.unwrap();
-    assert!(
-        hits(&c, Code::Collision).is_empty(),
-        "the default Ø10 cutter: {:#?}",
-        hits(&c, Code::Collision)
-    );
-    let wide = base.replace(
-        "LOADTL/1,LENGTH,100\n",
-        "TLDATA/MILL,50.0000,5.0000,100.0000,0.0000,0.0000\nLOADTL/1,LENGTH,100\n",
-    );
+    assert!(hits(&c, Code::Collision).is_empty(), "the default Ø10 cutter: {:#?}", hits(&c, Code::Collision));
+    let wide = base.replace("LOADTL/1,LENGTH,100\n", "TLDATA/MILL,50.0000,5.0000,100.0000,0.0000,0.0000\nLOADTL/1,LENGTH,100\n");
     let (c, s) = run(&p, &wide, fixture);
     s.unwrap();
-    assert!(
-        hits(&c, Code::Collision)
-            .iter()
-            .any(|d| d.message.starts_with("cutter and fixture")),
-        "{:#?}",
-        c.diags
-    );
+    assert!(hits(&c, Code::Collision).iter().any(|d| d.message.starts_with("cutter and fixture")), "{:#?}", c.diags);
 }
 
 /// The stock is in the CL's units: a CL in inches on a mm machine gives its stock in inches.
@@ -876,20 +638,11 @@ fn the_cutter_is_the_cls_tldata() {
 fn the_stock_is_in_the_cls_units() {
     let p = shipped_profile("spinner-u5-620");
     let text = "PARTNO/T\nUNITS/INCHES\nLOADTL/1,LENGTH,4\nSPINDL/6000,RPM,CLW\nFEDRAT/20,IPM\nRAPID\nGOTO/0,0,4,0,0,1\nRAPID\nGOTO/0,0,1,0,0,1\nSPINDL/OFF\nFINI\n";
-    let stock = |s: &str| Settings {
-        stock: Some(s.into()),
-        ..Default::default()
-    };
+    let stock = |s: &str| Settings { stock: Some(s.into()), ..Default::default() };
     // 2 in high: the rapid to 1 in is inside it; read as mm it would be 2 mm high and clear.
     let (c, s) = run(&p, text, stock("-2,-2,0,2,2,2"));
     s.unwrap();
-    assert!(
-        hits(&c, Code::Collision)
-            .iter()
-            .any(|d| d.message.starts_with("cutter and stock")),
-        "{:#?}",
-        c.diags
-    );
+    assert!(hits(&c, Code::Collision).iter().any(|d| d.message.starts_with("cutter and stock")), "{:#?}", c.diags);
     let (c, s) = run(&p, text, stock("-2,-2,0,2,2,0.5"));
     s.unwrap();
     assert!(hits(&c, Code::Collision).is_empty(), "{:#?}", hits(&c, Code::Collision));
@@ -916,11 +669,7 @@ fn the_corpus_with_fitting_stock_is_clear() {
     ];
     for (file, id, lift, floor) in cases {
         let text = std::fs::read_to_string(format!("{}/tests/data/{file}", env!("CARGO_MANIFEST_DIR"))).unwrap();
-        let stock = if file.contains("project2") {
-            String::new()
-        } else {
-            fitting_stock(&text, floor)
-        };
+        let stock = if file.contains("project2") { String::new() } else { fitting_stock(&text, floor) };
         let p = shipped_profile(id);
         // The 3-axis machine's table top is at z = -150: the part sits on it.
         let table = if id == "vmc-3axis" { -150.0 } else { 0.0 };
@@ -967,13 +716,7 @@ fn fitting_stock(text: &str, floor: f64) -> String {
     let top = (rapid_low - 0.5).min(hi[2]).max(floor + 0.5);
     // A drilled row has no width: the stock is a little wider than the holes' centres.
     let pad = |i: usize| 0.02 * (hi[i] - lo[i]) + 0.01;
-    format!(
-        "{},{},{floor},{},{},{top}",
-        lo[0] - pad(0),
-        lo[1] - pad(1),
-        hi[0] + pad(0),
-        hi[1] + pad(1)
-    )
+    format!("{},{},{floor},{},{},{top}", lo[0] - pad(0), lo[1] - pad(1), hi[0] + pad(0), hi[1] + pad(1))
 }
 
 // Triangle-mesh bodies: STL files beside the profile.
@@ -993,13 +736,7 @@ fn mesh_dir(test: &str, files: &[(&str, Vec<u8>)]) -> std::path::PathBuf {
 fn spinner_mesh(file: &str) -> String {
     let table = "cylinder = { from = [0.0, 0.0, -60.0], to = [0.0, 0.0, 0.0], radius = 300.0 }";
     assert!(SPINNER.contains(table));
-    format!(
-        "{}\n{}",
-        shipped("spinner-u5-620"),
-        SPINNER
-            .replace(table, &format!("mesh = {file:?}"))
-            .replace("name = \"table\"", "name = \"table mesh\"")
-    )
+    format!("{}\n{}", shipped("spinner-u5-620"), SPINNER.replace(table, &format!("mesh = {file:?}")).replace("name = \"table\"", "name = \"table mesh\""))
 }
 
 fn table_stl() -> Vec<[[f64; 3]; 3]> {
@@ -1010,18 +747,12 @@ fn table_stl() -> Vec<[[f64; 3]; 3]> {
 fn a_mesh_on_the_table_rotary_is_checked_binary_and_ascii() {
     let dir = mesh_dir(
         "crash",
-        &[
-            ("table.stl", common::stl::binary(&table_stl())),
-            ("table-ascii.stl", common::stl::ascii(&table_stl()).into_bytes()),
-        ],
+        &[("table.stl", common::stl::binary(&table_stl())), ("table-ascii.stl", common::stl::ascii(&table_stl()).into_bytes())],
     );
     for file in ["table.stl", "table-ascii.stl"] {
         let p = kinepost::machines::parse_profile_in(&spinner_mesh(file), "spinner-mesh", None, Some(&dir)).unwrap();
         let g = p.geometry();
-        assert!(
-            matches!(&g.bodies[0].solid, kinepost::collide::Solid::Mesh(m) if m.triangles().len() == 12),
-            "{file}"
-        );
+        assert!(matches!(&g.bodies[0].solid, kinepost::collide::Solid::Mesh(m) if m.triangles().len() == 12), "{file}");
         let (text, lines) = cl(
             "MM",
             100.0,
@@ -1041,11 +772,7 @@ fn a_mesh_on_the_table_rotary_is_checked_binary_and_ascii() {
         assert_hit(&c, lines[3], "cutter", "table mesh");
         for (i, l) in lines.iter().enumerate() {
             if ![2, 3, 5].contains(&i) {
-                assert!(
-                    hits(&c, Code::Collision).iter().all(|d| d.line != Some(*l)),
-                    "{file}: line {l}: {:#?}",
-                    hits(&c, Code::Collision)
-                );
+                assert!(hits(&c, Code::Collision).iter().all(|d| d.line != Some(*l)), "{file}: line {l}: {:#?}", hits(&c, Code::Collision));
             }
         }
         // A clear path: tilted 30°, the tip above the table, the C table turning.
@@ -1072,9 +799,7 @@ fn bad_meshes_are_refused_naming_the_key() {
     nan[3][1][2] = f64::NAN;
     let mut big = common::stl::binary(&table_stl());
     big.resize(17 << 20, 0);
-    let many: Vec<_> = (0..200_001)
-        .map(|i| [[i as f64, 0.0, 0.0], [i as f64, 1.0, 0.0], [i as f64, 0.0, 1.0]])
-        .collect();
+    let many: Vec<_> = (0..200_001).map(|i| [[i as f64, 0.0, 0.0], [i as f64, 1.0, 0.0], [i as f64, 0.0, 1.0]]).collect();
     let dir = mesh_dir(
         "bad",
         &[
@@ -1083,17 +808,12 @@ fn bad_meshes_are_refused_naming_the_key() {
             ("many.stl", common::stl::binary(&many)),
             ("junk.stl", b"not an stl".to_vec()),
             ("point.stl", common::stl::binary(&[[[1.0, 2.0, 3.0]; 3]])),
-            (
-                "far.stl",
-                common::stl::binary(&[[[0.0; 3], [1.0, 0.0, 0.0], [0.0, 1e30, 0.0]]]),
-            ),
+            ("far.stl", common::stl::binary(&[[[0.0; 3], [1.0, 0.0, 0.0], [0.0, 1e30, 0.0]]])),
             ("table.stl", common::stl::binary(&table_stl())),
         ],
     );
     let bad = |file: &str, dir: Option<&std::path::Path>| {
-        kinepost::machines::parse_profile_in(&spinner_mesh(file), "spinner-mesh", None, dir)
-            .unwrap_err()
-            .to_string()
+        kinepost::machines::parse_profile_in(&spinner_mesh(file), "spinner-mesh", None, dir).unwrap_err().to_string()
     };
     for (file, why) in [
         ("nan.stl", "finite"),
@@ -1114,13 +834,8 @@ fn bad_meshes_are_refused_naming_the_key() {
     let e = bad("table.stl", None);
     assert!(e.contains("body[0].mesh") && e.contains("directory only"), "{e}");
     // Two shapes in one body.
-    let two = spinner_mesh("table.stl").replace(
-        "mesh = \"table.stl\"",
-        "mesh = \"table.stl\"\nbox = [0.0, 0.0, 0.0, 1.0, 1.0, 1.0]",
-    );
-    let e = kinepost::machines::parse_profile_in(&two, "two", None, Some(&dir))
-        .unwrap_err()
-        .to_string();
+    let two = spinner_mesh("table.stl").replace("mesh = \"table.stl\"", "mesh = \"table.stl\"\nbox = [0.0, 0.0, 0.0, 1.0, 1.0, 1.0]");
+    let e = kinepost::machines::parse_profile_in(&two, "two", None, Some(&dir)).unwrap_err().to_string();
     assert!(e.contains("body[0]") && e.contains("one shape"), "{e}");
     // The library reads a profile's meshes beside it.
     std::fs::write(dir.join("spinner-u5-620.toml"), spinner_mesh("table.stl")).unwrap();
@@ -1147,24 +862,12 @@ fn a_closed_mesh_is_a_solid_an_open_one_a_surface() {
             ("inward.stl", common::stl::ascii(&inward).into_bytes()),
         ],
     );
-    let tool = ToolShape {
-        length: 10.0,
-        diameter: 10.0,
-        corner_radius: 0.0,
-        holder_diameter: 0.0,
-        holder_length: 0.0,
-    };
+    let tool = ToolShape { length: 10.0, diameter: 10.0, corner_radius: 0.0, holder_diameter: 0.0, holder_length: 0.0 };
     for (file, solid) in [("closed.stl", true), ("open.stl", false), ("inward.stl", false)] {
-        let text = format!(
-            "{}\n[[body]]\nname = \"table mesh\"\non = \"C\"\nmesh = {file:?}\n",
-            shipped("spinner-u5-620")
-        );
+        let text = format!("{}\n[[body]]\nname = \"table mesh\"\non = \"C\"\nmesh = {file:?}\n", shipped("spinner-u5-620"));
         let p = kinepost::machines::parse_profile_in(&text, "t", None, Some(&dir)).unwrap();
         let g = p.geometry();
-        assert!(
-            matches!(&g.bodies[0].solid, Solid::Mesh(m) if m.is_solid() == solid),
-            "{file}"
-        );
+        assert!(matches!(&g.bodies[0].solid, Solid::Mesh(m) if m.is_solid() == solid), "{file}");
         let mut w = World::new(&p.machine, &g, &[], &[], 2.0, 0.01);
         w.set_tool(tool);
         let zero = kinepost::kinematics::Vec3::zeros();
@@ -1177,10 +880,7 @@ fn a_closed_mesh_is_a_solid_an_open_one_a_surface() {
         let deep = at(&mut w, -25.0);
         assert_eq!(deep.len(), usize::from(solid), "{file}: {deep:?}");
         if solid {
-            assert!(
-                deep[0].a == "cutter" && deep[0].b == "table mesh" && deep[0].dist <= -15.0,
-                "{deep:?}"
-            );
+            assert!(deep[0].a == "cutter" && deep[0].b == "table mesh" && deep[0].dist <= -15.0, "{deep:?}");
         }
         // Through the top face: a hit either way; above it: none.
         assert!(at(&mut w, -5.0).iter().any(|h| h.b == "table mesh"), "{file}");
@@ -1194,25 +894,12 @@ fn a_closed_mesh_is_a_solid_an_open_one_a_surface() {
 fn a_mesh_against_a_mesh() {
     use kinepost::collide::{Hit, ToolShape, World};
     let head = common::stl::box_triangles([-50.0, -50.0, 5.0], [50.0, 50.0, 40.0]);
-    let dir = mesh_dir(
-        "mm",
-        &[
-            ("table.stl", common::stl::binary(&table_stl())),
-            ("head.stl", common::stl::binary(&head)),
-        ],
-    );
+    let dir = mesh_dir("mm", &[("table.stl", common::stl::binary(&table_stl())), ("head.stl", common::stl::binary(&head))]);
     let bodies = "[[body]]\nname = \"table mesh\"\non = \"C\"\nmesh = \"table.stl\"\n[[body]]\nname = \"head mesh\"\non = \"spindle\"\nmesh = \"head.stl\"\n";
-    let p =
-        kinepost::machines::parse_profile_in(&format!("{}\n{bodies}", shipped("spinner-u5-620")), "t", None, Some(&dir)).unwrap();
+    let p = kinepost::machines::parse_profile_in(&format!("{}\n{bodies}", shipped("spinner-u5-620")), "t", None, Some(&dir)).unwrap();
     let g = p.geometry();
     let mut w = World::new(&p.machine, &g, &[], &[], 2.0, 0.01);
-    w.set_tool(ToolShape {
-        length: 10.0,
-        diameter: 10.0,
-        corner_radius: 0.0,
-        holder_diameter: 0.0,
-        holder_length: 0.0,
-    });
+    w.set_tool(ToolShape { length: 10.0, diameter: 10.0, corner_radius: 0.0, holder_diameter: 0.0, holder_length: 0.0 });
     let zero = kinepost::kinematics::Vec3::zeros();
     let mut at = |z: f64| {
         let mut out: Vec<Hit> = Vec::new();
@@ -1221,10 +908,7 @@ fn a_mesh_against_a_mesh() {
     };
     // The housing spans z + 15 … z + 50 (spindle at z + 10).
     let through = at(-30.0);
-    assert!(
-        through.len() == 1 && through[0].b == "table mesh" && through[0].dist < 0.0,
-        "{through:?}"
-    );
+    assert!(through.len() == 1 && through[0].b == "table mesh" && through[0].dist < 0.0, "{through:?}");
     let wholly = at(-57.0);
     assert!(wholly.len() == 1 && wholly[0].dist < 0.0, "wholly inside: {wholly:?}");
     assert!(at(-14.0).iter().all(|h| h.dist > 0.0), "a near miss at most");
@@ -1252,13 +936,9 @@ fn skipping_pairs_that_cannot_have_closed_in_misses_nothing() {
     }
     // A head rotary before a table one in the chain's numbering (dmg-dmc75v's B listed first).
     let text = shipped_file("dmg-dmc75v");
-    let (c, b) = (
-        text.find("[[rotary]]\nname = \"C\"").unwrap(),
-        text.find("[[rotary]]\nname = \"B\"").unwrap(),
-    );
+    let (c, b) = (text.find("[[rotary]]\nname = \"C\"").unwrap(), text.find("[[rotary]]\nname = \"B\"").unwrap());
     let end = b + text[b..].find("\n\n").unwrap() + 1;
-    let swapped =
-        format!("{}{}{}{}", &text[..c], &text[b..end], &text[c..b], &text[end..]).replace("\"dmg-dmc75v\"", "\"dmg-b-first\"");
+    let swapped = format!("{}{}{}{}", &text[..c], &text[b..end], &text[c..b], &text[end..]).replace("\"dmg-dmc75v\"", "\"dmg-b-first\"");
     let p = parse_profile(&swapped, "dmg-b-first", None).unwrap();
     assert_eq!(p.machine.rotaries[0].name, 'B');
     let (h, w) = walk_compare(&p, 3000, &mut rnd);
@@ -1267,16 +947,9 @@ fn skipping_pairs_that_cannot_have_closed_in_misses_nothing() {
     assert!(whole > steps / 20, "only {whole} of {steps} moves were taken whole");
     // Mesh bodies too: a closed table (a solid: wholly inside is a hit) and a head housing.
     let head = common::stl::box_triangles([-120.0, -120.0, 5.0], [120.0, 120.0, 200.0]);
-    let dir = mesh_dir(
-        "walk",
-        &[
-            ("table.stl", common::stl::binary(&table_stl())),
-            ("head.stl", common::stl::binary(&head)),
-        ],
-    );
+    let dir = mesh_dir("walk", &[("table.stl", common::stl::binary(&table_stl())), ("head.stl", common::stl::binary(&head))]);
     let bodies = "[[body]]\nname = \"table mesh\"\non = \"C\"\nmesh = \"table.stl\"\n[[body]]\nname = \"head mesh\"\non = \"spindle\"\nmesh = \"head.stl\"\n";
-    let p =
-        kinepost::machines::parse_profile_in(&format!("{}\n{bodies}", shipped("spinner-u5-620")), "t", None, Some(&dir)).unwrap();
+    let p = kinepost::machines::parse_profile_in(&format!("{}\n{bodies}", shipped("spinner-u5-620")), "t", None, Some(&dir)).unwrap();
     assert!(walk_compare(&p, 3000, &mut rnd).0 > 100, "the mesh walk touched too little");
 }
 
@@ -1288,10 +961,7 @@ fn a_rotary_turning_alone_is_counted_for_the_pairs_it_moves() {
     use kinepost::collide::{Solid, ToolShape, World};
     let p = shipped_profile("spinner-u5-620");
     let (m, g) = (&p.machine, p.geometry());
-    let stock = [Solid::Box {
-        min: [-40.0, -40.0, 0.0].into(),
-        max: [40.0, 40.0, 30.0].into(),
-    }];
+    let stock = [Solid::Box { min: [-40.0, -40.0, 0.0].into(), max: [40.0, 40.0, 30.0].into() }];
     let len = m.default_tool_length;
     let tool = ToolShape::default_for(len, true);
     let wo = kinepost::kinematics::Vec3::zeros();
@@ -1338,11 +1008,7 @@ fn the_samples_follow_a_part_the_work_offset_puts_far_off_the_axes() {
     for wo in [Vec3::zeros(), Vec3::new(1000.0, 0.0, 0.0), Vec3::new(300.0, -700.0, 50.0)] {
         let setup = Setup::new(len, wo);
         // (B, C) actual angles at the move's ends.
-        for (a, b) in [
-            ([0.0, 0.0], [0.0, 90.0]),
-            ([0.0, 0.0], [30.0, -45.0]),
-            ([-20.0, 170.0], [15.0, 10.0]),
-        ] {
+        for (a, b) in [([0.0, 0.0], [0.0, 90.0]), ([0.0, 0.0], [30.0, -45.0]), ([-20.0, 170.0], [15.0, 10.0])] {
             let (from, to) = ([a[0] * deg, a[1] * deg, 0.0], [b[0] * deg, b[1] * deg, 0.0]);
             let (n, coarse) = world.samples(m, (&lin, &from), (&lin, &to), len, &wo, 0.0);
             assert_eq!(coarse, None, "{n} samples");
@@ -1359,10 +1025,7 @@ fn the_samples_follow_a_part_the_work_offset_puts_far_off_the_axes() {
                         let t = (k as f64 + sub as f64 / 8.0) / n as f64;
                         let d = (controlled_point(m, &at(t), &c, &setup) - here).norm();
                         worst = worst.max(d / half);
-                        assert!(
-                            d <= half,
-                            "work offset {wo:?}, ({a:?}) to ({b:?}): corner {c:?} moves {d:.2} mm between {n} samples"
-                        );
+                        assert!(d <= half, "work offset {wo:?}, ({a:?}) to ({b:?}): corner {c:?} moves {d:.2} mm between {n} samples");
                     }
                 }
             }
@@ -1372,10 +1035,7 @@ fn the_samples_follow_a_part_the_work_offset_puts_far_off_the_axes() {
     assert!(worst > 0.2, "the stock moved at most {worst} of a step between samples");
     // A sheet 0.01 mm thick turned half a turn would need more samples than one block takes:
     // the samples stop at the most, and say how far apart they are.
-    let sheet = [Solid::Box {
-        min,
-        max: Vec3::new(40.0, 40.0, 0.01),
-    }];
+    let sheet = [Solid::Box { min, max: Vec3::new(40.0, 40.0, 0.01) }];
     let world = World::new(m, &Geometry::default(), &sheet, &[], 2.0, 1e-3);
     let (from, to) = ([0.0; 3], [0.0, std::f64::consts::PI, 0.0]);
     let (n, coarse) = world.samples(m, (&lin, &from), (&lin, &to), len, &Vec3::new(500.0, 0.0, 0.0), 0.0);
@@ -1394,10 +1054,7 @@ fn walk_compare(p: &Profile, n: usize, rnd: &mut impl FnMut() -> f64) -> (usize,
     let mut hits = 0;
     let m = &p.machine;
     let g = p.geometry();
-    let stock = [kinepost::collide::Solid::Box {
-        min: [-40.0, -40.0, 0.0].into(),
-        max: [40.0, 40.0, 30.0].into(),
-    }];
+    let stock = [kinepost::collide::Solid::Box { min: [-40.0, -40.0, 0.0].into(), max: [40.0, 40.0, 30.0].into() }];
     let len = m.default_tool_length;
     let tool = ToolShape::default_for(len, m.units == kinepost::kinematics::Units::Mm);
     let wo = kinepost::kinematics::Vec3::zeros();
@@ -1452,11 +1109,7 @@ fn walk_compare(p: &Profile, n: usize, rnd: &mut impl FnMut() -> f64) -> (usize,
             for t in [0.25, 0.5, 0.75, 1.0] {
                 let along = |p: &[f64; 3], q: &[f64; 3]| std::array::from_fn::<f64, 3, _>(|i| p[i] + (q[i] - p[i]) * t);
                 let seen = fresh_hits(&along(&lin0, &lin), &along(&rot0, &rot), stock_now);
-                assert!(
-                    seen.is_empty(),
-                    "{} step {k}: taken whole, yet {seen:?} at {t} of the way",
-                    m.id
-                );
+                assert!(seen.is_empty(), "{} step {k}: taken whole, yet {seen:?} at {t} of the way", m.id);
             }
         } else {
             whole.check_at(m, &lin, &rot, len, &wo, stock_now, &mut Vec::new());

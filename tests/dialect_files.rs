@@ -77,15 +77,8 @@ fn the_built_in_files_are_the_dialects() {
         let text = std::fs::read_to_string(dir.join(format!("{id}.toml"))).unwrap();
         let d = kinepost::machines::dialects::parse(&text, id, Some(id)).unwrap();
         let built = kinepost::nc::dialect(id).unwrap();
-        assert_eq!(
-            (d.name.as_str(), d.title.as_str()),
-            (built.name.as_str(), built.title.as_str())
-        );
-        assert_eq!(
-            format!("{d:?}"),
-            format!("{built:?}"),
-            "{id}: the file and the built-in differ"
-        );
+        assert_eq!((d.name.as_str(), d.title.as_str()), (built.name.as_str(), built.title.as_str()));
+        assert_eq!(format!("{d:?}"), format!("{built:?}"), "{id}: the file and the built-in differ");
     }
 }
 
@@ -97,59 +90,29 @@ fn a_shop_dialect_from_the_cli_writes_its_tool_change_and_verifies() {
     std::fs::write(&cl, two_tools()).unwrap();
     let nc = dir.join("two.nc");
     let (code, out, err) = kinepost(&[
-        "post",
-        "--machine",
-        MACHINE,
-        "--dialects",
-        dir.to_str().unwrap(),
-        "--dialect",
-        "shop",
-        "--output",
-        nc.to_str().unwrap(),
-        cl.to_str().unwrap(),
+        "post", "--machine", MACHINE, "--dialects", dir.to_str().unwrap(), "--dialect", "shop", "--output",
+        nc.to_str().unwrap(), cl.to_str().unwrap(),
     ]);
     assert_eq!(code, 0, "{out}{err}");
     let text = std::fs::read_to_string(&nc).unwrap();
     for tool in [1, 2] {
-        assert!(
-            text.contains(&format!("G91 G28 Z0.\nG90\nT{tool} M6\n")),
-            "tool {tool}:\n{text}"
-        );
+        assert!(text.contains(&format!("G91 G28 Z0.\nG90\nT{tool} M6\n")), "tool {tool}:\n{text}");
     }
-    assert!(
-        !text.contains("\nT1 M6\nG43"),
-        "the built-in tool change is replaced:\n{text}"
-    );
-    assert!(
-        text.contains("(MACHINE FRYER-5X-45 PROGRAM 1000)") || text.contains("(MACHINE fryer-5x-45 PROGRAM 1000)"),
-        "{text}"
-    );
+    assert!(!text.contains("\nT1 M6\nG43"), "the built-in tool change is replaced:\n{text}");
+    assert!(text.contains("(MACHINE FRYER-5X-45 PROGRAM 1000)") || text.contains("(MACHINE fryer-5x-45 PROGRAM 1000)"), "{text}");
     // The first move of tool 2 readies tool 3 (SELCTL/3 came before it).
     assert!(text.lines().any(|l| l == "T3"), "{text}");
-    let (code, out, err) = kinepost(&[
-        "verify",
-        "--machine",
-        MACHINE,
-        "--cl",
-        cl.to_str().unwrap(),
-        "--nc",
-        nc.to_str().unwrap(),
-    ]);
+    let (code, out, err) = kinepost(&["verify", "--machine", MACHINE, "--cl", cl.to_str().unwrap(), "--nc", nc.to_str().unwrap()]);
     assert_eq!(code, 0, "the program still reaches every CL point: {out}{err}");
     // Listed beside the built-ins.
     let (code, out, _) = kinepost(&["dialects", "--dialects", dir.to_str().unwrap()]);
     assert_eq!(code, 0);
-    assert!(
-        out.contains("shop") && out.contains("templates: program_start, tool_change, first_move"),
-        "{out}"
-    );
+    assert!(out.contains("shop") && out.contains("templates: program_start, tool_change, first_move"), "{out}");
     let _ = std::fs::remove_dir_all(&dir);
 }
 
 fn refused(text: &str) -> String {
-    kinepost::machines::dialects::parse(text, "bad.toml", None)
-        .unwrap_err()
-        .to_string()
+    kinepost::machines::dialects::parse(text, "bad.toml", None).unwrap_err().to_string()
 }
 
 #[test]
@@ -159,18 +122,9 @@ fn bad_templates_and_keys_are_refused_with_their_line() {
     let e = refused(&SHOP.replace("G90\nT{{ tool }}", "G90\nT{{ toool }}"));
     assert!(e.contains("templates.tool_change: line 3: unknown variable \"toool\""), "{e}");
     let e = refused(&SHOP.replace("T{{ tool }} M6", "T{{ tool | nosuchfilter }} M6"));
-    assert!(
-        e.contains("templates.tool_change: line 3") && e.contains("unknown filter"),
-        "{e}"
-    );
-    let e = refused(&SHOP.replace(
-        "G90\n",
-        "{% for i in range(90000) %}{% for j in range(90000) %}{% endfor %}{% endfor %}G90\n",
-    ));
-    assert!(
-        e.contains("templates.tool_change") && e.contains("fuel"),
-        "a runaway template: {e}"
-    );
+    assert!(e.contains("templates.tool_change: line 3") && e.contains("unknown filter"), "{e}");
+    let e = refused(&SHOP.replace("G90\n", "{% for i in range(90000) %}{% for j in range(90000) %}{% endfor %}{% endfor %}G90\n"));
+    assert!(e.contains("templates.tool_change") && e.contains("fuel"), "a runaway template: {e}");
     let e = refused(&SHOP.replace("tool_change = ", "tool_swap = "));
     assert!(e.contains("templates.tool_swap: no such event"), "{e}");
     let e = refused(&SHOP.replace("extends = \"fanuc\"", "extends = \"fanucc\""));
@@ -213,59 +167,26 @@ width = 5
 "#;
     let (nc, s, diags) = post_with(d, &two_tools());
     assert!(nc.contains("N00100 G20\n"), "{nc}");
-    assert!(
-        nc.contains(" G64 P.0004\n"),
-        "the blending word with the job's tolerance:\n{nc}"
-    );
+    assert!(nc.contains(" G64 P.0004\n"), "the blending word with the job's tolerance:\n{nc}");
     let words: Vec<&str> = nc.lines().filter(|l| !l.contains('(')).flat_map(|l| l.split(' ')).collect();
-    assert!(
-        words.iter().any(|w| w.starts_with('X') && w.ends_with('.')),
-        "a whole number ends in its point:\n{nc}"
-    );
-    for w in words
-        .iter()
-        .filter(|w| w.len() > 1 && "XYZABCF".contains(&w[..1]) && w.contains('.'))
-    {
-        assert!(
-            !w.ends_with('0') && !w[1..].trim_start_matches('-').starts_with("0."),
-            "{w} in\n{nc}"
-        );
+    assert!(words.iter().any(|w| w.starts_with('X') && w.ends_with('.')), "a whole number ends in its point:\n{nc}");
+    for w in words.iter().filter(|w| w.len() > 1 && "XYZABCF".contains(&w[..1]) && w.contains('.')) {
+        assert!(!w.ends_with('0') && !w[1..].trim_start_matches('-').starts_with("0."), "{w} in\n{nc}");
     }
     // Lines over 24 characters are errors at their CL line, the program says so.
-    assert!(
-        s.errors > 0 && diags.iter().any(|d| d.code == kinepost::diag::Code::LineTooLong),
-        "{diags:?}"
-    );
+    assert!(s.errors > 0 && diags.iter().any(|d| d.code == kinepost::diag::Code::LineTooLong), "{diags:?}");
     // Every word is still the same number: the blocks replay to their CL points (FK replay).
-    assert!(
-        !diags.iter().any(|d| d.code == kinepost::diag::Code::VerifyDeviation),
-        "{diags:?}"
-    );
+    assert!(!diags.iter().any(|d| d.code == kinepost::diag::Code::VerifyDeviation), "{diags:?}");
 
-    let (nc, ..) = post_with(
-        &d.replace("line_length = 24\n", "")
-            .replace("[format]", "[format]\nmodal = false"),
-        &two_tools(),
-    );
+    let (nc, ..) = post_with(&d.replace("line_length = 24\n", "").replace("[format]", "[format]\nmodal = false"), &two_tools());
     let moves: Vec<&str> = nc.lines().filter(|l| l.contains(" G1 ") || l.contains(" X")).collect();
-    assert!(
-        moves.len() > 20
-            && moves.iter().all(|l| l.contains(" X")
-                && l.contains(" Y")
-                && l.contains(" Z")
-                && l.contains(" A")
-                && l.contains(" C")),
-        "{nc}"
-    );
+    assert!(moves.len() > 20 && moves.iter().all(|l| l.contains(" X") && l.contains(" Y") && l.contains(" Z") && l.contains(" A") && l.contains(" C")), "{nc}");
 }
 
 #[test]
 fn a_runaway_template_is_stopped_and_told() {
     // Tool 1 (the trial render's) passes; tool 2 loops past the fuel a render may spend.
-    let d = SHOP.replace(
-        "G90\n",
-        "{% if tool == 2 %}{% for i in range(90000) %}{% for j in range(90000) %}{% endfor %}{% endfor %}{% endif %}G90\n",
-    );
+    let d = SHOP.replace("G90\n", "{% if tool == 2 %}{% for i in range(90000) %}{% for j in range(90000) %}{% endfor %}{% endfor %}{% endif %}G90\n");
     let (nc, s, diags) = post_with(&d, &two_tools());
     assert!(s.errors > 0, "{nc}");
     let t: Vec<_> = diags.iter().filter(|d| d.code == kinepost::diag::Code::Template).collect();
@@ -285,10 +206,7 @@ async fn dialects_over_the_api_are_versioned_and_a_job_keeps_its_version() {
 #[ignore = "needs PostgreSQL: KINEPOST_TEST_DATABASE_URL=postgres://… cargo test -- --ignored"]
 async fn dialects_over_the_api_on_postgres() {
     let Some((url, admin, name)) = common::postgres("dialects").await else {
-        assert!(
-            std::env::var("KINEPOST_REQUIRE_POSTGRES").is_err(),
-            "KINEPOST_REQUIRE_POSTGRES is set but KINEPOST_TEST_DATABASE_URL is not"
-        );
+        assert!(std::env::var("KINEPOST_REQUIRE_POSTGRES").is_err(), "KINEPOST_REQUIRE_POSTGRES is set but KINEPOST_TEST_DATABASE_URL is not");
         eprintln!("SKIPPED: set KINEPOST_TEST_DATABASE_URL=postgres://… to run on PostgreSQL");
         return;
     };
@@ -312,44 +230,21 @@ async fn round_trip(base: String) {
             .send()
     };
     assert_eq!(c.get(&url).status_ok().await, 404);
-    let r = c
-        .put(&url)
-        .header("content-type", "application/toml")
-        .body(SHOP)
-        .send()
-        .await
-        .unwrap();
+    let r = c.put(&url).header("content-type", "application/toml").body(SHOP).send().await.unwrap();
     assert_eq!(r.status(), 401);
     let r = put(SHOP.into()).await.unwrap();
     assert_eq!(r.status(), 201);
     assert_eq!(r.headers()["etag"], "\"shop-dialect-v1\"");
     let d: Value = r.json().await.unwrap();
-    assert_eq!(
-        d["templates"],
-        serde_json::json!(["program_start", "tool_change", "first_move"]),
-        "{d}"
-    );
+    assert_eq!(d["templates"], serde_json::json!(["program_start", "tool_change", "first_move"]), "{d}");
     let r = c.get(&url).header("accept", "application/toml").send().await.unwrap();
     assert_eq!(r.text().await.unwrap(), SHOP);
     let list = common::get_json(&c, &format!("{base}/v1/dialects")).await;
     let ids: Vec<&str> = list.as_array().unwrap().iter().filter_map(|d| d["name"].as_str()).collect();
-    assert_eq!(
-        ids,
-        [
-            "fanuc",
-            "haas",
-            "siemens",
-            "heidenhain",
-            "linuxcnc",
-            "linuxcnc-switchkins",
-            "shop"
-        ]
-    );
+    assert_eq!(ids, ["fanuc", "haas", "siemens", "heidenhain", "linuxcnc", "linuxcnc-switchkins", "shop"]);
 
     // A bad template: 422 naming the event and its line; nothing written.
-    let r = put(SHOP.replace("T{{ tool }} M6", "T{{ tool | nosuchfilter }} M6"))
-        .await
-        .unwrap();
+    let r = put(SHOP.replace("T{{ tool }} M6", "T{{ tool | nosuchfilter }} M6")).await.unwrap();
     assert_eq!(r.status(), 422);
     let p: Value = r.json().await.unwrap();
     assert_eq!(p["title"], "Invalid dialect");
@@ -375,10 +270,7 @@ async fn round_trip(base: String) {
     let id = job["id"].as_str().unwrap();
     common::wait_job(&c, &base, id, "succeeded", Duration::from_secs(60)).await;
     let nc = c.get(format!("{base}/v1/jobs/{id}/nc")).text_ok().await;
-    assert!(
-        nc.contains("G91 G28 Z0.") && !nc.contains("G53 G0 Z0."),
-        "the job ran with version 1:\n{nc}"
-    );
+    assert!(nc.contains("G91 G28 Z0.") && !nc.contains("G53 G0 Z0."), "the job ran with version 1:\n{nc}");
     let vs = common::get_json(&c, &format!("{url}/versions")).await;
     assert_eq!(vs["current"], 2, "{vs}");
     assert_eq!(c.get(format!("{url}/versions/1")).text_ok().await, SHOP);
@@ -406,29 +298,15 @@ block_delete = "/1"
 C = ["M82", "M83"]
 "#;
     let d = std::sync::Arc::new(kinepost::machines::dialects::parse(d, "t.toml", None).unwrap());
-    let s = kinepost::post::Settings {
-        dialect: Some("haas-shop".into()),
-        ..Default::default()
-    };
-    let o = s
-        .profile_options_with(&p, None, &|id| (id == "haas-shop").then(|| d.clone()))
-        .unwrap();
+    let s = kinepost::post::Settings { dialect: Some("haas-shop".into()), ..Default::default() };
+    let o = s.profile_options_with(&p, None, &|id| (id == "haas-shop").then(|| d.clone())).unwrap();
     let mut cl = String::from("UNITS/INCHES\nLOADTL/1\nSPINDL/RPM,3000,CLW\nFEDRAT/20\n");
-    for (k, (b, c)) in [(0.0f64, 0.0f64), (20.0, 40.0), (20.0, 40.0), (30.0, 90.0)]
-        .iter()
-        .enumerate()
-    {
+    for (k, (b, c)) in [(0.0f64, 0.0f64), (20.0, 40.0), (20.0, 40.0), (30.0, 90.0)].iter().enumerate() {
         let (b, c) = (b.to_radians(), c.to_radians());
         if k == 2 {
             cl.push_str("OPSKIP/ON\n");
         }
-        cl.push_str(&format!(
-            "GOTO/{},0,1,{:.7},{:.7},{:.7}\n",
-            k,
-            b.sin() * c.cos(),
-            b.sin() * c.sin(),
-            b.cos()
-        ));
+        cl.push_str(&format!("GOTO/{},0,1,{:.7},{:.7},{:.7}\n", k, b.sin() * c.cos(), b.sin() * c.sin(), b.cos()));
         if k == 2 {
             cl.push_str("OPSKIP/OFF\n");
         }
@@ -436,24 +314,8 @@ C = ["M82", "M83"]
     cl.push_str("FINI\n");
     let mut sink = common::collect::Collect::default();
     kinepost::post::post(cl.as_bytes(), &p.machine, &o, &mut sink).unwrap();
-    assert!(
-        sink.nc.contains("M82") || sink.nc.contains("M83"),
-        "the dialect's C clamp words:\n{}",
-        sink.nc
-    );
-    assert!(
-        !sink.nc.contains("M10") && !sink.nc.contains("M11"),
-        "not the profile's:\n{}",
-        sink.nc
-    );
-    assert!(
-        sink.nc.contains("M12") || sink.nc.contains("M13"),
-        "B keeps the profile's:\n{}",
-        sink.nc
-    );
-    assert!(
-        sink.nc.lines().any(|l| l.starts_with("/1G")),
-        "the block delete:\n{}",
-        sink.nc
-    );
+    assert!(sink.nc.contains("M82") || sink.nc.contains("M83"), "the dialect's C clamp words:\n{}", sink.nc);
+    assert!(!sink.nc.contains("M10") && !sink.nc.contains("M11"), "not the profile's:\n{}", sink.nc);
+    assert!(sink.nc.contains("M12") || sink.nc.contains("M13"), "B keeps the profile's:\n{}", sink.nc);
+    assert!(sink.nc.lines().any(|l| l.starts_with("/1G")), "the block delete:\n{}", sink.nc);
 }

@@ -1301,32 +1301,17 @@ fn program_flow_in_every_dialect() {
         let (stop, opt) = (at("M0"), at("M1"));
         assert!(stop < opt, "{d}");
         let between = &lines[stop..opt].join("\n");
-        assert!(
-            between.contains("S5000") && between.contains("M3") && between.contains("M8"),
-            "{d}: {between}"
-        );
+        assert!(between.contains("S5000") && between.contains("M3") && between.contains("M8"), "{d}: {between}");
         let after = &lines[opt..].join("\n");
         assert_eq!(after.matches("S6000").count(), 1, "{d}: the CL's own SPINDL only: {after}");
         assert!(!after.contains("S5000") && after.contains("M8"), "{d}: {after}");
         let line_of = |needle: &str| -> Vec<Option<u32>> {
-            sink.diags
-                .iter()
-                .filter(|x| x.message.contains(needle))
-                .map(|x| x.line)
-                .collect()
+            sink.diags.iter().filter(|x| x.message.contains(needle)).map(|x| x.line).collect()
         };
-        assert_eq!(
-            line_of("the stop halts"),
-            [Some(8), Some(8), Some(10)],
-            "{d}: {:?}",
-            sink.diags
-        );
+        assert_eq!(line_of("the stop halts"), [Some(8), Some(8), Some(10)], "{d}: {:?}", sink.diags);
         let skipped: Vec<&&str> = lines.iter().filter(|l| l.starts_with('/')).collect();
         if conv {
-            assert!(
-                skipped.is_empty() && line_of("block delete is not written") == [Some(13)],
-                "{d}"
-            );
+            assert!(skipped.is_empty() && line_of("block delete is not written") == [Some(13)], "{d}");
         } else {
             assert_eq!(skipped.len(), 1, "{d}: the one block between OPSKIP/ON and OFF: {skipped:?}");
             assert!(skipped[0].contains('X'), "{d}: the move to X40 mm: {skipped:?}");
@@ -1334,32 +1319,14 @@ fn program_flow_in_every_dialect() {
         assert!(lines.contains(&"M19") || lines.iter().any(|l| l.ends_with(" M19")), "{d}");
         assert_eq!(line_of("M30 not written"), [Some(18)], "{d}");
         assert_eq!(line_of("G91 not written"), [Some(19)], "{d}");
-        assert_eq!(
-            line_of("G64 not written").len(),
-            conv as usize,
-            "{d}: G64 passes on word address"
-        );
+        assert_eq!(line_of("G64 not written").len(), conv as usize, "{d}: G64 passes on word address");
         let preselect = if conv { "TOOL DEF 2" } else { "T2" };
         assert!(lines.iter().any(|l| l.ends_with(preselect)), "{d}: SELCTL/2 readies tool 2");
         let (on, off) = if conv { ("RL", "R0") } else { ("G41", "G40") };
-        assert_eq!(
-            sink.lines_with(on),
-            [22],
-            "{d}: compensation on the move after CUTCOM/LEFT:\n{}",
-            sink.nc
-        );
-        assert_eq!(
-            sink.lines_with(off),
-            [25],
-            "{d}: and off on the move after CUTCOM/OFF:\n{}",
-            sink.nc
-        );
+        assert_eq!(sink.lines_with(on), [22], "{d}: compensation on the move after CUTCOM/LEFT:\n{}", sink.nc);
+        assert_eq!(sink.lines_with(off), [25], "{d}: and off on the move after CUTCOM/OFF:\n{}", sink.nc);
         let d_word = lines.iter().any(|l| l.split_whitespace().any(|t| t == "D7"));
-        assert_eq!(
-            d_word,
-            !matches!(d, "siemens" | "heidenhain"),
-            "{d}: the CL's register where the control has one"
-        );
+        assert_eq!(d_word, !matches!(d, "siemens" | "heidenhain"), "{d}: the CL's register where the control has one");
         assert_golden(&format!("flow-{d}-{machine}.nc"), &sink.nc);
     }
 }
@@ -1375,37 +1342,18 @@ fn codes_linuxcnc_does_not_know_are_not_written() {
     let cl = "UNITS/MM\nLOADTL/1\nFEDRAT/500,MMPM\nGOTO/0,0,20,0,0,1\nAUXFUN/77\nAUXFUN/101\n\
               RAPID\nGOTO/0,0,20,0,0.5,0.8660254\nGOTO/10,0,20,0,0.5,0.8660254\nEND\n";
     for (d, known) in [("linuxcnc", false), ("haas", true)] {
-        let s = post::Settings {
-            dialect: Some(d.into()),
-            ..Default::default()
-        };
+        let s = post::Settings { dialect: Some(d.into()), ..Default::default() };
         let o = s.profile_options(&p, None).unwrap();
         let mut sink = Collect::default();
         post::post(cl.as_bytes(), &p.machine, &o, &mut sink).unwrap();
-        let has = |w: &str| {
-            sink.nc
-                .lines()
-                .any(|l| !l.starts_with('(') && l.split_whitespace().any(|t| t == w))
-        };
+        let has = |w: &str| sink.nc.lines().any(|l| !l.starts_with('(') && l.split_whitespace().any(|t| t == w));
         assert_eq!(has("M77"), known, "{d}:\n{}", sink.nc);
         assert!(has("M101"), "{d}: a user code passes");
         assert_eq!(has("M13") && has("M12"), known, "{d}: clamp words:\n{}", sink.nc);
-        let refused = sink
-            .diags
-            .iter()
-            .any(|x| x.line == Some(5) && x.severity == kinepost::diag::Severity::Error);
+        let refused = sink.diags.iter().any(|x| x.line == Some(5) && x.severity == kinepost::diag::Severity::Error);
         assert_eq!(refused, !known, "{d}: {:?}", sink.diags);
-        let told = sink
-            .diags
-            .iter()
-            .filter(|x| x.code == kinepost::diag::Code::UnknownWord)
-            .count();
-        assert_eq!(
-            told,
-            if known { 0 } else { 2 },
-            "{d}: once per clamped rotary: {:?}",
-            sink.diags
-        );
+        let told = sink.diags.iter().filter(|x| x.code == kinepost::diag::Code::UnknownWord).count();
+        assert_eq!(told, if known { 0 } else { 2 }, "{d}: once per clamped rotary: {:?}", sink.diags);
     }
 }
 

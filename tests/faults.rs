@@ -443,10 +443,7 @@ async fn a_strict_stream_stopped_early_still_ends_whole() {
             .await
             .unwrap();
         assert_eq!(resp.status(), 200, "the stream began before the error");
-        let text = resp
-            .text()
-            .await
-            .unwrap_or_else(|e| panic!("run {run}: the stream broke: {e}"));
+        let text = resp.text().await.unwrap_or_else(|e| panic!("run {run}: the stream broke: {e}"));
         let last: Value = serde_json::from_str(text.lines().last().unwrap()).unwrap();
         assert_eq!(last["type"], "error", "run {run}: the stream ends with its error: {last}");
     }

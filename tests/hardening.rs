@@ -385,13 +385,7 @@ async fn if_range_gets_the_part_only_of_the_same_output() {
     let whole = c.get(&url).send().await.unwrap();
     let etag = whole.headers()["etag"].to_str().unwrap().to_string();
     let len = whole.bytes().await.unwrap().len();
-    let r = c
-        .get(&url)
-        .header("range", "bytes=0-9")
-        .header("if-range", &etag)
-        .send()
-        .await
-        .unwrap();
+    let r = c.get(&url).header("range", "bytes=0-9").header("if-range", &etag).send().await.unwrap();
     assert_eq!(r.status(), 200);
     assert_eq!(r.headers()["accept-ranges"], "none");
     assert_eq!(r.bytes().await.unwrap().len(), len);

@@ -52,14 +52,7 @@ async fn machines_health_metrics_and_docs() {
         "Swagger UI served from the binary"
     );
     // It loads this service's document (it opened on "No API definition provided").
-    let init = c
-        .get(format!("{base}/docs/swagger-initializer.js"))
-        .send()
-        .await
-        .unwrap()
-        .text()
-        .await
-        .unwrap();
+    let init = c.get(format!("{base}/docs/swagger-initializer.js")).send().await.unwrap().text().await.unwrap();
     assert!(init.contains("\"/openapi.json\""), "{init}");
     let m = c.get(format!("{base}/metrics")).send().await.unwrap().text().await.unwrap();
     assert!(
@@ -68,10 +61,7 @@ async fn machines_health_metrics_and_docs() {
     );
     assert!(m.contains("kinepost_streams_in_flight 0"));
     // The queue's series are there before the first job, at 0.
-    assert!(
-        m.contains("kinepost_jobs{state=\"queued\"} 0") && m.contains("kinepost_jobs{state=\"failed\"} 0"),
-        "{m}"
-    );
+    assert!(m.contains("kinepost_jobs{state=\"queued\"} 0") && m.contains("kinepost_jobs{state=\"failed\"} 0"), "{m}");
 }
 
 #[tokio::test]
@@ -95,9 +85,7 @@ async fn metrics_are_valid_openmetrics_with_every_series_from_the_start() {
     }
     for outcome in ["succeeded", "failed", "cancelled"] {
         start.push(format!("kinepost_job_duration_seconds_count{{outcome=\"{outcome}\"}} 0"));
-        start.push(format!(
-            "kinepost_job_duration_seconds_bucket{{le=\"+Inf\",outcome=\"{outcome}\"}} 0"
-        ));
+        start.push(format!("kinepost_job_duration_seconds_bucket{{le=\"+Inf\",outcome=\"{outcome}\"}} 0"));
     }
     for line in &start {
         assert!(m.lines().any(|l| l == line), "no `{line}` at start in\n{m}");
@@ -105,18 +93,13 @@ async fn metrics_are_valid_openmetrics_with_every_series_from_the_start() {
     // The first scrape is counted once it is answered.
     let m = c.get(format!("{base}/metrics")).text_ok().await;
     check_exposition(&m);
-    assert!(
-        m.contains("kinepost_http_requests_total{route=\"/metrics\",status=\"200\"} 1\n"),
-        "{m}"
-    );
+    assert!(m.contains("kinepost_http_requests_total{route=\"/metrics\",status=\"200\"} 1\n"), "{m}");
 }
 
 /// An OpenMetrics text exposition: comments (HELP, TYPE, UNIT) and samples, each sample in a
 /// family a TYPE line declared before it, ended by one `# EOF`.
 fn check_exposition(text: &str) {
-    let body = text
-        .strip_suffix("# EOF\n")
-        .unwrap_or_else(|| panic!("no final # EOF in\n{text}"));
+    let body = text.strip_suffix("# EOF\n").unwrap_or_else(|| panic!("no final # EOF in\n{text}"));
     let mut families = Vec::new();
     for line in body.lines() {
         if let Some(decl) = line.strip_prefix("# TYPE ") {
@@ -816,11 +799,7 @@ async fn a_post_over_the_servers_budget_ends_saying_so() {
         blocks_per_byte: 0,
         seconds: f64::INFINITY,
     };
-    let base = server(Config {
-        post_budget: budget,
-        ..cfg()
-    })
-    .await;
+    let base = server(Config { post_budget: budget, ..cfg() }).await;
     let c = reqwest::Client::new();
     let cl = common::generated("spinner-u5-620", 2000, 3);
     let post = |accept: &'static str| {
@@ -834,16 +813,9 @@ async fn a_post_over_the_servers_budget_ends_saying_so() {
     let last: serde_json::Value = serde_json::from_str(nd.lines().last().unwrap()).unwrap();
     assert_eq!(last["error"]["code"], "over_budget", "{last}");
     assert!(last["error"]["detail"].as_str().unwrap().contains("output bound"), "{last}");
-    assert!(
-        nd.lines().count() < 700,
-        "stopped near the bound: {} records",
-        nd.lines().count()
-    );
+    assert!(nd.lines().count() < 700, "stopped near the bound: {} records", nd.lines().count());
     let text = post("text/plain").await.unwrap().text().await.unwrap();
-    assert!(
-        text.trim_end().ends_with(')') && text.contains("(ERROR: OUTPUT BOUND"),
-        "{text}"
-    );
+    assert!(text.trim_end().ends_with(')') && text.contains("(ERROR: OUTPUT BOUND"), "{text}");
     assert!(!text.contains("M30"), "no program end after the bound");
     let r = c
         .post(format!("{base}/v1/jobs?machine=spinner-u5-620"))
@@ -853,10 +825,7 @@ async fn a_post_over_the_servers_budget_ends_saying_so() {
         .await
         .unwrap();
     assert_eq!(r.status(), 202);
-    let id = r.json::<serde_json::Value>().await.unwrap()["id"]
-        .as_str()
-        .unwrap()
-        .to_string();
+    let id = r.json::<serde_json::Value>().await.unwrap()["id"].as_str().unwrap().to_string();
     let j = common::wait_finished(&c, &base, &id, std::time::Duration::from_secs(60)).await;
     assert_eq!(j["state"], "failed", "{j}");
     assert!(j["error"].as_str().unwrap().contains("output bound"), "{j}");
@@ -898,16 +867,10 @@ async fn collision_fields_are_taken_and_checked() {
             .header("content-type", "text/plain")
             .body(cl)
     };
-    let nc = post("&stock=0,0,0,50,50,20&collision_clearance=3&collisions=on")
-        .text_ok()
-        .await;
+    let nc = post("&stock=0,0,0,50,50,20&collision_clearance=3&collisions=on").text_ok().await;
     assert!(nc.contains("M30"), "{nc}");
     post("&collisions=off").text_ok().await;
-    for (q, key) in [
-        ("&collisions=maybe", "collisions"),
-        ("&stock=1,2,3", "stock"),
-        ("&collision_clearance=-1", "collision_clearance"),
-    ] {
+    for (q, key) in [("&collisions=maybe", "collisions"), ("&stock=1,2,3", "stock"), ("&collision_clearance=-1", "collision_clearance")] {
         let r = post(q).send().await.unwrap();
         assert_eq!(r.status(), 400, "{q}");
         assert!(r.text().await.unwrap().contains(key), "{q}");

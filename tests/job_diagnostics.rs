@@ -112,11 +112,7 @@ async fn a_jobs_diagnostics_are_the_clis_byte_for_byte() {
         let store = std::fs::metadata(spool(&cfg).join(format!("{id}.blocks"))).unwrap().len();
         let nc = done["progress"]["nc_bytes"].as_u64().unwrap();
         eprintln!("{file}: NC {nc} B, NDJSON {} B, block store {store} B", want.len());
-        assert!(
-            store * 2 < want.len() as u64,
-            "{file}: store {store} B, NDJSON {} B",
-            want.len()
-        );
+        assert!(store * 2 < want.len() as u64, "{file}: store {store} B, NDJSON {} B", want.len());
         assert!(!spool(&cfg).join(format!("{id}.ndjson")).exists());
     }
 }

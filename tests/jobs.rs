@@ -376,9 +376,7 @@ async fn a_preview_carries_the_machine_the_tool_the_stock_and_each_collisions_bo
     // table tilted 85° (line 13).
     let cl = "PARTNO/COLLIDE\nUNITS/MM\nLOADTL/1,LENGTH,100\nSPINDL/6000,RPM,CLW\nFEDRAT/500,MMPM\nRAPID\nGOTO/0,0,100,0,0,1\nGOTO/0,0,20,0,0,1\nGOTO/0,0,-5,0,0,1\nRAPID\nGOTO/0,0,100,0,0,1\nRAPID\nGOTO/0,0,100,0.996195,0,0.087156\nGOTO/0,0,6,0.996195,0,0.087156\nSPINDL/OFF\nFINI\n";
     let r = c
-        .post(format!(
-            "{base}/v1/jobs?machine=spinner-u5-620&stock=-50,-50,0,50,50,40&work_offset=1,2,-3"
-        ))
+        .post(format!("{base}/v1/jobs?machine=spinner-u5-620&stock=-50,-50,0,50,50,40&work_offset=1,2,-3"))
         .body(cl)
         .send()
         .await
@@ -390,20 +388,12 @@ async fn a_preview_carries_the_machine_the_tool_the_stock_and_each_collisions_bo
     let m = &p["machine"];
     assert_eq!(m["id"], "spinner-u5-620");
     assert_eq!(m["kinematics"], "table-table");
-    let rot: Vec<&str> = m["rotary"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|r| r["name"].as_str().unwrap())
-        .collect();
+    let rot: Vec<&str> = m["rotary"].as_array().unwrap().iter().map(|r| r["name"].as_str().unwrap()).collect();
     assert_eq!(rot, ["B", "C"]);
     for r in m["rotary"].as_array().unwrap() {
         assert_eq!(r["on"], "table");
         let a: Vec<f64> = r["axis"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
-        assert!(
-            (a.iter().map(|v| v * v).sum::<f64>() - 1.0).abs() < 1e-12,
-            "a unit axis: {a:?}"
-        );
+        assert!((a.iter().map(|v| v * v).sum::<f64>() - 1.0).abs() < 1e-12, "a unit axis: {a:?}");
     }
     let bodies = m["bodies"].as_array().unwrap();
     let table = bodies.iter().find(|b| b["name"] == "table").expect("the table body");
@@ -424,8 +414,7 @@ async fn a_preview_carries_the_machine_the_tool_the_stock_and_each_collisions_bo
         marks.iter().any(|mk| {
             mk["line"] == line
                 && mk["contacts"].as_array().is_some_and(|cs| {
-                    cs.iter()
-                        .any(|c| c["code"] == "collision" && c["a"] == a && c["b"] == b && c["depth"].as_f64().unwrap() > 0.0)
+                    cs.iter().any(|c| c["code"] == "collision" && c["a"] == a && c["b"] == b && c["depth"].as_f64().unwrap() > 0.0)
                 })
         })
     };

@@ -19,10 +19,7 @@ fn rs274() -> Option<PathBuf> {
         .map(|d| d.join("rs274"))
         .find(|p| p.is_file());
     if found.is_none() {
-        assert!(
-            std::env::var_os("KINEPOST_REQUIRE_RS274").is_none(),
-            "rs274 is required here (apt-get install linuxcnc-uspace)"
-        );
+        assert!(std::env::var_os("KINEPOST_REQUIRE_RS274").is_none(), "rs274 is required here (apt-get install linuxcnc-uspace)");
         eprintln!("rs274 not installed: LinuxCNC's interpreter not run");
     }
     found
@@ -79,10 +76,7 @@ fn post_linuxcnc(cl: &[u8], machine: &str, extra: impl Fn(&mut Settings)) -> Str
         .and_then(|l| l.with_dialects(concat!(env!("CARGO_MANIFEST_DIR"), "/dialects").as_ref()))
         .unwrap();
     let p = lib.get(machine).unwrap();
-    let mut s = Settings {
-        dialect: Some("linuxcnc".into()),
-        ..Default::default()
-    };
+    let mut s = Settings { dialect: Some("linuxcnc".into()), ..Default::default() };
     extra(&mut s);
     let o = s.profile_options_with(&p, None, &|id| lib.dialects.get(id)).unwrap();
     let mut sink = Collect::default();
@@ -109,19 +103,11 @@ fn linuxcnc_reads_every_program_to_its_end() {
         for mode in ["joint", "tcp"] {
             run(format!("{id} {mode}"), post_linuxcnc(&cl, id, |s| s.mode = Some(mode.into())));
         }
-        run(
-            format!("{id} feed mode dpm"),
-            post_linuxcnc(&cl, id, |s| s.feed_mode = Some("dpm".into())),
-        );
+        run(format!("{id} feed mode dpm"), post_linuxcnc(&cl, id, |s| s.feed_mode = Some("dpm".into())));
     }
     let data = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data");
-    let files = [
-        "nx_clsf_mech491_simple_mill_plane_mm.cls",
-        "nx_clsf_mech491_variable_axis_inch_5ax.cls",
-        "creo8_ncl_bohren_drill_mm.ncl",
-        "creo8_ncl_profilfraesen_profile_mm.ncl",
-        "generated/nx_two_setups_moved.cls",
-    ];
+    let files = ["nx_clsf_mech491_simple_mill_plane_mm.cls", "nx_clsf_mech491_variable_axis_inch_5ax.cls",
+        "creo8_ncl_bohren_drill_mm.ncl", "creo8_ncl_profilfraesen_profile_mm.ncl", "generated/nx_two_setups_moved.cls"];
     for f in files {
         let cl = std::fs::read(Path::new(data).join(f)).unwrap();
         for (what, extra) in [
@@ -160,23 +146,10 @@ fn the_xyzbc_trt_profile_is_linuxcncs_trt_kinematics() {
     for _ in 0..500 {
         let p = Vec3::new(next(-80.0, 80.0), next(-60.0, 60.0), next(-40.0, 60.0));
         let (b, c) = (next(-100.0, 50.0), next(-720.0, 720.0));
-        let (rb, rc) = (
-            Rotation3::from_axis_angle(&Vec3::y_axis(), b.to_radians()),
-            Rotation3::from_axis_angle(&Vec3::z_axis(), c.to_radians()),
-        );
+        let (rb, rc) = (Rotation3::from_axis_angle(&Vec3::y_axis(), b.to_radians()), Rotation3::from_axis_angle(&Vec3::z_axis(), c.to_radians()));
         let joint = r + d + rb * (rc * (p - r) - d);
-        let j = Joints {
-            linear: joint.into(),
-            rotary: [b.to_radians(), c.to_radians(), 0.0],
-        };
-        let pose = kinematics::fk(
-            m,
-            &j,
-            &Setup {
-                tool_length: 50.0,
-                work_offset: Vec3::zeros(),
-            },
-        );
+        let j = Joints { linear: joint.into(), rotary: [b.to_radians(), c.to_radians(), 0.0] };
+        let pose = kinematics::fk(m, &j, &Setup { tool_length: 50.0, work_offset: Vec3::zeros() });
         assert!((pose.tip - p).norm() < 1e-9, "B{b} C{c}: kinepost {} LinuxCNC {p}", pose.tip);
         let axis = rc.inverse() * (rb.inverse() * Vec3::z());
         assert!((pose.axis - axis).norm() < 1e-12, "B{b} C{c}");
@@ -191,11 +164,7 @@ fn xyzbc_trt_programs_run_with_switchkins() {
     let dir = std::env::temp_dir().join(format!("kinepost-rs274-trt-{}", std::process::id()));
     std::fs::create_dir_all(dir.join("subs")).unwrap();
     for m in ["428", "429"] {
-        std::fs::write(
-            dir.join("subs").join(format!("{m}remap.ngc")),
-            format!("o<{m}remap> sub\no<{m}remap> endsub\nM2\n"),
-        )
-        .unwrap();
+        std::fs::write(dir.join("subs").join(format!("{m}remap.ngc")), format!("o<{m}remap> sub\no<{m}remap> endsub\nM2\n")).unwrap();
     }
     let ini = dir.join("trt.ini");
     std::fs::write(

@@ -370,14 +370,8 @@ async fn writes_are_off_without_a_token_and_files_version_at_start_up() {
 /// A profile whose table is an STL mesh `file` (the shipped spinner's kinematics, no other body).
 fn spinner_mesh_as(id: &str, file: &str) -> String {
     let text = spinner_as(id);
-    let cut = text
-        .find("\n# Geometry for the collision check")
-        .or_else(|| text.find("\n[[body]]"))
-        .unwrap_or(text.len());
-    format!(
-        "{}\n[[body]]\nname = \"table mesh\"\non = \"C\"\nmesh = {file:?}\n",
-        &text[..cut]
-    )
+    let cut = text.find("\n# Geometry for the collision check").or_else(|| text.find("\n[[body]]")).unwrap_or(text.len());
+    format!("{}\n[[body]]\nname = \"table mesh\"\non = \"C\"\nmesh = {file:?}\n", &text[..cut])
 }
 
 #[tokio::test]
@@ -399,37 +393,17 @@ async fn mesh_bodies_come_from_the_library_directory_and_are_served_for_the_page
     let body = &m["bodies"][0];
     assert_eq!(body["mesh"]["file"], "table.stl", "{m}");
     assert_eq!(body["mesh"]["triangles"], 12);
-    assert_eq!(
-        body["mesh"]["bounds"],
-        serde_json::json!([-300.0, -300.0, -60.0, 300.0, 300.0, 0.0])
-    );
-    let r = c
-        .get(format!("{base}/v1/machines/spinner-mesh/meshes/table.stl"))
-        .send()
-        .await
-        .unwrap();
+    assert_eq!(body["mesh"]["bounds"], serde_json::json!([-300.0, -300.0, -60.0, 300.0, 300.0, 0.0]));
+    let r = c.get(format!("{base}/v1/machines/spinner-mesh/meshes/table.stl")).send().await.unwrap();
     assert_eq!(r.status(), 200);
     assert_eq!(r.headers()["content-type"], "model/stl");
     let etag = r.headers()["etag"].to_str().unwrap().to_string();
     let bytes = r.bytes().await.unwrap();
     assert_eq!(bytes.len(), 84 + 12 * 50);
-    assert_eq!(
-        &bytes[12 + 84..84 + 50 - 2],
-        &stl[12 + 84..84 + 50 - 2],
-        "the first triangle's vertices"
-    );
-    let r = c
-        .get(format!("{base}/v1/machines/spinner-mesh/meshes/table.stl"))
-        .header("if-none-match", &etag)
-        .send()
-        .await
-        .unwrap();
+    assert_eq!(&bytes[12 + 84..84 + 50 - 2], &stl[12 + 84..84 + 50 - 2], "the first triangle's vertices");
+    let r = c.get(format!("{base}/v1/machines/spinner-mesh/meshes/table.stl")).header("if-none-match", &etag).send().await.unwrap();
     assert_eq!(r.status(), 304);
-    for url in [
-        "spinner-mesh/meshes/other.stl",
-        "spinner-u5-620/meshes/table.stl",
-        "nobody/meshes/table.stl",
-    ] {
+    for url in ["spinner-mesh/meshes/other.stl", "spinner-u5-620/meshes/table.stl", "nobody/meshes/table.stl"] {
         assert_eq!(c.get(format!("{base}/v1/machines/{url}")).status_ok().await, 404, "{url}");
     }
 

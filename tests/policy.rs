@@ -69,11 +69,7 @@ fn retract_along_the_axis_lifts_by_its_distance() {
         .filter(|(_, t)| t.contains("(RETRACT)"))
         .map(|(w, _)| (0..3).map(|i| (w[1].tip[i] - w[0].tip[i]).powi(2)).sum::<f64>().sqrt())
         .collect();
-    assert!(
-        !lifts.is_empty() && lifts.iter().all(|d| (d - 25.0).abs() < 1e-3),
-        "{lifts:?}\n{}",
-        sink.nc
-    );
+    assert!(!lifts.is_empty() && lifts.iter().all(|d| (d - 25.0).abs() < 1e-3), "{lifts:?}\n{}", sink.nc);
 }
 
 #[test]
@@ -116,24 +112,11 @@ fn a_profile_states_its_default_and_a_job_overrides_it() {
 fn bad_retracts_are_refused_naming_the_setting() {
     let lib = library();
     let m = &lib.get("spinner-u5-620").unwrap().machine;
-    for bad in [
-        "up",
-        "axis:",
-        "axis:-5",
-        "axis:0",
-        "plane:x",
-        "plane:NaN",
-        "plane:1e300",
-        "machine-z:1",
-    ] {
+    for bad in ["up", "axis:", "axis:-5", "axis:0", "plane:x", "plane:NaN", "plane:1e300", "machine-z:1"] {
         let e = with_retract("joint", bad).options(m).unwrap_err();
         assert!(e.starts_with("retract"), "{bad}: {e}");
     }
-    for (good, want) in [
-        ("machine-z", Retract::MachineZ),
-        ("axis:5", Retract::Axis(5.0)),
-        ("plane:-20", Retract::Plane(-20.0)),
-    ] {
+    for (good, want) in [("machine-z", Retract::MachineZ), ("axis:5", Retract::Axis(5.0)), ("plane:-20", Retract::Plane(-20.0))] {
         assert_eq!(with_retract("joint", good).options(m).unwrap().retract, want);
     }
     assert_eq!(Settings::default().options(m).unwrap().mode, Mode::Joint);
@@ -148,11 +131,7 @@ fn prefer_keeps_a_rotary_on_the_side_asked_for() {
     for k in 0..=60 {
         let az = (k as f64 * 1.5).to_radians();
         let (i, j, kk) = (tilt.sin() * az.cos(), tilt.sin() * az.sin(), tilt.cos());
-        cl.push_str(&format!(
-            "GOTO/{:.3},{:.3},20,{i:.7},{j:.7},{kk:.7}\n",
-            30.0 * az.cos(),
-            30.0 * az.sin()
-        ));
+        cl.push_str(&format!("GOTO/{:.3},{:.3},20,{i:.7},{j:.7},{kk:.7}\n", 30.0 * az.cos(), 30.0 * az.sin()));
     }
     cl.push_str("FINI\n");
     let lib = library();
@@ -206,12 +185,7 @@ fn swing() -> String {
     for k in 0..=10 {
         let az = (60.0 + 3.0 * k as f64).to_radians();
         let tilt = 30f64.to_radians();
-        cl.push_str(&format!(
-            "GOTO/0,0,20,{:.7},{:.7},{:.7}\n",
-            tilt.sin() * az.cos(),
-            tilt.sin() * az.sin(),
-            tilt.cos()
-        ));
+        cl.push_str(&format!("GOTO/0,0,20,{:.7},{:.7},{:.7}\n", tilt.sin() * az.cos(), tilt.sin() * az.sin(), tilt.cos()));
     }
     cl.push_str("FINI\n");
     cl
@@ -245,10 +219,7 @@ fn feed_mode_dpm_writes_no_inverse_time_and_keeps_each_blocks_time() {
         assert!(!sink.nc.contains("G93"), "{mode}:\n{}", sink.nc);
         // The same motion in the same time: each block's F over the path the control reads it
         // along gives the block's time.
-        assert!(
-            (sum.cycle_time_s - sum93.cycle_time_s).abs() < 1e-6 * sum93.cycle_time_s.max(1.0),
-            "{mode}"
-        );
+        assert!((sum.cycle_time_s - sum93.cycle_time_s).abs() < 1e-6 * sum93.cycle_time_s.max(1.0), "{mode}");
         let mut checked = (0, 0);
         let mut prev: Option<&kinepost::post::BlockInfo> = None;
         let mut f_modal = None;
@@ -265,19 +236,13 @@ fn feed_mode_dpm_writes_no_inverse_time_and_keeps_each_blocks_time() {
                 };
                 if rot > 1e-3 && b.time_s > 1e-3 {
                     let want = path / (b.time_s / 60.0);
-                    assert!(
-                        (f - want).abs() <= 0.06 + 2e-3 * want,
-                        "{mode}: F{f} where {want:.2} gives the block's time: {t}"
-                    );
+                    assert!((f - want).abs() <= 0.06 + 2e-3 * want, "{mode}: F{f} where {want:.2} gives the block's time: {t}");
                     if lin > 5e-4 { checked.0 += 1 } else { checked.1 += 1 }
                 }
             }
             prev = Some(b);
         }
-        assert!(
-            checked.0 > 20 && checked.1 >= 5,
-            "{mode}: {checked:?} blocks checked (with and without linear motion)"
-        );
+        assert!(checked.0 > 20 && checked.1 >= 5, "{mode}: {checked:?} blocks checked (with and without linear motion)");
     }
     let s = Settings {
         feed_mode: Some("per-tooth".into()),

@@ -714,16 +714,9 @@ fn a_bounded_rotary_unwinds_with_a_marked_retract() {
     let mut o = Options::new(&m);
     o.unwind = kinepost::post::Unwind::AtRapids;
     let (strict, s2) = run(&m, cl.as_bytes(), &o);
-    assert!(
-        s2.errors >= 1 && strict.nc.contains("UNWIND") && strict.nc.contains("ERROR UNWIND"),
-        "{}",
-        strict.nc
-    );
+    assert!(s2.errors >= 1 && strict.nc.contains("UNWIND") && strict.nc.contains("ERROR UNWIND"), "{}", strict.nc);
     assert_eq!(strict.blocks.len(), sink.blocks.len(), "the same motion");
-    let bad = kinepost::post::Settings {
-        unwind: Some("never".into()),
-        ..Default::default()
-    };
+    let bad = kinepost::post::Settings { unwind: Some("never".into()), ..Default::default() };
     assert!(bad.options(&m).unwrap_err().starts_with("unwind"));
 }
 
@@ -762,28 +755,17 @@ fn a_post_stops_at_its_output_and_time_budget() {
         let mut sink = Collect::default();
         (post::post(cl.as_bytes(), &m, &o, &mut sink), sink)
     };
-    let tight = Budget {
-        floor_blocks: 500,
-        blocks_per_byte: 0,
-        seconds: f64::INFINITY,
-    };
+    let tight = Budget { floor_blocks: 500, blocks_per_byte: 0, seconds: f64::INFINITY };
     let (r, sink) = post_with(tight);
     let Err(post::Error::Budget(why)) = r else { panic!("{r:?}") };
     assert!(why.contains("output bound") && why.contains("500"), "{why}");
     let written = sink.nc.lines().filter(|l| l.starts_with('X') || l.starts_with("G")).count();
     assert!((500..520).contains(&written), "stops at the bound: {written} lines");
     // One block a byte is far more than this path needs (about one block in ten bytes).
-    let per_byte = Budget {
-        floor_blocks: 500,
-        blocks_per_byte: 1,
-        seconds: f64::INFINITY,
-    };
+    let per_byte = Budget { floor_blocks: 500, blocks_per_byte: 1, seconds: f64::INFINITY };
     let (r, _) = post_with(per_byte);
     assert_eq!(r.unwrap().blocks, whole.blocks);
-    let (r, _) = post_with(Budget {
-        seconds: 0.0,
-        ..Budget::default()
-    });
+    let (r, _) = post_with(Budget { seconds: 0.0, ..Budget::default() });
     let Err(post::Error::Budget(why)) = r else { panic!("{r:?}") };
     assert!(why.contains("time bound"), "{why}");
     o.budget = Budget::new(0, 0.0).unwrap();
@@ -807,10 +789,7 @@ fn a_long_travel_table_winds_on_from_where_it_stands() {
     let (sink, s) = run(&m, spiral(20).as_bytes(), &Options::new(&m));
     assert_eq!((s.errors, s.warnings), (0, 0), "{:?}", sink.diags);
     let travel = s.axes.get(&'C').unwrap();
-    assert!(
-        travel.max - travel.min < 7200.0 + 360.0,
-        "twenty turns, no unwind: {travel:?}"
-    );
+    assert!(travel.max - travel.min < 7200.0 + 360.0, "twenty turns, no unwind: {travel:?}");
     assert!(travel.min.abs().min(travel.max.abs()) < 360.0, "starts near 0: {travel:?}");
 }
 
@@ -1093,36 +1072,14 @@ fn consecutive_rapids_that_turn_rotaries_climb_to_the_top_of_z_once() {
     assert_eq!(s.errors, 0, "{:?}", sink.diags);
     let climbs = sink.nc.lines().filter(|l| l.contains("(RETRACT Z)")).count();
     assert_eq!(climbs, 1, "one climb to the top of Z:\n{}", sink.nc);
-    let lift = sink
-        .nc
-        .lines()
-        .position(|l| l.contains("(RETRACT)"))
-        .expect("a lift along the tool axis");
+    let lift = sink.nc.lines().position(|l| l.contains("(RETRACT)")).expect("a lift along the tool axis");
     let turn = sink.nc.lines().nth(lift + 1).unwrap();
-    assert!(
-        turn.contains("ROTARY REPOSITION") && turn.contains('C'),
-        "turned at clearance: {turn}"
-    );
-    replay_matches(
-        &m,
-        &cl,
-        &sink.nc,
-        Mode::Joint,
-        &Setup::new(m.default_tool_length, Vec3::zeros()),
-        1e-3,
-    );
+    assert!(turn.contains("ROTARY REPOSITION") && turn.contains('C'), "turned at clearance: {turn}");
+    replay_matches(&m, &cl, &sink.nc, Mode::Joint, &Setup::new(m.default_tool_length, Vec3::zeros()), 1e-3);
     // A cut between them: the next rotary rapid climbs again.
-    let cut = cl.replace(
-        "\nRAPID\nGOTO/20,5,60,0,",
-        &format!("\nGOTO/21,5,60,{s30},0,{c30}\nRAPID\nGOTO/20,5,60,0,"),
-    );
+    let cut = cl.replace("\nRAPID\nGOTO/20,5,60,0,", &format!("\nGOTO/21,5,60,{s30},0,{c30}\nRAPID\nGOTO/20,5,60,0,"));
     let (sink, _) = run(&m, cut.as_bytes(), &o);
-    assert_eq!(
-        sink.nc.lines().filter(|l| l.contains("(RETRACT Z)")).count(),
-        2,
-        "{}",
-        sink.nc
-    );
+    assert_eq!(sink.nc.lines().filter(|l| l.contains("(RETRACT Z)")).count(), 2, "{}", sink.nc);
 }
 
 #[test]
@@ -1741,10 +1698,7 @@ fn the_cls_tool_lengths_are_stated_and_verify_follows_them() {
             cl.push('\n');
         }
         let said = |l: f64| format!("TOOL LENGTH {l:.*} FROM THE CL", if m.units == Units::Mm { 3 } else { 4 });
-        for dialect in [
-            kinepost::nc::dialect("fanuc").unwrap(),
-            kinepost::nc::dialect("siemens").unwrap(),
-        ] {
+        for dialect in [kinepost::nc::dialect("fanuc").unwrap(), kinepost::nc::dialect("siemens").unwrap()] {
             for mode in [Mode::Joint, Mode::Tcp] {
                 let mut o = fanuc(&m, mode);
                 o.dialect = dialect.clone();
@@ -2578,11 +2532,7 @@ fn spindle_speeds_stay_within_the_profiles_range() {
     let lib = Library::load_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap();
     for p in lib.iter() {
         let (lo, hi) = p.spindle_range();
-        assert!(
-            p.doc.spindle.is_some() && hi < post::MAX_SPINDLE_SPEED,
-            "{}: every shipped profile states its spindle",
-            p.doc.id
-        );
+        assert!(p.doc.spindle.is_some() && hi < post::MAX_SPINDLE_SPEED, "{}: every shipped profile states its spindle", p.doc.id);
         let o = post::Settings::default().profile_options(p, None).unwrap();
         let cl = format!(
             "UNITS/MM\nLOADTL/1\nSPINDL/{}\nFEDRAT/100\nGOTO/10,20,30,0,0,1\nSPINDL/{}\nGOTO/12,20,30,0,0,1\nFINI\n",
@@ -2591,11 +2541,7 @@ fn spindle_speeds_stay_within_the_profiles_range() {
         );
         let (sink, _) = run(&p.machine, cl.as_bytes(), &o);
         let errs: Vec<_> = sink.diags.iter().filter(|d| d.code == Code::WordRange).collect();
-        assert!(
-            errs.len() == 1 && errs[0].line == Some(6) && errs[0].severity == Severity::Error,
-            "{}: {errs:?}",
-            p.doc.id
-        );
+        assert!(errs.len() == 1 && errs[0].line == Some(6) && errs[0].severity == Severity::Error, "{}: {errs:?}", p.doc.id);
         assert!(errs[0].message.contains("spindle maximum"), "{}", errs[0].message);
         let s_words: Vec<f64> = sink
             .nc
@@ -2705,32 +2651,17 @@ fn records_that_change_the_machine_change_the_nc_or_are_told() {
         "SELCTL/2",
     ] {
         let (sink, _) = run(&m, cl(rec).as_bytes(), &Options::new(&m));
-        let told = sink
-            .diags
-            .iter()
-            .any(|d| d.line == Some(7) && d.severity >= Severity::Warning);
-        assert!(
-            told || sink.nc != plain.nc,
-            "{rec}: neither written nor told: {:?}",
-            sink.diags
-        );
+        let told = sink.diags.iter().any(|d| d.line == Some(7) && d.severity >= Severity::Warning);
+        assert!(told || sink.nc != plain.nc, "{rec}: neither written nor told: {:?}", sink.diags);
     }
     // Cutter compensation is written, on the move after it (`ON` with no side before it names
     // none: an error there).
-    for (rec, word) in [
-        ("CUTCOM/LEFT", "G41 D1 X10.000"),
-        ("CUTCOM/RIGHT,1", "G42 D1 X10.000"),
-        ("CUTCOM/LEFT,XYPLAN,4", "G41 D4 X10.000"),
-    ] {
+    for (rec, word) in [("CUTCOM/LEFT", "G41 D1 X10.000"), ("CUTCOM/RIGHT,1", "G42 D1 X10.000"), ("CUTCOM/LEFT,XYPLAN,4", "G41 D4 X10.000")] {
         let (sink, _) = run(&m, cl(rec).as_bytes(), &Options::new(&m));
         assert!(sink.nc.lines().any(|l| l.ends_with(word)), "{rec}:\n{}", sink.nc);
     }
     let (sink, _) = run(&m, cl("CUTCOM/ ON ").as_bytes(), &Options::new(&m));
-    assert!(
-        sink.diags
-            .iter()
-            .any(|d| d.line == Some(7) && d.severity == Severity::Error && d.code == Code::CutterComp)
-    );
+    assert!(sink.diags.iter().any(|d| d.line == Some(7) && d.severity == Severity::Error && d.code == Code::CutterComp));
 }
 
 /// The NC lines of `sink` that are feed blocks, by index into its program's lines.

@@ -551,11 +551,7 @@ async fn a_restarting_replica_sweeps_only_its_own_and_expired_spool_files() {
     ];
     let (child, base) = common::spawn_binary(&data, &args);
     // The second replica is the same node (its data directory): this test removes it at its end.
-    let mut first = Replica {
-        child,
-        base,
-        data: Default::default(),
-    };
+    let mut first = Replica { child, base, data: Default::default() };
     let c = reqwest::Client::new();
     let j: Value = c
         .post(format!("{}/v1/jobs?machine=dmg-dmc75v", first.base))
@@ -612,19 +608,11 @@ async fn a_restarting_replica_sweeps_only_its_own_and_expired_spool_files() {
         common::plant(&spool, name, *age);
     }
     let (child, base) = common::spawn_binary(&data, &args);
-    let second = Replica {
-        child,
-        base,
-        data: Default::default(),
-    };
+    let second = Replica { child, base, data: Default::default() };
     // Answering at all means start-up (and its sweep) is done.
     assert_eq!(c.get(format!("{}/v1/jobs/{id}/nc", second.base)).status_ok().await, 200);
     let mut want: Vec<String> = kept.iter().map(|(n, _)| n.clone()).collect();
-    want.extend(
-        ["blocks", "cl", "lines", "nc", "preview.json"]
-            .iter()
-            .map(|x| format!("{id}.{x}")),
-    );
+    want.extend(["blocks", "cl", "lines", "nc", "preview.json"].iter().map(|x| format!("{id}.{x}")));
     want.sort();
     assert_eq!(common::spool_names(&spool), want);
     let _ = std::fs::remove_dir_all(&spool);

@@ -49,34 +49,17 @@ fn a_second_operations_mcs_is_taken_into_the_first() {
             let r = verified(&m, cl, &s.nc, mode);
             assert!(r.ok && r.matched == 80, "{mode:?}: {r:?}");
         }
-        let d = s
-            .diags
-            .iter()
-            .find(|d| d.code == Code::CoordinateSystem)
-            .expect("the MCS change is told");
+        let d = s.diags.iter().find(|d| d.code == Code::CoordinateSystem).expect("the MCS change is told");
         assert_eq!((d.line, d.severity), (Some(55), Severity::Info), "{d:?}");
-        assert!(
-            d.message.contains("100.0000, 0.0000, 0.0000 mm") && d.message.contains("turned 90.0000°"),
-            "{d:?}"
-        );
-        assert!(
-            s.nc.contains("(MCS MOVED 100.0000, 0.0000, 0.0000 MM TURNED 90.000 DEG FROM THE FIRST"),
-            "{}",
-            s.nc
-        );
+        assert!(d.message.contains("100.0000, 0.0000, 0.0000 mm") && d.message.contains("turned 90.0000°"), "{d:?}");
+        assert!(s.nc.contains("(MCS MOVED 100.0000, 0.0000, 0.0000 MM TURNED 90.000 DEG FROM THE FIRST"), "{}", s.nc);
         // The same machine motion as the path written in one MCS.
         let same = post(&m, &one, mode);
         assert_eq!(s.blocks.len(), same.blocks.len(), "{mode:?}");
         for (a, b) in s.blocks.iter().zip(&same.blocks) {
             for (x, y) in a.joints.0.iter().zip(b.joints.0.iter()) {
                 let (x, y) = (x.unwrap_or(0.0), y.unwrap_or(0.0));
-                assert!(
-                    (x - y).abs() < 2e-3,
-                    "{mode:?} block {}: {:?} vs {:?}",
-                    a.n,
-                    a.joints,
-                    b.joints
-                );
+                assert!((x - y).abs() < 2e-3, "{mode:?} block {}: {:?} vs {:?}", a.n, a.joints, b.joints);
             }
         }
     }
@@ -106,11 +89,7 @@ fn an_mcs_that_is_no_frame_is_refused_at_its_line() {
     let m = machine("haas-umc750");
     let cl = "UNITS/MM\nMSYS/0,0,0,1,0,0,0,0,1\nLOADTL/1\nFEDRAT/500,MMPM\nGOTO/10,0,20\nMSYS/5,0,0,1,0,0,0.5,0.5,0\nGOTO/10,10,20\nFINI\n";
     let s = post(&m, cl, Mode::Tcp);
-    let d = s
-        .diags
-        .iter()
-        .find(|d| d.line == Some(6) && d.severity == Severity::Error)
-        .expect("line 6 told");
+    let d = s.diags.iter().find(|d| d.line == Some(6) && d.severity == Severity::Error).expect("line 6 told");
     assert_eq!(d.code, Code::BadRecord, "{d:?}");
     assert!(d.message.contains("MSYS") && d.message.contains("not applied"), "{d:?}");
     assert!(s.nc.contains("ERROR"), "{}", s.nc);
@@ -143,14 +122,7 @@ fn with_work_offsets_a_moved_mcs_runs_in_the_next_offset() {
         let lines: Vec<&str> = s.nc.lines().collect();
         let g55 = lines.iter().position(|l| *l == "G55").expect("G55 selected");
         assert_eq!(lines[g55 + 1], "(WORK OFFSET G55 = G54 + X100.000 Y0.000 Z0.000)", "{mode:?}");
-        assert_eq!(
-            lines
-                .iter()
-                .filter(|l| l.starts_with("(WORK OFFSET G55 = G54 + X100.000"))
-                .count(),
-            2,
-            "{mode:?}: at the change and before the end"
-        );
+        assert_eq!(lines.iter().filter(|l| l.starts_with("(WORK OFFSET G55 = G54 + X100.000")).count(), 2, "{mode:?}: at the change and before the end");
         let r = verified(&m, &moved, &s.nc, mode);
         assert!(r.ok && r.matched == 80, "{mode:?}: {r:?}");
         // The same machine motion as with the points taken into the first MCS.
@@ -161,10 +133,7 @@ fn with_work_offsets_a_moved_mcs_runs_in_the_next_offset() {
         }
         // Block by block after the change, an X both write is 100 less in G55.
         let motion = |nc: &str| -> Vec<Option<f64>> {
-            let after = nc
-                .lines()
-                .skip_while(|l| !l.starts_with("(MCS MOVED") && !l.starts_with("(WORK OFFSET"))
-                .skip(1);
+            let after = nc.lines().skip_while(|l| !l.starts_with("(MCS MOVED") && !l.starts_with("(WORK OFFSET")).skip(1);
             after
                 .filter(|l| l.starts_with(['G', 'X', 'Y', 'Z', 'A', 'B', 'C']) && *l != "G55")
                 .map(|l| l.split(' ').find_map(|w| w.strip_prefix('X')?.parse().ok()))
@@ -173,10 +142,7 @@ fn with_work_offsets_a_moved_mcs_runs_in_the_next_offset() {
         let (wo, tr) = (motion(&s.nc), motion(&plain.nc));
         assert_eq!(wo.len(), tr.len(), "{mode:?}");
         let both: Vec<(f64, f64)> = wo.iter().zip(&tr).filter_map(|(a, b)| Some(((*a)?, (*b)?))).collect();
-        assert!(
-            both.len() > 10 && both.iter().all(|(a, b)| (b - a - 100.0).abs() < 2e-3),
-            "{mode:?}: {both:?}"
-        );
+        assert!(both.len() > 10 && both.iter().all(|(a, b)| (b - a - 100.0).abs() < 2e-3), "{mode:?}: {both:?}");
     }
 }
 
@@ -196,11 +162,7 @@ fn with_work_offsets_a_turned_mcs_is_an_error_and_still_cut_right() {
 #[test]
 fn work_offsets_are_refused_where_the_program_selects_none_or_uses_planes() {
     let m = machine("spinner-u5-620");
-    for (dialect, wcs, planes) in [
-        ("heidenhain", None, None),
-        ("fanuc", Some("none"), None),
-        ("fanuc", None, Some("tilted")),
-    ] {
+    for (dialect, wcs, planes) in [("heidenhain", None, None), ("fanuc", Some("none"), None), ("fanuc", None, Some("tilted"))] {
         let s = post::Settings {
             dialect: Some(dialect.into()),
             work_coordinates: wcs.map(Into::into),
@@ -211,10 +173,7 @@ fn work_offsets_are_refused_where_the_program_selects_none_or_uses_planes() {
         let e = s.options(&m).unwrap_err();
         assert!(e.starts_with("setups work-offsets"), "{dialect} {wcs:?} {planes:?}: {e}");
     }
-    let bad = post::Settings {
-        setups: Some("offsets".into()),
-        ..Default::default()
-    };
+    let bad = post::Settings { setups: Some("offsets".into()), ..Default::default() };
     assert!(bad.options(&m).unwrap_err().contains("expected transform or work-offsets"));
 }
 

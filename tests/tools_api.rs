@@ -49,6 +49,7 @@ fn two_tools() -> String {
     )
 }
 
+
 #[tokio::test]
 async fn tool_tables_round_trip_on_sqlite() {
     let mut cfg = common::cfg();
@@ -61,10 +62,7 @@ async fn tool_tables_round_trip_on_sqlite() {
 #[ignore = "needs PostgreSQL: KINEPOST_TEST_DATABASE_URL=postgres://… cargo test -- --ignored"]
 async fn tool_tables_round_trip_on_postgres() {
     let Some((url, admin, name)) = common::postgres("tools").await else {
-        assert!(
-            std::env::var("KINEPOST_REQUIRE_POSTGRES").is_err(),
-            "KINEPOST_REQUIRE_POSTGRES is set but KINEPOST_TEST_DATABASE_URL is not"
-        );
+        assert!(std::env::var("KINEPOST_REQUIRE_POSTGRES").is_err(), "KINEPOST_REQUIRE_POSTGRES is set but KINEPOST_TEST_DATABASE_URL is not");
         eprintln!("SKIPPED: set KINEPOST_TEST_DATABASE_URL=postgres://… to run on PostgreSQL");
         return;
     };
@@ -142,11 +140,7 @@ async fn round_trip(base: &str) {
     let r = put(&TABLE.replace("length = 3.5", "length = -3.5"), None).await.unwrap();
     assert_eq!(r.status(), 422);
     let p: Value = r.json().await.unwrap();
-    assert_eq!(
-        (p["key"].as_str(), p["title"].as_str()),
-        (Some("tool[0] (T1).length"), Some("Invalid tool table")),
-        "{p}"
-    );
+    assert_eq!((p["key"].as_str(), p["title"].as_str()), (Some("tool[0] (T1).length"), Some("Invalid tool table")), "{p}");
     let vs = common::get_json(&c, &format!("{url}/versions")).await;
     assert_eq!(vs["current"], 2, "{vs}");
     assert_eq!(c.get(format!("{url}/versions/1")).text_ok().await, TABLE);

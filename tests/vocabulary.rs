@@ -70,10 +70,7 @@ fn every_word_changes_the_nc_or_is_told_and_only_the_informational_ones_are_sile
             Treatment::Told(sev, _) => at_line.iter().any(|d| d.severity == sev && d.message.starts_with(w.word)),
         };
         if !ok {
-            failures.push(format!(
-                "{} ({:?}): changed {changed}, told {at_line:?}",
-                w.sample, w.treatment
-            ));
+            failures.push(format!("{} ({:?}): changed {changed}, told {at_line:?}", w.sample, w.treatment));
         }
     }
     assert!(failures.is_empty(), "{}", failures.join("\n"));
@@ -89,15 +86,8 @@ fn the_documented_vocabulary_is_the_one_in_the_code() {
          A word not listed here is unknown: a warning naming its line, and the record is not used.\n\
          SOLIDWORKS CAM's vendor records (`CSI_…`) are informational: tool and path parameters for its own posts.\n",
     );
-    for (title, pick) in [
-        ("Honoured: acted on", 0),
-        ("Informational: read past in silence", 1),
-        ("Told: not acted on, a diagnostic at its line", 2),
-    ] {
-        doc.push_str(&format!(
-            "\n## {title}\n\n| word | example | {} |\n|---|---|---|\n",
-            if pick == 2 { "severity: why" } else { "why" }
-        ));
+    for (title, pick) in [("Honoured: acted on", 0), ("Informational: read past in silence", 1), ("Told: not acted on, a diagnostic at its line", 2)] {
+        doc.push_str(&format!("\n## {title}\n\n| word | example | {} |\n|---|---|---|\n", if pick == 2 { "severity: why" } else { "why" }));
         for w in VOCABULARY {
             let (class, why) = match w.treatment {
                 Treatment::Honoured => (0, String::new()),
@@ -105,11 +95,7 @@ fn the_documented_vocabulary_is_the_one_in_the_code() {
                 Treatment::Told(s, r) => (2, format!("{}: {r}", if s == Severity::Error { "error" } else { "warning" })),
             };
             if class == pick {
-                doc.push_str(&format!(
-                    "| `{}` | `{}` | {why} |\n",
-                    w.word,
-                    w.sample.replace('\n', "` then `")
-                ));
+                doc.push_str(&format!("| `{}` | `{}` | {why} |\n", w.word, w.sample.replace('\n', "` then `")));
             }
         }
     }
@@ -118,8 +104,5 @@ fn the_documented_vocabulary_is_the_one_in_the_code() {
         std::fs::write(path, &doc).unwrap();
     }
     let checked_in = std::fs::read_to_string(path).expect("docs/cl-vocabulary.md (KINEPOST_UPDATE_DOCS=1 writes it)");
-    assert_eq!(
-        checked_in, doc,
-        "docs/cl-vocabulary.md is stale: run with KINEPOST_UPDATE_DOCS=1"
-    );
+    assert_eq!(checked_in, doc, "docs/cl-vocabulary.md is stale: run with KINEPOST_UPDATE_DOCS=1");
 }

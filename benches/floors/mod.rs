@@ -110,3 +110,4 @@ pub fn plain_floor(path: &std::path::Path, out: impl Write) -> u64 {
     }
     n
 }
+

@@ -14,20 +14,13 @@ pub(super) fn msys(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
         match num(a.text).filter(|x| x.is_finite()) {
             Some(x) => v.push(x),
             None => {
-                st.bad(
-                    diags,
-                    a.col,
-                    format!("MSYS: expected a number, found {:?}: not applied", a.text.trim()),
-                );
+                st.bad(diags, a.col, format!("MSYS: expected a number, found {:?}: not applied", a.text.trim()));
                 return None;
             }
         }
     }
     if v.len() != 9 {
-        let msg = format!(
-            "MSYS: expected origin, X axis and Y axis (9 values), found {}: not applied",
-            v.len()
-        );
+        let msg = format!("MSYS: expected origin, X axis and Y axis (9 values), found {}: not applied", v.len());
         st.bad(diags, st.rest_col, msg);
         return None;
     }

@@ -24,14 +24,7 @@ pub(super) fn movarc(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
             (Some(x), _) if v.len() < 7 => v.push(x),
             (None, "ANGLE") => sweep = args.next().and_then(|b| num(b.text)).filter(|x| x.is_finite() && *x > 0.0),
             _ => {
-                st.bad(
-                    diags,
-                    a.col,
-                    format!(
-                        "MOVARC: expected a number or ANGLE, found {:?}: taken as a straight move",
-                        a.text.trim()
-                    ),
-                );
+                st.bad(diags, a.col, format!("MOVARC: expected a number or ANGLE, found {:?}: taken as a straight move", a.text.trim()));
                 return None;
             }
         }
@@ -105,11 +98,7 @@ pub(super) fn retract(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> 
         None | Some("ON") => Some(Record::Retract),
         Some("OFF") => Some(Record::Ignored(st.major.clone())),
         Some(other) => {
-            st.bad(
-                diags,
-                st.args[0].col,
-                format!("RETRCT: expected ON or OFF, found {other:?}: no retract"),
-            );
+            st.bad(diags, st.args[0].col, format!("RETRCT: expected ON or OFF, found {other:?}: no retract"));
             None
         }
     }

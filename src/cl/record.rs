@@ -171,38 +171,27 @@ pub enum Record {
     /// Text to pass through as an NC comment (PPRINT, INSERT).
     Comment(String),
     /// `STOP` (a program stop) or `OPSTOP` (`optional`: the operator's optional stop).
-    Stop {
-        optional: bool,
-    },
+    Stop { optional: bool },
     /// `AUXFUN/n` (`M`) or `PREFUN/n` (`G`): a machine function the CAM passes to the control.
-    Function {
-        letter: char,
-        code: String,
-    },
+    Function { letter: char, code: String },
     /// `OPSKIP/ON|OFF`: the blocks between are skipped with the operator's block delete.
     BlockSkip(bool),
     /// `SELCTL/n`: tool `n` readied for the next change.
     Preselect(u32),
     /// NX's `MSYS`: the operation's machine coordinate system (origin, X and Y axes, all in
     /// NX's absolute frame; unit and square); the points and axes after it are in it.
-    Mcs {
-        origin: [f64; 3],
-        x: [f64; 3],
-        y: [f64; 3],
-    },
+    Mcs { origin: [f64; 3], x: [f64; 3], y: [f64; 3] },
     /// `CUTCOM`: cutter radius compensation on (a side, a register) or off.
     CutterComp(super::flow::CutterComp),
     /// The CL says whether its path is the tool centre (`centre`) or the contour: `said`, its
     /// words (Creo's `CUTCOM_GEOMETRY_TYPE` comment).
-    PathMeaning {
-        centre: bool,
-        said: String,
-    },
+    PathMeaning { centre: bool, said: String },
     End,
     /// Recognised and not acted on: informational, or told where it stands
     /// ([`super::vocabulary`]).
     Ignored(String),
 }
+
 
 pub(super) struct Arg<'a> {
     pub(super) text: &'a str,
@@ -755,9 +744,7 @@ fn informational(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
         "MSYS" => super::frames::msys(st, diags),
         // SOLIDWORKS CAM's vendor records: tool and path parameters for its own posts.
         m if m.starts_with("CSI_") => Some(Record::Ignored(m.to_string())),
-        m if let Some(w) = super::vocabulary::word(m)
-            && w.treatment != Treatment::Honoured =>
-        {
+        m if let Some(w) = super::vocabulary::word(m) && w.treatment != Treatment::Honoured => {
             if let Treatment::Told(sev, why) = w.treatment {
                 let msg = format!("{m}: {why}");
                 diags.push(Diagnostic::new(Code::IgnoredRecord, sev, Some(st.line), msg).at(st.lead + 1));

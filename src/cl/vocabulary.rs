@@ -26,27 +26,15 @@ pub struct Word {
 }
 
 const fn honoured(word: &'static str, sample: &'static str) -> Word {
-    Word {
-        word,
-        sample,
-        treatment: Treatment::Honoured,
-    }
+    Word { word, sample, treatment: Treatment::Honoured }
 }
 
 const fn info(word: &'static str, sample: &'static str, why: &'static str) -> Word {
-    Word {
-        word,
-        sample,
-        treatment: Treatment::Informational(why),
-    }
+    Word { word, sample, treatment: Treatment::Informational(why) }
 }
 
 const fn told(word: &'static str, sample: &'static str, sev: Severity, why: &'static str) -> Word {
-    Word {
-        word,
-        sample,
-        treatment: Treatment::Told(sev, why),
-    }
+    Word { word, sample, treatment: Treatment::Told(sev, why) }
 }
 
 use Severity::{Error, Warning};
@@ -94,32 +82,12 @@ pub const VOCABULARY: &[Word] = &[
     honoured("FINI", "FINI"),
     honoured("END", "END"),
     // Informational: the reason is the whole case for silence.
-    info(
-        "END-OF-PATH",
-        "END-OF-PATH",
-        "an operation's end: what follows says what happens next",
-    ),
-    info(
-        "PAINT",
-        "PAINT/COLOR,4",
-        "NX's display of the path: colour, speed, tool drawing",
-    ),
-    info(
-        "CSYS",
-        "CSYS/1,0,0,0,0,1,0,0,0,0,1,0",
-        "SOLIDWORKS CAM's setup frame: its GOTOs are already in the part frame",
-    ),
-    info(
-        "TRNTYP",
-        "TRNTYP/WORLD,0,0,0",
-        "SOLIDWORKS CAM's note of the frame type before each CSYS",
-    ),
+    info("END-OF-PATH", "END-OF-PATH", "an operation's end: what follows says what happens next"),
+    info("PAINT", "PAINT/COLOR,4", "NX's display of the path: colour, speed, tool drawing"),
+    info("CSYS", "CSYS/1,0,0,0,0,1,0,0,0,0,1,0", "SOLIDWORKS CAM's setup frame: its GOTOs are already in the part frame"),
+    info("TRNTYP", "TRNTYP/WORLD,0,0,0", "SOLIDWORKS CAM's note of the frame type before each CSYS"),
     info("BOX", "BOX/0,0,0,100,100,50", "CAMWorks' stock box: geometry for a simulator"),
-    info(
-        "MACHIN",
-        "MACHIN/UNCX01,1",
-        "names the post the CAM meant: the job's machine profile decides",
-    ),
+    info("MACHIN", "MACHIN/UNCX01,1", "names the post the CAM meant: the job's machine profile decides"),
     info("OPFEATSTART", "OPFEATSTART/1", "CAMWorks' feature bounds"),
     info("OPFEATEND", "OPFEATEND/1", "CAMWorks' feature bounds"),
     info("OPERATION", "OPERATION/END", "operation bounds (Fusion)"),
@@ -132,35 +100,19 @@ pub const VOCABULARY: &[Word] = &[
     info("MFGNO", "MFGNO/4", "Creo's manufacturing number"),
     info("FEATNO", "FEATNO/638", "Creo's feature number"),
     info("AUTOPS", "AUTOPS", "an APT processor switch"),
-    info(
-        "CYCLE_DEF",
-        "CYCLE_DEF/1",
-        "a cycle's definition for a listing; CYCLE itself is honoured",
-    ),
+    info("CYCLE_DEF", "CYCLE_DEF/1", "a cycle's definition for a listing; CYCLE itself is honoured"),
     info("SET", "SET/1", "a CAM-side setting"),
     info("OPTIONS", "OPTIONS/1", "a CAM-side setting"),
     info("TECHNO", "TECHNO/1", "the CAM's technology listing"),
     info("SEQNO", "SEQNO/10,INCR,10", "sequence numbers are the job's option"),
-    info(
-        "MOVE_ATTRIB",
-        "MOVE_ATTRIB/LINK",
-        "SOLIDWORKS CAM's tag of a link move: the moves are in the CL",
-    ),
-    info(
-        "LINTOL",
-        "LINTOL/0.01",
-        "a tolerance the CAM applied: the job's tolerance governs the post",
-    ),
+    info("MOVE_ATTRIB", "MOVE_ATTRIB/LINK", "SOLIDWORKS CAM's tag of a link move: the moves are in the CL"),
+    info("LINTOL", "LINTOL/0.01", "a tolerance the CAM applied: the job's tolerance governs the post"),
     info("INTOL", "INTOL/0.01", "a tolerance the CAM applied to the path already"),
     info("OUTTOL", "OUTTOL/0.01", "a tolerance the CAM applied to the path already"),
     info("TOLER", "TOLER/0.01", "a tolerance the CAM applied to the path already"),
     info("THICK", "THICK/0.5", "stock left: already in the path"),
     info("MCHTOL", "MCHTOL/0.01", "cornering tolerance of a listing"),
-    info(
-        "INDIRV",
-        "INDIRV/1,0,0",
-        "APT geometry input: already resolved into the GOTOs",
-    ),
+    info("INDIRV", "INDIRV/1,0,0", "APT geometry input: already resolved into the GOTOs"),
     info("ARCSLP", "ARCSLP/ON", "how arcs are output: the job's dialect decides"),
     info("PITCH", "PITCH/1.5", "a thread's pitch for a listing: cycles carry their own"),
     info("LEADER", "LEADER/10", "tape leader"),
@@ -173,36 +125,11 @@ pub const VOCABULARY: &[Word] = &[
     info("PPLOT", "PPLOT/ON", "plotter output"),
     info("DELETE", "DELETE/10", "tape delete codes"),
     // Told: could change the machine; not acted on.
-    told(
-        "ORIGIN",
-        "ORIGIN/100,0,0",
-        Warning,
-        "the origin of the output: NX writes it as information, an ISO post would shift the words by it; not applied (set the job's work_offset or the control's work offset)",
-    ),
-    told(
-        "TRANS",
-        "TRANS/100,0,0",
-        Error,
-        "a shift of the output words a post would apply: not applied (set the job's work_offset or the control's work offset)",
-    ),
-    told(
-        "ROTATE",
-        "ROTATE/CAXIS,ATANGLE,90",
-        Error,
-        "NX's table index: not applied; the path after it is taken as written",
-    ),
-    told(
-        "ROTHED",
-        "ROTHED/AAXIS,30",
-        Error,
-        "a head index: not applied; the path after it is taken as written",
-    ),
-    told(
-        "NURBS",
-        "NURBS/1",
-        Error,
-        "NURBS motion is not posted: the path it describes is missing (post with linear output)",
-    ),
+    told("ORIGIN", "ORIGIN/100,0,0", Warning, "the origin of the output: NX writes it as information, an ISO post would shift the words by it; not applied (set the job's work_offset or the control's work offset)"),
+    told("TRANS", "TRANS/100,0,0", Error, "a shift of the output words a post would apply: not applied (set the job's work_offset or the control's work offset)"),
+    told("ROTATE", "ROTATE/CAXIS,ATANGLE,90", Error, "NX's table index: not applied; the path after it is taken as written"),
+    told("ROTHED", "ROTHED/AAXIS,30", Error, "a head index: not applied; the path after it is taken as written"),
+    told("NURBS", "NURBS/1", Error, "NURBS motion is not posted: the path it describes is missing (post with linear output)"),
     told("POSTN", "POSTN/IN,X,10", Error, "a direct axis position: not applied"),
     told("GOHOME", "GOHOME", Error, "a move to the home position: not written"),
     told("THREAD", "THREAD/1.5", Error, "threading motion: not written"),
@@ -210,26 +137,11 @@ pub const VOCABULARY: &[Word] = &[
     told("TRACUT", "TRACUT/1", Error, "an APT transform left for the post: not applied"),
     told("INDEX", "INDEX/1", Error, "an APT repeat left for the post: not applied"),
     told("COPY", "COPY/1", Error, "an APT repeat left for the post: not applied"),
-    told(
-        "HEAD",
-        "HEAD/1",
-        Warning,
-        "a head or turret selection: a mill has one spindle here",
-    ),
+    told("HEAD", "HEAD/1", Warning, "a head or turret selection: a mill has one spindle here"),
     told("SWITCH", "SWITCH/3", Warning, "a CAM-specific switch: not applied"),
-    told(
-        "CLAMP",
-        "CLAMP/ON",
-        Warning,
-        "a clamp word: the profile's clamp words are written around positioning",
-    ),
+    told("CLAMP", "CLAMP/ON", Warning, "a clamp word: the profile's clamp words are written around positioning"),
     told("AIR", "AIR/ON", Warning, "air blast: not written (AUXFUN passes the M code)"),
-    told(
-        "SAFETY",
-        "SAFETY/ON",
-        Warning,
-        "a safety setting of another post: not applied",
-    ),
+    told("SAFETY", "SAFETY/ON", Warning, "a safety setting of another post: not applied"),
     told("RESET", "RESET", Warning, "a post reset: not applied"),
     told("CHECK", "CHECK/1", Warning, "a probing or check request: not written"),
     told("REVERS", "REVERS", Warning, "a direction reversal: not applied"),

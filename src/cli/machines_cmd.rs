@@ -1,7 +1,7 @@
 //! `kinepost machines …`: the machine library offline (validate, fit an angle error, …).
 
-use super::parse_words;
 use clap::Subcommand;
+use super::parse_words;
 use kinepost::kinematics::{Setup, Vec3};
 use kinepost::machines::{self, Library};
 use std::collections::BTreeMap;
@@ -195,3 +195,4 @@ pub(super) fn machines_cmd(lib: &Library, dir: &std::path::Path, a: &MachinesCmd
         }
     }
 }
+

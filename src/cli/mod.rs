@@ -18,11 +18,11 @@ macro_rules! say {
 mod machines_cmd;
 
 use clap::{Parser, Subcommand};
+use machines_cmd::{MachinesCmd, machines_cmd};
 use kinepost::kinematics::{self, IkOptions, Joints, Pose, Setup, Units, Vec3};
 use kinepost::machines::{self, Library};
 use kinepost::output::{solution_json, utc_now};
 use kinepost::post::parse_triple;
-use machines_cmd::{MachinesCmd, machines_cmd};
 use serde_json::{Value, json};
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -236,12 +236,7 @@ pub struct BudgetArgs {
     #[arg(long, env = "KINEPOST_MAX_BLOCKS_PER_BYTE", default_value_t = 8)]
     pub max_blocks_per_byte: u64,
     /// Seconds a post may run (0: no bound).
-    #[arg(
-        long,
-        env = "KINEPOST_MAX_POST_SECONDS",
-        default_value_t = 3600.0,
-        allow_hyphen_values = true
-    )]
+    #[arg(long, env = "KINEPOST_MAX_POST_SECONDS", default_value_t = 3600.0, allow_hyphen_values = true)]
     pub max_post_seconds: f64,
 }
 
@@ -449,9 +444,7 @@ pub fn main() -> ExitCode {
 fn library(cli: &Cli) -> Result<Library, String> {
     let dir = cli.machines.clone().unwrap_or_else(machines::default_dir);
     let dialects = cli.dialects.clone().unwrap_or_else(machines::dialects::default_dir);
-    Library::load_dir(&dir)
-        .and_then(|l| l.with_dialects(&dialects))
-        .map_err(|e| e.to_string())
+    Library::load_dir(&dir).and_then(|l| l.with_dialects(&dialects)).map_err(|e| e.to_string())
 }
 
 /// Opens a CL input: a path, or `-` for standard input.
@@ -541,9 +534,7 @@ fn seconds(flag: &str, v: f64, min: f64, max: f64, unit: f64) -> Result<std::tim
 /// The user's data directory (XDG), else `./data` where there is no home.
 fn default_data_dir() -> PathBuf {
     let xdg = std::env::var_os("XDG_DATA_HOME").filter(|d| !d.is_empty()).map(PathBuf::from);
-    let home = std::env::var_os("HOME")
-        .filter(|d| !d.is_empty())
-        .map(|h| PathBuf::from(h).join(".local/share"));
+    let home = std::env::var_os("HOME").filter(|d| !d.is_empty()).map(|h| PathBuf::from(h).join(".local/share"));
     xdg.or(home).map_or_else(|| PathBuf::from("data"), |d| d.join("kinepost"))
 }
 
@@ -555,10 +546,7 @@ fn serve(cli: &Cli, a: &ServeArgs) -> Result<(), String> {
         tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
     // Colours only for a terminal: a log file kept the escape codes.
     let ansi = std::io::IsTerminal::is_terminal(&std::io::stderr());
-    let builder = tracing_subscriber::fmt()
-        .with_env_filter(filter)
-        .with_writer(std::io::stderr)
-        .with_ansi(ansi);
+    let builder = tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).with_ansi(ansi);
     match a.log_format.as_str() {
         "json" => builder.json().init(),
         "text" => builder.init(),
@@ -681,27 +669,11 @@ fn run(cli: Cli) -> Result<(), Failure> {
         }
         Command::Dialects { json } => {
             for d in lib.dialects.iter() {
-                let events: Vec<&str> = kinepost::nc::templates::EVENTS
-                    .iter()
-                    .copied()
-                    .filter(|e| d.templates.has(e))
-                    .collect();
+                let events: Vec<&str> = kinepost::nc::templates::EVENTS.iter().copied().filter(|e| d.templates.has(e)).collect();
                 if json {
-                    say!(
-                        "{}",
-                        json!({"id": d.name, "title": d.title, "templates": events, "notes": d.notes})
-                    );
+                    say!("{}", json!({"id": d.name, "title": d.title, "templates": events, "notes": d.notes}));
                 } else {
-                    say!(
-                        "{:<16} {:<34} {}",
-                        d.name,
-                        d.title,
-                        if events.is_empty() {
-                            String::new()
-                        } else {
-                            format!("templates: {}", events.join(", "))
-                        }
-                    );
+                    say!("{:<16} {:<34} {}", d.name, d.title, if events.is_empty() { String::new() } else { format!("templates: {}", events.join(", ")) });
                 }
             }
             Ok(())
@@ -824,8 +796,7 @@ fn post_cmd(
     ));
     if o.setup_offsets && a.input != "-" {
         // Input that is no CL is refused by the post itself, with its line.
-        o.header
-            .extend(post::setups::header_lines(open_input(&a.input)?, m, &o).unwrap_or_default());
+        o.header.extend(post::setups::header_lines(open_input(&a.input)?, m, &o).unwrap_or_default());
     }
     let out: Box<dyn Write> = match &a.output {
         Some(p) => Box::new(std::fs::File::create(p).map_err(|e| format!("{}: {e}", p.display()))?),
@@ -845,10 +816,7 @@ fn post_cmd(
         && !matches!(e, post::Error::NotCl(_))
     {
         // Cut short: the file says so where the machinist reads it.
-        let _ = sink.line(
-            &o.dialect.comment_line(&format!("KINEPOST: NOT FIT TO RUN, CUT SHORT: {e}")),
-            None,
-        );
+        let _ = sink.line(&o.dialect.comment_line(&format!("KINEPOST: NOT FIT TO RUN, CUT SHORT: {e}")), None);
     }
     sink.flush().map_err(|e| e.to_string())?;
     let s = res.map_err(|e| e.to_string())?;

@@ -4,9 +4,7 @@
 
 use super::AppState;
 use super::error::{ApiError, Problem};
-use super::machines::{
-    VersionsDto, authorize, etag_header, expectation_of, toml_body, toml_response, version_toml, versions_of, wants_toml, written,
-};
+use super::machines::{VersionsDto, authorize, etag_header, expectation_of, toml_body, toml_response, version_toml, versions_of, wants_toml, written};
 use crate::machines::{Current, Expect};
 use crate::nc::Dialect;
 use crate::text::quote;
@@ -62,11 +60,7 @@ fn dto(st: &AppState, c: &Current<Dialect>) -> DialectDto {
         tcp_off: d.tcp_off.clone(),
         inverse_time: d.inverse_time.clone(),
         tool_change: d.tool_change.clone(),
-        templates: crate::nc::templates::EVENTS
-            .iter()
-            .filter(|e| d.templates.has(e))
-            .map(|e| e.to_string())
-            .collect(),
+        templates: crate::nc::templates::EVENTS.iter().filter(|e| d.templates.has(e)).map(|e| e.to_string()).collect(),
         default_for: st
             .machines
             .list()
@@ -87,16 +81,11 @@ fn dialect_err(e: crate::machines::Error) -> ApiError {
     match e {
         E::NotFound(id) => ApiError::NotFound(format!("no dialect {}", quote(&id))),
         E::Parse { .. } | E::Invalid { .. } => ApiError::BadDialect(e.to_string()),
-        E::Exists { id, version } => ApiError::Conflict(format!(
-            "dialect {} exists (version {version}): replace it with PUT",
-            quote(&id)
-        )),
+        E::Exists { id, version } => ApiError::Conflict(format!("dialect {} exists (version {version}): replace it with PUT", quote(&id))),
         E::Precondition { id, current } => ApiError::PreconditionFailed(format!(
             "dialect {} is at {}: the write was based on another",
             quote(&id),
-            current.map_or("no version (deleted or never created)".to_string(), |v| format!(
-                "version {v}"
-            ))
+            current.map_or("no version (deleted or never created)".to_string(), |v| format!("version {v}"))
         )),
         e => e.into(),
     }
@@ -121,11 +110,7 @@ pub(super) async fn list_dialects(State(st): State<Arc<AppState>>) -> Json<Vec<D
         (status = 304, description = "Not modified (If-None-Match)"),
         (status = 404, description = "No such dialect", body = Problem, content_type = "application/problem+json")),
     tag = "dialects")]
-pub(super) async fn get_dialect(
-    State(st): State<Arc<AppState>>,
-    Path(id): Path<String>,
-    headers: HeaderMap,
-) -> Result<Response, ApiError> {
+pub(super) async fn get_dialect(State(st): State<Arc<AppState>>, Path(id): Path<String>, headers: HeaderMap) -> Result<Response, ApiError> {
     let c = st.machines.dialects.get(&id).map_err(dialect_err)?;
     if let Some(r) = super::not_modified(&headers, &c.etag()) {
         return Ok(r);
@@ -134,8 +119,9 @@ pub(super) async fn get_dialect(
         let text = match st.machines.dialects.text(&id, c.version).await {
             Ok(t) => t,
             // Files only: no store to hold the text; the file's own words.
-            Err(crate::machines::Error::ReadOnly) => crate::machines::dialects::file_text(Some(&st.config.dialects), &id)
-                .map_err(|e| ApiError::Internal(e.to_string()))?,
+            Err(crate::machines::Error::ReadOnly) => {
+                crate::machines::dialects::file_text(Some(&st.config.dialects), &id).map_err(|e| ApiError::Internal(e.to_string()))?
+            }
             Err(e) => return Err(dialect_err(e)),
         };
         toml_response(StatusCode::OK, text)
@@ -170,19 +156,9 @@ async fn dialect_text(req: Request) -> Result<String, ApiError> {
 pub(super) async fn create_dialect(State(st): State<Arc<AppState>>, req: Request) -> Result<Response, ApiError> {
     authorize(&st, req.headers())?;
     let text = dialect_text(req).await?;
-    let (c, _) = st
-        .machines
-        .dialects
-        .put(&text, None, Expect::Absent)
-        .await
-        .map_err(dialect_err)?;
+    let (c, _) = st.machines.dialects.put(&text, None, Expect::Absent).await.map_err(dialect_err)?;
     tracing::info!(dialect = %c.id, version = c.version, "dialect created");
-    Ok(written(
-        StatusCode::CREATED,
-        &c,
-        dto(&st, &c),
-        &format!("/v1/dialects/{}", c.id),
-    ))
+    Ok(written(StatusCode::CREATED, &c, dto(&st, &c), &format!("/v1/dialects/{}", c.id)))
 }
 
 /// Replaces (or creates) a dialect; with `If-Match`, only if it is still that version. Posts and
@@ -202,20 +178,11 @@ pub(super) async fn create_dialect(State(st): State<Arc<AppState>>, req: Request
         (status = 507, description = "The store's disk is full: nothing written (Retry-After)", body = Problem, content_type = "application/problem+json")),
     security(("admin" = [])),
     tag = "dialects")]
-pub(super) async fn put_dialect(
-    State(st): State<Arc<AppState>>,
-    Path(id): Path<String>,
-    req: Request,
-) -> Result<Response, ApiError> {
+pub(super) async fn put_dialect(State(st): State<Arc<AppState>>, Path(id): Path<String>, req: Request) -> Result<Response, ApiError> {
     authorize(&st, req.headers())?;
     let expect = expectation_of::<Dialect>(req.headers(), &id)?;
     let text = dialect_text(req).await?;
-    let (c, created) = st
-        .machines
-        .dialects
-        .put(&text, Some(&id), expect)
-        .await
-        .map_err(dialect_err)?;
+    let (c, created) = st.machines.dialects.put(&text, Some(&id), expect).await.map_err(dialect_err)?;
     tracing::info!(dialect = %id, version = c.version, "dialect written");
     let status = if created { StatusCode::CREATED } else { StatusCode::OK };
     Ok(written(status, &c, dto(&st, &c), &format!("/v1/dialects/{id}")))
@@ -232,11 +199,7 @@ pub(super) async fn put_dialect(
         (status = 507, description = "The store's disk is full: nothing written (Retry-After)", body = Problem, content_type = "application/problem+json")),
     security(("admin" = [])),
     tag = "dialects")]
-pub(super) async fn delete_dialect(
-    State(st): State<Arc<AppState>>,
-    Path(id): Path<String>,
-    headers: HeaderMap,
-) -> Result<StatusCode, ApiError> {
+pub(super) async fn delete_dialect(State(st): State<Arc<AppState>>, Path(id): Path<String>, headers: HeaderMap) -> Result<StatusCode, ApiError> {
     authorize(&st, &headers)?;
     let expect = expectation_of::<Dialect>(&headers, &id)?;
     let v = st.machines.dialects.delete(&id, expect).await.map_err(dialect_err)?;
@@ -248,10 +211,7 @@ pub(super) async fn delete_dialect(
 #[utoipa::path(get, path = "/v1/dialects/{id}/versions", params(("id" = String, Path)),
     responses((status = 200, description = "Success", body = VersionsDto), (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json")),
     tag = "dialects")]
-pub(super) async fn list_dialect_versions(
-    State(st): State<Arc<AppState>>,
-    Path(id): Path<String>,
-) -> Result<Json<VersionsDto>, ApiError> {
+pub(super) async fn list_dialect_versions(State(st): State<Arc<AppState>>, Path(id): Path<String>) -> Result<Json<VersionsDto>, ApiError> {
     versions_of(&st.machines.dialects, id.clone())
         .await?
         .map(Json)

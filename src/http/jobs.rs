@@ -230,10 +230,7 @@ pub async fn submit(
             // The machine's table as it is now, whatever is written to it before the job runs.
             settings.machine_tools_version = st.machines.tools.get(&current.id).ok().map(|c| c.version);
         }
-        let dialect = settings
-            .dialect
-            .clone()
-            .unwrap_or_else(|| current.item.machine.controller.clone());
+        let dialect = settings.dialect.clone().unwrap_or_else(|| current.item.machine.controller.clone());
         settings.dialect_version = st.machines.dialects.get(&dialect).ok().map(|c| c.version);
         settings
             .profile_options_with(&current.item, standing, &|id| st.machines.dialect(id))

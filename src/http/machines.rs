@@ -234,9 +234,7 @@ pub(super) fn expectation_of<T: Kind>(h: &HeaderMap, id: &str) -> Result<Expect,
         .strip_prefix(&format!("\"{id}{}", T::ETAG))
         .and_then(|r| r.strip_suffix('"'))
         .and_then(|n| n.parse::<i64>().ok())
-        .ok_or_else(|| {
-            ApiError::PreconditionFailed(format!("If-Match {}: not an ETag of {} {}", quote(v), T::WHAT, quote(id)))
-        })?;
+        .ok_or_else(|| ApiError::PreconditionFailed(format!("If-Match {}: not an ETag of {} {}", quote(v), T::WHAT, quote(id))))?;
     Ok(Expect::Version(version))
 }
 
@@ -344,10 +342,7 @@ pub(super) async fn put_machine(
     let text = profile_text(req).await?;
     let (c, created) = st.machines.put(&text, Some(&id), expect).await?;
     tracing::info!(machine = %id, version = c.version, "machine profile written");
-    Ok(profile_written(
-        if created { StatusCode::CREATED } else { StatusCode::OK },
-        &c,
-    ))
+    Ok(profile_written(if created { StatusCode::CREATED } else { StatusCode::OK }, &c))
 }
 
 /// Deletes a machine profile (a version marking the deletion; jobs already queued keep theirs).
@@ -400,10 +395,7 @@ pub(super) async fn list_versions(
     State(st): State<Arc<AppState>>,
     Path(id): Path<String>,
 ) -> Result<Json<VersionsDto>, ApiError> {
-    versions_of(&st.machines, id.clone())
-        .await?
-        .map(Json)
-        .ok_or(ApiError::UnknownMachine(id))
+    versions_of(&st.machines, id.clone()).await?.map(Json).ok_or(ApiError::UnknownMachine(id))
 }
 
 /// A shelf's history of `id`; `None` when it never had one.
@@ -482,12 +474,7 @@ pub(super) async fn get_mesh(
         return Ok(r);
     }
     let bytes = crate::machines::meshes::to_binary_stl(&mesh);
-    let mut r = (
-        StatusCode::OK,
-        [(header::CONTENT_TYPE, HeaderValue::from_static("model/stl"))],
-        bytes,
-    )
-        .into_response();
+    let mut r = (StatusCode::OK, [(header::CONTENT_TYPE, HeaderValue::from_static("model/stl"))], bytes).into_response();
     if let Ok(v) = HeaderValue::from_str(&etag) {
         r.headers_mut().insert(header::ETAG, v);
     }

@@ -27,8 +27,8 @@ use axum::middleware;
 use axum::response::{IntoResponse, Response};
 use axum::routing::{get, post as post_route};
 use std::path::PathBuf;
-use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::Arc;
 use std::time::Duration;
 use tower_http::cors::{AllowOrigin, CorsLayer};
 use tower_http::request_id::{MakeRequestId, PropagateRequestIdLayer, RequestId, SetRequestIdLayer};
@@ -231,9 +231,7 @@ pub fn app(state: Arc<AppState>) -> axum::Router {
         .route("/v1/dialects", get(dialects::list_dialects).post(dialects::create_dialect))
         .route(
             "/v1/dialects/{id}",
-            get(dialects::get_dialect)
-                .put(dialects::put_dialect)
-                .delete(dialects::delete_dialect),
+            get(dialects::get_dialect).put(dialects::put_dialect).delete(dialects::delete_dialect),
         )
         .route("/v1/dialects/{id}/versions", get(dialects::list_dialect_versions))
         .route("/v1/dialects/{id}/versions/{version}", get(dialects::get_dialect_version))
@@ -417,6 +415,7 @@ where
         _ => resp.map(axum::body::Body::new),
     }
 }
+
 
 /// Alive.
 #[utoipa::path(get, path = "/healthz", responses((status = 200, description = "ok")), tag = "ops")]

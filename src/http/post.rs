@@ -370,9 +370,7 @@ pub async fn post_cl(
     let (params, filename, body) = upload(&st, query, req).await?;
     let checked = params.profile(&st).and_then(|c| {
         let standing = super::tools::standing(&st, &c.id);
-        let opts = params
-            .settings()
-            .profile_options_with(&c.item, standing, &|id| st.machines.dialect(id));
+        let opts = params.settings().profile_options_with(&c.item, standing, &|id| st.machines.dialect(id));
         Ok((c.item, opts.map_err(ApiError::BadParameter)?))
     });
     let ((profile, mut opts), body) = refuse_unread(checked, body).await?;

@@ -154,20 +154,10 @@ pub(super) async fn put_tools(
         e => e,
     };
     let text = toml_body::<ToolTableDoc>(req, "tool table").await.map_err(table_err)?;
-    let (c, created) = st
-        .machines
-        .tools
-        .put(&text, Some(&id), expect)
-        .await
-        .map_err(|e| table_err(e.into()))?;
+    let (c, created) = st.machines.tools.put(&text, Some(&id), expect).await.map_err(|e| table_err(e.into()))?;
     tracing::info!(machine = %id, version = c.version, "tool table written");
     let status = if created { StatusCode::CREATED } else { StatusCode::OK };
-    Ok(written(
-        status,
-        &c,
-        ToolTableDto::from(&c),
-        &format!("/v1/machines/{id}/tools"),
-    ))
+    Ok(written(status, &c, ToolTableDto::from(&c), &format!("/v1/machines/{id}/tools")))
 }
 
 /// Deletes a machine's tool table (a version marking the deletion): posts go back to the CL's

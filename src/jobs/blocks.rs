@@ -23,11 +23,11 @@
 //! wrote whole bytes of the residual after a nibble of their count: the padding and the nibbles
 //! cost 3.4 bytes a block of five axes, 14 % of the store.
 
-use super::varint::{get_varint, put_varint, unzigzag, zigzag};
 use crate::diag::Diagnostic;
 use crate::output::Record;
 use crate::post::{AxisWords, BlockInfo};
 use std::io::{self, BufRead, Read, Write};
+use super::varint::{get_varint, put_varint, unzigzag, zigzag};
 
 /// The file's first bytes; a later format gets a new one.
 pub const MAGIC: &[u8; 8] = b"KPBLKS2\n";
@@ -189,21 +189,13 @@ impl<W: Write> BlockWriter<W> {
             (a.code, a.severity, a.line, a.column, &a.message) == (r.code, r.severity, r.line, r.column, &r.message)
         };
         b.diagnostics.len() == self.state.diags.len()
-            && b.diagnostics
-                .iter()
-                .zip(self.state.repeated(b.source_line))
-                .all(|(a, r)| same(a, r))
+            && b.diagnostics.iter().zip(self.state.repeated(b.source_line)).all(|(a, r)| same(a, r))
     }
 
     fn encode_block(&mut self, b: &BlockInfo, skip: u64, text: &str, with_diags: bool, repeat: bool) {
         let s = &mut self.state;
         let t = s.at(b.source_line);
-        let mask = b
-            .joints
-            .0
-            .iter()
-            .enumerate()
-            .fold(0u8, |m, (i, v)| m | ((v.is_some() as u8) << i));
+        let mask = b.joints.0.iter().enumerate().fold(0u8, |m, (i, v)| m | ((v.is_some() as u8) << i));
         // The residuals, by axis.
         let mut residuals = [0u64; 6];
         for (i, v) in b.joints.0.iter().enumerate() {
@@ -408,10 +400,7 @@ impl<R: BufRead> Decoder<R> {
     }
 
     fn varint(&mut self) -> io::Result<u64> {
-        get_varint(
-            || self.byte(),
-            || io::Error::new(io::ErrorKind::InvalidData, "varint too long"),
-        )
+        get_varint(|| self.byte(), || io::Error::new(io::ErrorKind::InvalidData, "varint too long"))
     }
 
     fn bytes(&mut self) -> io::Result<Vec<u8>> {

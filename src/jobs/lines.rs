@@ -15,11 +15,11 @@
 //! before this format left the fixed-size entries themselves, whose first 8 bytes (line 1's
 //! offset) are zeros: no magic, served as they are.
 
-use super::varint::{get_varint, put_varint, unzigzag, zigzag};
 use crate::output::linemap::{ENTRY, Entries, Entry};
 use crate::post::BlockInfo;
 use std::io::{self, BufRead, Read, Seek, SeekFrom, Write};
 use std::path::Path;
+use super::varint::{get_varint, put_varint, unzigzag, zigzag};
 
 /// The file's first bytes; a later format gets a new one.
 pub const MAGIC: &[u8; 8] = b"KPLINES2";

@@ -275,12 +275,7 @@ impl Queue {
         let dialect = match (&profile, job.settings.dialect_version) {
             (Ok(p), Some(v)) => {
                 let id = job.settings.dialect.clone().unwrap_or_else(|| p.machine.controller.clone());
-                self.machines
-                    .dialects
-                    .version(&id, v)
-                    .await
-                    .map(Some)
-                    .map_err(|e| format!("dialect {id:?} version {v}: {e}"))
+                self.machines.dialects.version(&id, v).await.map(Some).map_err(|e| format!("dialect {id:?} version {v}: {e}"))
             }
             _ => Ok(None),
         };
@@ -288,7 +283,9 @@ impl Queue {
             let (job, cancel, progress) = (job.clone(), cancel.clone(), progress.clone());
             let spool = self.store.spool().to_path_buf();
             let run = (self.config.budget, self.threads_for_next());
-            tokio::task::spawn_blocking(move || execute(profile?, tools?, dialect?, &spool, &job, run, &cancel, &progress))
+            tokio::task::spawn_blocking(move || {
+                execute(profile?, tools?, dialect?, &spool, &job, run, &cancel, &progress)
+            })
         };
         tokio::pin!(task);
         let result = loop {
@@ -453,8 +450,7 @@ fn execute(
     if opts.setup_offsets {
         // The spool can be read twice: the header lists the offsets the program selects.
         let first = std::io::BufReader::new(std::fs::File::open(&paths.input).map_err(io)?);
-        opts.header
-            .extend(post::setups::header_lines(first, &profile.machine, &opts).unwrap_or_default());
+        opts.header.extend(post::setups::header_lines(first, &profile.machine, &opts).unwrap_or_default());
     }
     let input = std::fs::File::open(&paths.input).map_err(io)?;
     let input = std::io::BufReader::with_capacity(
@@ -495,12 +491,7 @@ fn execute(
     };
     let (nc, _) = sink.files.into_inner().map_err(io)?;
     nc.sync_all().map_err(io)?;
-    let lines = sink
-        .lines
-        .finish()
-        .map_err(io)?
-        .into_inner()
-        .map_err(|e| io(e.into_error()))?;
+    let lines = sink.lines.finish().map_err(io)?.into_inner().map_err(|e| io(e.into_error()))?;
     lines.sync_all().map_err(io)?;
     let blocks = sink.blocks.into_inner().into_inner().map_err(|e| io(e.into_error()))?;
     blocks.sync_all().map_err(io)?;

@@ -45,19 +45,12 @@ impl Pieces {
                 let mid = lo + width * (p as f64 + 0.5);
                 let values: [f64; TERMS] = std::array::from_fn(|j| f(mid + 0.5 * width * node(j)));
                 std::array::from_fn(|k| {
-                    let sum: f64 = (0..TERMS)
-                        .map(|j| values[j] * (PI * k as f64 * (j as f64 + 0.5) / TERMS as f64).cos())
-                        .sum();
+                    let sum: f64 = (0..TERMS).map(|j| values[j] * (PI * k as f64 * (j as f64 + 0.5) / TERMS as f64).cos()).sum();
                     sum * if k == 0 { 1.0 } else { 2.0 } / TERMS as f64
                 })
             })
             .collect();
-        Pieces {
-            lo,
-            hi,
-            density: n as f64 / (hi - lo),
-            c,
-        }
+        Pieces { lo, hi, density: n as f64 / (hi - lo), c }
     }
 
     /// The piece's series at `x` in [lo, hi], by Clenshaw's recurrence.
@@ -97,9 +90,7 @@ impl AngleError {
         };
         e.held = (e.delta(e.range.0), e.delta(e.range.1));
         let r = e.range.0.abs().max(e.range.1.abs());
-        e.max_curve = (2..e.k.len())
-            .map(|i| (i * (i - 1)) as f64 * e.k[i].abs() * r.powi(i as i32 - 2))
-            .sum();
+        e.max_curve = (2..e.k.len()).map(|i| (i * (i - 1)) as f64 * e.k[i].abs() * r.powi(i as i32 - 2)).sum();
         e.max_abs = (0..=1000)
             .map(|i| e.poly(e.range.0 + (e.range.1 - e.range.0) * i as f64 / 1000.0).abs())
             .fold(0.0, f64::max);
@@ -263,10 +254,7 @@ mod tests {
                 wanted.extend([-1e-9, -1e-12, -1e-13, 0.0, 1e-13, 1e-12, 1e-9].map(|d| at + d));
             }
             // And from the plain start, whose Newton steps end where the curvature still shows.
-            let plain = AngleError {
-                inverse: None,
-                ..e.clone()
-            };
+            let plain = AngleError { inverse: None, ..e.clone() };
             for (e, a) in [e, &plain].into_iter().flat_map(|e| wanted.iter().map(move |&a| (e, a))) {
                 let c = e.word_for(a);
                 let residual = c + e.delta(c) - a;

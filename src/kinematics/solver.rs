@@ -179,9 +179,7 @@ pub fn ik_into(m: &Machine, pose: &Pose, setup: &Setup, opt: &IkOptions, out: &m
                 push(m, out, pose, setup, &ch.seq, [a1, a2, Cs::ZERO], None, 0, 0, sing);
             }
         }
-        Shape::Three { s0, pair, missing, form } => {
-            super::three::three(m, ch, s0, pair, *missing, form, &u, pose, setup, opt, free, out)?
-        }
+        Shape::Three { s0, pair, missing, form } => super::three::three(m, ch, s0, pair, *missing, form, &u, pose, setup, opt, free, out)?,
     }
     Ok(())
 }

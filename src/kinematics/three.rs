@@ -253,10 +253,7 @@ pub(super) fn three(
     let scale = 1.0 + p_w.norm() + setup.tool_length.abs();
     let mut found = match resultant_roots(&r, scale) {
         Some(found) if !found.is_empty() => found,
-        _ => scan::roots(&r, scale)?
-            .into_iter()
-            .map(|(a, sg)| (a, Cs::of(a), sg))
-            .collect(),
+        _ => scan::roots(&r, scale)?.into_iter().map(|(a, sg)| (a, Cs::of(a), sg)).collect(),
     };
     found.sort_by(|a, b| a.0.total_cmp(&b.0));
     let mut count = 0u8;
@@ -284,9 +281,9 @@ pub(super) fn three(
         // Next to the inner axis the rounding can split one root of f in two, a hair apart: one
         // solution, the one that reproduces the pose better.
         let n = out.len();
-        if let Some(k) =
-            (first..n.saturating_sub(1)).find(|&k| (0..3).all(|i| wrap(out[k].actual[i] - out[n - 1].actual[i]).abs() < 1e-7))
-        {
+        if let Some(k) = (first..n.saturating_sub(1)).find(|&k| {
+            (0..3).all(|i| wrap(out[k].actual[i] - out[n - 1].actual[i]).abs() < 1e-7)
+        }) {
             if miss(m, pose, setup, &out[n - 1]) < miss(m, pose, setup, &out[k]) {
                 out.swap(k, n - 1);
             }
@@ -414,14 +411,7 @@ fn settled(r: &Residual, x: f64, z: Cs, slope: f64, (lo, hi): (f64, f64), scale:
 /// can leave its root a few ulps of the product away from f's. `slope`: f' at x, or NaN; `f`
 /// gives f and something else of the point (`px` at x) from its (cos, sin), returned with the
 /// point settled on. Each point's (cos, sin) is its neighbour's turned by the step.
-fn settle<P: Copy>(
-    f: impl Fn(Cs) -> (f64, P),
-    (x, z): (f64, Cs),
-    (fx, px): (f64, P),
-    slope: f64,
-    (lo, hi): (f64, f64),
-    scale: f64,
-) -> (f64, Cs, f64, P) {
+fn settle<P: Copy>(f: impl Fn(Cs) -> (f64, P), (x, z): (f64, Cs), (fx, px): (f64, P), slope: f64, (lo, hi): (f64, f64), scale: f64) -> (f64, Cs, f64, P) {
     let (mut x, mut z, mut fx, mut px, mut d) = (x, z, fx, px, slope);
     for _ in 0..8 {
         if !(fx.abs() > 1e-14 * scale) {
@@ -515,11 +505,7 @@ impl Trig {
             return None;
         }
         let noise = 2e-14 * (size + sum);
-        let weighed = |n: i32| {
-            (0..DEGREE)
-                .map(|k| ((k + 1) as f64).powi(n) * (a[k].abs() + b[k].abs()))
-                .sum::<f64>()
-        };
+        let weighed = |n: i32| (0..DEGREE).map(|k| ((k + 1) as f64).powi(n) * (a[k].abs() + b[k].abs())).sum::<f64>();
         Some(Trig {
             a0,
             a,
@@ -673,10 +659,7 @@ struct Powers {
 
 impl Powers {
     fn first(&self) -> Cs {
-        Cs {
-            c: self.c[0],
-            s: self.s[0],
-        }
+        Cs { c: self.c[0], s: self.s[0] }
     }
 }
 

@@ -9,11 +9,11 @@
 
 use super::tools::{TABLE_SUFFIX, ToolTable, parse_tool_table};
 use super::{Error, Library, Profile, parse_profile_in};
+use std::path::{Path, PathBuf};
 use crate::nc::Dialect;
 use sqlx::AnyPool;
 use sqlx::Row;
 use std::collections::{BTreeMap, HashMap};
-use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex, RwLock};
 
 /// Where a version came from.
@@ -103,9 +103,7 @@ impl Kind for ToolTable {
         Ok((id.to_string(), parse_tool_table(text, file)?))
     }
     fn files(lib: &Library) -> Vec<(String, Arc<Self>)> {
-        lib.iter()
-            .filter_map(|p| Some((p.machine.id.clone(), lib.tools(&p.machine.id)?)))
-            .collect()
+        lib.iter().filter_map(|p| Some((p.machine.id.clone(), lib.tools(&p.machine.id)?))).collect()
     }
 }
 
@@ -294,23 +292,18 @@ impl<T: Kind> Shelf<T> {
     /// last version that came from a file and no API write or deletion came after it: a shop's
     /// own changes are never overwritten by a file at start-up.
     async fn open(files: &Library, db: AnyPool) -> Result<Shelf<T>, Error> {
-        sqlx::query(sqlx::AssertSqlSafe(schema(T::TABLE)))
-            .execute(&db)
-            .await
-            .map_err(db_err)?;
+        sqlx::query(sqlx::AssertSqlSafe(schema(T::TABLE))).execute(&db).await.map_err(db_err)?;
         for (id, _) in T::files(files) {
             let id = &id;
             let text = &T::file_text(files, id).map_err(|source| Error::Io {
                 path: format!("{}{}", id, T::SUFFIX),
                 source,
             })?;
-            let last = sqlx::query(sql::<T>(
-                "SELECT version, toml, source FROM {table} WHERE id = $1 ORDER BY version DESC LIMIT 1",
-            ))
-            .bind(id)
-            .fetch_optional(&db)
-            .await
-            .map_err(db_err)?;
+            let last = sqlx::query(sql::<T>("SELECT version, toml, source FROM {table} WHERE id = $1 ORDER BY version DESC LIMIT 1"))
+                .bind(id)
+                .fetch_optional(&db)
+                .await
+                .map_err(db_err)?;
             let next = match &last {
                 None => Some(1),
                 Some(r) => {
@@ -486,15 +479,14 @@ impl<T: Kind> Shelf<T> {
         }
         check(id, present, expect)?;
         let version = last.map_or(0, |(v, _)| v) + 1;
-        let inserted = sqlx::query(sql::<T>(
-            "INSERT INTO {table} (id, version, toml, source, created_ms) VALUES ($1, $2, $3, 'api', $4)",
-        ))
-        .bind(id)
-        .bind(version)
-        .bind(text)
-        .bind(now_ms())
-        .execute(&mut *tx)
-        .await;
+        let inserted =
+            sqlx::query(sql::<T>("INSERT INTO {table} (id, version, toml, source, created_ms) VALUES ($1, $2, $3, 'api', $4)"))
+                .bind(id)
+                .bind(version)
+                .bind(text)
+                .bind(now_ms())
+                .execute(&mut *tx)
+                .await;
         match inserted {
             Err(sqlx::Error::Database(d)) if d.is_unique_violation() => {
                 return Err(Error::Precondition {
@@ -522,14 +514,12 @@ impl<T: Kind> Shelf<T> {
             if self.get(&id).ok().is_some_and(|c| c.version == v) {
                 continue;
             }
-            let row = sqlx::query(sql::<T>(
-                "SELECT toml, source, created_ms FROM {table} WHERE id = $1 AND version = $2",
-            ))
-            .bind(&id)
-            .bind(v)
-            .fetch_one(db)
-            .await
-            .map_err(db_err)?;
+            let row = sqlx::query(sql::<T>("SELECT toml, source, created_ms FROM {table} WHERE id = $1 AND version = $2"))
+                .bind(&id)
+                .bind(v)
+                .fetch_one(db)
+                .await
+                .map_err(db_err)?;
             let (text, source, created_ms): (Option<String>, String, i64) = (row.get(0), row.get(1), row.get(2));
             let Ok(mut m) = self.current.write() else { continue };
             match text.map(|t| T::parse(&t, &format!("{id} v{v}"), Some(&id), &self.dir)) {

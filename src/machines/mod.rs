@@ -349,11 +349,7 @@ pub fn parse_profile_in(text: &str, file: &str, stem: Option<&str>, dir: Option<
 }
 
 /// The profile's `[[body]]` entries as bodies, or the key that is wrong and why.
-fn geometry(
-    doc: &ProfileDoc,
-    m: &Machine,
-    meshes: &mut meshes::MeshReader,
-) -> Result<crate::collide::Geometry, (String, String)> {
+fn geometry(doc: &ProfileDoc, m: &Machine, meshes: &mut meshes::MeshReader) -> Result<crate::collide::Geometry, (String, String)> {
     use crate::collide::{Body, Link, Solid};
     if doc.body.len() > crate::collide::MAX_BODIES {
         return Err(("body".into(), format!("more than {} bodies", crate::collide::MAX_BODIES)));
@@ -362,10 +358,7 @@ fn geometry(
     for (i, b) in doc.body.iter().enumerate() {
         let key = |k: &str| format!("body[{i}].{k}");
         if b.name.is_empty() || b.name.len() > 64 || doc.body[..i].iter().any(|o| o.name == b.name) {
-            return Err((
-                key("name"),
-                format!("{} must be a unique name of 1 to 64 characters", quote(&b.name)),
-            ));
+            return Err((key("name"), format!("{} must be a unique name of 1 to 64 characters", quote(&b.name))));
         }
         let link = Link::parse(&b.on, m).map_err(|e| (key("on"), e))?;
         let solid = match (&b.box_, &b.cylinder, &b.mesh) {
@@ -381,13 +374,7 @@ fn geometry(
             (None, None, Some(f)) => Solid::Mesh(meshes.mesh(f).map_err(|e| (key("mesh"), e))?),
             _ => return Err((key("box"), "give one shape: box, cylinder or mesh".into())),
         };
-        let shape = if b.box_.is_some() {
-            "box"
-        } else if b.cylinder.is_some() {
-            "cylinder"
-        } else {
-            "mesh"
-        };
+        let shape = if b.box_.is_some() { "box" } else if b.cylinder.is_some() { "cylinder" } else { "mesh" };
         solid.check().map_err(|e| (key(shape), e))?;
         bodies.push(Body {
             name: b.name.clone(),
@@ -405,9 +392,10 @@ fn check_spindle(s: &SpindleDoc) -> Result<(), (&'static str, String)> {
         return Err(("spindle.max_rpm", format!("{} is not from 1 to {top}", s.max_rpm)));
     }
     match s.min_rpm {
-        Some(m) if !(m.is_finite() && (1.0..=s.max_rpm).contains(&m)) => {
-            Err(("spindle.min_rpm", format!("{m} is not from 1 to max_rpm {}", s.max_rpm)))
-        }
+        Some(m) if !(m.is_finite() && (1.0..=s.max_rpm).contains(&m)) => Err((
+            "spindle.min_rpm",
+            format!("{m} is not from 1 to max_rpm {}", s.max_rpm),
+        )),
         _ => Ok(()),
     }
 }

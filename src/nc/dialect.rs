@@ -195,9 +195,7 @@ fn three_or_none<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Option<[Strin
     match <[String; 3]>::try_from(v) {
         Ok(a) => Ok(Some(a)),
         Err(v) if v.is_empty() => Ok(None),
-        Err(_) => Err(serde::de::Error::custom(
-            "expected three words (left, right, off) or an empty list",
-        )),
+        Err(_) => Err(serde::de::Error::custom("expected three words (left, right, off) or an empty list")),
     }
 }
 
@@ -246,10 +244,7 @@ pub fn parse_dialect(
         .try_into()
         .map_err(|e: toml::de::Error| format!("{file}: {}", e.message()))?;
     if !templates.is_empty() {
-        table.insert(
-            "templates".into(),
-            toml::Value::try_from(&templates).map_err(|e| e.to_string())?,
-        );
+        table.insert("templates".into(), toml::Value::try_from(&templates).map_err(|e| e.to_string())?);
     }
     d.templates = Templates::compile(&templates).map_err(|e| format!("{file}: {e}"))?;
     d.table = table;
@@ -259,11 +254,7 @@ pub fn parse_dialect(
 
 fn toml_error(text: &str, e: &toml::de::Error) -> String {
     match e.span() {
-        Some(s) => format!(
-            "line {}: {}",
-            text[..s.start.min(text.len())].matches('\n').count() + 1,
-            e.message()
-        ),
+        Some(s) => format!("line {}: {}", text[..s.start.min(text.len())].matches('\n').count() + 1, e.message()),
         None => e.message().to_string(),
     }
 }
@@ -275,13 +266,7 @@ fn validate(d: &Dialect, file: &str, id: Option<&str>) -> Result<(), String> {
     {
         return bad("id", format!("{:?} must equal {id:?}", d.name));
     }
-    if d.name.is_empty()
-        || d.name.len() > 64
-        || !d
-            .name
-            .bytes()
-            .all(|b| b.is_ascii_lowercase() || b.is_ascii_digit() || b == b'-')
-    {
+    if d.name.is_empty() || d.name.len() > 64 || !d.name.bytes().all(|b| b.is_ascii_lowercase() || b.is_ascii_digit() || b == b'-') {
         return bad("id", "[a-z0-9-]+, at most 64 characters".into());
     }
     if let Some(s) = d.sequence
@@ -303,23 +288,14 @@ fn validate(d: &Dialect, file: &str, id: Option<&str>) -> Result<(), String> {
         }
     }
     let r = d.ranges;
-    if !(r.feed_mm > 0.0
-        && r.feed_mm.is_finite()
-        && r.inverse_time > 0.0
-        && r.inverse_time.is_finite()
-        && r.dwell_s >= 0.0
-        && r.dwell_s.is_finite())
-    {
+    if !(r.feed_mm > 0.0 && r.feed_mm.is_finite() && r.inverse_time > 0.0 && r.inverse_time.is_finite() && r.dwell_s >= 0.0 && r.dwell_s.is_finite()) {
         return bad("ranges", "feeds must be positive and finite, the dwell finite".into());
     }
     if let Some(k) = d.clamps.keys().find(|k| !matches!(k.as_str(), "A" | "B" | "C")) {
         return bad("clamps", format!("{k:?}: a rotary is A, B or C"));
     }
     let lines = d.begin.iter().chain(&d.end).map(|f| f.text.as_str());
-    if let Some(l) = lines
-        .chain(d.tool_change.iter().map(String::as_str))
-        .find(|l| l.contains('\n'))
-    {
+    if let Some(l) = lines.chain(d.tool_change.iter().map(String::as_str)).find(|l| l.contains('\n')) {
         return bad("begin/end/tool_change", format!("{l:?}: one line each"));
     }
     Ok(())

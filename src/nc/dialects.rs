@@ -1,8 +1,8 @@
 //! The five built-in dialects (the files of `dialects/`, compiled in), and what a dialect lets a
 //! CL pass through to its control.
 
-use super::Style;
 use super::dialect::{Dialect, parse_dialect};
+use super::Style;
 use std::sync::{Arc, LazyLock};
 
 /// The built-in dialects' files, parents first (the others extend `fanuc`).
@@ -65,9 +65,7 @@ pub fn function_risk(d: &Dialect, letter: char, code: &str) -> Risk {
         return match (d.style, d.harmless_g.iter().any(|g| g == code)) {
             (Style::Conversational, _) => Risk::Refused("the control takes no G codes"),
             (_, true) => Risk::None,
-            _ => Risk::Refused(
-                "a G code that may change coordinates, units, plane, compensation or motion under the program's own words",
-            ),
+            _ => Risk::Refused("a G code that may change coordinates, units, plane, compensation or motion under the program's own words"),
         };
     }
     match code {
@@ -83,3 +81,4 @@ pub fn function_risk(d: &Dialect, letter: char, code: &str) -> Risk {
         _ => Risk::None,
     }
 }
+

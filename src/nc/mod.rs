@@ -5,10 +5,10 @@
 mod cycles;
 mod dialect;
 mod dialects;
+pub mod templates;
 mod number;
 pub mod plane;
 pub mod read;
-pub mod templates;
 
 pub use cycles::{Canned, CannedKind, CycleLines, Cycles, IsoTaps};
 pub use dialect::{Dialect, Frame, MAX_DIALECT_BYTES, Sequence, WordFormat, parse_dialect};
@@ -224,16 +224,8 @@ impl Formatter {
     pub fn new(d: Arc<Dialect>, fmt: Formats, sequence_numbers: bool) -> Formatter {
         let numbered = d.style == Style::Conversational || (sequence_numbers && d.block_numbers);
         let seq = d.sequence.unwrap_or(match d.style {
-            Style::Conversational => Sequence {
-                start: 0,
-                step: 1,
-                width: 0,
-            },
-            Style::WordAddress => Sequence {
-                start: 5,
-                step: 5,
-                width: 0,
-            },
+            Style::Conversational => Sequence { start: 0, step: 1, width: 0 },
+            Style::WordAddress => Sequence { start: 5, step: 5, width: 0 },
         });
         let restyle = !d.format.trailing_zeros || !d.format.leading_zero;
         Formatter {
@@ -386,10 +378,7 @@ impl Formatter {
         let d = self.d.clone();
         let up = if z_up { d.machine_z_up.as_str() } else { "" };
         let off = tcp_off.unwrap_or_else(|| vec![d.tcp_off.clone()]);
-        let words = [d.spindle_off.as_str(), &d.coolant_off]
-            .into_iter()
-            .chain(off.iter().map(String::as_str))
-            .chain([up]);
+        let words = [d.spindle_off.as_str(), &d.coolant_off].into_iter().chain(off.iter().map(String::as_str)).chain([up]);
         for w in words {
             if !w.is_empty() {
                 out.push(self.words(w).to_string());

@@ -279,10 +279,7 @@ pub fn restyle(line: &str, open: &str, trailing: bool, leading: bool) -> String 
 
 fn restyle_word(token: &str, trailing: bool, leading: bool) -> std::borrow::Cow<'_, str> {
     let mut chars = token.chars();
-    let Some(address) = chars
-        .next()
-        .filter(|c| c.is_ascii_uppercase() && !matches!(c, 'G' | 'M' | 'N' | 'O' | 'T' | 'H' | 'D'))
-    else {
+    let Some(address) = chars.next().filter(|c| c.is_ascii_uppercase() && !matches!(c, 'G' | 'M' | 'N' | 'O' | 'T' | 'H' | 'D')) else {
         return token.into();
     };
     let rest = chars.as_str();
@@ -290,9 +287,7 @@ fn restyle_word(token: &str, trailing: bool, leading: bool) -> std::borrow::Cow<
         Some(d) => (&rest[..1], d),
         None => ("", rest),
     };
-    let Some((int, frac)) = digits.split_once('.') else {
-        return token.into();
-    };
+    let Some((int, frac)) = digits.split_once('.') else { return token.into() };
     if !int.bytes().all(|b| b.is_ascii_digit()) || !frac.bytes().all(|b| b.is_ascii_digit()) || int.is_empty() {
         return token.into();
     }

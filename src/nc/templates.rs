@@ -80,8 +80,7 @@ impl Templates {
             if text.len() > MAX_BYTES {
                 return Err(format!("templates.{event}: longer than {MAX_BYTES} bytes"));
             }
-            env.add_template_owned(event.clone(), text.clone())
-                .map_err(|e| template_error(event, &e))?;
+            env.add_template_owned(event.clone(), text.clone()).map_err(|e| template_error(event, &e))?;
             let t = env.get_template(event).map_err(|e| template_error(event, &e))?;
             let mut unknown: Vec<String> = t
                 .undeclared_variables(false)
@@ -98,8 +97,7 @@ impl Templates {
             }
             // A trial with every variable set finds what only rendering can: an unknown filter
             // or test, a filter on the wrong kind of value, a loop that runs out of fuel.
-            t.render(Value::from_object(Vars::sample().0))
-                .map_err(|e| template_error(event, &e))?;
+            t.render(Value::from_object(Vars::sample().0)).map_err(|e| template_error(event, &e))?;
             has[i] = true;
         }
         let env = has.iter().any(|h| *h).then_some(env);
@@ -125,12 +123,8 @@ impl Templates {
         Some(match t.render(Value::from_object(vars.0.clone())) {
             Ok(text) if text.len() > MAX_BYTES => Err(format!("templates.{event}: wrote more than {MAX_BYTES} bytes")),
             Ok(text) => {
-                let lines: Vec<String> = text
-                    .lines()
-                    .map(str::trim)
-                    .filter(|l| !l.is_empty())
-                    .map(str::to_string)
-                    .collect();
+                let lines: Vec<String> =
+                    text.lines().map(str::trim).filter(|l| !l.is_empty()).map(str::to_string).collect();
                 if lines.len() > MAX_LINES {
                     Err(format!("templates.{event}: wrote more than {MAX_LINES} lines"))
                 } else {

@@ -25,8 +25,8 @@ pub use emit::linearize::{NONLINEAR_SAMPLES, seg_dist};
 pub use policy::{Prefer, Preselect, Retract, RotaryFeed, Unwind};
 pub use settings::{Budget, MAX_SPINDLE_SPEED, Mode, Options, Settings, parse_triple, threads};
 pub use sink::{AxisStats, AxisWords, BlockInfo, Sink, Summary, TextSink, ToolUse};
-pub use source::{ArcSpec, Hole, HolePart, Item, MotionPt, ProgEvent, Source};
 pub use tools::LengthFrom;
+pub use source::{ArcSpec, Hole, HolePart, Item, MotionPt, ProgEvent, Source};
 
 use crate::diag::Diagnostic;
 use crate::kinematics::{Machine, Setup};
@@ -134,9 +134,7 @@ fn run<R: BufRead + Send, S: Sink + ?Sized>(
     }
     let mut direct = Direct { apply, summary: None };
     plan.produce(&mut direct)?;
-    direct
-        .summary
-        .ok_or_else(|| Error::Io(std::io::Error::other("the post ended without its end")))
+    direct.summary.ok_or_else(|| Error::Io(std::io::Error::other("the post ended without its end")))
 }
 
 /// What the reading and planning half asks of the emitting half, in the order a single thread
@@ -248,9 +246,7 @@ impl<R: BufRead> Plan<'_, R> {
             // after the tool change it belongs to is written (the retract is the old tool's).
             let lengths = &mut self.lengths;
             let step = match &item {
-                Item::Event(ProgEvent::ToolLength { length, line }) if o.tool_length.is_none() => {
-                    lengths.cl_length(*length, *line)
-                }
+                Item::Event(ProgEvent::ToolLength { length, line }) if o.tool_length.is_none() => lengths.cl_length(*length, *line),
                 Item::Event(ProgEvent::Tool { number, line, .. }) => lengths.tool(*number, *line),
                 Item::Motion(_) if lengths.waiting() => lengths.motion(),
                 _ => tools::Step::default(),

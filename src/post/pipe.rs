@@ -13,8 +13,8 @@
 
 use super::{Apply, Down, Error, Op, Plan, Sink, Summary};
 use std::io::BufRead;
-use std::sync::Mutex;
 use std::sync::mpsc::{Receiver, SyncSender, TryRecvError, sync_channel};
+use std::sync::Mutex;
 
 /// Ops a batch: a CL point is about three (its bytes read, the point, its end), a batch some
 /// 340 points and 240 KiB (512 woke the emitting half twice as often, for 7 % more CPU).
@@ -30,21 +30,19 @@ pub(super) fn run<R: BufRead + Send, S: Sink + ?Sized>(plan: Plan<'_, R>, mut ap
     let threaded = std::thread::scope(|scope| {
         let (tx, rx) = sync_channel::<Vec<Op>>(QUEUED);
         let (back_tx, back_rx) = sync_channel::<Vec<Op>>(QUEUED + 2);
-        let started = std::thread::Builder::new()
-            .name("kinepost-read".into())
-            .spawn_scoped(scope, || {
-                let taken = slot.lock().ok().and_then(|mut p| p.take());
-                if let Some(plan) = taken {
-                    let mut down = Batches {
-                        tx,
-                        back: back_rx,
-                        buf: Vec::with_capacity(BATCH),
-                    };
-                    if plan.produce(&mut down).is_ok() {
-                        down.flush();
-                    }
+        let started = std::thread::Builder::new().name("kinepost-read".into()).spawn_scoped(scope, || {
+            let taken = slot.lock().ok().and_then(|mut p| p.take());
+            if let Some(plan) = taken {
+                let mut down = Batches {
+                    tx,
+                    back: back_rx,
+                    buf: Vec::with_capacity(BATCH),
+                };
+                if plan.produce(&mut down).is_ok() {
+                    down.flush();
                 }
-            });
+            }
+        });
         match started {
             Ok(_) => Some(consume(rx, back_tx, &mut apply)),
             Err(_) => None,
@@ -55,27 +53,17 @@ pub(super) fn run<R: BufRead + Send, S: Sink + ?Sized>(plan: Plan<'_, R>, mut ap
     match threaded {
         Some(r) => r,
         None => {
-            let plan = slot
-                .into_inner()
-                .ok()
-                .flatten()
-                .ok_or_else(|| Error::Io(std::io::Error::other("no reading thread")))?;
+            let plan = slot.into_inner().ok().flatten().ok_or_else(|| Error::Io(std::io::Error::other("no reading thread")))?;
             let mut direct = super::Direct { apply, summary: None };
             plan.produce(&mut direct)?;
-            direct
-                .summary
-                .ok_or_else(|| Error::Io(std::io::Error::other("the post ended without its end")))
+            direct.summary.ok_or_else(|| Error::Io(std::io::Error::other("the post ended without its end")))
         }
     }
 }
 
 /// The emitting half: applies the batches in order until the end or the first error. Takes the
 /// receiver by value, so that returning closes the queue.
-fn consume<S: Sink + ?Sized>(
-    rx: Receiver<Vec<Op>>,
-    back: SyncSender<Vec<Op>>,
-    apply: &mut Apply<'_, '_, S>,
-) -> Result<Summary, Error> {
+fn consume<S: Sink + ?Sized>(rx: Receiver<Vec<Op>>, back: SyncSender<Vec<Op>>, apply: &mut Apply<'_, '_, S>) -> Result<Summary, Error> {
     for mut batch in rx.iter() {
         for op in batch.drain(..) {
             if let Some(s) = apply.op(op)? {

@@ -507,7 +507,12 @@ fn candidates(
 /// The rotary words of the cheapest candidate of `prev`, or of the committed root.
 fn best_words(prev: Option<&Column>, root: Option<&Cand>) -> [Option<f64>; 3] {
     let best = match prev {
-        Some(p) => p.cands.iter().zip(&p.cost).min_by(|a, b| a.1.total_cmp(b.1)).map(|(c, _)| c),
+        Some(p) => p
+            .cands
+            .iter()
+            .zip(&p.cost)
+            .min_by(|a, b| a.1.total_cmp(b.1))
+            .map(|(c, _)| c),
         None => root,
     };
     best.map_or([None; 3], |c| c.sol.joints.rotary.map(Some))

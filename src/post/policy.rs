@@ -47,9 +47,9 @@ impl Retract {
             Mode::Tcp => Retract::Axis(clearance),
         };
         match (job.map(Retract::parse).transpose()?, profile.map(Retract::parse).transpose()?) {
-            (Some(Retract::MachineZ), _) if mode == Mode::Tcp => {
-                Err("retract machine-z: in TCP mode X Y Z are the tip, not the machine's Z; use axis:D or plane:Z".into())
-            }
+            (Some(Retract::MachineZ), _) if mode == Mode::Tcp => Err(
+                "retract machine-z: in TCP mode X Y Z are the tip, not the machine's Z; use axis:D or plane:Z".into(),
+            ),
             (Some(r), _) => Ok(r),
             (None, Some(Retract::MachineZ)) => Ok(by_mode),
             (None, Some(r)) => Ok(r),
@@ -77,11 +77,7 @@ impl Prefer {
     /// Items separated by commas: a rotary of `m` and a sign (`B-`, `A+`; one at most), a rotary
     /// and the angle the program starts nearest (`C=180`, degrees).
     pub fn parse(text: &str, m: &crate::kinematics::Machine) -> Result<Prefer, String> {
-        let mut p = Prefer {
-            rotary: 0,
-            sign: 0.0,
-            start: [None; 3],
-        };
+        let mut p = Prefer { rotary: 0, sign: 0.0, start: [None; 3] };
         for item in text.split(',').map(str::trim).filter(|i| !i.is_empty()) {
             let mut chars = item.chars();
             let name = chars.next().unwrap_or(' ');
@@ -151,9 +147,7 @@ impl Unwind {
         match text.trim() {
             "retract" => Ok(Unwind::RetractInCut),
             "rapids" => Ok(Unwind::AtRapids),
-            t => Err(format!(
-                "unwind {t:?}: expected retract (in the cut too) or rapids (only at rapids)"
-            )),
+            t => Err(format!("unwind {t:?}: expected retract (in the cut too) or rapids (only at rapids)")),
         }
     }
 }

@@ -125,9 +125,7 @@ impl Budget {
     /// From flags; 0 for either means no bound.
     pub fn new(blocks_per_byte: u64, seconds: f64) -> Result<Budget, String> {
         if !(seconds.is_finite() && seconds >= 0.0) {
-            return Err(format!(
-                "a post's time bound must be a number of seconds, 0 for none, not {seconds}"
-            ));
+            return Err(format!("a post's time bound must be a number of seconds, 0 for none, not {seconds}"));
         }
         Ok(Budget {
             blocks_per_byte: if blocks_per_byte == 0 { u64::MAX } else { blocks_per_byte },
@@ -346,8 +344,7 @@ impl Settings {
             }
         }
         // The profile's motion policies, where the job gives none.
-        let policy =
-            |pick: fn(&crate::machines::PolicyDoc) -> &Option<String>| p.doc.policy.as_ref().and_then(|d| pick(d).as_deref());
+        let policy = |pick: fn(&crate::machines::PolicyDoc) -> &Option<String>| p.doc.policy.as_ref().and_then(|d| pick(d).as_deref());
         o.retract = super::Retract::resolve(self.retract.as_deref(), policy(|d| &d.retract), o.mode, o.clearance)?;
         if let (None, Some(f)) = (&self.feed_mode, policy(|d| &d.feed_mode)) {
             o.rotary_feed = super::RotaryFeed::parse(f)?;
@@ -367,10 +364,7 @@ impl Settings {
             && !(o.spindle_range.0..=o.spindle_range.1).contains(&s)
         {
             let (lo, hi) = o.spindle_range;
-            return Err(format!(
-                "spindle_speed {s}: {}'s spindle turns from {lo} to {hi} RPM",
-                p.doc.id
-            ));
+            return Err(format!("spindle_speed {s}: {}'s spindle turns from {lo} to {hi} RPM", p.doc.id));
         }
         if o.tool_table.is_none()
             && let Some((t, label)) = standing
@@ -585,10 +579,7 @@ fn setups_allowed(o: &Options) -> Result<(), String> {
         ));
     }
     if o.tilted_planes {
-        return Err(
-            "setups work-offsets: not with planes=tilted (a plane's origin is in the first offset's words): use setups=transform"
-                .into(),
-        );
+        return Err("setups work-offsets: not with planes=tilted (a plane's origin is in the first offset's words): use setups=transform".into());
     }
     Ok(())
 }

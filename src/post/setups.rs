@@ -2,8 +2,8 @@
 //! of the dialect, its origin measured from the first's; the program then says where to set it.
 //! The one rule both the emitter and `verify` follow.
 
-use super::Options;
 use super::source::{Item, ProgEvent, Source};
+use super::Options;
 use crate::kinematics::{Machine, Vec3};
 use std::io::BufRead;
 
@@ -67,11 +67,7 @@ impl WorkOffsets {
 
     /// Each offset after the first with its origin from the first: what the operator sets.
     pub fn listing(&self) -> impl Iterator<Item = (&str, Vec3)> + '_ {
-        self.shifts
-            .iter()
-            .enumerate()
-            .skip(1)
-            .map(|(i, s)| (self.codes[i].as_str(), *s))
+        self.shifts.iter().enumerate().skip(1).map(|(i, s)| (self.codes[i].as_str(), *s))
     }
 
     pub fn first(&self) -> &str {
@@ -97,8 +93,5 @@ pub fn header_lines<R: BufRead>(cl: R, m: &Machine, o: &Options) -> Result<Vec<S
         }
     }
     let dec = crate::nc::Formats::for_dialect(&o.dialect, m.units).linear as usize;
-    Ok(offsets
-        .listing()
-        .map(|(code, s)| offset_text(code, offsets.first(), s, dec))
-        .collect())
+    Ok(offsets.listing().map(|(code, s)| offset_text(code, offsets.first(), s, dec)).collect())
 }

@@ -470,6 +470,7 @@ impl<R: BufRead> Source<R> {
         self.out.push_back(Item::Event(ProgEvent::Diag(d)));
     }
 
+
     fn set_axis(&mut self, a: [f64; 3], line: u32) -> bool {
         let v = Vec3::from(a);
         let n = v.norm();
@@ -549,6 +550,7 @@ impl<R: BufRead> Source<R> {
         self.feed = Some((v, unit));
     }
 
+
     /// One record: a plain move comes back (to go after whatever the record queued), everything
     /// else is queued here.
     fn statement(&mut self, line: u32, rec: Record) -> Option<MotionPt> {
@@ -590,9 +592,7 @@ impl<R: BufRead> Source<R> {
                 }
                 if let Some(d) = diameter.filter(|d| d.is_finite() && *d > 0.0) {
                     self.diameter_mm = Some(d * self.cl_units.factor_to(Units::Mm));
-                    let r = corner_radius
-                        .filter(|r| r.is_finite() && *r >= 0.0 && *r <= d / 2.0)
-                        .unwrap_or(0.0);
+                    let r = corner_radius.filter(|r| r.is_finite() && *r >= 0.0 && *r <= d / 2.0).unwrap_or(0.0);
                     self.out.push_back(Item::Event(ProgEvent::Cutter {
                         diameter: d * self.scale,
                         corner_radius: r * self.scale,
@@ -612,7 +612,9 @@ impl<R: BufRead> Source<R> {
             }
             Record::Delay(dwell) => self.out.push_back(Item::Event(ProgEvent::Dwell { dwell, line })),
             Record::Stop { optional } => self.out.push_back(Item::Event(ProgEvent::Stop { optional, line })),
-            Record::Function { letter, code } => self.out.push_back(Item::Event(ProgEvent::Function { letter, code, line })),
+            Record::Function { letter, code } => {
+                self.out.push_back(Item::Event(ProgEvent::Function { letter, code, line }))
+            }
             Record::Preselect(tool) => self.out.push_back(Item::Event(ProgEvent::Preselect { tool, line })),
             Record::BlockSkip(on) => self.out.push_back(Item::Event(ProgEvent::BlockSkip { on, line })),
             Record::Mcs { origin, x, y } => self.mcs(origin, x, y, line),

@@ -3,8 +3,8 @@
 //! reproduced, in order, by a block; blocks between two matched feed points must lie on the CL
 //! segment.
 
-use super::setups::WorkOffsets;
 use super::source::{HolePart, Item, MotionPt, ProgEvent, Source};
+use super::setups::WorkOffsets;
 use super::tools::Lengths;
 use super::{Mode, seg_dist};
 use crate::kinematics::{Joints, Machine, Setup, Units, Vec3, angle_between, fk};
@@ -256,12 +256,7 @@ impl<N: BufRead> Replay<'_, N> {
 
     /// A block's X Y Z from its work offset's origin to the first's.
     fn shift_block(&self, b: &mut NcBlock) {
-        let Some(shift) = self
-            .offsets
-            .as_ref()
-            .zip(b.wcs)
-            .and_then(|(o, c)| o.index_of(c).map(|i| o.shift(i)))
-        else {
+        let Some(shift) = self.offsets.as_ref().zip(b.wcs).and_then(|(o, c)| o.index_of(c).map(|i| o.shift(i))) else {
             return;
         };
         let s = b.units.factor_to(self.m.units);

@@ -10,10 +10,7 @@ use kinepost::machines::Library;
 use std::sync::Arc;
 
 pub async fn server(cfg: Config) -> String {
-    let library = Library::load_dir(&cfg.machines)
-        .unwrap()
-        .with_dialects(&cfg.dialects)
-        .unwrap();
+    let library = Library::load_dir(&cfg.machines).unwrap().with_dialects(&cfg.dialects).unwrap();
     let (queue, machines) = kinepost::jobs::Queue::start(cfg.jobs(), &library).await.unwrap();
     let metrics = Arc::new(Metrics::default());
     let m = metrics.clone();
@@ -88,11 +85,7 @@ fn spawn_serving(mut cmd: std::process::Command, data: &std::path::Path, extra: 
         assert!(err.read_line(&mut line).unwrap() > 0, "server exited early");
         if let Some(rest) = line.split("listening on ").nth(1) {
             // A text line (`… listening on http://… machines=10`) or a JSON one (`…","machines"…`).
-            break rest
-                .split(|c: char| c.is_whitespace() || c == '"')
-                .next()
-                .unwrap()
-                .to_string();
+            break rest.split(|c: char| c.is_whitespace() || c == '"').next().unwrap().to_string();
         }
     };
     std::thread::spawn(move || for _ in err.lines() {});

@@ -148,9 +148,7 @@ fn a_version_1_store_is_still_read() {
         .unwrap()
         .read_to_end(&mut out)
         .unwrap();
-    let fnv = out
-        .iter()
-        .fold(0xcbf29ce484222325u64, |h, &b| (h ^ b as u64).wrapping_mul(0x100000001b3));
+    let fnv = out.iter().fold(0xcbf29ce484222325u64, |h, &b| (h ^ b as u64).wrapping_mul(0x100000001b3));
     assert_eq!((out.len(), fnv), (245_905, 0xe0290fdd74dcd032));
 }
 
@@ -180,12 +178,7 @@ fn version_2_is_smaller_and_the_same() {
             self.1.record(&Record::Summary { summary: s })
         }
     }
-    let mut both = Both(
-        FileSink::new(Vec::new(), Some(Vec::new())),
-        BlockWriter::new(Vec::new()).unwrap(),
-        Vec::new(),
-        0,
-    );
+    let mut both = Both(FileSink::new(Vec::new(), Some(Vec::new())), BlockWriter::new(Vec::new()).unwrap(), Vec::new(), 0);
     crate::post::post(&cl[..], &p.machine, &opts, &mut both).unwrap();
     let (_, nd) = both.0.into_inner().unwrap();
     let store = both.1.into_inner();

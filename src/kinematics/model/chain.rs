@@ -39,12 +39,7 @@ pub(crate) enum Shape {
     Two(Pair),
     /// Three rotaries, one linear missing: the outer angle is found by a 1-D root search on the
     /// missing linear's coordinate, the inner two by subproblem 2.
-    Three {
-        s0: Vec3,
-        pair: Pair,
-        missing: usize,
-        form: Box<Form>,
-    },
+    Three { s0: Vec3, pair: Pair, missing: usize, form: Box<Form> },
 }
 
 impl Chain {

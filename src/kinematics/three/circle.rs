@@ -8,10 +8,7 @@ use crate::kinematics::subproblem::Cs;
 /// the normalised sum of its ends.
 #[inline]
 pub(super) fn chord_mid(p: Cs, q: Cs) -> Cs {
-    unit(Cs {
-        c: p.c + q.c,
-        s: p.s + q.s,
-    })
+    unit(Cs { c: p.c + q.c, s: p.s + q.s })
 }
 
 /// `z` scaled onto the unit circle.
@@ -26,15 +23,7 @@ pub(super) fn unit(z: Cs) -> Cs {
 #[inline]
 pub(super) fn turn_small(z: Cs, h: f64) -> Cs {
     debug_assert!(h.abs() <= std::f64::consts::TAU / GRID as f64, "{h}");
-    const S: [f64; 7] = [
-        1.0,
-        -1.0 / 6.0,
-        1.0 / 120.0,
-        -1.0 / 5040.0,
-        1.0 / 362_880.0,
-        -1.0 / 39_916_800.0,
-        1.0 / 6_227_020_800.0,
-    ];
+    const S: [f64; 7] = [1.0, -1.0 / 6.0, 1.0 / 120.0, -1.0 / 5040.0, 1.0 / 362_880.0, -1.0 / 39_916_800.0, 1.0 / 6_227_020_800.0];
     const C: [f64; 8] = [
         1.0,
         -1.0 / 2.0,

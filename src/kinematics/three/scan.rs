@@ -214,15 +214,7 @@ pub(super) fn local(r: &Residual, sg: i8, a: f64, b: f64, scale: f64) -> ArrayVe
 
 /// One branch scanned from the samples at `at(0..=n)` (increasing), refined between them, each
 /// after the first shown to `seen`: its roots that are zeros of f where the pair reaches.
-fn branch(
-    r: &Residual,
-    sg: i8,
-    n: usize,
-    at: impl Fn(usize) -> f64,
-    scale: f64,
-    depth0: u32,
-    mut seen: impl FnMut(&Sample),
-) -> ArrayVec<f64, 16> {
+fn branch(r: &Residual, sg: i8, n: usize, at: impl Fn(usize) -> f64, scale: f64, depth0: u32, mut seen: impl FnMut(&Sample)) -> ArrayVec<f64, 16> {
     let reach = |a: f64| r.pair.meet(&r.inner(a)).reach;
     let eval = |a: f64, clamp: bool| r.eval(a, sg, clamp);
     let lever = r.lever(scale);

@@ -221,27 +221,9 @@ fn the_resultant_finds_every_root_the_scan_finds() {
     compare(&propeller(), &mut rng, 500 * k, [TURN; 3], &mut tally);
     // Within the profile's travel; and with B within 3° of ±90°, where the tool lies along A (the
     // inner axis) for some C, and close roots gather (the cases that found two gaps).
-    compare(
-        &propeller(),
-        &mut rng,
-        500 * k,
-        [TURN, (d(-120.0), d(120.0)), (d(-100.0), d(100.0))],
-        &mut tally,
-    );
-    compare(
-        &propeller(),
-        &mut rng,
-        250 * k,
-        [TURN, (d(-120.0), d(120.0)), (d(87.0), d(93.0))],
-        &mut tally,
-    );
-    compare(
-        &propeller(),
-        &mut rng,
-        250 * k,
-        [TURN, (d(-120.0), d(120.0)), (d(-93.0), d(-87.0))],
-        &mut tally,
-    );
+    compare(&propeller(), &mut rng, 500 * k, [TURN, (d(-120.0), d(120.0)), (d(-100.0), d(100.0))], &mut tally);
+    compare(&propeller(), &mut rng, 250 * k, [TURN, (d(-120.0), d(120.0)), (d(87.0), d(93.0))], &mut tally);
+    compare(&propeller(), &mut rng, 250 * k, [TURN, (d(-120.0), d(120.0)), (d(-93.0), d(-87.0))], &mut tally);
     eprintln!(
         "cases {}, resultant answered {}, scan roots {}, also found {}, resultant only {}, scan's roots in an unreachable gap {}",
         tally[0], tally[1], tally[2], tally[3], tally[4], tally[5]
@@ -256,14 +238,8 @@ fn two_roots_on_one_branch_microradians_apart_are_both_found() {
     let m = propeller();
     let mut tally = [0usize; 6];
     for (linear, rotary) in [
-        (
-            [0.0, -728.0634614002945, -335.9523285179989],
-            [-2.6760457067572943, -1.9567300858593424, -1.5606983370650898],
-        ),
-        (
-            [0.0, -826.190101812559, -250.0622762929595],
-            [0.002308303649497301, -2.0935446392706036, -1.5419024073980092],
-        ),
+        ([0.0, -728.0634614002945, -335.9523285179989], [-2.6760457067572943, -1.9567300858593424, -1.5606983370650898]),
+        ([0.0, -826.190101812559, -250.0622762929595], [0.002308303649497301, -2.0935446392706036, -1.5419024073980092]),
     ] {
         check(&m, &Joints { linear, rotary }, &mut tally);
     }
@@ -280,17 +256,12 @@ fn the_form_is_the_chain_turned() {
     let mut machines = 0;
     while machines < 200 {
         let Some(m) = random_machine(&mut rng) else { continue };
-        let Shape::Three { missing, form, .. } = &m.chain.shape else {
-            continue;
-        };
+        let Shape::Three { missing, form, .. } = &m.chain.shape else { continue };
         machines += 1;
         for _ in 0..50 {
             let p_w = Vec3::new(rng.range(-900.0, 900.0), rng.range(-900.0, 900.0), rng.range(-900.0, 900.0));
             let tool_length = rng.range(0.0, 300.0);
-            let cs: [Cs; 3] = std::array::from_fn(|_| Cs {
-                c: rng.range(-1.5, 1.5),
-                s: rng.range(-1.5, 1.5),
-            });
+            let cs: [Cs; 3] = std::array::from_fn(|_| Cs { c: rng.range(-1.5, 1.5), s: rng.range(-1.5, 1.5) });
             let mut by_chain_order = [Cs::ZERO; 3];
             for (k, &ri) in m.chain.seq.iter().enumerate() {
                 by_chain_order[ri] = cs[k];
@@ -331,21 +302,9 @@ fn a_rotation_off_the_circle_is_polished() {
         description: String::new(),
         linears: [lin.clone(), None, lin],
         rotaries: vec![
-            head(
-                'A',
-                [0.2554644587564226, -0.6566409438265203, -0.7096200259314169],
-                [299.92002826691146, 87.48773624826077, -219.4857314414133],
-            ),
-            head(
-                'B',
-                [-0.31020079837826, 0.4282318516914217, -0.8487596514222542],
-                [241.12522729401007, 47.61215407084177, -3.633760260418967],
-            ),
-            head(
-                'C',
-                [0.004674002257104746, -0.01987769116748522, -0.9997914938109599],
-                [-151.4475043986951, 216.5611121022729, 252.9963481590321],
-            ),
+            head('A', [0.2554644587564226, -0.6566409438265203, -0.7096200259314169], [299.92002826691146, 87.48773624826077, -219.4857314414133]),
+            head('B', [-0.31020079837826, 0.4282318516914217, -0.8487596514222542], [241.12522729401007, 47.61215407084177, -3.633760260418967]),
+            head('C', [0.004674002257104746, -0.01987769116748522, -0.9997914938109599], [-151.4475043986951, 216.5611121022729, 252.9963481590321]),
         ],
         default_tool_length: 100.0,
     })
@@ -390,23 +349,13 @@ fn the_isolation_brackets_every_root_and_drops_no_interval_that_holds_one() {
             r >= lo - 1e-12 && r <= hi + 1e-12
         };
         for &(x, z, d, lo, hi) in &iso.roots {
-            assert!(
-                roots.iter().any(|&r| near(x, d, r)),
-                "case {case}: a root at {x} that g does not have: {roots:?}"
-            );
+            assert!(roots.iter().any(|&r| near(x, d, r)), "case {case}: a root at {x} that g does not have: {roots:?}");
             // Proven monotone there: the bracket holds one root, however close its neighbour (to
             // the rounding of g over its slope at either end).
             let tol = 16.0 * poly.noise / d.abs();
             let held = |e: f64| roots.iter().filter(|&&r| inside(r, (lo - e, hi + e))).count();
-            assert!(
-                held(tol) >= 1 && held(-tol) <= 1,
-                "case {case}: ({lo}, {hi}) holds {} roots: {roots:?}",
-                held(0.0)
-            );
-            assert!(
-                (z.c - x.cos()).abs() < 1e-13 && (z.s - x.sin()).abs() < 1e-13,
-                "case {case}: its (cos, sin) is not its angle's"
-            );
+            assert!(held(tol) >= 1 && held(-tol) <= 1, "case {case}: ({lo}, {hi}) holds {} roots: {roots:?}", held(0.0));
+            assert!((z.c - x.cos()).abs() < 1e-13 && (z.s - x.sin()).abs() < 1e-13, "case {case}: its (cos, sin) is not its angle's");
             assert!(inside(x, (lo, hi)), "case {case}: {x} outside its interval ({lo}, {hi})");
         }
         for &r in &roots {
@@ -420,3 +369,4 @@ fn the_isolation_brackets_every_root_and_drops_no_interval_that_holds_one() {
     // so, rarely, is the whole circle.
     assert!(tally[0] > 5 * tally[1] && tally[2] < 30, "{tally:?}");
 }
+

@@ -75,12 +75,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                     ccw,
                     words: words.trim_end().to_string(),
                     length: length / pieces as f64,
-                    path: (
-                        a.pose.tip,
-                        b.pose.tip,
-                        *arc,
-                        [(i - 1) as f64, i as f64].map(|k| k / pieces as f64),
-                    ),
+                    path: (a.pose.tip, b.pose.tip, *arc, [(i - 1) as f64, i as f64].map(|k| k / pieces as f64)),
                 });
                 if i == pieces {
                     return self.block(b, pt, false, diags, pt.inserted, None);

@@ -16,20 +16,10 @@ type Ends<'a> = (&'a [f64; 3], &'a [f64; 3]);
 /// the linears for each, with its nominal kinematics.
 enum Way {
     Joints,
-    Tcp {
-        tip: [Vec3; 2],
-        words: [[f64; 3]; 2],
-        setup: Setup,
-    },
+    Tcp { tip: [Vec3; 2], words: [[f64; 3]; 2], setup: Setup },
     /// G2/G3 (the rotaries still): the tip along the arc, fractions `f` of the whole arc from
     /// `tips[0]` to `tips[1]`.
-    Arc {
-        tips: [Vec3; 2],
-        arc: ArcSpec,
-        f: [f64; 2],
-        actual: [f64; 3],
-        setup: Setup,
-    },
+    Arc { tips: [Vec3; 2], arc: ArcSpec, f: [f64; 2], actual: [f64; 3], setup: Setup },
 }
 
 impl Way {
@@ -43,13 +33,7 @@ impl Way {
                 let q = kinematics::controlled_point(m, &w, &(tip[0] + (tip[1] - tip[0]) * t), setup);
                 ([q.x, q.y, q.z], m.actual_angles(&w))
             }
-            Way::Arc {
-                tips,
-                arc,
-                f,
-                actual,
-                setup,
-            } => {
+            Way::Arc { tips, arc, f, actual, setup } => {
                 let tip = super::arcs::helix_tip(tips[0], tips[1], arc, f[0] + (f[1] - f[0]) * t);
                 let q = kinematics::controlled_point(m, actual, &tip, setup);
                 ([q.x, q.y, q.z], *actual)
@@ -69,7 +53,10 @@ impl Way {
             return turn.hypot(rise - h) * (f[1] - f[0]).abs() * (1.0 + 1e-9);
         }
         let Way::Tcp { tip, words, setup } = self else { return 0.0 };
-        let lever = tip[0].norm().max(tip[1].norm()) + setup.work_offset.norm() + setup.tool_length.abs() + pivots;
+        let lever = tip[0].norm().max(tip[1].norm())
+            + setup.work_offset.norm()
+            + setup.tool_length.abs()
+            + pivots;
         let turn: f64 = (0..m.rotaries.len()).map(|i| (words[1][i] - words[0][i]).abs()).sum();
         (tip[1] - tip[0]).norm() + turn * lever
     }
@@ -87,17 +74,7 @@ struct Found {
 /// The samples along the move from `from` (none: the machine got to `to` some other way) to
 /// `to`, into `found`.
 #[allow(clippy::too_many_arguments)]
-fn sweep(
-    world: &mut crate::collide::World,
-    m: &Machine,
-    from: Option<Ends>,
-    to: Ends,
-    way: &Way,
-    len: f64,
-    wo: &Vec3,
-    stock: bool,
-    found: &mut Found,
-) {
+fn sweep(world: &mut crate::collide::World, m: &Machine, from: Option<Ends>, to: Ends, way: &Way, len: f64, wo: &Vec3, stock: bool, found: &mut Found) {
     let path = from.map_or(0.0, |_| way.path(m, world.pivots()));
     if world.move_clear(m, from, to, len, wo, stock, path) {
         found.samples += 1;
@@ -156,17 +133,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         let Some(world) = self.world.as_mut() else { return };
         let from = prev.map(|p| (&p.joints.linear, &p.actual));
         let to = (&to.joints.linear, &to.actual);
-        sweep(
-            world,
-            self.m,
-            from,
-            to,
-            &way,
-            self.setup.tool_length,
-            &self.setup.work_offset,
-            stock,
-            found,
-        );
+        sweep(world, self.m, from, to, &way, self.setup.tool_length, &self.setup.work_offset, stock, found);
     }
 
     /// What `found` found, as diagnostics of the block at `line`.
@@ -189,11 +156,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             } else {
                 (Code::NearCollision, Severity::Warning, format!("{:.3} {unit} apart", h.dist))
             };
-            let on = if found.samples > 1 {
-                "at or on the way to this block"
-            } else {
-                "at this block"
-            };
+            let on = if found.samples > 1 { "at or on the way to this block" } else { "at this block" };
             let mut d = Diagnostic::new(code, severity, Some(line), format!("{} and {}: {what} {on}", h.a, h.b));
             d.bodies = Some(Box::new(crate::diag::Bodies {
                 a: h.a,
@@ -224,10 +187,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             }
             None => *start,
         };
-        let (r, bottom) = (
-            self.along(start, cb.z_r - cb.z_start),
-            self.along(start, cb.z_bottom - cb.z_start),
-        );
+        let (r, bottom) = (self.along(start, cb.z_r - cb.z_start), self.along(start, cb.z_bottom - cb.z_start));
         self.sweep_to(Some(&first), &r, true, &mut found);
         self.sweep_to(Some(&r), &bottom, false, &mut found);
         self.sweep_to(Some(&bottom), &top, true, &mut found);
@@ -253,9 +213,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             (s.diameter, s.corner_radius) = (d, r);
         }
         let Some(table) = self.o.tool_table.as_ref() else { return s };
-        let Some(t) = self.tool.and_then(|n| table.get(n)) else {
-            return s;
-        };
+        let Some(t) = self.tool.and_then(|n| table.get(n)) else { return s };
         let k = table.units.factor_to(self.m.units);
         if let Some(d) = t.diameter {
             s.diameter = d * k;

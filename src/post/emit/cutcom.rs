@@ -210,13 +210,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         }
         self.say_path(w.line)?;
         let text = template.replace("{t}", &register.to_string());
-        Ok(Some((
-            text,
-            Some(Active {
-                want: w,
-                off: words[2].clone(),
-            }),
-        )))
+        Ok(Some((text, Some(Active { want: w, off: words[2].clone() }))))
     }
 
     /// The dialect's words (left, right, off) that compensate across the tool at `to`, with the

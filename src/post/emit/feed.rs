@@ -125,10 +125,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
     /// The path F is read along in `dpm` (NIST RS274, LinuxCNC, Haas): the linear axes' when
     /// their words change, else the rotaries' degrees.
     fn dpm_len(&self, p: &At, to: &At) -> f64 {
-        let lin = (0..3)
-            .map(|i| (to.joints.linear[i] - p.joints.linear[i]).powi(2))
-            .sum::<f64>()
-            .sqrt();
+        let lin = (0..3).map(|i| (to.joints.linear[i] - p.joints.linear[i]).powi(2)).sum::<f64>().sqrt();
         if lin >= self.f.fmt.half_linear() {
             return lin;
         }

@@ -292,14 +292,7 @@ impl<'a, S: Sink + ?Sized> Emitter<'a, S> {
                 // The job gives stock and fixtures in the CL's units, known once the reader has
                 // looked ahead.
                 let k = |v: &[crate::collide::Solid]| v.iter().map(|s| s.scaled(src.scale)).collect::<Vec<_>>();
-                crate::collide::World::new(
-                    m,
-                    g,
-                    &k(&o.stock),
-                    &k(&o.fixtures),
-                    o.collision_clearance,
-                    o.tolerance.max(1e-3),
-                )
+                crate::collide::World::new(m, g, &k(&o.stock), &k(&o.fixtures), o.collision_clearance, o.tolerance.max(1e-3))
             }),
         }
     }
@@ -343,12 +336,7 @@ impl<'a, S: Sink + ?Sized> Emitter<'a, S> {
                 Code::LineTooLong,
                 Severity::Error,
                 info.and_then(|i| i.source_line),
-                format!(
-                    "a line of {} characters, longer than the {n} {} reads: {:.60}",
-                    text.len(),
-                    self.o.dialect.name,
-                    text
-                ),
+                format!("a line of {} characters, longer than the {n} {} reads: {:.60}", text.len(), self.o.dialect.name, text),
             ))?;
         }
         self.sink.line(&text, info)

@@ -197,23 +197,12 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             format!(
                 "{word}: retract {:.3} along the tool axis, turn, re-approach{why}{}",
                 (r1.pose.tip - prev.pose.tip).norm(),
-                if refused {
-                    " (unwind=rapids allows none inside a cut: written so the part is safe, check the toolpath)"
-                } else {
-                    ""
-                }
+                if refused { " (unwind=rapids allows none inside a cut: written so the part is safe, check the toolpath)" } else { "" }
             ),
         );
         let mut diags = vec![d];
         if r1.joints != prev.joints {
-            self.block(
-                r1,
-                pt,
-                true,
-                std::mem::take(&mut diags),
-                true,
-                Some(&format!("RETRACT {word}")),
-            )?;
+            self.block(r1, pt, true, std::mem::take(&mut diags), true, Some(&format!("RETRACT {word}")))?;
         }
         self.block(r2, pt, true, diags, true, Some(word))?;
         self.block(to, pt, false, Vec::new(), pt.inserted, None)?;
@@ -382,11 +371,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         for i in 0..self.m.rotaries.len() {
             let Some((lock, unlock)) = &self.o.clamps[i] else { continue };
             let d = self.o.dialect.clone();
-            let bad: Vec<&str> = [lock, unlock]
-                .into_iter()
-                .map(String::as_str)
-                .filter(|w| !d.knows(w))
-                .collect();
+            let bad: Vec<&str> = [lock, unlock].into_iter().map(String::as_str).filter(|w| !d.knows(w)).collect();
             if bad.is_empty() {
                 continue;
             }

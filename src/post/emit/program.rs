@@ -174,12 +174,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             ProgEvent::Function { letter, code, line } => self.function(letter, &code, line)?,
             ProgEvent::BlockSkip { on, line } => self.block_skip(on, line)?,
             ProgEvent::Preselect { tool, line } => self.selctl(tool, line)?,
-            ProgEvent::Setup {
-                shift,
-                turned,
-                line,
-                comment,
-            } => self.setup_change(shift, turned, line, &comment)?,
+            ProgEvent::Setup { shift, turned, line, comment } => self.setup_change(shift, turned, line, &comment)?,
             ProgEvent::CutterComp { comp, line, turns } => self.cutter_comp(comp, line, turns),
             ProgEvent::PathMeaning { centre, said, line } => self.path_meaning(centre, said, line),
             ProgEvent::Diag(dg) => self.note(dg)?,
@@ -415,17 +410,13 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         self.next_tool = Some(tool);
         let max = self.o.dialect.ranges.tool;
         if tool > max {
-            return self
-                .note(Diagnostic::new(
-                    Code::WordRange,
-                    Severity::Error,
-                    Some(line),
-                    format!(
-                        "SELCTL/{tool}: beyond the tool numbers {} takes (up to {max}): not written",
-                        self.o.dialect.name
-                    ),
-                ))
-                .map_err(Error::from);
+            return self.note(Diagnostic::new(
+                Code::WordRange,
+                Severity::Error,
+                Some(line),
+                format!("SELCTL/{tool}: beyond the tool numbers {} takes (up to {max}): not written", self.o.dialect.name),
+            ))
+            .map_err(Error::from);
         }
         if let Some(l) = self.f.line(&self.o.dialect.tool_preselect, tool, 0) {
             self.out(&l)?;

@@ -44,10 +44,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         let l = self.f.words(&code).to_string();
         self.out(&l)?;
         if i > 0 {
-            let c = self
-                .f
-                .comment(&offset_text(&code, &first, s, self.f.fmt.linear as usize))
-                .to_string();
+            let c = self.f.comment(&offset_text(&code, &first, s, self.f.fmt.linear as usize)).to_string();
             self.out(&c)?;
         }
         Ok(())
@@ -58,10 +55,8 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         let Some(offsets) = self.offsets.as_ref() else {
             return Ok(());
         };
-        let lines: Vec<String> = offsets
-            .listing()
-            .map(|(code, s)| offset_text(code, offsets.first(), s, self.f.fmt.linear as usize))
-            .collect();
+        let lines: Vec<String> =
+            offsets.listing().map(|(code, s)| offset_text(code, offsets.first(), s, self.f.fmt.linear as usize)).collect();
         for l in lines {
             let c = self.f.comment(&l).to_string();
             self.out(&c)?;

@@ -13,7 +13,9 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
     /// tool table) diameter, the tool readied next, the spindle speed, the work offset …
     fn template_vars(&self) -> Vars {
         let mut v = Vars::default();
-        let diameter = self.tool.and_then(|t| self.o.tool_table.as_ref()?.get(t)?.diameter);
+        let diameter = self
+            .tool
+            .and_then(|t| self.o.tool_table.as_ref()?.get(t)?.diameter);
         v.set_opt("tool", self.tool)
             .set("length", self.setup.tool_length)
             .set_opt("diameter", diameter)
@@ -48,12 +50,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                 }
             }
             Some(Err(e)) => {
-                self.note(Diagnostic::new(
-                    Code::Template,
-                    Severity::Error,
-                    line,
-                    format!("dialect {}: {e}: nothing written", d.name),
-                ))?;
+                self.note(Diagnostic::new(Code::Template, Severity::Error, line, format!("dialect {}: {e}: nothing written", d.name)))?;
             }
             None => return Ok(false),
         }
@@ -66,12 +63,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         match d.templates.render(event, &self.template_vars()) {
             Some(Ok(lines)) => Ok(lines),
             Some(Err(e)) => {
-                self.note(Diagnostic::new(
-                    Code::Template,
-                    Severity::Error,
-                    None,
-                    format!("dialect {}: {e}: nothing written", d.name),
-                ))?;
+                self.note(Diagnostic::new(Code::Template, Severity::Error, None, format!("dialect {}: {e}: nothing written", d.name)))?;
                 Ok(Vec::new())
             }
             None => Ok(Vec::new()),

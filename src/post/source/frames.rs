@@ -25,8 +25,7 @@ impl<R: BufRead> Source<R> {
     }
 
     fn mcs_shift(&self) -> Vec3 {
-        self.mcs
-            .map_or(Vec3::zeros(), |(_, t)| t * Units::Mm.factor_to(self.profile_units))
+        self.mcs.map_or(Vec3::zeros(), |(_, t)| t * Units::Mm.factor_to(self.profile_units))
     }
 
     /// A part-frame vector in the CL's frame: [`Self::to_part`] undone.
@@ -67,12 +66,7 @@ impl<R: BufRead> Source<R> {
         self.diag(Code::CoordinateSystem, Severity::Info, line, format!("MSYS: {said}"));
         let turned = new.is_some_and(|(r, _)| (r - Matrix3::identity()).amax() > 1e-9);
         let shift = self.mcs_shift();
-        self.out.push_back(Item::Event(ProgEvent::Setup {
-            shift,
-            turned,
-            line,
-            comment,
-        }));
+        self.out.push_back(Item::Event(ProgEvent::Setup { shift, turned, line, comment }));
     }
 
     /// The frame a `ROTABL` index puts the CL in, where the CL itself confirms it: CAMWorks
@@ -146,6 +140,7 @@ impl<R: BufRead> Source<R> {
             )),
         }
     }
+
 }
 
 /// What an MCS relative to the first is, for the diagnostic and the NC comment (CL units).
@@ -158,16 +153,11 @@ fn describe_mcs(rel: Option<(Matrix3<f64>, Vec3)>, u: Units) -> (String, String)
     let moved = format!("{:.4}, {:.4}, {:.4} {}", t.x, t.y, t.z, u.as_str());
     let turn = Rotation3::from_matrix_unchecked(r).axis_angle().map(|(a, angle)| {
         let deg = angle.to_degrees();
-        (
-            format!(", turned {deg:.4}° about ({:.4}, {:.4}, {:.4})", a.x, a.y, a.z),
-            format!(" TURNED {deg:.3} DEG"),
-        )
+        (format!(", turned {deg:.4}° about ({:.4}, {:.4}, {:.4})", a.x, a.y, a.z), format!(" TURNED {deg:.3} DEG"))
     });
     let (turn_said, turn_nc) = turn.unwrap_or_default();
     (
-        format!(
-            "this operation's MCS is the first's moved by ({moved}){turn_said}: its points and tool axes are taken into the first MCS"
-        ),
+        format!("this operation's MCS is the first's moved by ({moved}){turn_said}: its points and tool axes are taken into the first MCS"),
         format!("MCS MOVED {moved}{turn_nc} FROM THE FIRST: POINTS TAKEN INTO IT").to_ascii_uppercase(),
     )
 }

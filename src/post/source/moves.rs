@@ -53,17 +53,8 @@ impl<R: BufRead> Source<R> {
     /// `RETRCT`: at rapid along the tool axis to the clearance plane, from where the tool is.
     pub(super) fn retract(&mut self, line: u32) {
         let (Some((n, offset)), Some(tip)) = (self.clearance, self.tip) else {
-            let why = if self.clearance.is_none() {
-                "no clearance plane (CLEARP) in force"
-            } else {
-                "no position yet"
-            };
-            self.diag(
-                Code::IgnoredRecord,
-                Severity::Warning,
-                line,
-                format!("RETRCT: {why}: no retract written"),
-            );
+            let why = if self.clearance.is_none() { "no clearance plane (CLEARP) in force" } else { "no position yet" };
+            self.diag(Code::IgnoredRecord, Severity::Warning, line, format!("RETRCT: {why}: no retract written"));
             return;
         };
         let from = self.to_part_point(tip);
