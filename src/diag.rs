@@ -37,6 +37,9 @@ pub enum Code {
     VerifyDeviation,
     ArcLinearized,
     CycleExpanded,
+    /// A hole that is only ever the control's cycle (a tap, a bore that stops or orients the
+    /// spindle) and cannot be one here: not machined, an error at its line.
+    CycleRefused,
     SurfaceSpeed,
     SpindleSpeed,
     SpindleStopped,
@@ -95,6 +98,7 @@ impl Code {
             Code::VerifyDeviation => "verify_deviation",
             Code::ArcLinearized => "arc_linearized",
             Code::CycleExpanded => "cycle_expanded",
+            Code::CycleRefused => "cycle_refused",
             Code::SurfaceSpeed => "surface_speed",
             Code::SpindleSpeed => "spindle_speed",
             Code::WordRange => "word_range",

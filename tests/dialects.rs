@@ -1357,3 +1357,345 @@ fn codes_linuxcnc_does_not_know_are_not_written() {
         assert_eq!(told, if known { 0 } else { 2 }, "{d}: once per clamped rotary: {:?}", sink.diags);
     }
 }
+
+/// Every CL hole cycle kind the reader knows: (the `CYCLE/` record's kind words and values
+/// after `FEDTO`, whether it is only ever the control's cycle, whether the spindle turns CCW).
+const HOLE_KINDS: [(&str, &str, bool, bool); 19] = [
+    ("DRILL", "", false, false),
+    ("DRILL", ",DWELL,0.5", false, false),
+    ("FACE", ",DWELL,0.5", false, false),
+    ("CSINK", "", false, false),
+    ("DEEP", ",STEP,2", false, false),
+    ("DEEP2", ",1STPECK,2", false, false),
+    ("PECK", ",STEP,2", false, false),
+    ("DRILL,DEEP", ",STEP,2", false, false),
+    ("BRKCHP", ",STEP,2", false, false),
+    ("TAP", "", true, false),
+    ("RGDTAP", "", true, false),
+    ("TAP,LEFT", "", true, true),
+    ("RGDTAP", "", true, true),
+    ("BORE", "", false, false),
+    ("BORE", ",DWELL,0.5", false, false),
+    ("REAM", "", false, false),
+    ("BORE,DRAG", "", true, false),
+    ("BORE,NODRAG", ",SHIFT,0.2", true, false),
+    ("BORE,BACK", "", true, false),
+];
+
+/// One hole at (10, 20, 0) down the part's Z (line 7 is its GOTO): a tap's feed per revolution
+/// is its pitch, 1.25.
+fn one_hole(kind: &str, extra: &str, ccw: bool) -> String {
+    let feed = if kind.contains("TAP") { "MMPR,1.25" } else { "MMPM,120" };
+    format!(
+        "UNITS/MM\nLOADTL/1\nSPINDL/RPM,800,{}\nRAPID\nGOTO/10,20,40,0,0,1\nCYCLE/{kind},FEDTO,12,{feed},RAPTO,3,RTRCTO,15{extra}\nGOTO/10,20,0\nCYCLE/OFF\nGOTO/10,20,40\nEND\nFINI\n",
+        if ccw { "CCLW" } else { "CLW" }
+    )
+}
+
+fn post_cl(machine: &str, dialect: &str, mode: Mode, canned: bool, cl: &str) -> (Collect, post::Summary) {
+    let lib = Library::load_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap();
+    let m = lib.get(machine).unwrap().machine.clone();
+    let mut o = Options::new(&m);
+    o.mode = mode;
+    o.canned_cycles = canned;
+    o.dialect = kinepost::nc::dialect(dialect).unwrap();
+    let mut sink = Collect::default();
+    let s = post::post(cl.as_bytes(), &m, &o, &mut sink).unwrap();
+    (sink, s)
+}
+
+/// Every CL cycle kind × dialect × mode × canned or not: the control's own cycle, or an error
+/// naming the hole's line; a tap or a bore that stops or orients the spindle never enters the
+/// hole as moves (a rapid out of a tap snaps it, a turning bar drawn out marks the wall), and a
+/// bore written as moves comes out at the feed.
+#[test]
+fn every_hole_cycle_is_the_controls_cycle_or_an_error() {
+    use kinepost::diag::{Code, Severity};
+    for (kind, extra, canned_only, ccw) in HOLE_KINDS {
+        let cl = one_hole(kind, extra, ccw);
+        for d in ["fanuc", "haas", "linuxcnc", "siemens", "heidenhain"] {
+            for mode in [Mode::Joint, Mode::Tcp] {
+                for canned in [false, true] {
+                    let (sink, sum) = post_cl("spinner-u5-620", d, mode, canned, &cl);
+                    let what = format!("{kind}{extra} {d} {mode:?} canned {canned}:\n{}", sink.nc);
+                    let below: Vec<usize> = (0..sink.blocks.len()).filter(|&i| sink.blocks[i].tip[2] < -1e-6).collect();
+                    if sum.canned_holes == 1 {
+                        // The cycle's call is the one block at the bottom.
+                        assert_eq!(below.len(), 1, "{what}");
+                        assert_eq!(sum.errors, 0, "{what}");
+                        continue;
+                    }
+                    if canned_only {
+                        let refused = sink.diags.iter().find(|x| x.code == Code::CycleRefused);
+                        let r = refused.unwrap_or_else(|| panic!("no cycle_refused: {what}"));
+                        assert_eq!((r.severity, r.line), (Severity::Error, Some(7)), "{what}");
+                        assert!(sink.nc.contains("ERROR CYCLE_REFUSED CL LINE 7"), "{what}");
+                        assert!(below.is_empty(), "a block in the hole: {what}");
+                        continue;
+                    }
+                    // Written as moves: to the bottom and out; a bore's way out at the feed.
+                    assert!(!below.is_empty(), "{what}");
+                    let bottom = below
+                        .iter()
+                        .copied()
+                        .max_by(|a, b| sink.blocks[*b].tip[2].total_cmp(&sink.blocks[*a].tip[2]))
+                        .unwrap();
+                    let out = &sink.blocks[bottom + 1];
+                    let bore = kind.starts_with("BORE") || kind == "REAM";
+                    assert_eq!(out.rapid, !bore, "{what}");
+                }
+            }
+        }
+    }
+}
+
+/// Every hole kind in one program, each at its own point (10 mm apart along X), right-hand ones
+/// first, then the spindle turned CCW for the left-hand taps.
+fn all_holes() -> String {
+    let mut cl = String::from("UNITS/MM\nLOADTL/1\nSPINDL/RPM,800,CLW\nRAPID\nGOTO/0,0,40,0,0,1\n");
+    let mut x = 0;
+    for ccw in [false, true] {
+        if ccw {
+            cl += "SPINDL/RPM,800,CCLW\n";
+        }
+        for (kind, extra, _, left) in HOLE_KINDS {
+            if left != ccw {
+                continue;
+            }
+            let feed = if kind.contains("TAP") { "MMPR,1.25" } else { "MMPM,120" };
+            x += 10;
+            cl += &format!("CYCLE/{kind},FEDTO,12,{feed},RAPTO,3,RTRCTO,15{extra}\nGOTO/{x},20,0\nCYCLE/OFF\n");
+        }
+    }
+    cl + "END\nFINI\n"
+}
+
+/// Each dialect's form of every hole cycle (golden files, `KINEPOST_UPDATE_GOLDEN=1`), read back
+/// by `verify` to every hole's top and bottom; what a control has no cycle for is an error at
+/// its line. The forms and the manuals they follow: docs/dialects.md.
+#[test]
+fn golden_hole_cycles_per_dialect() {
+    use kinepost::kinematics::{Setup, Vec3};
+    use kinepost::post::verify::{VerifyOptions, verify};
+    let lib = Library::load_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap();
+    let m = lib.get("vmc-3axis").unwrap().machine.clone();
+    let cl = all_holes();
+    for d in ["fanuc", "haas", "linuxcnc", "siemens", "heidenhain"] {
+        let (sink, sum) = post_cl("vmc-3axis", d, Mode::Joint, true, &cl);
+        assert_golden(&format!("holes-{d}-vmc-3axis.nc"), &sink.nc);
+        // Back boring nowhere; a fine bore not on LinuxCNC (its G76 threads).
+        let refused = if d == "linuxcnc" { 2 } else { 1 };
+        assert_eq!(sum.errors, refused, "{d}\n{}", sink.nc);
+        assert_eq!(sum.canned_holes, HOLE_KINDS.len() as u64 - refused, "{d}\n{}", sink.nc);
+        let vo = VerifyOptions {
+            mode: Mode::Joint,
+            setup: Setup::new(m.default_tool_length, Vec3::zeros()),
+            tolerance: 0.01,
+            angle_tolerance_deg: 0.01,
+            cl_units: None,
+            cl_tool_length: true,
+            tool_table: None,
+        };
+        // Every hole's top is on its cycle's way in, but those refused: never reached.
+        let r = verify(cl.as_bytes(), sink.nc.as_bytes(), &m, &vo).unwrap();
+        let refused_at: Vec<u32> = sink
+            .diags
+            .iter()
+            .filter(|x| x.code == kinepost::diag::Code::CycleRefused)
+            .filter_map(|x| x.line)
+            .collect();
+        assert_eq!(refused_at.len() as u64, refused, "{d}");
+        assert_eq!(r.matched, r.cl_points - refused, "{d}: {r:?}\n{}", sink.nc);
+        assert!(
+            r.misses.iter().all(|x| refused_at.contains(&x.cl_line)),
+            "{d}: {r:?}\n{}",
+            sink.nc
+        );
+    }
+}
+
+/// One canned hole on vmc-3axis in `dialect`: the cycle's line (the block at the hole's
+/// bottom), the summary and the diagnostics; the CYCLE record is line 6.
+fn one_canned(dialect: &str, cycle: &str) -> (String, post::Summary, Collect) {
+    let cl =
+        format!("UNITS/MM\nLOADTL/1\nSPINDL/RPM,800,CLW\nRAPID\nGOTO/10,20,40,0,0,1\n{cycle}\nGOTO/10,20,0\nCYCLE/OFF\nEND\n");
+    let (sink, sum) = post_cl("vmc-3axis", dialect, Mode::Joint, true, &cl);
+    let call = sink
+        .texts
+        .iter()
+        .zip(&sink.blocks)
+        .find(|(_, b)| b.tip[2] < -1e-6)
+        .map(|(t, _)| t.clone());
+    (call.unwrap_or_else(|| panic!("no cycle: {}", sink.nc)), sum, sink)
+}
+
+/// The error a value out of range gets: `word_range`, at the CYCLE's hole (line 7).
+fn range_error(sink: &Collect, says: &str) {
+    let d = sink.diags.iter().find(|d| d.code == kinepost::diag::Code::WordRange);
+    let d = d.unwrap_or_else(|| panic!("no word_range: {:?}\n{}", sink.diags, sink.nc));
+    assert_eq!((d.severity, d.line), (kinepost::diag::Severity::Error, Some(7)), "{d}");
+    assert!(d.message.contains(says), "{d}");
+    assert!(sink.nc.contains("ERROR WORD_RANGE CL LINE 7"), "{}", sink.nc);
+}
+
+/// A cycle's feed of 1e300 was written `F0.0` (the integer it rounds to wrapped): an error, and
+/// the control's largest feed written.
+#[test]
+fn a_cycle_feed_beyond_the_control_is_an_error_not_f0() {
+    let (call, sum, sink) = one_canned("fanuc", "CYCLE/DRILL,FEDTO,5,MMPM,1e300,RAPTO,3");
+    assert!(call.ends_with("F999000.0"), "{call}");
+    assert_eq!(sum.errors, 1);
+    range_error(&sink, "feed");
+}
+
+/// A peck of 1e-7 was written `Q0.000`, a peck the control refuses or loops on: an error, and
+/// the smallest peck the word holds written.
+#[test]
+fn a_peck_that_rounds_to_nothing_is_an_error_not_q0() {
+    let (call, sum, sink) = one_canned("fanuc", "CYCLE/DEEP,FEDTO,5,STEP,1e-7,MMPM,100,RAPTO,3");
+    assert!(call.contains(" Q0.001 "), "{call}");
+    assert_eq!(sum.errors, 1);
+    range_error(&sink, "peck");
+}
+
+/// A peck of 1e300 was written `Q0.000`: a peck deeper than the hole is one plunge to its
+/// bottom, written as the hole's depth.
+#[test]
+fn a_peck_deeper_than_the_hole_is_the_holes_depth() {
+    let (call, sum, _) = one_canned("fanuc", "CYCLE/DEEP,FEDTO,5,STEP,1e300,MMPM,100,RAPTO,3");
+    assert!(call.contains(" Q5.000 "), "{call}");
+    assert_eq!(sum.errors, 0);
+}
+
+/// A dwell of 1e300 s was written `P9223372036854775807` (milliseconds, saturated): an error,
+/// and the control's longest dwell written.
+#[test]
+fn a_cycle_dwell_beyond_the_control_is_an_error() {
+    let (call, sum, sink) = one_canned("fanuc", "CYCLE/DRILL,FEDTO,5,MMPM,100,RAPTO,3,DWELL,1e300");
+    assert!(call.contains(" P99999999 "), "{call}");
+    assert_eq!(sum.errors, 1);
+    range_error(&sink, "dwell");
+}
+
+/// `RAPTO,-50` rapided 50 mm below the hole's top (into the part) and the estimate read −0.3
+/// min: an error at the CYCLE's line, the R plane at the top, the time positive.
+#[test]
+fn an_r_plane_below_the_holes_top_is_an_error() {
+    let (call, sum, sink) = one_canned("fanuc", "CYCLE/DRILL,FEDTO,5,MMPM,100,RAPTO,-50,RTRCTO,10");
+    assert!(call.contains(" R0.000 "), "{call}");
+    assert!(sum.cycle_time_s > 0.0, "{}", sum.cycle_time_s);
+    let d = sink
+        .diags
+        .iter()
+        .find(|d| d.message.contains("RAPTO"))
+        .unwrap_or_else(|| panic!("{:?}", sink.diags));
+    assert_eq!((d.severity, d.line), (kinepost::diag::Severity::Error, Some(6)), "{d}");
+    assert!(sink.nc.contains("CL LINE 6"), "{}", sink.nc);
+    // Written as moves, the same: no rapid below the top before the feed.
+    let (sink, _) = post_cl(
+        "vmc-3axis",
+        "fanuc",
+        Mode::Joint,
+        false,
+        "UNITS/MM\nFEDRAT/MMPM,100\nRAPID\nGOTO/10,20,40,0,0,1\nCYCLE/DRILL,FEDTO,5,MMPM,100,RAPTO,-50\nGOTO/10,20,0\nCYCLE/OFF\nEND\n",
+    );
+    assert!(sink.blocks.iter().all(|b| !b.rapid || b.tip[2] >= -1e-6), "{}", sink.nc);
+}
+
+/// A tap's feed is its pitch times the speed (the CL's feed per revolution is the pitch, a
+/// feed per minute over the speed gives it), its hand the record's or the spindle's; a tap with
+/// no speed turning, or a left-hand one with the spindle turning clockwise, is an error.
+#[test]
+fn a_taps_feed_is_its_pitch_times_the_speed_and_its_hand_the_spindles() {
+    let tap = |d: &str, spindle: &str, cycle: &str| {
+        let cl = format!(
+            "UNITS/MM\nLOADTL/1\n{spindle}\nRAPID\nGOTO/10,20,40,0,0,1\n{cycle},FEDTO,12,RAPTO,3\nGOTO/10,20,0\nCYCLE/OFF\nEND\n"
+        );
+        post_cl("vmc-3axis", d, Mode::Joint, false, &cl)
+    };
+    let (cw, ccw) = ("SPINDL/RPM,800,CLW", "SPINDL/RPM,800,CCLW");
+    // (dialect, rigid right-hand, rigid left-hand, floating right, floating left): words each holds.
+    let cases: [(&str, [&[&str]; 4]); 5] = [
+        (
+            "fanuc",
+            [
+                &["M29 S800", "G84 ", "F1000.0"],
+                &["M29 S800", "G74 ", "F1000.0"],
+                &["G84 ", "F1000.0"],
+                &["G74 ", "F1000.0"],
+            ],
+        ),
+        (
+            "haas",
+            [
+                &["G84 ", "F1000.0"],
+                &["G74 ", "F1000.0"],
+                &["G84 ", "F1000.0"],
+                &["G74 ", "F1000.0"],
+            ],
+        ),
+        (
+            "linuxcnc",
+            [
+                &["G33.1 Z-12.000 K1.2500"],
+                &["M4", "G33.1 Z-12.000 K1.2500"],
+                &["G84 ", "F1000.0"],
+                &["G74 ", "F1000.0"],
+            ],
+        ),
+        (
+            "siemens",
+            [
+                &["CYCLE84(", ",3,,1.2500,0,800,800)"],
+                &["CYCLE84(", ",4,,-1.2500,0,800,800)"],
+                &["F1000.0", "CYCLE840(", ",4,3,1)"],
+                &["F1000.0", "CYCLE840(", ",3,4,1)"],
+            ],
+        ),
+        (
+            "heidenhain",
+            [
+                &["CYCL DEF 207", "Q239=+1.2500"],
+                &["CYCL DEF 207", "Q239=-1.2500"],
+                &["CYCL DEF 206", "Q206=+1000.0"],
+                &["M4", "CYCL DEF 206", "Q206=+1000.0"],
+            ],
+        ),
+    ];
+    for (d, [rigid, rigid_left, float, float_left]) in cases {
+        for (spindle, cycle, want) in [
+            (cw, "CYCLE/RGDTAP,MMPR,1.25", rigid),
+            (cw, "CYCLE/RGDTAP,MMPM,1000", rigid),
+            (ccw, "CYCLE/RGDTAP,MMPR,1.25", rigid_left),
+            (cw, "CYCLE/TAP,MMPR,1.25", float),
+            (ccw, "CYCLE/TAP,LEFT,MMPR,1.25", float_left),
+            (ccw, "CYCLE/TAP,MMPR,1.25", float_left),
+        ] {
+            let (sink, sum) = tap(d, spindle, cycle);
+            assert_eq!((sum.errors, sum.canned_holes), (0, 1), "{d} {cycle}\n{}", sink.nc);
+            for w in want {
+                assert!(sink.nc.contains(w), "{d} {spindle} {cycle}: no {w:?}\n{}", sink.nc);
+            }
+        }
+        for (spindle, cycle, says) in [
+            (
+                cw,
+                "CYCLE/TAP,LEFT,MMPR,1.25",
+                "left-hand tap with the spindle turning clockwise",
+            ),
+            ("SPINDL/OFF", "CYCLE/RGDTAP,MMPR,1.25", "no spindle speed"),
+            (cw, "CYCLE/TAP", "no feed"),
+        ] {
+            let (sink, sum) = tap(d, spindle, cycle);
+            let r = sink.diags.iter().find(|x| x.code == kinepost::diag::Code::CycleRefused);
+            let r = r.unwrap_or_else(|| panic!("{d} {cycle}: {:?}\n{}", sink.diags, sink.nc));
+            assert!(r.message.contains(says) && r.line == Some(7), "{d} {cycle}: {r}");
+            assert_eq!(sum.canned_holes, 0, "{d} {cycle}");
+            assert!(
+                sink.blocks.iter().all(|b| b.tip[2] >= -1e-6),
+                "{d} {cycle}: into the hole\n{}",
+                sink.nc
+            );
+        }
+    }
+}

@@ -193,3 +193,67 @@ fn xyzbc_trt_programs_run_with_switchkins() {
     let _ = std::fs::remove_dir_all(&dir);
     assert!(failures.is_empty(), "{}", failures.join("\n"));
 }
+
+/// Every hole cycle LinuxCNC has (G81 G82 G83 G73, G84 and G74 for a floating holder, G33.1
+/// for a rigid tap, G85 G86 G89), canned and as moves, on a 3-axis and a 5-axis profile: rs274
+/// reads each program to its end. (A fine bore is an error there: its G76 is threading.)
+#[test]
+fn linuxcnc_reads_every_hole_cycle_it_has() {
+    let Some(rs274) = rs274() else { return };
+    let dir = std::env::temp_dir().join(format!("kinepost-rs274-holes-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let kinds = [
+        ("DRILL", "MMPM,120", ""),
+        ("DRILL", "MMPM,120", ",DWELL,0.5"),
+        ("DEEP", "MMPM,120", ",STEP,2"),
+        ("BRKCHP", "MMPM,120", ",STEP,2"),
+        ("TAP", "MMPR,1.25", ""),
+        ("RGDTAP", "MMPR,1.25", ""),
+        ("BORE", "MMPM,120", ""),
+        ("BORE", "MMPM,120", ",DWELL,0.5"),
+        ("REAM", "MMPM,120", ""),
+        ("BORE,DRAG", "MMPM,120", ""),
+    ];
+    let mut cl = String::from("UNITS/MM\nLOADTL/1\nSPINDL/RPM,800,CLW\nRAPID\nGOTO/0,0,40,0,0,1\n");
+    let mut x = 0;
+    for (k, feed, extra) in kinds {
+        x += 10;
+        cl += &format!("CYCLE/{k},FEDTO,12,{feed},RAPTO,3,RTRCTO,15{extra}\nGOTO/{x},20,TOP\nCYCLE/OFF\n");
+    }
+    // Left-hand taps: the spindle turning CCW (G74, G33.1 follows the spindle).
+    cl += "SPINDL/RPM,800,CCLW\n";
+    for k in ["TAP", "RGDTAP"] {
+        x += 10;
+        cl += &format!("CYCLE/{k},FEDTO,12,MMPR,1.25,RAPTO,3\nGOTO/{x},20,TOP\nCYCLE/OFF\n");
+    }
+    cl += "END\nFINI\n";
+    let mut failures = Vec::new();
+    // The holes' tops where the table is not in the way.
+    for (id, top) in [("vmc-3axis", "0"), ("spinner-u5-620", "60")] {
+        let cl = cl.replace("TOP", top);
+        for canned in [false, true] {
+            let nc = post_linuxcnc(cl.as_bytes(), id, |s| {
+                if canned {
+                    s.cycles = Some("canned".into());
+                }
+            });
+            assert!(nc.contains("ERRORS 0,"), "{id} canned {canned}:\n{nc}");
+            let words: &[&str] = if canned {
+                &[
+                    "G81 ", "G82 ", "G83 ", "G73 ", "G84 ", "G74 ", "G33.1 ", "G85 ", "G86 ", "G89 ",
+                ]
+            } else {
+                // Taps and the stopping bore are cycles even so.
+                &["G84 ", "G74 ", "G33.1 ", "G86 "]
+            };
+            for w in words {
+                assert!(nc.contains(w), "{id} canned {canned}: no {w}\n{nc}");
+            }
+            if let Some(e) = interpret(&rs274, &dir, &nc) {
+                failures.push(format!("{id} canned {canned}: {e}\n{nc}"));
+            }
+        }
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+}

@@ -2927,3 +2927,150 @@ fn text_after_the_end_is_no_unknown_record() {
     assert!(!sink.diags.iter().any(|d| d.code == Code::UnknownRecord), "{:?}", sink.diags);
     assert_eq!(s.warnings, 0, "{:?}", sink.diags);
 }
+
+/// The NC lines of `sink` that are feed blocks, by index into its program's lines.
+fn feed_lines(sink: &Collect) -> Vec<usize> {
+    let (mut k, mut feeds) = (0, Vec::new());
+    for (i, l) in sink.nc.lines().enumerate() {
+        if k < sink.texts.len() && l == sink.texts[k] {
+            if !sink.blocks[k].rapid {
+                feeds.push(i);
+            }
+            k += 1;
+        }
+    }
+    feeds
+}
+
+/// Clamps per operation: the NX variable-axis file on haas-umc750 (TCP and joint) was locked
+/// after its approach (`M12`/`M10` before the first feed, the first blocks happening not to turn
+/// a rotary) and unlocked three blocks into the cut, a stop with a dwell mid-surface. A rotary
+/// that turns while an operation cuts is unlocked before its first move and stays so: no clamp
+/// word between the first and the last feed move. A 3+2 operation (the SOLIDWORKS CAM boss
+/// file, read in place: GPL) locks once per orientation.
+#[test]
+fn clamps_hold_for_a_whole_operation_never_between_feed_moves() {
+    let lib = Library::load_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap();
+    let p = lib.get("haas-umc750").unwrap();
+    let clamp = |l: &str| ["M10", "M11", "M12", "M13"].iter().any(|w| l.starts_with(w));
+    for mode in [Mode::Tcp, Mode::Joint] {
+        let mut o = Options::new(&p.machine);
+        o.mode = mode;
+        o.clamps = p.clamps();
+        let (sink, _) = run(
+            &p.machine,
+            &std::fs::read(data("nx_clsf_mech491_variable_axis_inch_5ax.cls")).unwrap(),
+            &o,
+        );
+        let feeds = feed_lines(&sink);
+        let lines: Vec<&str> = sink.nc.lines().collect();
+        let (first, last) = (feeds[0], *feeds.last().unwrap());
+        let inside: Vec<&&str> = lines[first..=last].iter().filter(|l| clamp(l)).collect();
+        assert!(
+            inside.is_empty(),
+            "{mode:?}: {inside:?} between feed lines {first} and {last}"
+        );
+        assert!(
+            lines[..first].iter().any(|l| l.starts_with("M13")),
+            "{mode:?}: B unlocked before"
+        );
+        assert!(
+            lines[last..].iter().any(|l| l.starts_with("M12")),
+            "{mode:?}: locked at the end"
+        );
+    }
+    let boss = Path::new(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../shared/corpus/swcam_apt_boss_3plus2.apt"
+    ));
+    let Ok(cl) = std::fs::read(boss) else { return };
+    let o = Options {
+        clamps: p.clamps(),
+        ..Options::new(&p.machine)
+    };
+    let (sink, _) = run(&p.machine, &cl, &o);
+    let words: Vec<&str> = sink.nc.lines().filter(|l| clamp(l)).collect();
+    // One orientation change (to B90): B unlocked to turn, locked for the operation once.
+    assert_eq!(words, ["M13 (B UNLOCK)", "M12 (B LOCK)"], "{words:?}");
+}
+
+/// A 30° cone that starts with the tool vertical (the singular pose: C free) on spinner-u5-620
+/// was cut with B+ whatever was preferred: from the singular start the B− branch cost the free C
+/// a half turn it never makes (the machine positions onto the start, C turned where the cut
+/// needs it). A preference holds from a singular start as anywhere else.
+#[test]
+fn a_preference_holds_from_a_singular_start() {
+    let m = machine("spinner-u5-620");
+    let mut cl = String::from("UNITS/MM\nLOADTL/1\nSPINDL/RPM,3000,CLW\nRAPID\nGOTO/20,0,30,0,0,1\nFEDRAT/MMPM,500\n");
+    // Tilting from vertical to 30° about Y, then around the cone.
+    for k in 1..=6 {
+        let t = (5.0 * k as f64).to_radians();
+        cl += &format!("GOTO/20,0,30,{},0,{}\n", t.sin(), t.cos());
+    }
+    for k in 1..=24 {
+        let a = (15.0 * k as f64).to_radians();
+        let t = 30f64.to_radians();
+        cl += &format!(
+            "GOTO/{},{},30,{},{},{}\n",
+            20.0 * a.cos(),
+            20.0 * a.sin(),
+            t.sin() * a.cos(),
+            t.sin() * a.sin(),
+            t.cos()
+        );
+    }
+    cl += "END\n";
+    for side in ["B-", "B+"] {
+        let mut o = Options::new(&m);
+        o.prefer = Some(kinepost::post::Prefer::parse(side, &m).unwrap());
+        let (sink, sum) = run(&m, cl.as_bytes(), &o);
+        assert_eq!(sum.errors, 0, "{side}\n{}", sink.nc);
+        let b: Vec<f64> = sink.blocks.iter().filter_map(|x| x.joints.0[4]).collect();
+        let sign = if side == "B-" { -1.0 } else { 1.0 };
+        assert!(b.iter().all(|v| v * sign >= -1e-6), "{side}: {b:?}\n{}", sink.nc);
+        assert!(b.iter().any(|v| v.abs() > 29.0), "{side}: {b:?}");
+    }
+}
+
+/// Tool preload: right after each tool change, the next tool the CL loads (`preselect` `next`,
+/// the default, on a CL read twice): `T2` after `T1 M6` and before `T2 M6`. A streamed CL is
+/// read once: readied where the CL says `SELCTL`, and said. `cl`: only `SELCTL`; `off`: none.
+#[test]
+fn the_next_tool_is_readied_right_after_each_tool_change() {
+    let m = machine("vmc-3axis");
+    let cl = "UNITS/MM\nLOADTL/1\nSPINDL/RPM,3000,CLW\nFEDRAT/MMPM,500\nRAPID\nGOTO/0,0,50,0,0,1\nGOTO/10,0,0\n\
+              LOADTL/2\nRAPID\nGOTO/0,0,50\nGOTO/20,0,0\nSELCTL/9\nLOADTL/7\nGOTO/20,0,10\nEND\n";
+    let seekable = |p: Option<&str>| {
+        let mut o = Options::new(&m);
+        if let Some(p) = p {
+            o.preselect = post::Preselect::parse(p).unwrap();
+        }
+        let mut sink = Collect::default();
+        post::post_seekable(std::io::Cursor::new(cl.as_bytes()), &m, &o, &mut sink).unwrap();
+        sink
+    };
+    let lines = |nc: &str| nc.lines().map(str::to_string).collect::<Vec<_>>();
+    let at = |l: &[String], w: &str| l.iter().position(|x| x == w).unwrap_or_else(|| panic!("no {w}: {l:?}"));
+    let l = lines(&seekable(None).nc);
+    let (t1, t2, t7) = (at(&l, "T1 M6"), at(&l, "T2 M6"), at(&l, "T7 M6"));
+    assert_eq!(at(&l, "T2"), t1 + 1, "{l:?}");
+    assert_eq!(at(&l, "T7"), t2 + 1, "{l:?}");
+    // The CL's own SELCTL/9 is still written where it stands (between T2 M6 and T7 M6).
+    assert!((t2..t7).contains(&at(&l, "T9")), "{l:?}");
+    // Read once: only the CL's SELCTL, and why.
+    let (sink, _) = run(&m, cl.as_bytes(), &Options::new(&m));
+    let l = lines(&sink.nc);
+    assert!(
+        !l.iter().any(|x| x == "T2" || x == "T7") && l.iter().any(|x| x == "T9"),
+        "{l:?}"
+    );
+    assert!(sink.diags.iter().any(|d| d.message.contains("read once")), "{:?}", sink.diags);
+    let l = lines(&seekable(Some("cl")).nc);
+    assert!(
+        !l.iter().any(|x| x == "T2" || x == "T7") && l.iter().any(|x| x == "T9"),
+        "{l:?}"
+    );
+    let l = lines(&seekable(Some("off")).nc);
+    assert!(!l.iter().any(|x| x == "T2" || x == "T7" || x == "T9"), "{l:?}");
+    assert!(post::Preselect::parse("later").is_err());
+}

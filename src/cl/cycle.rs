@@ -13,8 +13,12 @@ pub(super) fn parse_cycle(args: &[Arg], line: u32, rest_col: u32, diags: &mut Ve
         "OFF" => return Some(Record::CycleOff),
         "INIT" | "ON" | "" => return Some(Record::Ignored("CYCLE".into())),
         "DRILL" | "FACE" | "CSINK" => CycleKind::Drill,
-        "DEEP" | "DEEP2" | "BRKCHP" | "PECK" => CycleKind::Deep,
-        "TAP" | "RGDTAP" => CycleKind::Tap,
+        "DEEP" | "DEEP2" | "PECK" => CycleKind::Deep,
+        "BRKCHP" => CycleKind::BreakChip,
+        "TAP" | "RGDTAP" => CycleKind::Tap {
+            rigid: first == "RGDTAP",
+            left: false,
+        },
         "BORE" | "REAM" => CycleKind::Bore,
         _ => CycleKind::Other,
     };
@@ -26,6 +30,7 @@ pub(super) fn parse_cycle(args: &[Arg], line: u32, rest_col: u32, diags: &mut Ve
         feed: None,
         peck: None,
         dwell: None,
+        shift: None,
     };
     if !iso_positional(args, &mut p) {
         let positional = cycle_keywords(args, line, &mut p, diags);
@@ -49,6 +54,20 @@ pub(super) fn parse_cycle(args: &[Arg], line: u32, rest_col: u32, diags: &mut Ve
     Some(Record::Cycle(p))
 }
 
+/// A cycle's kind changed by a word after its first: `DRILL,DEEP`, `BORE,DRAG`, `TAP,LEFT`.
+fn with_word(kind: CycleKind, word: &str) -> CycleKind {
+    match (kind, word) {
+        (CycleKind::Drill, "DEEP") => CycleKind::Deep,
+        (CycleKind::Drill | CycleKind::Deep, "BRKCHP") => CycleKind::BreakChip,
+        (CycleKind::Bore, "DRAG") => CycleKind::BoreStop,
+        (CycleKind::Bore, "NODRAG" | "ORIENT") => CycleKind::BoreOrient,
+        (CycleKind::Bore, "BACK") => CycleKind::BoreBack,
+        (CycleKind::Tap { rigid, .. }, "LEFT" | "CCLW") => CycleKind::Tap { rigid, left: true },
+        (CycleKind::Tap { left, .. }, "RIGID") => CycleKind::Tap { rigid: true, left },
+        (k, _) => k,
+    }
+}
+
 /// Sets the values a keyword names (the number after it) and returns the numbers no keyword
 /// names, in order.
 fn cycle_keywords(args: &[Arg], line: u32, p: &mut CycleParams, diags: &mut Vec<Diagnostic>) -> Vec<f64> {
@@ -67,6 +86,11 @@ fn cycle_keywords(args: &[Arg], line: u32, p: &mut CycleParams, diags: &mut Vec<
             "RTRCTO" => p.retract_to = next(),
             "1STPECK" | "STEP" => p.peck = next(),
             "DWELL" => p.dwell = next(),
+            "SHIFT" => p.shift = next(),
+            // The words that say which cycle (NX: `DRILL,DEEP`, `BORE,DRAG`, `TAP,LEFT` …).
+            "DEEP" | "BRKCHP" | "DRAG" | "NODRAG" | "ORIENT" | "BACK" | "LEFT" | "CCLW" | "RIGID" => {
+                p.kind = with_word(p.kind, &k);
+            }
             "MMPM" | "IPM" | "MMPR" | "IPR" => {
                 let unit = if k.ends_with("PR") {
                     FeedUnit::PerRev
@@ -147,4 +171,29 @@ fn cycle_value(args: &[Arg], i: usize, line: u32, diags: &mut Vec<Diagnostic>) -
         diags.push(Diagnostic::new(Code::BadRecord, Severity::Warning, Some(line), msg).at(a.col));
     }
     first
+}
+
+impl CycleKind {
+    /// Only ever the control's cycle: never written as moves.
+    pub fn canned_only(self) -> bool {
+        matches!(
+            self,
+            CycleKind::Tap { .. } | CycleKind::BoreStop | CycleKind::BoreOrient | CycleKind::BoreBack
+        )
+    }
+
+    /// What a person calls it, for messages.
+    pub fn name(self) -> &'static str {
+        match self {
+            CycleKind::Drill | CycleKind::Other => "drilling",
+            CycleKind::Deep => "deep drilling",
+            CycleKind::BreakChip => "chip-breaking drilling",
+            CycleKind::Tap { rigid: true, .. } => "rigid tapping",
+            CycleKind::Tap { .. } => "tapping",
+            CycleKind::Bore => "boring",
+            CycleKind::BoreStop => "boring with a spindle stop",
+            CycleKind::BoreOrient => "fine boring",
+            CycleKind::BoreBack => "back boring",
+        }
+    }
 }

@@ -46,12 +46,32 @@ pub enum CoolantCmd {
     Off,
 }
 
+/// What a hole cycle does, as a control runs it. A tap and a bore that stops or orients the
+/// spindle cannot be written as moves (a rapid out of a tap snaps it, a turning bar drawn out of
+/// a bore marks the wall): they are only ever the control's own cycles.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum CycleKind {
+    /// `DRILL`, `FACE`, `CSINK` (a spot drill with a `DWELL`).
     Drill,
+    /// `DEEP`, `DEEP2`, `PECK`: pecks with a full retract.
     Deep,
-    Tap,
+    /// `BRKCHP`: pecks with a short retract that breaks the chip.
+    BreakChip,
+    /// `TAP` (a floating holder) and `RGDTAP` (`rigid`, the spindle synchronised with Z);
+    /// `left`: a left-hand thread (`LEFT`/`CCLW` in the record, or the spindle turning CCW).
+    Tap {
+        rigid: bool,
+        left: bool,
+    },
+    /// `BORE`, `REAM`: feed in, feed out (a `DWELL` at the bottom where given).
     Bore,
+    /// `BORE,DRAG`: feed in, the spindle stopped at the bottom, rapid out.
+    BoreStop,
+    /// `BORE,NODRAG` / `ORIENT`: fine bore, the spindle oriented at the bottom and the bar
+    /// shifted off the wall (`SHIFT`) before it rapids out.
+    BoreOrient,
+    /// `BORE,BACK`: back boring, from below the part upward.
+    BoreBack,
     Other,
 }
 
@@ -68,6 +88,8 @@ pub struct CycleParams {
     pub feed: Option<(f64, FeedUnit, Option<Units>)>,
     pub peck: Option<f64>,
     pub dwell: Option<f64>,
+    /// A fine bore's shift off the wall at the bottom (`SHIFT`).
+    pub shift: Option<f64>,
 }
 
 #[derive(Clone, Debug, PartialEq)]

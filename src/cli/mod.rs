@@ -321,8 +321,9 @@ pub struct PostArgs {
     /// Default 0: exact.
     #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
     pub singular_tolerance: f64,
-    /// Drilling cycles as the control's canned cycles (G81/G82/G83, CYCLE81–83, CYCL DEF 200)
-    /// where the hole runs along the machine's Z; default: expanded into moves.
+    /// Hole cycles as the control's canned cycles (G81–G89, CYCLE81–89, CYCL DEF 200–207) where
+    /// the hole runs along the machine's Z; default: expanded into moves (taps and bores that
+    /// stop the spindle are always cycles, or an error).
     #[arg(long)]
     pub canned_cycles: bool,
     /// Fixed-axis (3+2) runs in a tilted working plane (G68.2 + G53.1, G254, CYCLE800, PLANE
@@ -361,6 +362,10 @@ pub struct PostArgs {
     /// given.
     #[arg(long)]
     pub unwind: Option<String>,
+    /// Which tool is readied while another cuts: next (the default: right after each tool
+    /// change, the next tool the CL loads), cl (where the CL says SELCTL) or off.
+    #[arg(long)]
+    pub preselect: Option<String>,
     /// The collision check against the profile's bodies: on (the default) or off.
     #[arg(long)]
     pub collisions: Option<String>,
@@ -466,6 +471,26 @@ pub fn open_input(path: &str) -> Result<Box<dyn std::io::BufRead + Send>, String
         let f = std::fs::File::open(path).map_err(|e| format!("{path}: {e}"))?;
         Ok(Box::new(std::io::BufReader::with_capacity(1 << 16, f)))
     }
+}
+
+/// A post of the CL at `path`: a file is read twice where that readies the next tool
+/// (`post::post_seekable`), standard input once.
+fn post_input<S: kinepost::post::Sink + ?Sized>(
+    path: &str,
+    m: &kinepost::kinematics::Machine,
+    o: &kinepost::post::Options,
+    sink: &mut S,
+) -> Result<Result<kinepost::post::Summary, kinepost::post::Error>, String> {
+    if path == "-" {
+        return Ok(kinepost::post::post(open_input(path)?, m, o, sink));
+    }
+    let f = std::fs::File::open(path).map_err(|e| format!("{path}: {e}"))?;
+    Ok(kinepost::post::post_seekable(
+        std::io::BufReader::with_capacity(1 << 16, f),
+        m,
+        o,
+        sink,
+    ))
 }
 
 fn lint(input: &str, verbose: bool) -> Result<(), String> {
@@ -755,6 +780,7 @@ fn post_cmd(
         prefer: a.prefer.clone(),
         feed_mode: a.feed_mode.clone(),
         unwind: a.unwind.clone(),
+        preselect: a.preselect.clone(),
         collisions: a.collisions.clone(),
         collision_clearance: a.collision_clearance,
         threads: Some(a.threads),
@@ -785,7 +811,6 @@ fn post_cmd(
         // Input that is no CL is refused by the post itself, with its line.
         o.header.extend(post::setups::header_lines(open_input(&a.input)?, m, &o).unwrap_or_default());
     }
-    let input = open_input(&a.input)?;
     let out: Box<dyn Write> = match &a.output {
         Some(p) => Box::new(std::fs::File::create(p).map_err(|e| format!("{}: {e}", p.display()))?),
         None => Box::new(std::io::stdout().lock()),
@@ -798,7 +823,7 @@ fn post_cmd(
     };
     let mut sink = kinepost::output::FileSink::new(out, diag);
     sink.echo_warnings = true;
-    let res = post::post(input, m, &o, &mut sink);
+    let res = post_input(&a.input, m, &o, &mut sink)?;
     // Input that is no CL is refused before the program begins: there is nothing to mark.
     if let Err(e) = &res
         && !matches!(e, post::Error::NotCl(_))

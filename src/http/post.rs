@@ -92,6 +92,11 @@ pub struct PostParams {
     /// Where a bounded rotary may unwind: `retract` (in the cut too) or `rapids` (one inside a
     /// cut is an error); the profile's `[policy] unwind` where absent.
     pub unwind: Option<String>,
+    /// Which tool is readied while another cuts: `next` (default: right after each tool change,
+    /// the next tool the CL loads; a streamed post, whose CL is read once, readies where the CL
+    /// says `SELCTL`; a job's spooled CL is read twice), `cl` (where the CL says `SELCTL`) or
+    /// `off`.
+    pub preselect: Option<String>,
     /// The collision check against the profile's bodies: `on` (default) or `off`.
     pub collisions: Option<String>,
     /// Bodies closer than this (profile units; default 2 mm / 0.08 in): `near_collision`.
@@ -128,6 +133,7 @@ impl PostParams {
             prefer: self.prefer.clone(),
             feed_mode: self.feed_mode.clone(),
             unwind: self.unwind.clone(),
+            preselect: self.preselect.clone(),
             collisions: self.collisions.clone(),
             collision_clearance: self.collision_clearance,
             threads: None, // the server's to choose (`Config::post_threads`), not a request's
@@ -175,6 +181,7 @@ impl PostParams {
             "prefer" => self.prefer = Some(v).filter(|s| !s.is_empty()),
             "feed_mode" => self.feed_mode = Some(v).filter(|s| !s.is_empty()),
             "unwind" => self.unwind = Some(v).filter(|s| !s.is_empty()),
+            "preselect" => self.preselect = Some(v).filter(|s| !s.is_empty()),
             "collisions" => self.collisions = Some(v).filter(|s| !s.is_empty()),
             "collision_clearance" => self.collision_clearance = if v.trim().is_empty() { None } else { Some(num(&v)?) },
             "stock" => self.stock = Some(v).filter(|s| !s.trim().is_empty()),

@@ -483,6 +483,16 @@ impl<R: Read> Read for Counting<R> {
     }
 }
 
+/// Read twice (the first pass that finds the tools' order, then the post): the progress is
+/// where the reading stands, so it starts again with it.
+impl<R: std::io::Seek> std::io::Seek for Counting<R> {
+    fn seek(&mut self, pos: std::io::SeekFrom) -> std::io::Result<u64> {
+        let at = self.inner.seek(pos)?;
+        self.progress.bytes.store(at, Ordering::Relaxed);
+        Ok(at)
+    }
+}
+
 /// The spool files' sink (NC, block store, compact line map, and the preview beside them), counting
 /// blocks and stopping when the job is cancelled.
 struct JobSink<'a> {
@@ -584,7 +594,7 @@ fn execute(
         progress,
         cancel,
     };
-    let res = post::post(input, &profile.machine, &opts, &mut sink);
+    let res = post::post_seekable(input, &profile.machine, &opts, &mut sink);
     let res = match res {
         Ok(s) => Ok(s),
         Err(e) => {

@@ -2,6 +2,7 @@
 //! events (tool change, spindle, motion blocks …); a [`Formatter`] turns each into text lines in
 //! its dialect, suppressing modal words, and keeps no more state than a controller would.
 
+mod cycles;
 mod dialect;
 mod dialects;
 pub mod templates;
@@ -9,6 +10,7 @@ mod number;
 pub mod plane;
 pub mod read;
 
+pub use cycles::{Canned, CannedKind, CycleLines, Cycles, IsoTaps};
 pub use dialect::{Dialect, Frame, MAX_DIALECT_BYTES, Sequence, WordFormat, parse_dialect};
 pub use dialects::{BUILTIN_FILES, DIALECTS, Risk, builtins, dialect, function_risk};
 pub use number::{restyle, round_to, write_fixed};
@@ -44,99 +46,6 @@ pub struct Ranges {
     /// Longest dwell, seconds.
     pub dwell_s: f64,
 }
-
-/// Canned drilling cycle families.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Deserialize)]
-#[serde(tag = "kind", rename_all = "lowercase", deny_unknown_fields)]
-pub enum Cycles {
-    /// `G98/G99 G81|G82|G83 X Y Z R [Q] [P] F`, modal until `G80`; dwell `P` in milliseconds
-    /// (Fanuc) or seconds (Haas, LinuxCNC).
-    Iso { dwell_ms: bool },
-    /// `MCALL CYCLE81|82|83(RTP, RFP, SDIS, DP, DPR …)`, called by each positioning block until
-    /// a bare `MCALL`.
-    Siemens,
-    /// `CYCL DEF 200 DRILLING` with Q parameters, called by `M99` on a positioning block.
-    Heidenhain,
-}
-
-impl Cycles {
-    pub fn describe(self) -> &'static str {
-        match self {
-            Cycles::Iso { dwell_ms: true } => "G81/G82/G83 with G98/G99 R plane, G80 cancels; G82 dwell P in ms",
-            Cycles::Iso { dwell_ms: false } => "G81/G82/G83 with G98/G99 R plane, G80 cancels; G82 dwell P in seconds",
-            Cycles::Siemens => "MCALL CYCLE81/CYCLE82/CYCLE83, bare MCALL cancels",
-            Cycles::Heidenhain => "CYCL DEF 200 DRILLING, called with M99",
-        }
-    }
-}
-
-/// Which canned cycle a hole takes.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum CannedKind {
-    Drill,
-    /// Dwell at the bottom.
-    Spot,
-    /// Full-retract pecking.
-    Peck,
-}
-
-/// One hole as a canned cycle, in joint words (the hole runs along the machine's Z): position,
-/// and the Z levels of the top (surface), the R plane, the bottom and the start level the tool
-/// waits at and returns to (G98's initial level, Siemens' RTP, Heidenhain's 2nd set-up
-/// clearance).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Canned {
-    pub kind: CannedKind,
-    pub x: Option<f64>,
-    pub y: Option<f64>,
-    pub z_top: f64,
-    pub z_r: f64,
-    pub z_bottom: f64,
-    pub z_start: f64,
-    pub feed: f64,
-    pub peck: f64,
-    /// Seconds.
-    pub dwell: f64,
-}
-
-impl Canned {
-    /// The same cycle started from (`x`, `y`) at level `z_start`: every Z level moves with it.
-    pub fn start_at(&mut self, x: Option<f64>, y: Option<f64>, z_start: f64) {
-        let shift = z_start - self.z_start;
-        for z in [&mut self.z_top, &mut self.z_r, &mut self.z_bottom, &mut self.z_start] {
-            *z += shift;
-        }
-        (self.x, self.y) = (x, y);
-    }
-
-    /// The cycle's positions and levels measured from `origin` (a work offset's).
-    fn measured_from(&self, origin: [f64; 3]) -> Canned {
-        let [sx, sy, sz] = origin;
-        Canned {
-            x: self.x.map(|x| x - sx),
-            y: self.y.map(|y| y - sy),
-            z_top: self.z_top - sz,
-            z_r: self.z_r - sz,
-            z_bottom: self.z_bottom - sz,
-            z_start: self.z_start - sz,
-            ..*self
-        }
-    }
-
-    /// Same cycle as written (levels, feed, peck, dwell): a next hole needs only its position.
-    pub fn same_cycle(&self, o: &Canned, f: &Formats) -> bool {
-        let l = |a: f64, b: f64| round_to(a, f.linear) == round_to(b, f.linear);
-        self.kind == o.kind
-            && l(self.z_top, o.z_top)
-            && l(self.z_r, o.z_r)
-            && l(self.z_bottom, o.z_bottom)
-            && l(self.z_start, o.z_start)
-            && l(self.peck, o.peck)
-            && round_to(self.feed, f.feed) == round_to(o.feed, f.feed)
-            && round_to(self.dwell, 3) == round_to(o.dwell, 3)
-    }
-}
-
 
 /// Number formats: linear words 3 decimals in mm, 4 in inch; rotary words 4 decimals; feed 1
 /// (mm) or 2 (inch); inverse time 3, as NX's Haas post writes it: a 1/min value is small where
@@ -625,27 +534,13 @@ impl Formatter {
         write_fixed(&mut self.buf, r, dec);
     }
 
-    /// X and Y of a hole: always both on the block that starts a cycle (it is the call), else
-    /// what changed.
-    fn hole_xy(&mut self, c: &Canned, force: bool) {
-        let conv = self.conversational();
-        for (i, v) in [(0, c.x), (1, c.y)] {
-            let Some(v) = v else { continue };
-            let r = round_to(v, self.fmt.linear);
-            if force || self.axes[i] != Some(r) {
-                self.axes[i] = Some(r);
-                number::write_word(&mut self.buf, AXIS_ADDRESSES[i], conv, r, self.fmt.linear);
-            }
-        }
-    }
-
     /// A dwell of `seconds` (APT's `DELAY`): `G4 P` in milliseconds on Fanuc, in seconds with a
     /// decimal point on Haas and LinuxCNC (a Haas `P` without one is milliseconds), `G4 F`
     /// seconds on a Sinumerik (`G4 S` would be revolutions), cycle 9 on a TNC.
     pub fn dwell(&mut self, seconds: f64) -> Vec<String> {
         let mut out = Vec::new();
         let (word, ms) = match self.d.cycles {
-            Cycles::Iso { dwell_ms } => ("G4 P", dwell_ms),
+            Cycles::Iso { dwell_ms, .. } => ("G4 P", dwell_ms),
             Cycles::Siemens => ("G4 F", false),
             Cycles::Heidenhain => {
                 out.push(self.words("CYCL DEF 9.0 DWELL TIME").to_string());
@@ -665,162 +560,6 @@ impl Formatter {
             self.buf.push_str(itoa::Buffer::new().format((s * 1000.0).round() as i64));
         } else {
             self.number(s, 3, false);
-        }
-    }
-
-    /// The lines of one hole as a canned cycle (the tool already waits above it at `z_start`).
-    /// `modal`: the previous hole's cycle is still on with the same levels, feed, peck and
-    /// dwell, so only the position is written (it calls the cycle).
-    pub fn canned(&mut self, c: &Canned, modal: bool) -> Vec<String> {
-        let lin = self.fmt.linear;
-        let c = &c.measured_from([self.shift[0], self.shift[1], self.shift[2]]);
-        let mut out = Vec::new();
-        let feed_r = round_to(c.feed, self.fmt.feed);
-        match self.d.cycles {
-            Cycles::Iso { dwell_ms } => {
-                self.start();
-                if !modal {
-                    if let Some(d) = self.switch_feed_mode(FeedMode::PerMinute) {
-                        self.buf.push_str(d.feed_mode_word(FeedMode::PerMinute));
-                        self.buf.push(' ');
-                    }
-                    // G98 returns to the level the cycle started from, G99 to the R plane.
-                    let g98 = round_to(c.z_start, lin) > round_to(c.z_r, lin);
-                    self.buf.push_str(if g98 { "G98 " } else { "G99 " });
-                    self.buf.push_str(match c.kind {
-                        CannedKind::Drill => "G81 ",
-                        CannedKind::Spot => "G82 ",
-                        CannedKind::Peck => "G83 ",
-                    });
-                }
-                self.hole_xy(c, !modal);
-                if !modal {
-                    self.buf.push('Z');
-                    self.number(c.z_bottom, lin, false);
-                    self.buf.push_str(" R");
-                    self.number(c.z_r, lin, false);
-                    if c.kind == CannedKind::Peck {
-                        self.buf.push_str(" Q");
-                        self.number(c.peck, lin, false);
-                    }
-                    if c.kind == CannedKind::Spot {
-                        self.buf.push_str(" P");
-                        self.seconds(c.dwell, dwell_ms);
-                    }
-                    self.buf.push_str(" F");
-                    write_fixed(&mut self.buf, feed_r, self.fmt.feed);
-                    self.feed = Some(feed_r);
-                }
-                self.motion = None;
-            }
-            Cycles::Siemens => {
-                if !modal {
-                    let mut f = String::new();
-                    if let Some(d) = self.switch_feed_mode(FeedMode::PerMinute) {
-                        f.push_str(d.feed_mode_word(FeedMode::PerMinute));
-                        f.push(' ');
-                    }
-                    if self.feed != Some(feed_r) {
-                        f.push('F');
-                        write_fixed(&mut f, feed_r, self.fmt.feed);
-                        self.feed = Some(feed_r);
-                    }
-                    if !f.is_empty() {
-                        out.push(self.words(f.trim_end()).to_string());
-                    }
-                    self.start();
-                    self.buf.push_str("MCALL ");
-                    self.buf.push_str(match c.kind {
-                        CannedKind::Drill => "CYCLE81(",
-                        CannedKind::Spot => "CYCLE82(",
-                        CannedKind::Peck => "CYCLE83(",
-                    });
-                    // RTP, RFP, SDIS, DP (absolute), DPR left empty: given, it would win.
-                    self.number(c.z_start, lin, false);
-                    self.buf.push(',');
-                    self.number(c.z_top, lin, false);
-                    self.buf.push(',');
-                    self.number(c.z_r - c.z_top, lin, false);
-                    self.buf.push(',');
-                    self.number(c.z_bottom, lin, false);
-                    self.buf.push(',');
-                    match c.kind {
-                        CannedKind::Drill => {
-                            self.buf.pop();
-                        }
-                        CannedKind::Spot => {
-                            self.buf.push(',');
-                            self.number(c.dwell, 3, false);
-                        }
-                        // FDEP (first depth, absolute), FDPR empty, DAM (each next peck), DTB,
-                        // DTS, FRF 1, VARI 1: full retract between pecks, as G83.
-                        CannedKind::Peck => {
-                            self.buf.push(',');
-                            self.number(c.z_top - c.peck, lin, false);
-                            self.buf.push_str(",,");
-                            self.number(c.peck, lin, false);
-                            self.buf.push_str(",0,0,1,1");
-                        }
-                    }
-                    self.buf.push(')');
-                    out.push(self.buf.clone());
-                }
-                self.start();
-                self.hole_xy(c, true);
-                self.motion = None;
-            }
-            Cycles::Heidenhain => {
-                if !modal {
-                    self.start();
-                    self.buf.push_str("CYCL DEF 200 DRILLING ~");
-                    out.push(self.buf.clone());
-                    let depth = c.z_bottom - c.z_top;
-                    let plunge = if c.kind == CannedKind::Peck { c.peck } else { -depth };
-                    let dwell = if c.kind == CannedKind::Spot { c.dwell } else { 0.0 };
-                    let q: [(u32, f64, u32, &str); 8] = [
-                        (200, c.z_r - c.z_top, lin, "SET-UP CLEARANCE"),
-                        (201, depth, lin, "DEPTH"),
-                        (206, c.feed, self.fmt.feed, "FEED RATE FOR PLNGNG"),
-                        (202, plunge, lin, "PLUNGING DEPTH"),
-                        (210, 0.0, 0, "DWELL TIME AT TOP"),
-                        (203, c.z_top, lin, "SURFACE COORDINATE"),
-                        (204, c.z_start - c.z_top, lin, "2ND SET-UP CLEARANCE"),
-                        (211, dwell, 3, "DWELL TIME AT DEPTH"),
-                    ];
-                    for (k, (n, v, dec, name)) in q.iter().enumerate() {
-                        self.buf.clear();
-                        self.buf.push_str("  Q");
-                        self.buf.push_str(itoa::Buffer::new().format(*n));
-                        self.buf.push('=');
-                        self.number(*v, *dec, true);
-                        self.buf.push_str(" ;");
-                        self.buf.push_str(name);
-                        if k + 1 < q.len() {
-                            self.buf.push_str(" ~");
-                        }
-                        out.push(self.buf.clone());
-                    }
-                }
-                self.start();
-                self.buf.push_str("L ");
-                self.hole_xy(c, true);
-                self.buf.push_str("FMAX M99");
-            }
-        }
-        while self.buf.ends_with(' ') {
-            self.buf.pop();
-        }
-        out.push(self.buf.clone());
-        out
-    }
-
-    /// The line that switches a modal canned cycle off, if the control needs one.
-    pub fn canned_off(&mut self) -> Option<String> {
-        self.motion = None;
-        match self.d.cycles {
-            Cycles::Iso { .. } => Some(self.words("G80").to_string()),
-            Cycles::Siemens => Some(self.words("MCALL").to_string()),
-            Cycles::Heidenhain => None,
         }
     }
 

@@ -158,19 +158,29 @@ impl<R: std::io::BufRead> NcReader<R> {
         Ok(())
     }
 
-    /// Siemens' modal call `MCALL CYCLE81|82|83(RTP, RFP, SDIS, DP …)`: every positioning block
+    /// Siemens' modal call `MCALL CYCLE81…89|840(RTP, RFP, SDIS, DP …)`: every positioning block
     /// after it drills as ISO G81 with R at RFP + SDIS, the bottom at DP and the return to RTP;
-    /// a bare `MCALL` ends it. The pecks and dwells of 82 and 83 do not move the tip elsewhere.
+    /// a bare `MCALL` ends it. Pecks, dwells, taps and bores do not move the tip elsewhere (a
+    /// fine bore's lift-off aside, a fraction of a millimetre).
     fn mcall(&mut self, call: &str) -> Result<(), Error> {
         if call.is_empty() {
             self.cycle = None;
             return Ok(());
         }
         let upper = call.to_ascii_uppercase();
-        let args = ["CYCLE81(", "CYCLE82(", "CYCLE83("]
-            .iter()
-            .find_map(|c| upper.strip_prefix(c))
-            .ok_or_else(|| self.unsupported(format!("MCALL {call}: only CYCLE81, CYCLE82 and CYCLE83 are read")))?;
+        let args = [
+            "CYCLE81(",
+            "CYCLE82(",
+            "CYCLE83(",
+            "CYCLE84(",
+            "CYCLE840(",
+            "CYCLE85(",
+            "CYCLE86(",
+            "CYCLE89(",
+        ]
+        .iter()
+        .find_map(|c| upper.strip_prefix(c))
+        .ok_or_else(|| self.unsupported(format!("MCALL {call}: only CYCLE81 to 86, 89 and 840 are read")))?;
         let args: Vec<&str> = args.strip_suffix(')').unwrap_or(args).split(',').map(str::trim).collect();
         let arg = |k: usize, name: &str| {
             args.get(k)
@@ -248,7 +258,7 @@ impl<R: std::io::BufRead> NcReader<R> {
     /// follow on `~`-continued lines; 9 (a dwell) moves nothing.
     fn cycl_def_start(&mut self, words: &[&str], continued: bool) -> Result<(), Error> {
         match words {
-            ["200", ..] => {
+            ["200" | "201" | "202" | "203" | "206" | "207", ..] => {
                 self.cycl_def = Some(Vec::new());
                 if !continued {
                     return Err(self.unsupported("CYCL DEF 200 without its Q parameters".into()));
@@ -256,7 +266,7 @@ impl<R: std::io::BufRead> NcReader<R> {
             }
             ["9.0" | "9.1", ..] => {}
             [other, ..] => {
-                return Err(self.unsupported(format!("CYCL DEF {other}: only cycle 200 (drilling) is read")));
+                return Err(self.unsupported(format!("CYCL DEF {other}: only cycles 200 to 203, 206 and 207 are read")));
             }
             [] => {}
         }
@@ -468,7 +478,9 @@ impl<R: std::io::BufRead> NcReader<R> {
             990 => self.return_initial = false,
             // Drilling cycles whose motion is rapid to R, feed to Z, back out: the tap,
             // bore and fine-bore variants differ only in spindle and retract feed.
-            730 | 810 | 820 | 830 | 840 | 850 | 860 | 890 => w.starts_cycle = true,
+            730 | 740 | 760 | 810 | 820 | 830 | 840 | 850 | 860 | 890 => w.starts_cycle = true,
+            // LinuxCNC's rigid tap: from where the tool is to Z and back.
+            331 => w.sync_tap = true,
             200 => self.units = Units::Inch,
             210 => self.units = Units::Mm,
             900 => self.incremental = false,
@@ -532,6 +544,13 @@ impl<R: std::io::BufRead> NcReader<R> {
         }
         if self.cycle.is_some() {
             return self.cycle_hole(&w, comment).map(|_| None);
+        }
+        if w.sync_tap {
+            let (Some(from), Some(bottom)) = (self.axes[2], w.vals[2]) else {
+                return Err(self.unsupported("G33.1 without Z, or from an unknown Z".into()));
+            };
+            self.drill(from, bottom, from, comment);
+            return Ok(None);
         }
         self.set_axes(&w.vals);
         Ok(Some(self.block(self.rapid, comment)))
@@ -603,8 +622,10 @@ struct Words {
     ijk: [Option<f64>; 3],
     /// G68.2: a tilted plane defined by X Y Z and I J K.
     plane_def: bool,
-    /// A drilling cycle begins (G73, G81–G86, G89).
+    /// A drilling cycle begins (G73, G74, G76, G81–G86, G89).
     starts_cycle: bool,
+    /// G33.1: a rigid tap from the current Z to the block's and back.
+    sync_tap: bool,
 }
 
 /// Splits a word-address line at its comments: the code, upper-case, up to a `;` outside

@@ -54,13 +54,35 @@ fn fixed_run_ahead(axis: &Vec3, ahead: &VecDeque<Out>) -> bool {
     true
 }
 
+/// Whether the cut ahead of a rapid (or of an operation's start) at tool axis `axis` turns a
+/// rotary while cutting: a feed move to another tool axis before the operation ends (the next
+/// `TOOL PATH`, a tool change, the end) or a rapid to another axis (a reposition, which decides
+/// its own run), as far as [`LOOK_AHEAD`] items show. Such a rotary is left unlocked for the
+/// whole operation: a clamp word between two feed moves stops the machine mid-surface.
+fn turns_while_cutting(axis: &Vec3, ahead: &VecDeque<Out>) -> bool {
+    let mut prev = *axis;
+    for o in ahead.iter().take(LOOK_AHEAD) {
+        match o {
+            Out::Event(ProgEvent::Tool { .. } | ProgEvent::End | ProgEvent::Operation(_)) => return false,
+            Out::Event(_) => {}
+            Out::Point(c) => {
+                if angle_between(&prev, &c.pt.pose.axis) > PLANE_AXIS_EPS {
+                    return !c.pt.rapid;
+                }
+                prev = c.pt.pose.axis;
+            }
+        }
+    }
+    false
+}
+
 /// Hands what the planner committed to the emitter: at once, or with tilted planes through the
 /// look-ahead queue (see [`Emitter::drain`]). The first error stops the rest.
 pub(super) fn deliver<S: Sink + ?Sized>(e: &mut Emitter<'_, S>, pending: &mut VecDeque<Out>, failed: &mut Option<Error>, x: Out) {
     if failed.is_some() {
         return;
     }
-    if e.o.tilted_planes {
+    if e.looks_ahead() {
         pending.push_back(x);
         return;
     }
@@ -89,11 +111,12 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
     /// Writes what the planner committed, keeping [`LOOK_AHEAD`] items back (until `all`) when
     /// tilted planes are on: whether a fixed-axis run ends at a rapid is decided from them.
     pub(in crate::post) fn drain(&mut self, pending: &mut VecDeque<Out>, all: bool) -> Result<(), Error> {
-        // Without tilted planes only a held singular point waits here (`deliver` releases it).
-        if !all && !self.o.tilted_planes {
+        // Without tilted planes or clamps only a held singular point waits here (`deliver`
+        // releases it).
+        if !all && !self.looks_ahead() {
             return Ok(());
         }
-        let keep = if all || !self.o.tilted_planes { 0 } else { LOOK_AHEAD };
+        let keep = if all || !self.looks_ahead() { 0 } else { LOOK_AHEAD };
         while pending.len() > keep {
             let Some(o) = pending.pop_front() else { break };
             self.take(o, pending)?;
@@ -110,11 +133,40 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         }
     }
 
-    /// One committed item, with what is known to follow it (the tilted-plane look-ahead).
+    /// Whether items wait in the look-ahead: for tilted planes, and for clamps (whether an
+    /// operation turns a rotary while cutting).
+    pub(in crate::post) fn looks_ahead(&self) -> bool {
+        self.o.tilted_planes || self.o.clamps.iter().any(Option::is_some)
+    }
+
+    /// At a rapid or an operation's start: whether the cut ahead turns a rotary while cutting,
+    /// and if so the clamps released now, before its first move (see [`turns_while_cutting`]).
+    fn clamps_ahead(&mut self, axis: Option<Vec3>, ahead: &VecDeque<Out>) -> std::io::Result<()> {
+        let Some(axis) = axis.filter(|_| self.o.clamps.iter().any(Option::is_some)) else {
+            return Ok(());
+        };
+        self.cut_turns = turns_while_cutting(&axis, ahead);
+        if self.cut_turns { self.unlock_all() } else { Ok(()) }
+    }
+
+    /// One committed item, with what is known to follow it (the tilted-plane and clamp
+    /// look-ahead).
     pub(in crate::post) fn take(&mut self, o: Out, ahead: &VecDeque<Out>) -> Result<(), Error> {
         match o {
-            Out::Event(ev) => self.event(ev),
+            Out::Event(ev) => {
+                if matches!(ev, ProgEvent::Operation(_)) {
+                    let first = ahead.iter().find_map(|o| match o {
+                        Out::Point(c) => Some(c.pt.pose.axis),
+                        Out::Event(_) => None,
+                    });
+                    self.clamps_ahead(first, ahead)?;
+                }
+                self.event(ev)
+            }
             Out::Point(c) => {
+                if c.pt.rapid {
+                    self.clamps_ahead(Some(c.pt.pose.axis), ahead)?;
+                }
                 self.plane_ahead = c.pt.rapid && self.o.tilted_planes && fixed_run_ahead(&c.pt.pose.axis, ahead);
                 self.free_hint = c
                     .cand

@@ -22,7 +22,7 @@ pub mod tools;
 pub mod verify;
 
 pub use emit::linearize::{NONLINEAR_SAMPLES, seg_dist};
-pub use policy::{Prefer, Retract, RotaryFeed, Unwind};
+pub use policy::{Prefer, Preselect, Retract, RotaryFeed, Unwind};
 pub use settings::{Budget, MAX_SPINDLE_SPEED, Mode, Options, Settings, parse_triple, threads};
 pub use sink::{AxisStats, AxisWords, BlockInfo, Sink, Summary, TextSink, ToolUse};
 pub use tools::LengthFrom;
@@ -76,8 +76,37 @@ impl From<source::Error> for Error {
 /// Post-processes CL from `input` for machine `m` into `sink`. With `o.threads` 2 the CL is read
 /// and planned on a second thread (`pipe`); the output is the same byte for byte.
 pub fn post<R: BufRead + Send, S: Sink + ?Sized>(input: R, m: &Machine, o: &Options, sink: &mut S) -> Result<Summary, Error> {
+    post_with(input, m, o, sink, None)
+}
+
+/// [`post`] from a CL that can be read twice (a file): with `preselect` `next`, a first pass
+/// finds the order the CL loads its tools in, so that each tool change can ready the next one.
+pub fn post_seekable<R: BufRead + std::io::Seek + Send, S: Sink + ?Sized>(
+    mut input: R,
+    m: &Machine,
+    o: &Options,
+    sink: &mut S,
+) -> Result<Summary, Error> {
+    let order = match o.preselect == Preselect::Next && !o.dialect.tool_preselect.is_empty() {
+        true => {
+            let order = tools::load_order(&mut input).map_err(source::Error::from)?;
+            input.seek(std::io::SeekFrom::Start(0))?;
+            Some(order)
+        }
+        false => None,
+    };
+    post_with(input, m, o, sink, order)
+}
+
+fn post_with<R: BufRead + Send, S: Sink + ?Sized>(
+    input: R,
+    m: &Machine,
+    o: &Options,
+    sink: &mut S,
+    order: Option<Vec<u32>>,
+) -> Result<Summary, Error> {
     let mut sink = budget::Metered::new(sink, o.budget);
-    let r = run(input, m, o, &mut sink);
+    let r = run(input, m, o, &mut sink, order);
     match (r, sink.tripped) {
         (Err(_), Some(why)) => Err(Error::Budget(why)),
         (r, _) => r,
@@ -89,6 +118,7 @@ fn run<R: BufRead + Send, S: Sink + ?Sized>(
     m: &Machine,
     o: &Options,
     sink: &mut budget::Metered<'_, S>,
+    order: Option<Vec<u32>>,
 ) -> Result<Summary, Error> {
     let mut src = Source::new(input, m.units, o.cl_units, o.strict)?;
     src.canned_cycles = o.canned_cycles;
@@ -97,6 +127,7 @@ fn run<R: BufRead + Send, S: Sink + ?Sized>(
     let lengths = tools::Lengths::new(m.units, o.tool_length, o.tool_table.as_deref(), m.default_tool_length);
     let setup = Setup::new(lengths.length, o.work_offset);
     let mut e = Emitter::new(m, o, sink, setup, &src);
+    e.load_order = order;
     e.program_start()?;
     let plan = Plan {
         src,

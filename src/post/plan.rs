@@ -202,19 +202,20 @@ pub struct Planner<'m> {
 /// unwinds a bounded axis. Unbounded axes compare modulo a turn (the emitter picks the nearest
 /// winding); the free axis of a singular candidate costs nothing into it (it keeps the previous
 /// angle, which `relax` gives it) and its turn out of it is travel, no unwind (the emitter turns
-/// it at the singular point, tip standing).
+/// it at the singular point, tip standing); `placed`: `a` was reached by positioning, where the
+/// emitter turns that free rotary before the cut (see `rotary_travel`).
 /// Returns the cost without the branch penalty, and whether that penalty may apply (it needs
 /// the fold check, which callers skip when the move cannot win anyway).
 #[inline(always)]
-fn transition(ax: &PlanAxes, a: &Cand, b: &Cand, rapid: bool) -> (f64, bool) {
+fn transition(ax: &PlanAxes, a: &Cand, b: &Cand, rapid: bool, placed: bool) -> (f64, bool) {
     let (ja, jb) = (&a.sol.joints.rotary, &b.sol.joints.rotary);
     // Plain indices (no rotary is 3): `Option` compares cost 60 instructions a point here.
     let (sa, sb) = (a.sol.singular.unwrap_or(3), b.sol.singular.unwrap_or(3));
     // Neither singular (nearly every pair): no axis to leave out.
     let (travel, unwind) = if sa & sb == 3 {
-        rotary_travel::<false>(ax, ja, jb, sa, sb)
+        rotary_travel::<false>(ax, ja, jb, sa, sb, placed)
     } else {
-        rotary_travel::<true>(ax, ja, jb, sa, sb)
+        rotary_travel::<true>(ax, ja, jb, sa, sb, placed)
     };
     let mut cost = travel.to_degrees();
     if !rapid && unwind {
@@ -228,10 +229,19 @@ fn transition(ax: &PlanAxes, a: &Cand, b: &Cand, rapid: bool) -> (f64, bool) {
 
 /// Rotary travel (radians) from `ja` to `jb` and whether a bounded axis unwinds. With `SINGULAR`:
 /// `b`'s free axis (`sb`) costs nothing (it keeps the angle); `a`'s (`sa`) turns without an unwind,
-/// or, without an inherited angle (`PlanAxes::inherit`), costs nothing either.
+/// or, without an inherited angle (`PlanAxes::inherit`) or where `a` was `placed` (reached by
+/// positioning: the emitter turns its free rotary to where the cut after it needs it), costs
+/// nothing either: else a singular start cost the branch a preference wants a half turn of C.
 #[inline(always)]
-fn rotary_travel<const SINGULAR: bool>(ax: &PlanAxes, ja: &[f64; 3], jb: &[f64; 3], sa: usize, sb: usize) -> (f64, bool) {
-    let free_a = if ax.inherit { 3 } else { sa };
+fn rotary_travel<const SINGULAR: bool>(
+    ax: &PlanAxes,
+    ja: &[f64; 3],
+    jb: &[f64; 3],
+    sa: usize,
+    sb: usize,
+    placed: bool,
+) -> (f64, bool) {
+    let free_a = if ax.inherit && !placed { 3 } else { sa };
     let (mut travel, mut unwind) = (0.0, false);
     let mut axis = |i: usize| {
         if !SINGULAR || (sb != i && free_a != i) {
@@ -292,7 +302,7 @@ impl PlanAxes {
 /// The full transition cost, fold check included (from the committed root: once per commit).
 #[cold]
 fn transition_cost(m: &Machine, axes: &PlanAxes, a: &Cand, b: &Cand, rapid: bool, ua: &Vec3, ub: &Vec3) -> f64 {
-    let (c, check) = transition(axes, a, b, rapid);
+    let (c, check) = transition(axes, a, b, rapid, false);
     if check && !crosses_fold(m, &a.sol.joints.rotary, &b.sol.joints.rotary, ua, ub) {
         c + BRANCH_PENALTY
     } else {
@@ -340,7 +350,7 @@ fn relax(
                 let mut deferred = [0.0; MAX_CANDS];
                 let mut check_mask = 0u32;
                 for (a, ca) in p.cands.iter().enumerate() {
-                    let (t, check) = transition(axes, ca, cb, rapid);
+                    let (t, check) = transition(axes, ca, cb, rapid, p.pt.rapid);
                     let c = p.cost[a] + t;
                     if check {
                         deferred[a] = c;

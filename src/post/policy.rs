@@ -151,3 +151,30 @@ impl Unwind {
         }
     }
 }
+
+/// Which tool is readied in the magazine while another cuts (`preselect`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Preselect {
+    /// Right after each tool change, the next tool the CL loads (as a shop's post does); where
+    /// the CL cannot be read twice (a stream), as the CL says.
+    #[default]
+    Next,
+    /// Where the CL says `SELCTL`.
+    Cl,
+    /// Never (`SELCTL` told as not written).
+    Off,
+}
+
+impl Preselect {
+    /// `next`, `cl` or `off`.
+    pub fn parse(text: &str) -> Result<Preselect, String> {
+        match text.trim() {
+            "next" => Ok(Preselect::Next),
+            "cl" => Ok(Preselect::Cl),
+            "off" => Ok(Preselect::Off),
+            t => Err(format!(
+                "preselect {t:?}: expected next (the next tool after each change), cl (where the CL says SELCTL) or off"
+            )),
+        }
+    }
+}

@@ -46,6 +46,8 @@ pub struct Options {
     pub rotary_feed: super::RotaryFeed,
     /// Where a bounded rotary may unwind (`Unwind`).
     pub unwind: super::Unwind,
+    /// Which tool is readied while another cuts (`Preselect`).
+    pub preselect: super::Preselect,
     /// Cone (radians) around a singular direction within which blocks are marked `singular`.
     pub singular_cone: f64,
     /// Orientation tolerance (radians) the free rotary may use near a singular direction: 0 is
@@ -166,6 +168,7 @@ impl Options {
             prefer: None,
             rotary_feed: super::RotaryFeed::InverseTime,
             unwind: super::Unwind::RetractInCut,
+            preselect: super::Preselect::Next,
             singular_cone: 2f64.to_radians(),
             singular_tolerance: 0.0,
             clamps: Default::default(),
@@ -246,8 +249,9 @@ pub struct Settings {
     pub singular_tolerance: Option<f64>,
     /// Units of the CL when the file does not say: `mm` or `inch`.
     pub cl_units: Option<String>,
-    /// Drilling cycles: `expand` (default: moves) or `canned` (G81/G82/G83, CYCLE81–83, CYCL DEF
-    /// 200 where the hole runs along the machine's Z).
+    /// Hole cycles: `expand` (default: moves; taps and bores that stop the spindle are cycles
+    /// even so) or `canned` (G81–G89, CYCLE81–89, CYCL DEF 200–207 where the hole runs along
+    /// the machine's Z).
     #[serde(default)]
     pub cycles: Option<String>,
     /// 3+2 work: `positioning` (default: 5-axis positioning, machine coordinates) or `tilted`
@@ -288,6 +292,11 @@ pub struct Settings {
     /// unwind` where absent.
     #[serde(default)]
     pub unwind: Option<String>,
+    /// Which tool is readied while another cuts: `next` (default: right after each tool change,
+    /// the next tool the CL loads, where the CL can be read twice), `cl` (where the CL says
+    /// `SELCTL`) or `off`.
+    #[serde(default)]
+    pub preselect: Option<String>,
     /// The collision check: `on` (the default: every block, where the profile gives bodies) or
     /// `off`.
     #[serde(default)]
@@ -394,6 +403,9 @@ impl Settings {
         o.retract = super::Retract::resolve(self.retract.as_deref(), None, o.mode, o.clearance)?;
         if let Some(f) = self.feed_mode.as_deref().filter(|f| !f.trim().is_empty()) {
             o.rotary_feed = super::RotaryFeed::parse(f)?;
+        }
+        if let Some(p) = self.preselect.as_deref().filter(|p| !p.trim().is_empty()) {
+            o.preselect = super::Preselect::parse(p)?;
         }
         if let Some(u) = self.unwind.as_deref().filter(|u| !u.trim().is_empty()) {
             o.unwind = super::Unwind::parse(u)?;

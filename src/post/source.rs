@@ -43,12 +43,14 @@ pub struct MotionPt {
     pub hole: Option<Box<HolePart>>,
 }
 
-/// The points of one hole, in order: `Start` (canned output only: rapid, above the hole at the
-/// higher of the clearance and retract heights, carrying the cycle), then the R plane, `Top`
-/// (the CL GOTO), the bottom and the retract, those three `Rest`.
+/// The points of one hole, in order: `Start` (canned output, and every tap or stopping bore:
+/// rapid, above the hole at the higher of the clearance and retract heights, carrying the
+/// cycle), then the R plane (`Clear` where it starts a hole written as moves), `Top` (the CL
+/// GOTO), the bottom and the retract, those three `Rest`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum HolePart {
     Start(Hole),
+    Clear,
     Top,
     Rest,
 }
@@ -66,6 +68,8 @@ pub struct Hole {
     pub peck: Option<f64>,
     /// Seconds at the bottom.
     pub dwell: Option<f64>,
+    /// A fine bore's shift off the wall, profile units.
+    pub shift: Option<f64>,
     /// Feed in profile units per minute or per rev (None: no feed, the expansion rapids).
     pub feed: Option<(f64, FeedUnit)>,
 }
@@ -661,9 +665,9 @@ impl<R: BufRead> Source<R> {
             Record::Clearance(plane) => self.clearance(plane),
             Record::Retract => self.retract(line),
             Record::Cycle(c) => {
-                self.cycle = Some(c);
+                self.cycle = Some(self.r_at_or_above_top(c, line));
                 // Canned output says per hole what it could not write as a cycle.
-                if self.canned_cycles {
+                if self.canned_cycles || c.kind.canned_only() {
                     return None;
                 }
                 self.diag(
@@ -844,6 +848,25 @@ impl<R: BufRead> Source<R> {
         })
     }
 
+    /// A cycle's R plane below the hole's top would rapid into the part: the safe side is the
+    /// top itself, the feed starting there; an error at the CYCLE record.
+    fn r_at_or_above_top(&mut self, mut c: CycleParams, line: u32) -> CycleParams {
+        if c.rapid_to < 0.0 {
+            self.diag(
+                Code::BadRecord,
+                Severity::Error,
+                line,
+                format!(
+                    "CYCLE: RAPTO {} is below the hole's top: the tool would rapid into the part; written from the top",
+                    c.rapid_to
+                ),
+            );
+            c.rapid_to = 0.0;
+            c.retract_to = c.retract_to.map(|r| r.max(0.0));
+        }
+        c
+    }
+
     fn hole(&mut self, line: u32, p: Vec3, c: CycleParams) {
         // Along the tool axis, in the CL's frame (the points go into the part frame as pushed).
         let u = self.to_cl(self.axis);
@@ -861,12 +884,11 @@ impl<R: BufRead> Source<R> {
                 Severity::Error,
                 line,
                 format!(
-                    "{} cycle without a feed (no FEDRAT and none in the CYCLE record): its holes are written at rapid to depth",
-                    match c.kind {
-                        CycleKind::Tap => "tapping",
-                        CycleKind::Deep => "deep drilling",
-                        CycleKind::Bore => "boring",
-                        CycleKind::Drill | CycleKind::Other => "drilling",
+                    "{} cycle without a feed (no FEDRAT and none in the CYCLE record): its holes are {}",
+                    c.kind.name(),
+                    match c.kind.canned_only() {
+                        true => "not machined",
+                        false => "written at rapid to depth",
                     }
                 ),
             );
@@ -874,7 +896,8 @@ impl<R: BufRead> Source<R> {
         // Rapid to the R plane, feed through the hole's point (the CL GOTO) to depth, rapid out.
         let rapid = self.feed.is_none();
         let retract = c.retract_to.unwrap_or(c.rapid_to);
-        if self.canned_cycles {
+        // A tap, or a bore that stops or orients the spindle, is only ever the control's cycle.
+        if self.canned_cycles || c.kind.canned_only() {
             // Canned output: the cycle waits above the hole at the higher of R and the retract
             // height (G98's initial level), so the approach goes there first.
             let start = retract.max(c.rapid_to);
@@ -885,6 +908,7 @@ impl<R: BufRead> Source<R> {
                 start: start * self.scale,
                 peck: c.peck.map(|x| x * self.scale),
                 dwell: c.dwell,
+                shift: c.shift.map(|x| x * self.scale),
                 feed: self.feed,
             };
             self.push(line, p + u * start, true, true, Some("CYCLE"));
@@ -895,7 +919,7 @@ impl<R: BufRead> Source<R> {
             }
         } else {
             self.push(line, clear, true, true, Some("CYCLE"));
-            self.mark(HolePart::Rest);
+            self.mark(HolePart::Clear);
         }
         self.push(line, p, rapid, false, Some("CYCLE"));
         self.mark(HolePart::Top);
@@ -903,7 +927,14 @@ impl<R: BufRead> Source<R> {
             self.push(line, p - u * c.depth, rapid, true, Some("CYCLE"));
             self.mark(HolePart::Rest);
         }
-        self.push(line, p + u * retract, true, true, Some("CYCLE"));
+        // Expanded, the dwell at the bottom is a dwell (a canned hole's cycle has its own).
+        if let Some(t) = c.dwell.filter(|t| *t > 0.0 && !self.canned_cycles && !c.kind.canned_only()) {
+            let dwell = Dwell::Seconds(t);
+            self.out.push_back(Item::Event(ProgEvent::Dwell { dwell, line }));
+        }
+        // A bore or ream comes out as it went in, at the feed: a rapid would mark the wall.
+        let out_rapid = rapid || !matches!(c.kind, CycleKind::Bore);
+        self.push(line, p + u * retract, out_rapid, true, Some("CYCLE"));
         self.mark(HolePart::Rest);
         self.feed = saved;
     }

@@ -197,6 +197,27 @@ impl<'a> Lengths<'a> {
     }
 }
 
+/// Most tool loads a first pass keeps (`load_order`): beyond them no tool is readied.
+const MAX_LOADS: usize = 100_000;
+
+/// The tools the CL loads, in order (the tool in the spindle loaded again left out, as the
+/// emitter writes no change for it): a first pass over a CL that can be read twice, so that
+/// `preselect` `next` readies each next tool right after a change.
+pub(super) fn load_order<R: std::io::BufRead>(input: R) -> Result<Vec<u32>, crate::cl::Error> {
+    let mut reader = crate::cl::Reader::new(input);
+    let mut order = Vec::new();
+    while let Some(ev) = reader.next_event()? {
+        if let crate::cl::Event::Statement(s) = ev
+            && let crate::cl::Record::LoadTool { number, .. } = s.record
+            && order.last() != Some(&number)
+            && order.len() < MAX_LOADS
+        {
+            order.push(number);
+        }
+    }
+    Ok(order)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -1,11 +1,12 @@
-//! Canned drilling cycles (ISO G81–G83, Siemens MCALL, Heidenhain CYCL DEF 200) where a hole
-//! runs along the machine's Z, with the hole's bottom replayed through FK.
+//! Canned hole cycles (ISO G73–G89, Siemens MCALL CYCLE81–89, Heidenhain CYCL DEF 200–207)
+//! where a hole runs along the machine's Z, with the hole's bottom replayed through FK; the
+//! cycle's values checked against what the control's words take.
 
 use super::{At, Emitter};
 use crate::cl::{CycleKind, FeedUnit};
-use crate::diag::{Code, Diagnostic};
+use crate::diag::{Code, Diagnostic, Severity};
 use crate::kinematics::{self, Joints, Vec3, angle_between, fk};
-use crate::nc::{Canned, CannedKind};
+use crate::nc::{Canned, CannedKind, CycleLines, FeedMode};
 use crate::post::plan::Committed;
 use crate::post::{AxisWords, BlockInfo, Error, Hole, Mode, MotionPt, Sink};
 
@@ -36,12 +37,10 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         if m.linears[2].is_none() {
             return Err("the machine has no Z axis");
         }
-        let kind = match (h.kind, h.peck, h.dwell) {
-            (CycleKind::Deep, Some(q), _) if q > 0.0 => CannedKind::Peck,
-            (CycleKind::Drill | CycleKind::Deep, _, Some(t)) if t > 0.0 => CannedKind::Spot,
-            (CycleKind::Drill | CycleKind::Deep, _, _) => CannedKind::Drill,
-            _ => return Err("only drilling and peck drilling cycles are written canned"),
-        };
+        let kind = self.canned_kind(h)?;
+        if let Some(why) = self.f.cannot(kind) {
+            return Err(why);
+        }
         let feed = match h.feed {
             Some((f, FeedUnit::PerMinute)) => f,
             Some((f, FeedUnit::PerRev)) => f * self.rpm.ok_or("a feed per revolution with no spindle speed")?,
@@ -50,6 +49,19 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         if feed.is_nan() || feed <= 0.0 {
             return Err("the cycle has no feed");
         }
+        // A tap's feed is its pitch times the speed: both must be known, and the speed turning.
+        let rpm = self.rpm.filter(|s| self.spindle_on && *s > 0.0);
+        let pitch = match (kind, rpm) {
+            (CannedKind::Tap { .. }, None) => {
+                return Err("a tap with no spindle speed turning (its feed is the pitch times the speed)");
+            }
+            (CannedKind::Tap { .. }, Some(s)) => feed / s,
+            _ => 0.0,
+        };
+        let feed = match (h.feed, rpm) {
+            (Some((f, FeedUnit::PerRev)), Some(s)) if matches!(kind, CannedKind::Tap { .. }) => f * s,
+            _ => feed,
+        };
         let cand = c
             .cand
             .as_ref()
@@ -79,6 +91,9 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             feed,
             peck: h.peck.unwrap_or(0.0),
             dwell: h.dwell.unwrap_or(0.0),
+            pitch,
+            rpm: rpm.unwrap_or(0.0),
+            shift: h.shift.unwrap_or(0.0),
         };
         let at = At {
             joints,
@@ -88,6 +103,91 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             free,
         };
         Ok((cb, at))
+    }
+
+    /// A tap or a stopping bore that cannot be the control's cycle here: an error naming its CL
+    /// line, the tool taken to the hole's start level above it, and the hole left undrilled
+    /// (moves would snap the tap or mark the wall).
+    pub(super) fn hole_refused(&mut self, c: Committed, h: &Hole, why: &str) -> Result<(), Error> {
+        let line = c.pt.line;
+        let d = Diagnostic::new(
+            Code::CycleRefused,
+            Severity::Error,
+            Some(line),
+            format!("{} not written: {why}; the hole is not machined", h.kind.name()),
+        );
+        self.note(d)?;
+        let pt = MotionPt { hole: None, ..c.pt };
+        self.point_at(Committed { pt, ..c })?;
+        self.in_hole = true;
+        Ok(())
+    }
+
+    /// The control's cycle for a CL cycle: the hand of a tap from the record or else the
+    /// spindle's direction (a left-hand record with the spindle turning CW is refused: the
+    /// control would cut a right-hand thread or stop).
+    fn canned_kind(&self, h: &Hole) -> Result<CannedKind, &'static str> {
+        let pecks = h.peck.is_some_and(|q| q > 0.0);
+        let dwells = h.dwell.is_some_and(|t| t > 0.0);
+        Ok(match h.kind {
+            CycleKind::Deep if pecks => CannedKind::Peck,
+            CycleKind::BreakChip if pecks => CannedKind::ChipBreak,
+            CycleKind::Drill | CycleKind::Deep | CycleKind::BreakChip if dwells => CannedKind::Spot,
+            CycleKind::Drill | CycleKind::Deep | CycleKind::BreakChip => CannedKind::Drill,
+            CycleKind::Tap { left: true, .. } if self.spindle_on && self.spindle_cw => {
+                return Err("a left-hand tap with the spindle turning clockwise");
+            }
+            CycleKind::Tap { rigid, left } => CannedKind::Tap {
+                rigid,
+                left: left || (self.spindle_on && !self.spindle_cw),
+            },
+            CycleKind::Bore => CannedKind::Bore,
+            CycleKind::BoreStop => CannedKind::BoreStop,
+            CycleKind::BoreOrient => CannedKind::FineBore,
+            CycleKind::BoreBack => return Err("kinepost writes no back boring cycle yet"),
+            CycleKind::Other => return Err("the CL's cycle is not one kinepost knows as a canned cycle"),
+        })
+    }
+
+    /// The cycle's values within what the control's words take, else an error naming the CL
+    /// line and the value written at the safe side: a feed at the control's largest (slower),
+    /// a dwell at its longest (shorter), a peck deeper than the hole as the hole's depth (the
+    /// same one plunge), one that rounds to nothing as the word's smallest step (more pecks).
+    fn cycle_values(&self, cb: &mut Canned, line: u32) -> Vec<Diagnostic> {
+        let (d, fmt) = (&self.o.dialect, self.f.fmt);
+        let mut told = Vec::new();
+        let mut err = |msg: String| told.push(Diagnostic::new(Code::WordRange, Severity::Error, Some(line), msg));
+        let max = super::feed::feed_max(d, self.m.units, FeedMode::PerMinute);
+        if cb.feed.is_nan() || cb.feed > max {
+            err(format!(
+                "the cycle's feed {:e} is beyond what {} takes ({max}): written {max}",
+                cb.feed, d.name
+            ));
+            cb.feed = max;
+        }
+        let step = fmt.feed_step(FeedMode::PerMinute);
+        if cb.feed < 0.5 * step {
+            err(format!("the cycle's feed {:e} rounds to F0: written {step}", cb.feed));
+            cb.feed = step;
+        }
+        if cb.dwell.is_nan() || cb.dwell > d.ranges.dwell_s {
+            let max = d.ranges.dwell_s;
+            err(format!(
+                "the cycle's dwell of {:e} s is beyond what {} takes ({max} s): written {max} s",
+                cb.dwell, d.name
+            ));
+            cb.dwell = max;
+        }
+        if matches!(cb.kind, CannedKind::Peck | CannedKind::ChipBreak) {
+            let (depth, lstep) = (cb.z_top - cb.z_bottom, 2.0 * fmt.half_linear());
+            if cb.peck.is_nan() || cb.peck < 0.5 * lstep {
+                err(format!("the cycle's peck of {:e} rounds to Q0: written {lstep}", cb.peck));
+                cb.peck = lstep;
+            } else if cb.peck > depth {
+                cb.peck = depth.max(lstep);
+            }
+        }
+        told
     }
 
     /// Whether one unit of machine Z moves the tip one unit back along the tool axis here: then
@@ -106,10 +206,11 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         let pt = c.pt.clone();
         let before = self.at;
         self.cycle_in_plane(&mut cb, &start);
+        let told = self.cycle_values(&mut cb, pt.line);
         let modal = match (self.cycle_on, self.at) {
             (Some(on), Some(at)) => {
                 let same_rot = (0..self.m.rotaries.len()).all(|i| (start.joints.rotary[i] - at.joints.rotary[i]).abs() < 1e-9);
-                same_rot && on.same_cycle(&cb, &self.f.fmt)
+                same_rot && on.same_cycle(&cb, &self.f.fmt) && self.f.modal_cycle(cb.kind)
             }
             _ => false,
         };
@@ -138,7 +239,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         };
         self.at = Some(at);
         self.positioned = false;
-        self.canned_block(&pt, &h, cb, at, before.filter(|_| modal))
+        self.canned_block(&pt, &h, cb, at, before.filter(|_| modal), told)
     }
 
     /// A cycle's words moved into the tilted plane in force, when the tool stands on its
@@ -153,13 +254,18 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
     }
 
     /// The cycle's block; `from`: the hole before, where this one goes on with its cycle.
-    pub(super) fn canned_block(&mut self, pt: &MotionPt, h: &Hole, cb: Canned, at: At, from: Option<At>) -> Result<(), Error> {
+    pub(super) fn canned_block(
+        &mut self,
+        pt: &MotionPt,
+        h: &Hole,
+        cb: Canned,
+        at: At,
+        from: Option<At>,
+        told: Vec<Diagnostic>,
+    ) -> Result<(), Error> {
         let (m, modal) = (self.m, from.is_some());
-        let lines = self.f.canned(&cb, modal);
-        let Some((call, def)) = lines.split_last() else {
-            return Ok(());
-        };
-        for l in def {
+        let CycleLines { lines, call } = self.f.canned(&cb, modal);
+        for l in &lines[..call] {
             self.out(l)?;
         }
         // Self-verification: the bottom of the hole, replayed from the words as written.
@@ -190,9 +296,9 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             None => (replay.tip - want).norm(),
         };
         let ax_dev = angle_between(&replay.axis, &u).to_degrees();
-        let mut diags: Vec<Diagnostic> = self
-            .replayed(pt.line, tip_dev, ax_dev, "the cycle's bottom misses the hole")
+        let mut diags: Vec<Diagnostic> = told
             .into_iter()
+            .chain(self.replayed(pt.line, tip_dev, ax_dev, "the cycle's bottom misses the hole"))
             .chain(self.spindle_standing(pt.line))
             .collect();
         self.hole_collisions(from.as_ref(), &at, &cb, pt.line, &mut diags);
@@ -200,10 +306,14 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             self.count(d);
             self.flag(d)?;
         }
-        // Rapid down to R, feed to the bottom, rapid back to the start level.
-        let time = self.z_rapid_time(cb.z_start - cb.z_r)
-            + (cb.z_r - cb.z_bottom) / cb.feed
-            + self.z_rapid_time(cb.z_start - cb.z_bottom);
+        // Rapid down to R, feed to the bottom, the dwell, back to the start level: at rapid, or
+        // at the feed to R for a tap or a bore that comes out as it went in.
+        let (down, out) = (cb.z_r - cb.z_bottom, cb.z_start - cb.z_bottom);
+        let back = match cb.kind.feeds_out() {
+            true => down / cb.feed + self.z_rapid_time(cb.z_start - cb.z_r),
+            false => self.z_rapid_time(out),
+        };
+        let time = self.z_rapid_time(cb.z_start - cb.z_r) + down / cb.feed + back + cb.dwell / 60.0;
         self.sum.cycle_time_s += time * 60.0;
         if let Some(st) = self.stats[2].as_mut() {
             st.min = st.min.min(axes[2].unwrap_or(cb.z_bottom));
@@ -221,8 +331,11 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             axis: u.into(),
             time_s: time * 60.0,
         };
-        self.line(call, Some(&info))?;
-        self.cycle_on = Some(cb);
+        self.line(&lines[call], Some(&info))?;
+        for l in &lines[call + 1..] {
+            self.out(l)?;
+        }
+        self.cycle_on = self.f.modal_cycle(cb.kind).then_some(cb);
         self.in_hole = true;
         Ok(())
     }

@@ -100,6 +100,10 @@ pub(super) struct Emitter<'a, S: Sink + ?Sized> {
     pub(super) cl_cutter: Option<(f64, f64)>,
     /// The tool `SELCTL` readied, and the CL's operation in progress: what templates see.
     pub(super) next_tool: Option<u32>,
+    /// The tools the CL loads, in order (`preselect` `next` on a CL read twice), and how many
+    /// tool changes have been written.
+    pub(in crate::post) load_order: Option<Vec<u32>>,
+    pub(super) changes: usize,
     pub(super) operation: Option<String>,
     /// The next compensation on is a tool's first move (the `first_move` template).
     pub(super) first_move_due: bool,
@@ -135,6 +139,8 @@ pub(super) struct Emitter<'a, S: Sink + ?Sized> {
     pub(super) coolant_deferred: bool,
     /// Which clamped rotaries are locked now (a clamped axis is taken as locked at the start).
     pub(super) locked: [bool; 3],
+    /// The operation ahead turns a rotary while cutting: no clamp is locked until it ends.
+    pub(super) cut_turns: bool,
     /// Set for the next block: it is an arc.
     pub(super) arc: Option<ArcBlock>,
     /// The active circular-interpolation plane word (G17/G18/G19).
@@ -214,6 +220,8 @@ impl<'a, S: Sink + ?Sized> Emitter<'a, S> {
             last_line: 0,
             standing: formats.half_linear(),
             next_tool: None,
+            load_order: None,
+            changes: 0,
             first_move_due: true,
             operation: None,
             tool: None,
@@ -246,6 +254,7 @@ impl<'a, S: Sink + ?Sized> Emitter<'a, S> {
             stopped_coolant: None,
             coolant_deferred: false,
             arc: None,
+            cut_turns: false,
             locked: [true; 3],
             plane: "G17",
             offsets: o

@@ -93,23 +93,24 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
     }
 
     pub(super) fn point_at(&mut self, c: Committed) -> Result<(), Error> {
-        if self.o.canned_cycles {
-            match c.pt.hole.as_deref().copied() {
-                Some(HolePart::Start(h)) => {
-                    self.in_hole = false;
-                    match self.canned_check(&c, &h) {
-                        Ok((cb, start)) => return self.canned_hole(c, h, cb, start),
-                        Err(why) => self.expanded(&c.pt, why)?,
-                    }
+        match c.pt.hole.as_deref().copied() {
+            Some(HolePart::Start(h)) if self.o.canned_cycles || h.kind.canned_only() => {
+                self.in_hole = false;
+                match self.canned_check(&c, &h) {
+                    Ok((cb, start)) => return self.canned_hole(c, h, cb, start),
+                    Err(why) if h.kind.canned_only() => return self.hole_refused(c, &h, why),
+                    Err(why) => self.expanded(&c.pt, why)?,
                 }
-                // The rest of a hole written as a cycle.
-                Some(HolePart::Top) if self.in_hole => {
-                    self.sum.cl_points += 1;
-                    return Ok(());
-                }
-                Some(_) if self.in_hole => return Ok(()),
-                _ => self.in_hole = false,
             }
+            // A hole written as moves begins.
+            Some(HolePart::Clear) => self.in_hole = false,
+            // The rest of a hole written as a cycle (or refused).
+            Some(HolePart::Top) if self.in_hole => {
+                self.sum.cl_points += 1;
+                return Ok(());
+            }
+            Some(_) if self.in_hole => return Ok(()),
+            _ => self.in_hole = false,
         }
         self.sum.cl_points += !c.pt.inserted as u64;
         let pt = c.pt;

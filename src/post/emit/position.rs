@@ -298,8 +298,12 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         })
     }
 
-    /// Lock every clamped rotary that is unlocked (after positioning, at the end).
+    /// Lock every clamped rotary that is unlocked (after positioning, at the end), unless the
+    /// operation ahead turns a rotary while cutting: then it stays unlocked to its end.
     pub(super) fn lock_all(&mut self) -> std::io::Result<()> {
+        if self.cut_turns {
+            return Ok(());
+        }
         for i in 0..3 {
             if let Some((lock, _)) = &self.o.clamps[i]
                 && !self.locked[i]
@@ -313,6 +317,26 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                 );
                 self.out(&l)?;
                 self.locked[i] = true;
+            }
+        }
+        Ok(())
+    }
+
+    /// Unlock every locked clamp: before an operation that turns a rotary while cutting.
+    pub(in crate::post) fn unlock_all(&mut self) -> std::io::Result<()> {
+        for i in 0..self.m.rotaries.len() {
+            if let Some((_, unlock)) = &self.o.clamps[i]
+                && self.locked[i]
+                && !self.clamp_unknown[i]
+            {
+                let (open, close) = self.o.dialect.comment.clone();
+                let l = format!(
+                    "{} {open}{} UNLOCK{close}",
+                    self.f.words(&unlock.clone()),
+                    self.m.rotaries[i].name
+                );
+                self.out(&l)?;
+                self.locked[i] = false;
             }
         }
         Ok(())

@@ -7,7 +7,7 @@ use crate::diag::{Code, Diagnostic, Severity};
 use crate::kinematics::Vec3;
 use crate::post::sink::ToolUse;
 use crate::post::tools::LengthFrom;
-use crate::post::{Error, Mode, ProgEvent, Sink};
+use crate::post::{Error, Mode, Preselect, ProgEvent, Sink};
 
 /// Lines of the summary's tool list: a program of thousands of tool changes repeats its tools.
 const MAX_TOOL_LINES: usize = 1000;
@@ -103,6 +103,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         self.cutcom_end("the program's end")?;
         self.leave_plane(false)?;
         self.retract_up()?;
+        self.cut_turns = false;
         self.lock_all()?;
         // TCP: X Y Z are the tip, and the retract above went the clearance along the tool axis;
         // machine Z home takes the spindle clear of the part whatever comes next.
@@ -172,7 +173,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             ProgEvent::Stop { optional, line } => self.program_stop(optional, line)?,
             ProgEvent::Function { letter, code, line } => self.function(letter, &code, line)?,
             ProgEvent::BlockSkip { on, line } => self.block_skip(on, line)?,
-            ProgEvent::Preselect { tool, line } => self.preselect(tool, line)?,
+            ProgEvent::Preselect { tool, line } => self.selctl(tool, line)?,
             ProgEvent::Setup { shift, turned, line, comment } => self.setup_change(shift, turned, line, &comment)?,
             ProgEvent::CutterComp { comp, line, turns } => self.cutter_comp(comp, line, turns),
             ProgEvent::PathMeaning { centre, said, line } => self.path_meaning(centre, said, line),
@@ -274,6 +275,8 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         self.tool_changed = true;
         self.first_move_due = true;
         self.tool_line_due = true;
+        self.changes += 1;
+        self.preselect_next(line)?;
         if std::mem::take(&mut self.spindle_on) {
             self.spindle_restore = Some(line);
         }
@@ -370,7 +373,44 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         Ok(())
     }
 
-    /// SELCTL: the next tool readied while this one cuts, within the tool word's range.
+    /// `preselect` `next`: right after a tool change, the next tool the CL loads readied (the
+    /// first pass's order); on a CL read once (a stream) the order is not known: said once at
+    /// the second change, and `SELCTL` is written as the CL says.
+    fn preselect_next(&mut self, line: u32) -> Result<(), Error> {
+        if self.o.preselect != Preselect::Next || self.o.dialect.tool_preselect.is_empty() {
+            return Ok(());
+        }
+        let Some(order) = &self.load_order else {
+            // Said at the second change: the tool it loads was not readied after the first.
+            if self.changes < 2 {
+                return Ok(());
+            }
+            let why = "the CL is read once here (a stream), so the next tool is not known: readied where the CL says SELCTL";
+            return self
+                .say_once(why, Code::IgnoredRecord, Some(line), "preselect next")
+                .map_err(Error::from);
+        };
+        match order.get(self.changes).copied() {
+            Some(next) if Some(next) != self.next_tool => self.preselect(next, line),
+            _ => Ok(()),
+        }
+    }
+
+    /// SELCTL: as the CL says (`preselect` `cl`, or `next` on a stream); with `next` the tool
+    /// the first pass readied already is not written twice; with `off` none.
+    fn selctl(&mut self, tool: u32, line: u32) -> Result<(), Error> {
+        match self.o.preselect {
+            Preselect::Off => {
+                let what = format!("SELCTL/{tool}: not written (preselect off)");
+                self.note(Diagnostic::new(Code::IgnoredRecord, Severity::Info, Some(line), what))?;
+                Ok(())
+            }
+            Preselect::Next if self.load_order.is_some() && self.next_tool == Some(tool) => Ok(()),
+            _ => self.preselect(tool, line),
+        }
+    }
+
+    /// The next tool readied while this one cuts, within the tool word's range.
     fn preselect(&mut self, tool: u32, line: u32) -> Result<(), Error> {
         self.next_tool = Some(tool);
         let max = self.o.dialect.ranges.tool;
