@@ -1121,3 +1121,33 @@ fn walk_compare(p: &Profile, n: usize, rnd: &mut impl FnMut() -> f64) -> (usize,
     }
     (hits, taken_whole)
 }
+
+/// Issue 51, 5 and 2: the time bound was looked at every 256 output records, so a collision check
+/// that wrote nothing for minutes ran on (`--max-post-seconds 5` stopped at 19.7 s); a stock of
+/// ±1e8 on a six-point path takes minutes of samples. Now the bound is looked at between the
+/// check's samples: the post stops within a second of it, with the `over_budget` reason.
+#[test]
+fn the_time_bound_holds_inside_a_long_collision_check() {
+    let lib = kinepost::machines::Library::load_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/machines").as_ref()).unwrap();
+    let p = lib.get("spinner-u5-620").unwrap().clone();
+    let cl = String::from_utf8(common::generated("spinner-u5-620", 6, 1)).unwrap();
+    let settings = Settings {
+        stock: Some("-1e8,-1e8,-1e8,1e8,1e8,1e8".into()),
+        ..Default::default()
+    };
+    let mut o = settings.profile_options(&p, None).unwrap();
+    o.budget = post::Budget::new(0, 1.0).unwrap();
+    let (tx, rx) = std::sync::mpsc::channel();
+    let t0 = std::time::Instant::now();
+    std::thread::spawn(move || {
+        let r = run_with(&p, &cl, &o).1;
+        let _ = tx.send(r.map(|_| ()).map_err(|e| e.to_string()));
+    });
+    let r = rx
+        .recv_timeout(std::time::Duration::from_secs(20))
+        .expect("the post stops near its 1 s bound");
+    let took = t0.elapsed();
+    let e = r.expect_err("over its time");
+    assert!(e.contains("1 s"), "{e}");
+    assert!(took < std::time::Duration::from_secs(2), "stopped after {took:?}");
+}

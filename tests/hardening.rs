@@ -623,3 +623,27 @@ async fn readyz_is_503_while_no_post_could_be_served() {
     }
     assert_eq!(ready, 200, "ready again once the stream has ended");
 }
+
+/// Issue 51, 5: a post whose client left went on for about 65 s, the engine noticing only at its
+/// next write, which a long collision check held back. Now it looks between the check's
+/// samples: its stream slot (held by the engine's thread) is free within a second or two.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_post_whose_client_left_stops_within_a_second() {
+    let base = common::server(common::cfg()).await;
+    let cl = common::generated("spinner-u5-620", 6, 1);
+    let url = format!("{base}/v1/post?machine=spinner-u5-620&stock=-1e8,-1e8,-1e8,1e8,1e8,1e8");
+    let c = reqwest::Client::new();
+    let gone = c.post(&url).body(cl).timeout(Duration::from_secs(1)).send().await;
+    assert!(gone.is_err(), "the post answered within a second: the test needs a slower one");
+    let t0 = Instant::now();
+    let mut metrics = String::new();
+    while t0.elapsed() < Duration::from_secs(10) {
+        metrics = c.get(format!("{base}/metrics")).text_ok().await;
+        if metrics.contains("kinepost_streams_in_flight 0") {
+            break;
+        }
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+    assert!(metrics.contains("kinepost_streams_in_flight 0"), "the engine runs on");
+    assert!(t0.elapsed() < Duration::from_secs(2), "the engine stopped {:?} after its client left", t0.elapsed());
+}
