@@ -999,7 +999,7 @@ fn the_samples_follow_a_part_the_work_offset_puts_far_off_the_axes() {
     let p = shipped_profile("spinner-u5-620");
     let m = &p.machine;
     let (min, max) = (Vec3::new(-40.0, -40.0, 0.0), Vec3::new(40.0, 40.0, 30.0));
-    let world = World::new(m, &Geometry::default(), &[Solid::Box { min, max }], &[], 0.0, 1e-3);
+    let mut world = World::new(m, &Geometry::default(), &[Solid::Box { min, max }], &[], 0.0, 1e-3);
     let half = 15.0;
     let len = m.default_tool_length;
     let deg = std::f64::consts::PI / 180.0;
@@ -1036,7 +1036,7 @@ fn the_samples_follow_a_part_the_work_offset_puts_far_off_the_axes() {
     // A sheet 0.01 mm thick turned half a turn would need more samples than one block takes:
     // the samples stop at the most, and say how far apart they are.
     let sheet = [Solid::Box { min, max: Vec3::new(40.0, 40.0, 0.01) }];
-    let world = World::new(m, &Geometry::default(), &sheet, &[], 2.0, 1e-3);
+    let mut world = World::new(m, &Geometry::default(), &sheet, &[], 2.0, 1e-3);
     let (from, to) = ([0.0; 3], [0.0, std::f64::consts::PI, 0.0]);
     let (n, coarse) = world.samples(m, (&lin, &from), (&lin, &to), len, &Vec3::new(500.0, 0.0, 0.0), 0.0);
     assert_eq!(n, kinepost::collide::MAX_SAMPLES);
@@ -1131,11 +1131,12 @@ fn the_time_bound_holds_inside_a_long_collision_check() {
     let lib = kinepost::machines::Library::load_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/machines").as_ref()).unwrap();
     let p = lib.get("spinner-u5-620").unwrap().clone();
     let cl = String::from_utf8(common::generated("spinner-u5-620", 6, 1)).unwrap();
-    let settings = Settings {
-        stock: Some("-1e8,-1e8,-1e8,1e8,1e8,1e8".into()),
-        ..Default::default()
-    };
-    let mut o = settings.profile_options(&p, None).unwrap();
+    // Options refuse such a stock now (below); the engine's bound holds whatever it is given.
+    let mut o = Settings::default().profile_options(&p, None).unwrap();
+    o.stock = vec![kinepost::collide::Solid::Box {
+        min: kinepost::kinematics::Vec3::repeat(-1e8),
+        max: kinepost::kinematics::Vec3::repeat(1e8),
+    }];
     o.budget = post::Budget::new(0, 1.0).unwrap();
     let (tx, rx) = std::sync::mpsc::channel();
     let t0 = std::time::Instant::now();
@@ -1150,4 +1151,36 @@ fn the_time_bound_holds_inside_a_long_collision_check() {
     let e = r.expect_err("over its time");
     assert!(e.contains("1 s"), "{e}");
     assert!(took < std::time::Duration::from_secs(2), "stopped after {took:?}");
+}
+
+/// Issue 51, 2: job options multiplied the check's cost with nothing said: a ±1e8 stock (34.7 s
+/// for a 298-byte CL, 0.01 s without), a clearance of 1e-9 (39×), a 1e-6 mm fixture (40×). Now
+/// what no machine tool holds is refused naming the bound, and what is left costs at most the
+/// post's allowance of samples (`MAX_SAMPLES` once, 256 a move on average), the moves past it
+/// told `collision_coarse`.
+#[test]
+fn options_that_multiply_the_checks_cost_are_refused_or_bounded() {
+    let lib = kinepost::machines::Library::load_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/machines").as_ref()).unwrap();
+    let p = lib.get("spinner-u5-620").unwrap().clone();
+    for (s, want) in [
+        (Settings { stock: Some("-1e8,-1e8,-1e8,1e8,1e8,1e8".into()), ..Default::default() }, "within ±100000"),
+        (Settings { fixtures: Some("0,0,0,1e-6,1,1".into()), ..Default::default() }, "at least 0.001"),
+        (Settings { collision_clearance: Some(1e-9), ..Default::default() }, "0 (none) or at least 0.001"),
+    ] {
+        let e = s.profile_options(&p, None).err().expect("refused");
+        assert!(e.contains(want), "{e}");
+    }
+    // The smallest fixture taken: every move of the path would want thousands of samples.
+    let cl = String::from_utf8(common::generated("spinner-u5-620", 6, 1)).unwrap();
+    let o = Settings { fixtures: Some("0,0,0,0.001,0.001,0.001".into()), ..Default::default() }
+        .profile_options(&p, None)
+        .unwrap();
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        let (c, r) = run_with(&p, &cl, &o);
+        let _ = tx.send((hits(&c, Code::CollisionCoarse).len(), r.is_ok()));
+    });
+    let (coarse, ok) = rx.recv_timeout(std::time::Duration::from_secs(15)).expect("the check's cost is bounded");
+    assert!(ok);
+    assert!(coarse > 100, "the moves past the allowance are told coarse: {coarse}");
 }

@@ -163,7 +163,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                 Some(line),
                 format!(
                     "the move to this block was checked for collisions at {} samples, up to {apart:.3} {unit} of body motion apart where the check keeps them within {step:.3} {unit} (the clearance, or half the smallest body where less): a thin body or a shallow overlap could pass between two unseen",
-                    crate::collide::MAX_SAMPLES
+                    found.samples
                 ),
             ));
         }
