@@ -103,6 +103,9 @@ pub struct Mesh {
     shape: SharedShape,
     min: Vec3,
     max: Vec3,
+    /// The file the page draws, made once and shared by every download (each made its own
+    /// 10 MB copy: 150 unread ones took a gigabyte).
+    drawn: std::sync::OnceLock<Arc<[u8]>>,
 }
 
 impl Mesh {
@@ -124,7 +127,13 @@ impl Mesh {
             shape: SharedShape::new(tri),
             min,
             max,
+            drawn: std::sync::OnceLock::new(),
         })
+    }
+
+    /// What `make` writes of it, made at the first call and shared after.
+    pub fn drawn(&self, make: impl FnOnce(&Mesh) -> Vec<u8>) -> Arc<[u8]> {
+        self.drawn.get_or_init(|| make(self).into()).clone()
     }
 
     /// Whether it is closed and wound outward: then it is a solid, and a body wholly inside it

@@ -1184,3 +1184,25 @@ fn options_that_multiply_the_checks_cost_are_refused_or_bounded() {
     assert!(ok);
     assert!(coarse > 100, "the moves past the allowance are told coarse: {coarse}");
 }
+
+/// Issue 51, 7: the 1 000 000-triangle bound counted files, not bodies: 64 bodies naming one
+/// 200 000-triangle file passed (12.8 M triangles for the check), and the refusal for six
+/// different files said "more than 0 triangles". Counted per body now, the refusal naming them.
+#[test]
+fn the_triangle_bound_counts_bodies_and_names_the_count() {
+    let many: Vec<_> = (0..200_000).map(|i| [[i as f64 * 1e-3, 0.0, 0.0], [i as f64 * 1e-3, 1.0, 0.0], [i as f64 * 1e-3, 0.0, 1.0]]).collect();
+    let dir = mesh_dir("count", &[("many.stl", common::stl::binary(&many)), ("table.stl", common::stl::binary(&table_stl()))]);
+    let bodies = |files: &[&str]| -> String {
+        let mut p = shipped("spinner-u5-620");
+        for (i, f) in files.iter().enumerate() {
+            p.push_str(&format!("\n[[body]]\nname = \"part {i}\"\non = \"C\"\nmesh = {f:?}\n"));
+        }
+        p
+    };
+    let parse = |text: String| kinepost::machines::parse_profile_in(&text, "spinner-mesh", None, Some(&dir)).map(|_| ());
+    parse(bodies(&["many.stl"; 5])).expect("five bodies: 1 000 000 triangles");
+    let e = parse(bodies(&["many.stl"; 6])).unwrap_err().to_string();
+    assert!(e.contains("1200000 triangles (1000000 in the bodies before this one, 200000 in it)"), "{e}");
+    let e = parse(bodies(&["many.stl", "many.stl", "many.stl", "many.stl", "many.stl", "table.stl"])).unwrap_err().to_string();
+    assert!(e.contains("1000012 triangles") && !e.contains("more than 0"), "{e}");
+}

@@ -678,3 +678,66 @@ async fn a_post_whose_client_left_stops_within_a_second() {
     assert!(metrics.contains("kinepost_streams_in_flight 0"), "the engine runs on");
     assert!(took < Duration::from_secs(2), "the engine stopped {took:?} after its client left");
 }
+
+/// The resident memory of process `pid`, in MB.
+fn rss_mb(pid: u32) -> f64 {
+    let s = std::fs::read_to_string(format!("/proc/{pid}/status")).unwrap();
+    let kb: f64 = s.lines().find(|l| l.starts_with("VmRSS:")).unwrap().split_whitespace().nth(1).unwrap().parse().unwrap();
+    kb / 1024.0
+}
+
+/// Issue 51, 3: each download of a mesh made its own binary STL (10 MB for 200 000 triangles):
+/// 150 unread GETs took the server from 544 to 1 612 MB. Now every download shares one copy.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn unread_mesh_downloads_share_one_copy() {
+    let dir = std::env::temp_dir().join(format!("kinepost-meshes-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(dir.join("machines")).unwrap();
+    let spinner = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/machines/spinner-u5-620.toml")).unwrap();
+    let table = "cylinder = { from = [0.0, 0.0, -60.0], to = [0.0, 0.0, 0.0], radius = 250.0 }";
+    std::fs::write(
+        dir.join("machines/spinner-mesh.toml"),
+        spinner.replacen(table, "mesh = \"table.stl\"", 1).replace("id = \"spinner-u5-620\"", "id = \"spinner-mesh\""),
+    )
+    .unwrap();
+    let tris: Vec<[[f64; 3]; 3]> = (0..200_000)
+        .map(|i| {
+            let (x, y) = ((i % 400) as f64 - 200.0, (i / 400) as f64 * 0.8 - 200.0);
+            [[x, y, -60.0], [x + 1.0, y, -30.0], [x, y + 1.0, 0.0]]
+        })
+        .collect();
+    std::fs::write(dir.join("machines/table.stl"), common::stl::binary(&tris)).unwrap();
+    let machines = dir.join("machines");
+    let (mut child, base) = common::spawn_binary(
+        &dir.join("data"),
+        &["--machines", machines.to_str().unwrap(), "--max-downloads-per-client", "0"],
+    );
+    let path = "/v1/machines/spinner-mesh/meshes/table.stl";
+    // One read whole: the copy made, and the size of one.
+    let c = reqwest::Client::new();
+    let whole = c.get(format!("{base}{path}")).send().await.unwrap().bytes().await.unwrap();
+    assert_eq!(whole.len(), 84 + 50 * 200_000);
+    let before = rss_mb(child.id());
+    let mut unread = Vec::new();
+    for _ in 0..150 {
+        unread.push(stalled_get(&base, path).await);
+    }
+    // Until every one has its response (counted as its body starts), or the memory shows.
+    let t0 = Instant::now();
+    let counted = "kinepost_http_requests_total{route=\"/v1/machines/{id}/meshes/{file}\",status=\"200\"} 151";
+    while t0.elapsed() < Duration::from_secs(120) && rss_mb(child.id()) - before < 150.0 {
+        if c.get(format!("{base}/metrics")).text_ok().await.contains(counted) {
+            break;
+        }
+        tokio::time::sleep(Duration::from_millis(250)).await;
+    }
+    tokio::time::sleep(Duration::from_millis(500)).await;
+    let after = rss_mb(child.id());
+    let _ = child.kill();
+    let _ = child.wait();
+    let _ = std::fs::remove_dir_all(&dir);
+    drop(unread);
+    // A copy each would be 1.5 GB; hyper's buffers of each response, which share the bytes,
+    // are all that grows.
+    assert!(after - before < 150.0, "150 unread mesh downloads: {before:.0} MB -> {after:.0} MB");
+}
