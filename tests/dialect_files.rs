@@ -356,3 +356,21 @@ fn the_trial_render_holds_a_template_to_the_output_bounds() {
     let e = refused(&format!("{SHOP}operation_start = \"{{% for i in range(70) %}}(OP {{{{ operation }}}}){{% endfor %}}\"\n"));
     assert!(e.contains("templates.operation_start") && e.contains("8192 bytes"), "{e}");
 }
+
+/// Issue 51, 6 and 9: a dialect's keys had no bounds: `[sequence] width = 300000000` was taken
+/// (a 2 KB CL then streamed 13.5 GB), and its words were not held as a profile's: clamps
+/// `"M10 M30"` and a multi-line `safe_start` or `spindle_cw` were stored and then written as
+/// `M30` and `G0 Z-500` blocks. Each is refused now, naming the key.
+#[test]
+fn a_dialects_keys_are_bounded_and_its_words_are_words() {
+    let e = refused(&format!("{SHOP}\n[sequence]\nstart = 1\nstep = 1\nwidth = 300000000\n"));
+    assert!(e.contains("sequence.width") && e.contains("at most 9"), "{e}");
+    let e = refused(&format!("{SHOP}\n[clamps]\nC = [\"M10 M30\", \"M11\"]\n"));
+    assert!(e.contains("clamps.C") && e.contains("one NC word"), "{e}");
+    let e = refused(&SHOP.replace("title =", "safe_start = \"\"\"G90\nG0 Z-500\"\"\"\ntitle ="));
+    assert!(e.contains("safe_start") && e.contains("one line"), "{e}");
+    let e = refused(&SHOP.replace("title =", "spindle_cw = \"M3\\rM30\"\ntitle ="));
+    assert!(e.contains("spindle_cw") && e.contains("one line"), "{e}");
+    // What a shop writes is still taken.
+    kinepost::machines::dialects::parse(&format!("{SHOP}\n[clamps]\nC = [\"M10\", \"M11\"]\n[sequence]\nstart = 1\nstep = 1\nwidth = 5\n"), "ok.toml", None).unwrap();
+}
