@@ -216,7 +216,7 @@ impl Solid {
                 }
             }
             Solid::Cylinder { from, to, radius } => {
-                if !(finite(from) && finite(to)) || (to - from).norm() <= 0.0 || !(*radius > 0.0 && radius.is_finite()) {
+                if !(finite(from) && finite(to)) || (to - from).norm() <= 0.0 || !(*radius > 0.0 && *radius <= crate::kinematics::MAX_COORD) {
                     return Err("a cylinder needs two distinct finite end points and a positive radius".into());
                 }
             }

@@ -1206,3 +1206,19 @@ fn the_triangle_bound_counts_bodies_and_names_the_count() {
     let e = parse(bodies(&["many.stl", "many.stl", "many.stl", "many.stl", "many.stl", "table.stl"])).unwrap_err().to_string();
     assert!(e.contains("1000012 triangles") && !e.contains("more than 0"), "{e}");
 }
+
+/// Issue 51, 10: `tolerance=1e-300` quoted a 391-character number in its error (errors quote at
+/// most 80); an `MSYS` origin of 1e300 and a body radius of 1e300 were taken.
+#[test]
+fn huge_and_tiny_numbers_are_refused_and_quoted_short() {
+    let p = shipped_profile("spinner-u5-620");
+    let e = Settings { tolerance: Some(1e-300), ..Default::default() }.profile_options(&p, None).err().unwrap();
+    assert!(e.len() <= 160 && e.contains("1e-300"), "{} characters: {e}", e.len());
+    let (c, s) = run(&p, "UNITS/MM\nMSYS/1e300,0,0,1,0,0,0,1,0\nGOTO/0,0,100,0,0,1\nFINI\n", Settings::default());
+    s.unwrap();
+    assert!(c.diags.iter().any(|d| d.message.contains("MSYS: its origin must be within")), "{:?}", c.diags);
+    let big = shipped_file("spinner-u5-620").replacen("radius = 250.0", "radius = 1e300", 1);
+    assert!(big.contains("radius = 1e300"));
+    let e = parse_profile(&big, "big", None).err().expect("refused").to_string();
+    assert!(e.contains("radius"), "{e}");
+}

@@ -429,7 +429,8 @@ impl Settings {
             let least = 2.0 / 10f64.powi(crate::nc::Formats::for_dialect(&o.dialect, m.units).linear as i32);
             if t < least * (1.0 - 1e-9) {
                 return Err(format!(
-                    "tolerance {t} {unit} is finer than the X Y Z words can hold; the smallest that works is {least} {unit}"
+                    "tolerance {} {unit} is finer than the X Y Z words can hold; the smallest that works is {least} {unit}",
+                    short(t)
                 ));
             }
             o.tolerance = t;
@@ -541,6 +542,13 @@ impl Settings {
         }
         Ok(())
     }
+}
+
+/// A number as an error quotes it: as written where that is short, else in exponent form (1e-300
+/// written out is 301 digits; an error quotes at most 80 characters).
+fn short(v: f64) -> String {
+    let s = v.to_string();
+    if s.len() <= 24 { s } else { format!("{v:e}") }
 }
 
 /// The least clearance, and the least side of a stock or fixture box (samples are kept within
