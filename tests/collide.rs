@@ -1167,7 +1167,7 @@ fn options_that_multiply_the_checks_cost_are_refused_or_bounded() {
         (Settings { fixtures: Some("0,0,0,1e-6,1,1".into()), ..Default::default() }, "at least 0.001"),
         (Settings { collision_clearance: Some(1e-9), ..Default::default() }, "0 (none) or at least 0.001"),
     ] {
-        let e = s.profile_options(&p, None).err().expect("refused");
+        let e = s.profile_options(&p, None).map(|_| ()).expect_err("refused");
         assert!(e.contains(want), "{e}");
     }
     // The smallest fixture taken: every move of the path would want thousands of samples.
@@ -1219,6 +1219,6 @@ fn huge_and_tiny_numbers_are_refused_and_quoted_short() {
     assert!(c.diags.iter().any(|d| d.message.contains("MSYS: its origin must be within")), "{:?}", c.diags);
     let big = shipped_file("spinner-u5-620").replacen("radius = 250.0", "radius = 1e300", 1);
     assert!(big.contains("radius = 1e300"));
-    let e = parse_profile(&big, "big", None).err().expect("refused").to_string();
+    let e = parse_profile(&big, "big", None).map(|_| ()).expect_err("refused").to_string();
     assert!(e.contains("radius"), "{e}");
 }

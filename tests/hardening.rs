@@ -737,6 +737,7 @@ async fn unread_mesh_downloads_share_one_copy() {
     let _ = child.wait();
     let _ = std::fs::remove_dir_all(&dir);
     drop(unread);
+    eprintln!("150 unread mesh downloads: {before:.0} MB -> {after:.0} MB");
     // A copy each would be 1.5 GB; hyper's buffers of each response, which share the bytes,
     // are all that grows.
     assert!(after - before < 150.0, "150 unread mesh downloads: {before:.0} MB -> {after:.0} MB");
