@@ -21,6 +21,12 @@ pub const MAX_BODIES: usize = 64;
 /// The most samples of the motion between two blocks: a bound on one block's cost. A move that
 /// needs more is told (`collision_coarse`).
 pub const MAX_SAMPLES: usize = 16384;
+/// What one post's check may spend: [`MAX_SAMPLES`] once, then 256 a move on average; past it a
+/// move gets what is left, at least 64, and is told coarse. A stock of ±1e8 (its far corners
+/// swinging metres a degree), a 1e-6 mm fixture or a 1e-9 clearance asked the most of every
+/// move and multiplied a post's time by 40 to thousands; now its cost is bounded by its moves.
+pub const SAMPLES_PER_MOVE: u64 = 256;
+const COARSE_SAMPLES: u64 = 64;
 
 /// What a body moves with.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -97,6 +103,9 @@ pub struct Mesh {
     shape: SharedShape,
     min: Vec3,
     max: Vec3,
+    /// The file the page draws, made once and shared by every download (each made its own
+    /// 10 MB copy: 150 unread ones took a gigabyte).
+    drawn: std::sync::OnceLock<Arc<[u8]>>,
 }
 
 impl Mesh {
@@ -118,7 +127,13 @@ impl Mesh {
             shape: SharedShape::new(tri),
             min,
             max,
+            drawn: std::sync::OnceLock::new(),
         })
+    }
+
+    /// What `make` writes of it, made at the first call and shared after.
+    pub fn drawn(&self, make: impl FnOnce(&Mesh) -> Vec<u8>) -> Arc<[u8]> {
+        self.drawn.get_or_init(|| make(self).into()).clone()
     }
 
     /// Whether it is closed and wound outward: then it is a solid, and a body wholly inside it
@@ -201,7 +216,7 @@ impl Solid {
                 }
             }
             Solid::Cylinder { from, to, radius } => {
-                if !(finite(from) && finite(to)) || (to - from).norm() <= 0.0 || !(*radius > 0.0 && radius.is_finite()) {
+                if !(finite(from) && finite(to)) || (to - from).norm() <= 0.0 || !(*radius > 0.0 && *radius <= crate::kinematics::MAX_COORD) {
                     return Err("a cylinder needs two distinct finite end points and a positive radius".into());
                 }
             }
@@ -378,6 +393,9 @@ pub struct World {
     frame: (Vec3, f64, f64),
     /// The block before was a rapid (or there was none): see [`World::stock_at_rapid`].
     prev_rapid: bool,
+    /// Moves sampled, and the samples they took: the post's allowance ([`SAMPLES_PER_MOVE`]).
+    moves: u64,
+    spent: u64,
 }
 
 impl std::fmt::Debug for World {
@@ -427,6 +445,8 @@ impl World {
             since: Since::ZERO,
             last: None,
             frame: (Vec3::zeros(), 0.0, 0.0),
+            moves: 0,
+            spent: 0,
         };
         for b in &g.bodies {
             w.add(&b.name, b.link, &b.solid, 0.0);
@@ -713,14 +733,19 @@ impl World {
     /// offset carries the stock and fixtures away from the table's axes: a part far off them
     /// swings farther. `path` as for [`World::move_clear`].
     #[allow(clippy::too_many_arguments)]
-    pub fn samples(&self, m: &Machine, from: (&[f64; 3], &[f64; 3]), to: (&[f64; 3], &[f64; 3]), tool_length: f64, work_offset: &Vec3, path: f64) -> (usize, Option<(f64, f64)>) {
+    pub fn samples(&mut self, m: &Machine, from: (&[f64; 3], &[f64; 3]), to: (&[f64; 3], &[f64; 3]), tool_length: f64, work_offset: &Vec3, path: f64) -> (usize, Option<(f64, f64)>) {
         let moved = self.motion(m, from, to, tool_length, work_offset.norm(), path).total();
         let step = self.spacing();
         let n = (moved / step).ceil();
-        match n.is_finite() && n <= MAX_SAMPLES as f64 {
+        self.moves += 1;
+        let left = (MAX_SAMPLES as u64 + SAMPLES_PER_MOVE * self.moves).saturating_sub(self.spent);
+        let most = left.clamp(COARSE_SAMPLES, MAX_SAMPLES as u64) as usize;
+        let (n, coarse) = match n.is_finite() && n <= most as f64 {
             true => ((n as usize).max(1), None),
-            false => (MAX_SAMPLES, Some((moved / MAX_SAMPLES as f64, step))),
-        }
+            false => (most, Some((moved / most as f64, step))),
+        };
+        self.spent += n as u64;
+        (n, coarse)
     }
 }
 

@@ -999,7 +999,7 @@ fn the_samples_follow_a_part_the_work_offset_puts_far_off_the_axes() {
     let p = shipped_profile("spinner-u5-620");
     let m = &p.machine;
     let (min, max) = (Vec3::new(-40.0, -40.0, 0.0), Vec3::new(40.0, 40.0, 30.0));
-    let world = World::new(m, &Geometry::default(), &[Solid::Box { min, max }], &[], 0.0, 1e-3);
+    let mut world = World::new(m, &Geometry::default(), &[Solid::Box { min, max }], &[], 0.0, 1e-3);
     let half = 15.0;
     let len = m.default_tool_length;
     let deg = std::f64::consts::PI / 180.0;
@@ -1036,7 +1036,7 @@ fn the_samples_follow_a_part_the_work_offset_puts_far_off_the_axes() {
     // A sheet 0.01 mm thick turned half a turn would need more samples than one block takes:
     // the samples stop at the most, and say how far apart they are.
     let sheet = [Solid::Box { min, max: Vec3::new(40.0, 40.0, 0.01) }];
-    let world = World::new(m, &Geometry::default(), &sheet, &[], 2.0, 1e-3);
+    let mut world = World::new(m, &Geometry::default(), &sheet, &[], 2.0, 1e-3);
     let (from, to) = ([0.0; 3], [0.0, std::f64::consts::PI, 0.0]);
     let (n, coarse) = world.samples(m, (&lin, &from), (&lin, &to), len, &Vec3::new(500.0, 0.0, 0.0), 0.0);
     assert_eq!(n, kinepost::collide::MAX_SAMPLES);
@@ -1120,4 +1120,105 @@ fn walk_compare(p: &Profile, n: usize, rnd: &mut impl FnMut() -> f64) -> (usize,
         hits += b.len();
     }
     (hits, taken_whole)
+}
+
+/// Issue 51, 5 and 2: the time bound was looked at every 256 output records, so a collision check
+/// that wrote nothing for minutes ran on (`--max-post-seconds 5` stopped at 19.7 s); a stock of
+/// ±1e8 on a six-point path takes minutes of samples. Now the bound is looked at between the
+/// check's samples: the post stops within a second of it, with the `over_budget` reason.
+#[test]
+fn the_time_bound_holds_inside_a_long_collision_check() {
+    let lib = kinepost::machines::Library::load_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/machines").as_ref()).unwrap();
+    let p = lib.get("spinner-u5-620").unwrap().clone();
+    let cl = String::from_utf8(common::generated("spinner-u5-620", 6, 1)).unwrap();
+    // Options refuse such a stock now (below); the engine's bound holds whatever it is given.
+    let mut o = Settings::default().profile_options(&p, None).unwrap();
+    o.stock = vec![kinepost::collide::Solid::Box {
+        min: kinepost::kinematics::Vec3::repeat(-1e8),
+        max: kinepost::kinematics::Vec3::repeat(1e8),
+    }];
+    o.budget = post::Budget::new(0, 1.0).unwrap();
+    let (tx, rx) = std::sync::mpsc::channel();
+    let t0 = std::time::Instant::now();
+    std::thread::spawn(move || {
+        let r = run_with(&p, &cl, &o).1;
+        let _ = tx.send(r.map(|_| ()).map_err(|e| e.to_string()));
+    });
+    let r = rx
+        .recv_timeout(std::time::Duration::from_secs(20))
+        .expect("the post stops near its 1 s bound");
+    let took = t0.elapsed();
+    let e = r.expect_err("over its time");
+    assert!(e.contains("1 s"), "{e}");
+    assert!(took < std::time::Duration::from_secs(2), "stopped after {took:?}");
+}
+
+/// Issue 51, 2: job options multiplied the check's cost with nothing said: a ±1e8 stock (34.7 s
+/// for a 298-byte CL, 0.01 s without), a clearance of 1e-9 (39×), a 1e-6 mm fixture (40×). Now
+/// what no machine tool holds is refused naming the bound, and what is left costs at most the
+/// post's allowance of samples (`MAX_SAMPLES` once, 256 a move on average), the moves past it
+/// told `collision_coarse`.
+#[test]
+fn options_that_multiply_the_checks_cost_are_refused_or_bounded() {
+    let lib = kinepost::machines::Library::load_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/machines").as_ref()).unwrap();
+    let p = lib.get("spinner-u5-620").unwrap().clone();
+    for (s, want) in [
+        (Settings { stock: Some("-1e8,-1e8,-1e8,1e8,1e8,1e8".into()), ..Default::default() }, "within ±100000"),
+        (Settings { fixtures: Some("0,0,0,1e-6,1,1".into()), ..Default::default() }, "at least 0.001"),
+        (Settings { collision_clearance: Some(1e-9), ..Default::default() }, "0 (none) or at least 0.001"),
+    ] {
+        let e = s.profile_options(&p, None).map(|_| ()).expect_err("refused");
+        assert!(e.contains(want), "{e}");
+    }
+    // The smallest fixture taken: every move of the path would want thousands of samples.
+    let cl = String::from_utf8(common::generated("spinner-u5-620", 6, 1)).unwrap();
+    let o = Settings { fixtures: Some("0,0,0,0.001,0.001,0.001".into()), ..Default::default() }
+        .profile_options(&p, None)
+        .unwrap();
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        let (c, r) = run_with(&p, &cl, &o);
+        let _ = tx.send((hits(&c, Code::CollisionCoarse).len(), r.is_ok()));
+    });
+    let (coarse, ok) = rx.recv_timeout(std::time::Duration::from_secs(15)).expect("the check's cost is bounded");
+    assert!(ok);
+    assert!(coarse > 100, "the moves past the allowance are told coarse: {coarse}");
+}
+
+/// Issue 51, 7: the 1 000 000-triangle bound counted files, not bodies: 64 bodies naming one
+/// 200 000-triangle file passed (12.8 M triangles for the check), and the refusal for six
+/// different files said "more than 0 triangles". Counted per body now, the refusal naming them.
+#[test]
+fn the_triangle_bound_counts_bodies_and_names_the_count() {
+    let many: Vec<_> = (0..200_000).map(|i| [[i as f64 * 1e-3, 0.0, 0.0], [i as f64 * 1e-3, 1.0, 0.0], [i as f64 * 1e-3, 0.0, 1.0]]).collect();
+    let dir = mesh_dir("count", &[("many.stl", common::stl::binary(&many)), ("table.stl", common::stl::binary(&table_stl()))]);
+    let bodies = |files: &[&str]| -> String {
+        let mut p = shipped("spinner-u5-620");
+        for (i, f) in files.iter().enumerate() {
+            p.push_str(&format!("\n[[body]]\nname = \"part {i}\"\non = \"C\"\nmesh = {f:?}\n"));
+        }
+        p
+    };
+    let parse = |text: String| kinepost::machines::parse_profile_in(&text, "spinner-mesh", None, Some(&dir)).map(|_| ());
+    parse(bodies(&["many.stl"; 5])).expect("five bodies: 1 000 000 triangles");
+    let e = parse(bodies(&["many.stl"; 6])).unwrap_err().to_string();
+    assert!(e.contains("1200000 triangles (1000000 in the bodies before this one, 200000 in it)"), "{e}");
+    let e = parse(bodies(&["many.stl", "many.stl", "many.stl", "many.stl", "many.stl", "table.stl"])).unwrap_err().to_string();
+    assert!(e.contains("1000012 triangles") && !e.contains("more than 0"), "{e}");
+}
+
+/// Issue 51, 10: `tolerance=1e-300` quoted a 391-character number in its error (errors quote at
+/// most 80); an `MSYS` origin of 1e300 and a body radius of 1e300 were taken.
+#[test]
+fn huge_and_tiny_numbers_are_refused_and_quoted_short() {
+    let p = shipped_profile("spinner-u5-620");
+    let e = Settings { tolerance: Some(1e-300), ..Default::default() }.profile_options(&p, None).err().unwrap();
+    assert!(e.len() <= 160 && e.contains("1e-300"), "{} characters: {e}", e.len());
+    let (c, s) = run(&p, "UNITS/MM\nMSYS/1e300,0,0,1,0,0,0,1,0\nGOTO/0,0,100,0,0,1\nFINI\n", Settings::default());
+    s.unwrap();
+    assert!(c.diags.iter().any(|d| d.message.contains("MSYS: its origin must be within")), "{:?}", c.diags);
+    let big = shipped_file("spinner-u5-620").replacen("radius = 250.0", "radius = 1e300", 1);
+    assert!(big.contains("radius = 1e300"));
+    let e = parse_profile(&big, "big", None).map(|_| ()).expect_err("refused").to_string();
+    assert!(e.contains("radius"), "{e}");
 }

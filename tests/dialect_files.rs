@@ -319,3 +319,58 @@ C = ["M82", "M83"]
     assert!(sink.nc.contains("M12") || sink.nc.contains("M13"), "B keeps the profile's:\n{}", sink.nc);
     assert!(sink.nc.lines().any(|l| l.starts_with("/1G")), "the block delete:\n{}", sink.nc);
 }
+
+/// Issue 51, 4: the CL's text reached NC through a template variable: an operation named
+/// `FACE) M30 G0 Z-500 (` wrote `(OP FACE) M30 G0 Z-500 ()`, and a carriage return in a name
+/// reached the NC raw. Now the name is made safe as every comment is: no delimiter, no control
+/// character, and every block is one the template wrote.
+#[test]
+fn cl_text_in_a_template_variable_cannot_close_its_comment_or_split_a_block() {
+    let d = format!("{SHOP}operation_start = \"(OP {{{{ operation }}}})\"\n");
+    let cl = "UNITS/MM\nLOADTL/1\nSPINDL/RPM,6000,CLW\nFEDRAT/500\nTOOL PATH/FACE) M30 G0 Z-500 (,TOOL,T1\nGOTO/1,2,3\nEND-OF-PATH\nTOOL PATH/RO\rUGH\nG0 Z-400,TOOL,T1\nGOTO/4,5,6\nFINI\n";
+    let (nc, s, diags) = post_with(&d, cl);
+    assert_eq!(s.errors, 0, "{diags:?}\n{nc}");
+    let ops: Vec<&str> = nc.lines().filter(|l| l.contains("(OP ")).collect();
+    assert_eq!(ops.len(), 2, "{nc}");
+    for l in &ops {
+        let inner = l.split_once("(OP ").unwrap().1;
+        assert_eq!(inner.matches(')').count(), 1, "the name closed the comment: {l}");
+        assert!(inner.ends_with(')'), "{l}");
+    }
+    assert!(!nc.contains('\r'), "a carriage return reached the NC:\n{nc:?}");
+    assert!(!nc.lines().any(|l| l.trim_start_matches(|c: char| c == 'N' || c.is_ascii_digit()).trim_start().starts_with("G0 Z-400")), "{nc}");
+    let ends = nc.lines().filter(|l| l.split('(').next().unwrap().contains("M30")).count();
+    assert_eq!(ends, 1, "one program end:\n{nc}");
+}
+
+/// Issue 51, 4 and 10: the trial render when a dialect is read uses the longest values and the
+/// output bounds: a template that always writes 200 lines, or a carriage return within a line,
+/// is refused there (it passed, and every post using it then failed).
+#[test]
+fn the_trial_render_holds_a_template_to_the_output_bounds() {
+    let e = refused(&SHOP.replace("G90\n", "{% for i in range(200) %}G90\n{% endfor %}"));
+    assert!(e.contains("templates.tool_change") && e.contains("more than 64 lines"), "{e}");
+    let e = refused(&SHOP.replace("G90\n", "G90 {{ \"\\r\" }}M30\n"));
+    assert!(e.contains("templates.tool_change") && e.contains("U+000D"), "{e}");
+    // The longest operation name (120 characters) repeated past the byte bound.
+    let e = refused(&format!("{SHOP}operation_start = \"{{% for i in range(70) %}}(OP {{{{ operation }}}}){{% endfor %}}\"\n"));
+    assert!(e.contains("templates.operation_start") && e.contains("8192 bytes"), "{e}");
+}
+
+/// Issue 51, 6 and 9: a dialect's keys had no bounds: `[sequence] width = 300000000` was taken
+/// (a 2 KB CL then streamed 13.5 GB), and its words were not held as a profile's: clamps
+/// `"M10 M30"` and a multi-line `safe_start` or `spindle_cw` were stored and then written as
+/// `M30` and `G0 Z-500` blocks. Each is refused now, naming the key.
+#[test]
+fn a_dialects_keys_are_bounded_and_its_words_are_words() {
+    let e = refused(&format!("{SHOP}\n[sequence]\nstart = 1\nstep = 1\nwidth = 300000000\n"));
+    assert!(e.contains("sequence.width") && e.contains("at most 9"), "{e}");
+    let e = refused(&format!("{SHOP}\n[clamps]\nC = [\"M10 M30\", \"M11\"]\n"));
+    assert!(e.contains("clamps.C") && e.contains("one NC word"), "{e}");
+    let e = refused(&SHOP.replace("title =", "safe_start = \"\"\"G90\nG0 Z-500\"\"\"\ntitle ="));
+    assert!(e.contains("safe_start") && e.contains("one line"), "{e}");
+    let e = refused(&SHOP.replace("title =", "spindle_cw = \"M3\\rM30\"\ntitle ="));
+    assert!(e.contains("spindle_cw") && e.contains("one line"), "{e}");
+    // What a shop writes is still taken.
+    kinepost::machines::dialects::parse(&format!("{SHOP}\n[clamps]\nC = [\"M10\", \"M11\"]\n[sequence]\nstart = 1\nstep = 1\nwidth = 5\n"), "ok.toml", None).unwrap();
+}

@@ -473,3 +473,272 @@ async fn healthz_answers_while_ik_computes() {
         "healthz answered {took:?} after the IK calls went out"
     );
 }
+
+/// A GET of `path` on a socket whose receive buffer is small, which is then never read: a client
+/// that stalls a download (issue 51).
+async fn stalled_get(base: &str, path: &str) -> tokio::net::TcpStream {
+    let sock = tokio::net::TcpSocket::new_v4().unwrap();
+    sock.set_recv_buffer_size(4096).unwrap();
+    let mut s = sock
+        .connect(base.trim_start_matches("http://").parse().unwrap())
+        .await
+        .unwrap();
+    s.write_all(format!("GET {path} HTTP/1.1\r\nHost: kinepost\r\n\r\n").as_bytes())
+        .await
+        .unwrap();
+    s
+}
+
+/// A succeeded job whose diagnostics are many megabytes (more than socket buffers hold): its id
+/// and the diagnostics' length.
+async fn big_job(c: &reqwest::Client, base: &str) -> (String, usize) {
+    let job = c
+        .post(format!("{base}/v1/jobs?machine=dmg-dmc75v"))
+        .body(common::generated("dmg-dmc75v", 40_000, 5))
+        .json_ok()
+        .await;
+    let id = job["id"].as_str().unwrap().to_string();
+    common::wait_job(c, base, &id, "succeeded", Duration::from_secs(120)).await;
+    let len = c
+        .get(format!("{base}/v1/jobs/{id}/diagnostics"))
+        .send()
+        .await
+        .unwrap()
+        .bytes()
+        .await
+        .unwrap()
+        .len();
+    assert!(len > 8 << 20, "diagnostics of {len} bytes fit in socket buffers");
+    (id, len)
+}
+
+/// Issue 51, 1: clients that ask for a job's diagnostics and never read held a blocking thread
+/// each until the pool was full, and then no post could start (while `/healthz` said 200); and
+/// nothing ever ended their responses. Here the pool has 6 threads and 12 clients stall: a post
+/// is served at once, and every stalled download is cut at the write deadline.
+#[test]
+fn stalled_downloads_hold_no_thread_and_are_cut_at_the_write_deadline() {
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .max_blocking_threads(6)
+        .enable_all()
+        .build()
+        .unwrap();
+    rt.block_on(async {
+        let base = common::server(Config {
+            write_timeout: Duration::from_secs(3),
+            max_downloads_per_client: 0,
+            workers: 1,
+            ..common::cfg()
+        })
+        .await;
+        let c = reqwest::Client::builder().timeout(Duration::from_secs(10)).build().unwrap();
+        let (id, len) = big_job(&c, &base).await;
+        let path = format!("/v1/jobs/{id}/diagnostics");
+        let mut stalled = Vec::new();
+        for _ in 0..12 {
+            stalled.push(stalled_get(&base, &path).await);
+        }
+        tokio::time::sleep(Duration::from_millis(500)).await;
+        let t0 = Instant::now();
+        let r = c
+            .post(format!("{base}/v1/post?machine=vmc-3axis"))
+            .body("UNITS/MM\nFEDRAT/500,MMPM\nGOTO/1,2,3\n")
+            .send()
+            .await
+            .expect("a post is served beside stalled downloads");
+        assert_eq!(r.status(), 200);
+        assert!(r.text().await.unwrap().contains("M30"));
+        // Before the write deadline: the stalled downloads still hold whatever they hold.
+        assert!(t0.elapsed() < Duration::from_secs(2), "the post took {:?}", t0.elapsed());
+        // Each fills its socket's buffers (about 3 MB, rebuilt as they stream), waits three
+        // seconds and is cut; reading it earlier would let it go on.
+        tokio::time::sleep(Duration::from_secs(7)).await;
+        // Each was cut: what it gets when it reads at last is short of the whole.
+        for mut s in stalled {
+            let mut got = 0usize;
+            let mut buf = vec![0u8; 1 << 16];
+            loop {
+                match tokio::time::timeout(Duration::from_secs(5), tokio::io::AsyncReadExt::read(&mut s, &mut buf)).await {
+                    Ok(Ok(0)) | Ok(Err(_)) => break,
+                    Ok(Ok(n)) => got += n,
+                    Err(_) => panic!("a stalled download still open after its write deadline ({got} of {len} bytes read)"),
+                }
+            }
+            assert!(got < len, "a stalled download got the whole ({got} of {len} bytes)");
+        }
+    });
+}
+
+/// Issue 51, 1: one client's downloads in flight are bounded (429 beyond), and its slots come
+/// back when they end.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_clients_downloads_in_flight_are_bounded() {
+    let base = common::server(Config {
+        max_downloads_per_client: 2,
+        write_timeout: Duration::from_secs(60),
+        ..common::cfg()
+    })
+    .await;
+    let c = reqwest::Client::builder().timeout(Duration::from_secs(10)).build().unwrap();
+    let (id, _) = big_job(&c, &base).await;
+    let a = stalled_get(&base, &format!("/v1/jobs/{id}/diagnostics")).await;
+    let b = stalled_get(&base, &format!("/v1/jobs/{id}/diagnostics")).await;
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    let r = c.get(format!("{base}/v1/jobs/{id}/input")).send().await.unwrap();
+    assert_eq!(r.status(), 429, "a third download in flight");
+    assert!(r.headers().contains_key("retry-after"));
+    assert!(r.text().await.unwrap().contains("--max-downloads-per-client"));
+    drop((a, b));
+    tokio::time::sleep(Duration::from_millis(500)).await;
+    assert_eq!(c.get(format!("{base}/v1/jobs/{id}/input")).status_ok().await, 200);
+}
+
+/// Issue 51, 1: `/readyz` says whether a post could be served now: not while every post stream
+/// is taken (`/healthz` answered 200 throughout while none could be).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn readyz_is_503_while_no_post_could_be_served() {
+    let base = common::server(Config {
+        max_streams: 1,
+        ..common::cfg()
+    })
+    .await;
+    let c = reqwest::Client::new();
+    assert_eq!(c.get(format!("{base}/readyz")).status_ok().await, 200);
+    let head = post_head("/v1/post?machine=vmc-3axis", "text/plain", 100_000);
+    let held = raw(&base, format!("{head}UNITS/MM\n").as_bytes()).await;
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    let r = c.get(format!("{base}/readyz")).send().await.unwrap();
+    assert_eq!(r.status(), 503);
+    assert!(r.text().await.unwrap().contains("--max-streams"));
+    assert_eq!(c.get(format!("{base}/healthz")).status_ok().await, 200);
+    drop(held);
+    let mut ready = 0;
+    for _ in 0..40 {
+        ready = c.get(format!("{base}/readyz")).status_ok().await.as_u16();
+        if ready == 200 {
+            break;
+        }
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+    assert_eq!(ready, 200, "ready again once the stream has ended");
+}
+
+/// Issue 51, 5: a post whose client left went on for about 65 s, the engine noticing only at its
+/// next write, which a long collision check held back. Here the table is a mesh of 100 000
+/// triangles (a six-point path takes minutes to check in a debug build): the engine looks
+/// between the check's samples, and its stream slot (held by its thread) is free within 2 s.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_post_whose_client_left_stops_within_a_second() {
+    let dir = std::env::temp_dir().join(format!("kinepost-gone-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let spinner = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/machines/spinner-u5-620.toml")).unwrap();
+    let table = "cylinder = { from = [0.0, 0.0, -60.0], to = [0.0, 0.0, 0.0], radius = 250.0 }";
+    assert!(spinner.contains(table));
+    std::fs::write(dir.join("spinner-mesh.toml"), spinner.replacen(table, "mesh = \"table.stl\"", 1).replace("id = \"spinner-u5-620\"", "id = \"spinner-mesh\"")).unwrap();
+    // Small triangles strewn over the table: no bound lets the check skip them.
+    let mut seed = 1u64;
+    let mut rnd = |lo: f64, hi: f64| {
+        seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        lo + (hi - lo) * ((seed >> 11) as f64 / (1u64 << 53) as f64)
+    };
+    let tris: Vec<[[f64; 3]; 3]> = (0..100_000)
+        .map(|_| {
+            let (x, y, z) = (rnd(-250.0, 250.0), rnd(-250.0, 250.0), rnd(-60.0, 0.0));
+            [[x, y, z], [x + 3.0, y, z], [x, y + 3.0, z]]
+        })
+        .collect();
+    std::fs::write(dir.join("table.stl"), common::stl::binary(&tris)).unwrap();
+    let base = common::server(Config {
+        machines: dir.clone(),
+        ..common::cfg()
+    })
+    .await;
+    let cl = common::generated("spinner-u5-620", 6, 1);
+    let c = reqwest::Client::new();
+    let gone = c
+        .post(format!("{base}/v1/post?machine=spinner-mesh"))
+        .body(cl)
+        .timeout(Duration::from_secs(1))
+        .send()
+        .await;
+    assert!(gone.is_err(), "the post answered within a second: the test needs a slower one");
+    let t0 = Instant::now();
+    let mut metrics = String::new();
+    while t0.elapsed() < Duration::from_secs(10) {
+        metrics = c.get(format!("{base}/metrics")).text_ok().await;
+        if metrics.contains("kinepost_streams_in_flight 0") {
+            break;
+        }
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+    let took = t0.elapsed();
+    let _ = std::fs::remove_dir_all(&dir);
+    assert!(metrics.contains("kinepost_streams_in_flight 0"), "the engine runs on");
+    assert!(took < Duration::from_secs(2), "the engine stopped {took:?} after its client left");
+}
+
+/// The resident memory of process `pid`, in MB.
+fn rss_mb(pid: u32) -> f64 {
+    let s = std::fs::read_to_string(format!("/proc/{pid}/status")).unwrap();
+    let kb: f64 = s.lines().find(|l| l.starts_with("VmRSS:")).unwrap().split_whitespace().nth(1).unwrap().parse().unwrap();
+    kb / 1024.0
+}
+
+/// Issue 51, 3: each download of a mesh made its own binary STL (10 MB for 200 000 triangles):
+/// 150 unread GETs took the server from 544 to 1 612 MB. Now every download shares one copy.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn unread_mesh_downloads_share_one_copy() {
+    let dir = std::env::temp_dir().join(format!("kinepost-meshes-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(dir.join("machines")).unwrap();
+    let spinner = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/machines/spinner-u5-620.toml")).unwrap();
+    let table = "cylinder = { from = [0.0, 0.0, -60.0], to = [0.0, 0.0, 0.0], radius = 250.0 }";
+    std::fs::write(
+        dir.join("machines/spinner-mesh.toml"),
+        spinner.replacen(table, "mesh = \"table.stl\"", 1).replace("id = \"spinner-u5-620\"", "id = \"spinner-mesh\""),
+    )
+    .unwrap();
+    let tris: Vec<[[f64; 3]; 3]> = (0..200_000)
+        .map(|i| {
+            let (x, y) = ((i % 400) as f64 - 200.0, (i / 400) as f64 * 0.8 - 200.0);
+            [[x, y, -60.0], [x + 1.0, y, -30.0], [x, y + 1.0, 0.0]]
+        })
+        .collect();
+    std::fs::write(dir.join("machines/table.stl"), common::stl::binary(&tris)).unwrap();
+    let machines = dir.join("machines");
+    let (mut child, base) = common::spawn_binary(
+        &dir.join("data"),
+        &["--machines", machines.to_str().unwrap(), "--max-downloads-per-client", "0"],
+    );
+    let path = "/v1/machines/spinner-mesh/meshes/table.stl";
+    // One read whole: the copy made, and the size of one.
+    let c = reqwest::Client::new();
+    let whole = c.get(format!("{base}{path}")).send().await.unwrap().bytes().await.unwrap();
+    assert_eq!(whole.len(), 84 + 50 * 200_000);
+    let before = rss_mb(child.id());
+    let mut unread = Vec::new();
+    for _ in 0..150 {
+        unread.push(stalled_get(&base, path).await);
+    }
+    // Until every one has its response (counted as its body starts), or the memory shows.
+    let t0 = Instant::now();
+    let counted = "kinepost_http_requests_total{route=\"/v1/machines/{id}/meshes/{file}\",status=\"200\"} 151";
+    while t0.elapsed() < Duration::from_secs(120) && rss_mb(child.id()) - before < 150.0 {
+        if c.get(format!("{base}/metrics")).text_ok().await.contains(counted) {
+            break;
+        }
+        tokio::time::sleep(Duration::from_millis(250)).await;
+    }
+    tokio::time::sleep(Duration::from_millis(500)).await;
+    let after = rss_mb(child.id());
+    let _ = child.kill();
+    let _ = child.wait();
+    let _ = std::fs::remove_dir_all(&dir);
+    drop(unread);
+    eprintln!("150 unread mesh downloads: {before:.0} MB -> {after:.0} MB");
+    // A copy each would be 1.5 GB; hyper's buffers of each response, which share the bytes,
+    // are all that grows.
+    assert!(after - before < 150.0, "150 unread mesh downloads: {before:.0} MB -> {after:.0} MB");
+}

@@ -24,6 +24,12 @@ pub(super) fn msys(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
         st.bad(diags, st.rest_col, msg);
         return None;
     }
+    // An origin of 1e300 put every point of the operation beyond any bound the engine holds.
+    if !v[..3].iter().all(|c| crate::kinematics::coordinate_ok(*c)) {
+        let msg = format!("MSYS: its origin must be within ±{:e}: not applied", crate::kinematics::MAX_COORD);
+        st.bad(diags, st.args[0].col, msg);
+        return None;
+    }
     let (x, y) = ([v[3], v[4], v[5]], [v[6], v[7], v[8]]);
     let norm = |a: [f64; 3]| a.iter().map(|c| c * c).sum::<f64>().sqrt();
     let dot: f64 = x.iter().zip(&y).map(|(a, b)| a * b).sum();

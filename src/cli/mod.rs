@@ -160,6 +160,14 @@ pub struct ServeArgs {
     /// Seconds a connection may stay open with no request in flight (keep-alive).
     #[arg(long, env = "KINEPOST_IDLE_TIMEOUT", default_value_t = 60.0, allow_hyphen_values = true)]
     pub idle_timeout: f64,
+    /// Seconds a response may wait on a client that reads nothing; then its connection is
+    /// closed and what it held freed. 0: no limit.
+    #[arg(long, env = "KINEPOST_WRITE_TIMEOUT", default_value_t = 30.0, allow_hyphen_values = true)]
+    pub write_timeout: f64,
+    /// Downloads (a job's NC, diagnostics, input and line map; mesh files) one client address may
+    /// have in flight at once; more are answered 429. 0: no limit.
+    #[arg(long, env = "KINEPOST_MAX_DOWNLOADS_PER_CLIENT", default_value_t = 8)]
+    pub max_downloads_per_client: usize,
     /// Connections open at once (fewer if the open-file limit holds fewer); at the limit the one
     /// idle longest is closed to let a new one in.
     #[arg(long, env = "KINEPOST_MAX_CONNECTIONS", default_value_t = 4096)]
@@ -570,6 +578,8 @@ fn serve(cli: &Cli, a: &ServeArgs) -> Result<(), String> {
         max_streams: a.max_streams.max(1),
         header_timeout: seconds("header-timeout", a.header_timeout, 0.1, 3600.0, 1.0)?,
         idle_timeout: seconds("idle-timeout", a.idle_timeout, 0.1, 86400.0, 1.0)?,
+        write_timeout: seconds("write-timeout", a.write_timeout, 0.0, 86400.0, 1.0)?,
+        max_downloads_per_client: a.max_downloads_per_client,
         max_connections: a.max_connections.max(1),
         min_upload_rate: a.min_upload_rate,
         upload_rate_window: seconds("upload-rate-window", a.upload_rate_window, 0.1, 3600.0, 1.0)?,

@@ -473,30 +473,34 @@ async fn diagnostics(q: &Queue, job: &Job, req: Request) -> Result<Response, Api
     }
 }
 
-/// A blocking reader as a body: a thread fills 64 KiB chunks into a channel of four, so a slow
-/// client holds 256 KiB at most; a read error ends the body with an error (never a silent cut).
-pub(super) fn pumped(mut r: impl std::io::Read + Send + 'static) -> Body {
-    let (tx, rx) = tokio::sync::mpsc::channel::<Result<bytes::Bytes, std::io::Error>>(4);
-    tokio::task::spawn_blocking(move || {
-        loop {
+/// A blocking reader as a body, a 64 KiB chunk at a time: each chunk is read on the blocking
+/// pool when the client has taken the last one, the reader handed back and forth, so a client
+/// that reads nothing holds no thread (hundreds of them once took every thread of the pool, and
+/// no post could start) and a chunk of memory at most; a read error ends the body with an error
+/// (never a silent cut).
+pub(super) fn pumped(r: impl std::io::Read + Send + 'static) -> Body {
+    Body::from_stream(futures_util::stream::unfold(Some(r), |r| async move {
+        let mut r = r?;
+        let read = tokio::task::spawn_blocking(move || {
             let mut buf = vec![0u8; 64 << 10];
-            let n = match r.read(&mut buf) {
-                Ok(0) => return,
-                Ok(n) => n,
-                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
-                Err(e) => {
-                    let _ = tx.blocking_send(Err(e));
-                    return;
+            loop {
+                match r.read(&mut buf) {
+                    Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
+                    Ok(n) => {
+                        buf.truncate(n);
+                        return (r, Ok(buf));
+                    }
+                    Err(e) => return (r, Err(e)),
                 }
-            };
-            buf.truncate(n);
-            if tx.blocking_send(Ok(buf.into())).is_err() {
-                return;
             }
+        })
+        .await;
+        match read {
+            Ok((_, Ok(buf))) if buf.is_empty() => None,
+            Ok((r, Ok(buf))) => Some((Ok(bytes::Bytes::from(buf)), Some(r))),
+            Ok((_, Err(e))) => Some((Err(e), None)),
+            Err(e) => Some((Err(std::io::Error::other(e)), None)),
         }
-    });
-    Body::from_stream(futures_util::stream::unfold(rx, |mut rx| async move {
-        rx.recv().await.map(|item| (item, rx))
     }))
 }
 

@@ -1,5 +1,6 @@
 //! What one client may hold of the service: a post stream's slot, taken before anything is read
-//! and given back when the stream ends; an upload's pace; a form field's size.
+//! and given back when the stream ends; its downloads in flight; an upload's pace; a form
+//! field's size.
 
 use super::error::ApiError;
 use super::{AppState, Metrics};
@@ -34,6 +35,66 @@ pub(super) async fn admit_stream(State(st): State<Arc<AppState>>, mut req: Reque
     }
     req.extensions_mut().insert(slot);
     next.run(req).await
+}
+
+/// The downloads in flight by client address: one client's stalled downloads hold their files
+/// and buffers until the write deadline cuts them, so their number is bounded per client.
+#[derive(Default)]
+pub struct Downloads(std::sync::Mutex<std::collections::HashMap<std::net::IpAddr, usize>>);
+
+impl Downloads {
+    fn lock(&self) -> std::sync::MutexGuard<'_, std::collections::HashMap<std::net::IpAddr, usize>> {
+        self.0.lock().unwrap_or_else(|p| p.into_inner())
+    }
+}
+
+/// A download's place among its client's, given back when its body is dropped (sent or cut).
+struct DownloadSlot(Arc<AppState>, std::net::IpAddr);
+
+impl Drop for DownloadSlot {
+    fn drop(&mut self) {
+        let mut m = self.0.metrics.downloads.lock();
+        if let Some(n) = m.get_mut(&self.1) {
+            *n -= 1;
+            if *n == 0 {
+                m.remove(&self.1);
+            }
+        }
+    }
+}
+
+/// Download routes: a client with `--max-downloads-per-client` in flight is answered 429 (with
+/// Retry-After); a slot is held until the response's body is sent or dropped.
+pub(super) async fn admit_download(State(st): State<Arc<AppState>>, req: Request, next: Next) -> Response {
+    let limit = st.config.max_downloads_per_client;
+    let Some(ip) = req
+        .extensions()
+        .get::<axum::extract::ConnectInfo<std::net::SocketAddr>>()
+        .map(|c| c.0.ip())
+    else {
+        return next.run(req).await;
+    };
+    if limit == 0 {
+        return next.run(req).await;
+    }
+    {
+        let mut m = st.metrics.downloads.lock();
+        let n = m.entry(ip).or_default();
+        if *n >= limit {
+            return ApiError::TooManyRequests(format!(
+                "this client has {limit} downloads in flight (--max-downloads-per-client)"
+            ))
+            .into_response();
+        }
+        *n += 1;
+    }
+    let slot = DownloadSlot(st.clone(), ip);
+    next.run(req).await.map(|b| {
+        Body::new(http_body_util::BodyExt::map_frame(b, move |f| {
+            let _ = &slot;
+            f
+        }))
+    })
 }
 
 /// What every too-slow upload's message starts with, however many layers it passed through.

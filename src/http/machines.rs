@@ -473,7 +473,8 @@ pub(super) async fn get_mesh(
     if let Some(r) = super::not_modified(&headers, &etag) {
         return Ok(r);
     }
-    let bytes = crate::machines::meshes::to_binary_stl(&mesh);
+    // One copy however many download it: the body shares it.
+    let bytes = bytes::Bytes::from_owner(mesh.drawn(crate::machines::meshes::to_binary_stl));
     let mut r = (StatusCode::OK, [(header::CONTENT_TYPE, HeaderValue::from_static("model/stl"))], bytes).into_response();
     if let Ok(v) = HeaderValue::from_str(&etag) {
         r.headers_mut().insert(header::ETAG, v);

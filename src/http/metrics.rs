@@ -55,6 +55,8 @@ pub struct Metrics {
     /// Job run durations by outcome (succeeded, failed, cancelled; retried: a fault outside the
     /// job ended the run and it was queued again).
     job_runs: Family<OutcomeLabel, Histogram, fn() -> Histogram>,
+    /// Downloads in flight by client, for `--max-downloads-per-client`.
+    pub(super) downloads: super::limits::Downloads,
 }
 
 impl Default for Metrics {
@@ -67,6 +69,7 @@ impl Default for Metrics {
             blocks: Counter::default(),
             posts: duration_histogram(),
             job_runs: Family::new_with_constructor(duration_histogram),
+            downloads: super::limits::Downloads::default(),
         };
         for st in JobState::ALL.into_iter().filter(|s| s.finished()) {
             let _ = m.job_runs.get_or_create(&OutcomeLabel { outcome: st.as_str() });
@@ -130,6 +133,11 @@ impl Metrics {
 
     pub(super) fn stream_ended(&self) {
         self.streams.dec();
+    }
+
+    /// Post streams running now.
+    pub(super) fn streams_running(&self) -> u64 {
+        self.streams.get().max(0) as u64
     }
 
     /// The OpenMetrics text; `jobs`: jobs by state in the store (the queue depth), when it

@@ -53,6 +53,12 @@ pub struct Config {
     pub header_timeout: Duration,
     /// A connection with no request in flight is closed after this (keep-alive).
     pub idle_timeout: Duration,
+    /// A response whose client reads nothing for this long is cut off, its connection closed
+    /// (zero: never).
+    pub write_timeout: Duration,
+    /// Downloads (a job's outputs and input, meshes) one client address may have in flight at
+    /// once (429 beyond); 0: no limit.
+    pub max_downloads_per_client: usize,
     /// Connections open at once; at the limit the one idle longest is closed for a new one.
     pub max_connections: usize,
     /// Bytes a second an upload must average over `upload_rate_window` (0: no minimum); a slower
@@ -125,6 +131,8 @@ impl Default for Config {
             max_streams: 64,
             header_timeout: Duration::from_secs(30),
             idle_timeout: Duration::from_secs(60),
+            write_timeout: Duration::from_secs(30),
+            max_downloads_per_client: 8,
             max_connections: 4096,
             min_upload_rate: 1024,
             upload_rate_window: Duration::from_secs(30),
@@ -217,6 +225,8 @@ pub fn app(state: Arc<AppState>) -> axum::Router {
         .layer(tower_http::limit::RequestBodyLimitLayer::new(
             state.config.max_upload.min(usize::MAX as u64) as usize,
         ));
+    // A client's downloads in flight are counted until each body is sent or dropped.
+    let download = middleware::from_fn_with_state(state.clone(), limits::admit_download);
     // Streams are neither compressed (CompressionLayer holds them back) nor timed out.
     let streaming = axum::Router::new()
         .route(
@@ -230,10 +240,13 @@ pub fn app(state: Arc<AppState>) -> axum::Router {
             post_route(jobs::submit).layer(streams.clone()).get(jobs::list_jobs),
         )
         .route("/v1/jobs/{id}", get(jobs::get_job).delete(jobs::delete_job))
-        .route("/v1/jobs/{id}/nc", get(jobs::job_nc))
-        .route("/v1/jobs/{id}/diagnostics", get(jobs::job_diagnostics))
-        .route("/v1/jobs/{id}/input", get(jobs::job_input))
-        .route("/v1/jobs/{id}/lines", get(jobs::job_lines));
+        .route("/v1/jobs/{id}/nc", get(jobs::job_nc).layer(download.clone()))
+        .route(
+            "/v1/jobs/{id}/diagnostics",
+            get(jobs::job_diagnostics).layer(download.clone()),
+        )
+        .route("/v1/jobs/{id}/input", get(jobs::job_input).layer(download.clone()))
+        .route("/v1/jobs/{id}/lines", get(jobs::job_lines).layer(download.clone()));
     let api = axum::Router::new()
         .route("/v1/machines", get(machines::list_machines).post(machines::create_machine))
         .route("/v1/dialects", get(dialects::list_dialects).post(dialects::create_dialect))
@@ -251,7 +264,10 @@ pub fn app(state: Arc<AppState>) -> axum::Router {
         )
         .route("/v1/machines/{id}/versions", get(machines::list_versions))
         .route("/v1/machines/{id}/versions/{version}", get(machines::get_version))
-        .route("/v1/machines/{id}/meshes/{file}", get(machines::get_mesh))
+        .route(
+            "/v1/machines/{id}/meshes/{file}",
+            get(machines::get_mesh).layer(download.clone()),
+        )
         .route(
             "/v1/machines/{id}/tools",
             get(tools::get_tools).put(tools::put_tools).delete(tools::delete_tools),
@@ -431,11 +447,24 @@ async fn healthz() -> &'static str {
     "ok"
 }
 
-/// Ready: machines loaded, the data directory writable and the job store answering.
+/// Ready: machines loaded, the data directory writable, the job store answering, and a post
+/// could be served now (a stream slot free, a blocking thread to run it on).
 #[utoipa::path(get, path = "/readyz", responses((status = 200, description = "ready"), (status = 503, description = "Not ready or overloaded: retry later", body = Problem, content_type = "application/problem+json")), tag = "ops")]
 async fn readyz(State(st): State<Arc<AppState>>) -> Result<Response, ApiError> {
     if st.machines.is_empty() {
         return Err(ApiError::Busy("no machine profiles loaded".into()));
+    }
+    if st.metrics.streams_running() >= st.config.max_streams as u64 {
+        return Err(ApiError::Busy(format!(
+            "every post stream is running ({}, --max-streams)",
+            st.config.max_streams
+        )));
+    }
+    // A post runs on the blocking pool: when every thread of it is held, no post starts
+    // however idle the runtime is (and `/healthz` answers at once).
+    let probe = tokio::task::spawn_blocking(|| ());
+    if tokio::time::timeout(Duration::from_secs(1), probe).await.is_err() {
+        return Err(ApiError::Busy("no thread free to run a post within 1 s".into()));
     }
     let probe = st.config.data_dir.join(".readyz");
     std::fs::create_dir_all(&st.config.data_dir)

@@ -281,6 +281,10 @@ impl Sink for ChannelSink {
         Ok(())
     }
 
+    /// The response has been dropped: its client left.
+    fn halted(&mut self) -> bool {
+        self.tx.is_closed()
+    }
     fn summary(&mut self, s: &Summary) -> std::io::Result<()> {
         if self.ndjson {
             return self.record(&Record::Summary { summary: s });

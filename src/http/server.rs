@@ -5,6 +5,12 @@
 //! `idle_timeout` of the last response — and at most `max_connections` are open: when that many
 //! are, the one idle longest is closed to make room, so a new client gets in at once.
 //!
+//! A response is written under a third deadline, `write_timeout`: a body that has handed hyper a
+//! frame and is not asked for the next one within it is waiting on a client that reads nothing,
+//! and its connection is closed, so that what the response holds (a file, a post's thread, its
+//! buffers) is freed. A body slow to make its next frame (a post computing) is not waiting on the
+//! client and is not cut.
+//!
 //! The deadlines are kept here rather than by hyper's `header_read_timeout`: that one does not
 //! cover the bytes the protocol sniff reads first (a socket that sends nothing, or half an
 //! HTTP/2 preface) nor HTTP/2, and it would close an idle keep-alive connection on the header
@@ -14,7 +20,6 @@ use super::Config;
 use axum::Router;
 use axum::body::Body;
 use axum::extract::ConnectInfo;
-use http_body_util::BodyExt;
 use hyper::body::Incoming;
 use hyper_util::rt::{TokioExecutor, TokioIo};
 use hyper_util::server::conn::auto::Builder;
@@ -39,6 +44,7 @@ pub async fn run(listener: TcpListener, app: Router, cfg: &Config, shutdown: imp
     let deadlines = Deadlines {
         header: cfg.header_timeout,
         idle: cfg.idle_timeout,
+        write: cfg.write_timeout,
     };
     let mut shutdown = std::pin::pin!(shutdown);
     loop {
@@ -79,6 +85,8 @@ pub async fn run(listener: TcpListener, app: Router, cfg: &Config, shutdown: imp
 struct Deadlines {
     header: Duration,
     idle: Duration,
+    /// Zero: none.
+    write: Duration,
 }
 
 /// What a connection is doing: its deadline, and whether it may be closed to make room.
@@ -163,8 +171,11 @@ impl Conn {
         let close = Arc::new(Notify::new());
         let id = lock(&self.open).add(rx.clone(), close.clone());
         let (app, addr) = (self.app, self.addr);
+        let waits = Arc::new(Waits::default());
+        let bodies = waits.clone();
         let service = hyper::service::service_fn(move |req: hyper::Request<Incoming>| {
             let busy = Busy::start(tx.clone());
+            let waiting = bodies.add();
             let mut req = req.map(Body::new);
             // What `into_make_service_with_connect_info` would add: per-client limits read it.
             req.extensions_mut().insert(ConnectInfo(addr));
@@ -173,10 +184,11 @@ impl Conn {
                 let resp = app.oneshot(req).await.unwrap_or_else(|e: Infallible| match e {});
                 // The request counts as in flight until its body has been sent (or dropped).
                 Ok::<_, Infallible>(resp.map(|b| {
-                    Body::new(b.map_frame(move |f| {
-                        let _ = &busy;
-                        f
-                    }))
+                    Body::new(Watched {
+                        inner: b,
+                        waiting,
+                        _busy: busy,
+                    })
                 }))
             }
         });
@@ -187,7 +199,7 @@ impl Conn {
                     tracing::debug!(%addr, error = %e, "connection ended with an error");
                 }
             }
-            () = deadline(rx, self.deadlines) => tracing::debug!(%addr, "connection closed: no request within its deadline"),
+            why = deadline(rx, self.deadlines, &waits) => tracing::debug!(%addr, "connection closed: {why}"),
             () = close.notified() => tracing::debug!(%addr, "idle connection closed to make room"),
         }
         lock(&self.open).open.remove(&id);
@@ -219,24 +231,124 @@ impl Drop for Busy {
     }
 }
 
-/// Completes when the connection has gone without a request for longer than it may: the header
-/// deadline before its first request, the idle one after; never while a request is in flight.
-async fn deadline(mut rx: watch::Receiver<Activity>, d: Deadlines) {
+/// Completes when the connection has gone without a request for longer than it may (the header
+/// deadline before its first request, the idle one after), or when a response in flight has
+/// waited on its client for longer than the write deadline; with what happened.
+async fn deadline(mut rx: watch::Receiver<Activity>, d: Deadlines, waits: &Waits) -> &'static str {
+    // How often a response in flight is looked at: a stalled one is cut within a quarter of
+    // the deadline after it.
+    let tick = (d.write / 4).clamp(Duration::from_millis(50), Duration::from_secs(1));
     loop {
         let a = *rx.borrow_and_update();
         if a.in_flight > 0 {
-            if rx.changed().await.is_err() {
-                return std::future::pending().await;
+            if d.write.is_zero() {
+                if rx.changed().await.is_err() {
+                    return std::future::pending().await;
+                }
+                continue;
+            }
+            tokio::select! {
+                r = rx.changed() => if r.is_err() {
+                    return std::future::pending().await;
+                },
+                () = tokio::time::sleep(tick) => if waits.longest() > d.write {
+                    return "a response waited on its client longer than --write-timeout";
+                },
             }
             continue;
         }
         let limit = if a.served { d.idle } else { d.header };
         tokio::select! {
-            () = tokio::time::sleep_until(a.idle_since + limit) => return,
+            () = tokio::time::sleep_until(a.idle_since + limit) => return "no request within its deadline",
             r = rx.changed() => if r.is_err() {
                 return std::future::pending().await;
             },
         }
+    }
+}
+
+/// The responses of one connection in flight, each with when it began to wait on the client.
+#[derive(Default)]
+struct Waits {
+    bodies: Mutex<Vec<std::sync::Weak<Waiting>>>,
+}
+
+/// When a body handed over its last frame and has not been asked for the next (ms since
+/// `since`; `u64::MAX`: it is not waiting on the client).
+struct Waiting {
+    since: std::time::Instant,
+    at: std::sync::atomic::AtomicU64,
+}
+
+impl Waiting {
+    fn mark(&self, waiting: bool) {
+        let at = if waiting {
+            u64::try_from(self.since.elapsed().as_millis()).unwrap_or(u64::MAX - 1)
+        } else {
+            u64::MAX
+        };
+        self.at.store(at, std::sync::atomic::Ordering::Relaxed);
+    }
+}
+
+impl Waits {
+    fn add(&self) -> Arc<Waiting> {
+        let w = Arc::new(Waiting {
+            since: std::time::Instant::now(),
+            at: std::sync::atomic::AtomicU64::new(u64::MAX),
+        });
+        let mut bodies = self.bodies.lock().unwrap_or_else(|p| p.into_inner());
+        bodies.retain(|b| b.strong_count() > 0);
+        bodies.push(Arc::downgrade(&w));
+        w
+    }
+
+    /// The longest any response in flight has waited on its client.
+    fn longest(&self) -> Duration {
+        let bodies = self.bodies.lock().unwrap_or_else(|p| p.into_inner());
+        bodies
+            .iter()
+            .filter_map(std::sync::Weak::upgrade)
+            .filter_map(|w| {
+                let at = w.at.load(std::sync::atomic::Ordering::Relaxed);
+                (at != u64::MAX).then(|| w.since.elapsed().saturating_sub(Duration::from_millis(at)))
+            })
+            .max()
+            .unwrap_or_default()
+    }
+}
+
+/// A response body that tells its connection when it waits on the client: from the frame it
+/// handed over until hyper asks for the next one (hyper asks only once it has room to write).
+/// It holds its request's [`Busy`] until it is dropped, sent to its end or not.
+struct Watched {
+    inner: Body,
+    waiting: Arc<Waiting>,
+    _busy: Busy,
+}
+
+impl hyper::body::Body for Watched {
+    type Data = bytes::Bytes;
+    type Error = axum::Error;
+
+    fn poll_frame(
+        mut self: std::pin::Pin<&mut Self>,
+        cx: &mut std::task::Context<'_>,
+    ) -> std::task::Poll<Option<Result<hyper::body::Frame<Self::Data>, Self::Error>>> {
+        self.waiting.mark(false);
+        let r = std::pin::Pin::new(&mut self.inner).poll_frame(cx);
+        if matches!(r, std::task::Poll::Ready(Some(Ok(_)))) {
+            self.waiting.mark(true);
+        }
+        r
+    }
+
+    fn is_end_stream(&self) -> bool {
+        self.inner.is_end_stream()
+    }
+
+    fn size_hint(&self) -> hyper::body::SizeHint {
+        self.inner.size_hint()
     }
 }
 

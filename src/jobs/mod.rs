@@ -532,6 +532,9 @@ impl Sink for JobSink<'_> {
     fn tool(&mut self, first_block: u64, t: &crate::collide::ToolShape) {
         self.preview.tool(first_block, t)
     }
+    fn halted(&mut self) -> bool {
+        self.cancel.load(Ordering::Relaxed)
+    }
 }
 
 /// One job on a blocking thread: spool input → `.tmp` outputs, fsynced. The error is the

@@ -274,6 +274,13 @@ fn validate(d: &Dialect, file: &str, id: Option<&str>) -> Result<(), String> {
     {
         return bad("sequence.step", "must be at least 1".into());
     }
+    // A width of 3e8 once padded every block number to 300 MB.
+    if let Some(s) = d.sequence
+        && s.width > MAX_SEQUENCE_WIDTH
+    {
+        return bad("sequence.width", format!("at most {MAX_SEQUENCE_WIDTH} digits"));
+    }
+    words(d).map_err(|(key, problem)| format!("{file}: {key}: {problem}"))?;
     let f = d.format;
     for (k, v) in [
         ("format.linear_mm", f.linear_mm),
@@ -295,8 +302,70 @@ fn validate(d: &Dialect, file: &str, id: Option<&str>) -> Result<(), String> {
         return bad("clamps", format!("{k:?}: a rotary is A, B or C"));
     }
     let lines = d.begin.iter().chain(&d.end).map(|f| f.text.as_str());
-    if let Some(l) = lines.chain(d.tool_change.iter().map(String::as_str)).find(|l| l.contains('\n')) {
-        return bad("begin/end/tool_change", format!("{l:?}: one line each"));
+    if let Some(l) = lines.chain(d.tool_change.iter().map(String::as_str)).find(|l| l.chars().any(char::is_control)) {
+        return bad("begin/end/tool_change", format!("{}: one line each", crate::text::quote(l)));
+    }
+    Ok(())
+}
+
+/// The most digits a block number is padded to.
+const MAX_SEQUENCE_WIDTH: u32 = 9;
+/// The longest a dialect's word key may be.
+const MAX_WORD: usize = 200;
+
+/// The dialect's words held as a profile's are: each key one line of at most [`MAX_WORD`]
+/// characters without control characters (a multi-line `safe_start` wrote `G0 Z-500` as a block
+/// of its own), a clamp one word (`"M10 M30"` wrote an `M30`). The error: the key, the problem.
+fn words(d: &Dialect) -> Result<(), (String, String)> {
+    let one_line = [
+        ("units_mm", &d.units_mm),
+        ("units_inch", &d.units_inch),
+        ("safe_start", &d.safe_start),
+        ("rapid", &d.rapid),
+        ("feed", &d.feed),
+        ("feed_per_min", &d.feed_per_min),
+        ("tool_preselect", &d.tool_preselect),
+        ("length_comp", &d.length_comp),
+        ("tcp_on", &d.tcp_on),
+        ("tcp_off", &d.tcp_off),
+        ("machine_z_up", &d.machine_z_up),
+        ("spindle", &d.spindle),
+        ("spindle_cw", &d.spindle_cw),
+        ("spindle_ccw", &d.spindle_ccw),
+        ("spindle_off", &d.spindle_off),
+        ("coolant_flood", &d.coolant_flood),
+        ("coolant_mist", &d.coolant_mist),
+        ("coolant_through", &d.coolant_through),
+        ("coolant_off", &d.coolant_off),
+        ("stop", &d.stop),
+        ("optional_stop", &d.optional_stop),
+        ("cutcom_radius", &d.cutcom_radius),
+        ("block_delete", &d.block_delete),
+        ("blend", &d.blend),
+        ("comment", &d.comment.0),
+        ("comment", &d.comment.1),
+    ];
+    let lists = d
+        .work_coordinates
+        .iter()
+        .map(|w| ("work_coordinates", w))
+        .chain(d.inverse_time.iter().map(|w| ("inverse_time", w)))
+        .chain(d.cutcom.iter().chain(d.cutcom_3d.iter().flatten()).map(|w| ("cutcom", w)))
+        .chain(d.harmless_g.iter().map(|w| ("harmless_g", w)));
+    for (key, w) in one_line.into_iter().chain(lists) {
+        if w.chars().count() > MAX_WORD || w.chars().any(char::is_control) {
+            return Err((key.into(), format!("{}: one line of at most {MAX_WORD} characters", crate::text::quote(w))));
+        }
+    }
+    for (axis, pair) in &d.clamps {
+        for w in pair {
+            if w.is_empty() || w.len() > 16 || !w.chars().all(|c| c.is_ascii_alphanumeric() || c == '.' || c == '-') {
+                return Err((
+                    format!("clamps.{axis}"),
+                    format!("{}: one NC word each, lock then unlock, e.g. [\"M10\", \"M11\"]", crate::text::quote(w)),
+                ));
+            }
+        }
     }
     Ok(())
 }

@@ -183,13 +183,21 @@ fn push_comment(buf: &mut String, d: &Dialect, text: &str) {
     };
     buf.push_str(&d.comment.0);
     for c in text.chars().take(room) {
-        buf.push(if c == ')' || c == '(' || c == ';' || c.is_control() {
-            ' '
-        } else {
-            c.to_ascii_uppercase()
-        });
+        buf.push(if closes_comment(c) { ' ' } else { c.to_ascii_uppercase() });
     }
     buf.push_str(&d.comment.1);
+}
+
+/// A character no text from outside may bring into a block: a comment's delimiters (every
+/// dialect's: `(`, `)`, `;`) and control characters (a line break would start a block).
+fn closes_comment(c: char) -> bool {
+    c == ')' || c == '(' || c == ';' || c.is_control()
+}
+
+/// Text from the CL (an operation's name) as a template may write it: what would end a comment
+/// or a block made a space, as in every comment, its case kept, at most 120 characters.
+pub fn comment_safe(text: &str) -> String {
+    text.chars().take(120).map(|c| if closes_comment(c) { ' ' } else { c }).collect()
 }
 
 impl Dialect {

@@ -96,8 +96,13 @@ impl Templates {
                 ));
             }
             // A trial with every variable set finds what only rendering can: an unknown filter
-            // or test, a filter on the wrong kind of value, a loop that runs out of fuel.
-            t.render(Value::from_object(Vars::sample().0)).map_err(|e| template_error(event, &e))?;
+            // or test, a filter on the wrong kind of value, a loop that runs out of fuel, output
+            // over its bounds or a line split where the template does not say; with plausible
+            // values and with the longest and largest each may have.
+            for vars in [Vars::sample(), Vars::worst()] {
+                let text = t.render(Value::from_object(vars.0)).map_err(|e| template_error(event, &e))?;
+                lines(event, &text)?;
+            }
             has[i] = true;
         }
         let env = has.iter().any(|h| *h).then_some(env);
@@ -121,19 +126,36 @@ impl Templates {
             Err(e) => return Some(Err(template_error(event, &e))),
         };
         Some(match t.render(Value::from_object(vars.0.clone())) {
-            Ok(text) if text.len() > MAX_BYTES => Err(format!("templates.{event}: wrote more than {MAX_BYTES} bytes")),
-            Ok(text) => {
-                let lines: Vec<String> =
-                    text.lines().map(str::trim).filter(|l| !l.is_empty()).map(str::to_string).collect();
-                if lines.len() > MAX_LINES {
-                    Err(format!("templates.{event}: wrote more than {MAX_LINES} lines"))
-                } else {
-                    Ok(lines)
-                }
-            }
+            Ok(text) => lines(event, &text),
             Err(e) => Err(template_error(event, &e)),
         })
     }
+}
+
+/// A render's text as blocks, within the bounds: a line break (the template's own) ends a
+/// block; any other control character (a lone carriage return) is refused, so that nothing
+/// starts a block the template did not write as a line.
+fn lines(event: &str, text: &str) -> Result<Vec<String>, String> {
+    if text.len() > MAX_BYTES {
+        return Err(format!("templates.{event}: wrote more than {MAX_BYTES} bytes"));
+    }
+    let mut out = Vec::new();
+    for l in text.split('\n').map(|l| l.strip_suffix('\r').unwrap_or(l)) {
+        if let Some(c) = l.chars().find(|c| c.is_control() && *c != '\t') {
+            return Err(format!(
+                "templates.{event}: wrote the control character U+{:04X} within a line",
+                c as u32
+            ));
+        }
+        let l = l.trim();
+        if !l.is_empty() {
+            out.push(l.to_string());
+        }
+    }
+    if out.len() > MAX_LINES {
+        return Err(format!("templates.{event}: wrote more than {MAX_LINES} lines"));
+    }
+    Ok(out)
 }
 
 fn template_error(event: &str, e: &minijinja::Error) -> String {
@@ -172,6 +194,27 @@ impl Vars {
             .set("operation", "OPERATION")
             .set("tolerance", 0.01)
             .set("dialect", "dialect");
+        v
+    }
+
+    /// Every variable at the longest or largest it may be: an operation's name of 120
+    /// characters (what reaches a template of the CL's), ids of 64, numbers at their bounds.
+    fn worst() -> Vars {
+        let long = |n: usize| "W".repeat(n);
+        let mut v = Vars::default();
+        v.set("tool", i64::from(u32::MAX))
+            .set("length", -99_999.999)
+            .set("diameter", 99_999.999)
+            .set("next_tool", i64::from(u32::MAX))
+            .set("spindle_speed", 999_999)
+            .set("work_offset", "G54.1 P300")
+            .set("program_number", 99_999_999)
+            .set("machine", long(64))
+            .set("date", "2026-12-31 23:59")
+            .set("units", "inch")
+            .set("operation", long(120))
+            .set("tolerance", 1e-6)
+            .set("dialect", long(64));
         v
     }
 

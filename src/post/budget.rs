@@ -1,5 +1,8 @@
 //! What one post may cost, enforced where output is written: the sink the engine writes through
-//! stops the run at the [`Budget`]'s bound (output records per CL byte read, seconds).
+//! stops the run at the [`Budget`]'s bound (output records per CL byte read, seconds). The time
+//! and the reader's going are also looked at where the engine works without writing (between CL
+//! items, between a collision check's samples: [`Sink::halted`]), so that the run stops within a
+//! second of either, not at its next write.
 
 use super::{BlockInfo, Budget, Sink, Summary};
 use crate::diag::Diagnostic;
@@ -16,6 +19,8 @@ pub(super) struct Metered<'a, S: Sink + ?Sized> {
     /// Lines and diagnostics written, and the count at which the bound is next worked out.
     written: u64,
     next_check: u64,
+    /// Looks since the clock was last read ([`Sink::halted`]).
+    polls: u32,
     pub tripped: Option<String>,
 }
 
@@ -28,6 +33,7 @@ impl<'a, S: Sink + ?Sized> Metered<'a, S> {
             started: Instant::now(),
             written: 0,
             next_check: 0,
+            polls: 0,
             tripped: None,
         }
     }
@@ -72,5 +78,25 @@ impl<S: Sink + ?Sized> Sink for Metered<'_, S> {
     }
     fn tool(&mut self, first_block: u64, t: &crate::collide::ToolShape) {
         self.inner.tool(first_block, t)
+    }
+    /// The reader's going at every look, the clock at every 16th (a look costs a few ns, the
+    /// clock some 25; looks come at least once per CL item and per collision sample).
+    fn halted(&mut self) -> bool {
+        if self.tripped.is_some() {
+            return true;
+        }
+        if self.inner.halted() {
+            self.tripped = Some("stopped: the output's reader has gone (a client that left, a cancelled job)".into());
+            return true;
+        }
+        self.polls += 1;
+        if self.polls < 16 {
+            return false;
+        }
+        self.polls = 0;
+        // The time only: the output bound is counted where output is written, as before.
+        let secs = self.started.elapsed().as_secs_f64();
+        self.tripped = self.budget.exceeded(0, self.read, secs);
+        self.tripped.is_some()
     }
 }

@@ -190,6 +190,9 @@ impl<S: Sink + ?Sized> Apply<'_, '_, S> {
                 if let Some(err) = self.failed.take() {
                     return Err(err);
                 }
+                if e.sink.halted() {
+                    return Err(Error::Io(std::io::Error::other("halted")));
+                }
                 e.drain(&mut self.pending, false)?;
                 if let Some(d) = e.strict_error.take().or(src_strict) {
                     return Err(Error::Strict(d));

@@ -441,7 +441,8 @@ impl Settings {
             let least = 2.0 / 10f64.powi(crate::nc::Formats::for_dialect(&o.dialect, m.units).linear as i32);
             if t < least * (1.0 - 1e-9) {
                 return Err(format!(
-                    "tolerance {t} {unit} is finer than the X Y Z words can hold; the smallest that works is {least} {unit}"
+                    "tolerance {} {unit} is finer than the X Y Z words can hold; the smallest that works is {least} {unit}",
+                    short(t)
                 ));
             }
             o.tolerance = t;
@@ -532,6 +533,10 @@ impl Settings {
             if !(c.is_finite() && c >= 0.0 && crate::kinematics::coordinate_ok(c)) {
                 return Err("collision_clearance must be a length of 0 or more".into());
             }
+            // Samples are kept within the clearance: a 1e-9 one asked the most of every move.
+            if c > 0.0 && c < MIN_CLEARANCE {
+                return Err(format!("collision_clearance must be 0 (none) or at least {MIN_CLEARANCE}"));
+            }
             o.collision_clearance = c;
         }
         if let Some(s) = self.stock.as_deref().filter(|s| !s.trim().is_empty()) {
@@ -551,7 +556,22 @@ impl Settings {
     }
 }
 
-/// `x0,y0,z0,x1,y1,z1`: a box by two opposite corners.
+/// A number as an error quotes it: as written where that is short, else in exponent form (1e-300
+/// written out is 301 digits; an error quotes at most 80 characters).
+fn short(v: f64) -> String {
+    let s = v.to_string();
+    if s.len() <= 24 { s } else { format!("{v:e}") }
+}
+
+/// The least clearance, and the least side of a stock or fixture box (samples are kept within
+/// both; any less only multiplies the check's samples).
+const MIN_CLEARANCE: f64 = 0.001;
+/// The farthest a stock or fixture box may reach from the CL's origin (100 m, or 100 000 in):
+/// a ±1e8 one swung its corners through metres a degree.
+const MAX_BOX: f64 = 1e5;
+
+/// `x0,y0,z0,x1,y1,z1`: a box by two opposite corners, its sides at least [`MIN_CLEARANCE`], within
+/// ±[`MAX_BOX`].
 pub fn parse_box(s: &str) -> Result<crate::collide::Solid, String> {
     let v: Vec<f64> = s
         .split(',')
@@ -566,6 +586,12 @@ pub fn parse_box(s: &str) -> Result<crate::collide::Solid, String> {
         max: a.sup(&b),
     };
     solid.check()?;
+    if v.iter().any(|c| c.abs() > MAX_BOX) {
+        return Err(format!("every coordinate within ±{MAX_BOX}: nothing larger stands on a machine tool"));
+    }
+    if (b - a).abs().min() < MIN_CLEARANCE {
+        return Err(format!("each side at least {MIN_CLEARANCE} long"));
+    }
     Ok(solid)
 }
 

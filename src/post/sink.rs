@@ -60,6 +60,13 @@ pub trait Sink {
     /// The tool in the spindle from motion block `first_block` on (its length in force, its
     /// cutter and holder as the collision check sees them): what a preview draws.
     fn tool(&mut self, _first_block: u64, _t: &crate::collide::ToolShape) {}
+    /// Whether the run should stop now, though nothing is being written: whoever reads the
+    /// output has gone (a client that left, a cancelled job). The engine looks between CL items
+    /// and between the samples of a collision check, so a run stops within a second of it
+    /// rather than at its next write, which a long check can hold back for minutes.
+    fn halted(&mut self) -> bool {
+        false
+    }
 }
 
 /// NC text to any writer, one line each.

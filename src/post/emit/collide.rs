@@ -72,9 +72,21 @@ struct Found {
 }
 
 /// The samples along the move from `from` (none: the machine got to `to` some other way) to
-/// `to`, into `found`.
+/// `to`, into `found`; cut short when `halted` says the run is stopping (over its time, its
+/// reader gone): a move of thousands of samples on meshes can take minutes.
 #[allow(clippy::too_many_arguments)]
-fn sweep(world: &mut crate::collide::World, m: &Machine, from: Option<Ends>, to: Ends, way: &Way, len: f64, wo: &Vec3, stock: bool, found: &mut Found) {
+fn sweep(
+    world: &mut crate::collide::World,
+    m: &Machine,
+    from: Option<Ends>,
+    to: Ends,
+    way: &Way,
+    len: f64,
+    wo: &Vec3,
+    stock: bool,
+    found: &mut Found,
+    halted: &mut dyn FnMut() -> bool,
+) {
     let path = from.map_or(0.0, |_| way.path(m, world.pivots()));
     if world.move_clear(m, from, to, len, wo, stock, path) {
         found.samples += 1;
@@ -87,6 +99,9 @@ fn sweep(world: &mut crate::collide::World, m: &Machine, from: Option<Ends>, to:
     found.samples += n;
     let hits = &mut found.hits;
     for k in 1..=n {
+        if halted() {
+            return;
+        }
         let (lin, act) = match from.filter(|_| k < n) {
             Some(f) => way.at(m, f, to, k as f64 / n as f64),
             None => (*to.0, *to.1),
@@ -133,7 +148,9 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         let Some(world) = self.world.as_mut() else { return };
         let from = prev.map(|p| (&p.joints.linear, &p.actual));
         let to = (&to.joints.linear, &to.actual);
-        sweep(world, self.m, from, to, &way, self.setup.tool_length, &self.setup.work_offset, stock, found);
+        let sink = &mut *self.sink;
+        let (len, wo) = (self.setup.tool_length, &self.setup.work_offset);
+        sweep(world, self.m, from, to, &way, len, wo, stock, found, &mut || sink.halted());
     }
 
     /// What `found` found, as diagnostics of the block at `line`.
@@ -146,7 +163,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                 Some(line),
                 format!(
                     "the move to this block was checked for collisions at {} samples, up to {apart:.3} {unit} of body motion apart where the check keeps them within {step:.3} {unit} (the clearance, or half the smallest body where less): a thin body or a shallow overlap could pass between two unseen",
-                    crate::collide::MAX_SAMPLES
+                    found.samples
                 ),
             ));
         }

@@ -26,7 +26,8 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             .set("machine", self.m.id.clone())
             .set("date", crate::text::utc_now())
             .set("units", self.m.units.as_str())
-            .set_opt("operation", self.operation.clone())
+            // The CL's text: it may not close the template's comment or start a block.
+            .set_opt("operation", self.operation.as_deref().map(crate::nc::comment_safe))
             .set("tolerance", self.o.tolerance)
             .set("dialect", self.o.dialect.name.clone());
         v
