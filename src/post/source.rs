@@ -665,6 +665,8 @@ impl<R: BufRead> Source<R> {
             Record::Clearance(plane) => self.clearance(plane),
             Record::Retract => self.retract(line),
             Record::Cycle(c) => {
+                // A cycle's own feed is a feed: its holes are not cut at rapid.
+                self.fed |= c.feed.is_some();
                 self.cycle = Some(self.r_at_or_above_top(c, line));
                 // Canned output says per hole what it could not write as a cycle.
                 if self.canned_cycles || c.kind.canned_only() {
