@@ -695,3 +695,87 @@ async fn a_failed_jobs_diagnostics_end_with_its_error_even_when_cut_short() {
     assert_eq!(mended.len(), records.len() - 1);
     assert_eq!(mended.last().unwrap()["error"]["detail"], failed["error"]);
 }
+
+/// An Idempotency-Key names one request: given again with the same CL, machine and options it is
+/// that job (however the query is ordered, whatever was written to the machine's tool table
+/// since); with another input, machine, option or dialect it is a 422 naming the job, never that
+/// job as if it were the answer. Rows from before the digest was kept answer by the key alone.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_idempotency_key_given_with_another_request_is_refused() {
+    use sqlx::{ConnectOptions, Connection};
+    const TOKEN: &str = "crib";
+    let mut cfg = common::cfg();
+    cfg.workers = 0;
+    cfg.admin_token = Some(TOKEN.into());
+    let base = common::server(cfg.clone()).await;
+    let c = reqwest::Client::new();
+    let cl = common::generated("dmg-dmc75v", 200, 3);
+    let submit = |key: &'static str, query: &'static str, body: Vec<u8>| {
+        let c = c.clone();
+        let url = format!("{base}/v1/jobs?{query}");
+        async move {
+            let r = c.post(url).header("idempotency-key", key).body(body).send().await.unwrap();
+            let status = r.status().as_u16();
+            (status, r.json::<Value>().await.unwrap())
+        }
+    };
+    let first = "machine=dmg-dmc75v&sequence_numbers=true";
+    let (status, j) = submit("k1", first, cl.clone()).await;
+    assert_eq!(status, 202, "{j}");
+    let id = j["id"].as_str().unwrap().to_string();
+    for query in [first, "sequence_numbers=true&machine=dmg-dmc75v"] {
+        let (status, j) = submit("k1", query, cl.clone()).await;
+        assert_eq!((status, j["id"].as_str()), (202, Some(id.as_str())), "{query}: {j}");
+    }
+
+    let other_cl = common::generated("dmg-dmc75v", 200, 4);
+    for (query, body, what) in [
+        (first, other_cl.clone(), "another CL input"),
+        ("machine=dmg-dmc75v", cl.clone(), "other options"),
+        ("machine=dmg-dmc75v&sequence_numbers=true&dialect=fanuc", cl.clone(), "other options"),
+        ("machine=haas-umc750&sequence_numbers=true", cl.clone(), "other options"),
+        ("machine=haas-umc750", other_cl.clone(), "another CL input and other options"),
+    ] {
+        let (status, p) = submit("k1", query, body).await;
+        assert_eq!(status, 422, "{query}: {p}");
+        assert_eq!(p["type"], "https://kinepost.dev/problems/idempotency-key-reused", "{p}");
+        assert_eq!(p["title"], "Idempotency-Key reused with another request");
+        let detail = p["detail"].as_str().unwrap();
+        assert!(detail.contains(&id) && detail.contains(what), "{query}: {detail}");
+    }
+
+    // The machine's tool table written since: a version resolved by the service, not asked for.
+    let r = c
+        .put(format!("{base}/v1/machines/dmg-dmc75v/tools"))
+        .header("authorization", format!("Bearer {TOKEN}"))
+        .header("content-type", "application/toml")
+        .body("units = \"mm\"\n[[tool]]\nnumber = 1\nlength = 120\ndiameter = 10\n")
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 201, "{}", r.text().await.unwrap());
+    let (status, j) = submit("k1", first, cl.clone()).await;
+    assert_eq!((status, j["id"].as_str()), (202, Some(id.as_str())), "{j}");
+    assert_eq!(j["tool_table_version"], Value::Null, "the job keeps what it was accepted with");
+
+    // Two submissions racing with one new key and two inputs: one job, one refusal.
+    let (a, b) = tokio::join!(submit("k2", first, cl.clone()), submit("k2", first, other_cl.clone()));
+    let mut statuses = [a.0, b.0];
+    statuses.sort();
+    assert_eq!(statuses, [202, 422], "{} / {}", a.1, b.1);
+
+    // A row written before the digest was kept: the key alone, as then.
+    let mut db = sqlx::sqlite::SqliteConnectOptions::new()
+        .filename(cfg.data_dir.join("jobs.sqlite"))
+        .connect()
+        .await
+        .unwrap();
+    sqlx::query("UPDATE jobs SET request_digest = NULL WHERE id = $1")
+        .bind(&id)
+        .execute(&mut db)
+        .await
+        .unwrap();
+    db.close().await.unwrap();
+    let (status, j) = submit("k1", "machine=haas-umc750", other_cl).await;
+    assert_eq!((status, j["id"].as_str()), (202, Some(id.as_str())), "{j}");
+}

@@ -180,6 +180,20 @@ async fn two_replicas_share_one_queue_and_take_over_a_dead_ones_job() {
         same.push(j["id"].as_str().unwrap().to_string());
     }
     assert_eq!(same[0], same[1]);
+    // The key with another request, on either replica: refused, naming the job it is.
+    for base in [&a.base, &b.base] {
+        let r = c
+            .post(format!("{base}/v1/jobs?machine=dmg-dmc75v"))
+            .header("idempotency-key", "op-40")
+            .body(common::generated("dmg-dmc75v", 100, 2))
+            .send()
+            .await
+            .unwrap();
+        assert_eq!(r.status(), 422);
+        let p: Value = r.json().await.unwrap();
+        assert_eq!(p["type"], "https://kinepost.dev/problems/idempotency-key-reused", "{p}");
+        assert!(p["detail"].as_str().unwrap().contains(&same[0]), "{p}");
+    }
     let long: Value = c
         .post(format!("{}/v1/jobs?machine=dmg-dmc75v", a.base))
         .body(common::generated("dmg-dmc75v", 400_000, 9))

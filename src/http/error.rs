@@ -68,6 +68,9 @@ pub enum ApiError {
     /// The server's disk is full: the request was not accepted (retry later or elsewhere).
     #[error("{0}")]
     InsufficientStorage(String),
+    /// An Idempotency-Key already given with another request (`POST /v1/jobs`).
+    #[error("{0}")]
+    KeyReused(String),
     /// The post went over the server's bound on output per CL byte or on time.
     #[error("{0}")]
     OverBudget(String),
@@ -131,6 +134,11 @@ impl ApiError {
                 "Insufficient storage",
             ),
             ApiError::OverBudget(_) => (StatusCode::UNPROCESSABLE_ENTITY, "over-budget", "Post over its bound"),
+            ApiError::KeyReused(_) => (
+                StatusCode::UNPROCESSABLE_ENTITY,
+                "idempotency-key-reused",
+                "Idempotency-Key reused with another request",
+            ),
         };
         let (line, column, code) = match self {
             ApiError::BadRecord { line, column, code, .. } => (*line, *column, Some(code.to_string())),

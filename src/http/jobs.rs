@@ -171,6 +171,7 @@ impl From<jobs::Error> for ApiError {
             jobs::Error::Full(n) => ApiError::Busy(format!("the job queue is full ({n} jobs waiting)")),
             e @ jobs::Error::Unconfirmed(_) => ApiError::Busy(e.to_string()),
             e @ jobs::Error::ClientLimit { .. } => ApiError::TooManyRequests(e.to_string()),
+            e @ jobs::Error::KeyReused { .. } => ApiError::KeyReused(e.to_string()),
             jobs::Error::WrongState { id, state } => ApiError::Conflict(format!("job {id} is {state}")),
             jobs::Error::Upload(m) => upload_error(m),
             e @ jobs::Error::NoSpace(_) => ApiError::InsufficientStorage(e.to_string()),
@@ -196,7 +197,7 @@ fn job_id(id: &str) -> Result<&str, ApiError> {
 #[utoipa::path(
     post,
     path = "/v1/jobs",
-    params(PostParams, ("Idempotency-Key" = Option<String>, Header, description = "1–200 characters; the same key returns the same job")),
+    params(PostParams, ("Idempotency-Key" = Option<String>, Header, description = "1–200 characters; the same key with the same request (CL input, machine, options) returns the same job, with another request it is refused (422)")),
     request_body(content = String, description = "CL data (APT/CLSF text), raw or as the `file` part of multipart/form-data", content_type = "text/plain"),
     responses(
         (status = 202, description = "Accepted: on disk, queued", body = JobView),
@@ -205,6 +206,7 @@ fn job_id(id: &str) -> Result<&str, ApiError> {
         (status = 408, description = "Upload slower than --min-upload-rate: not accepted", body = super::error::Problem, content_type = "application/problem+json"),
         (status = 413, description = "Upload too large, or a form field over 64 KiB", body = super::error::Problem, content_type = "application/problem+json"),
         (status = 415, description = "Unsupported media type", body = super::error::Problem, content_type = "application/problem+json"),
+        (status = 422, description = "The Idempotency-Key is another request's: a job was accepted with it for another CL input, machine or options (type `idempotency-key-reused`)", body = super::error::Problem, content_type = "application/problem+json"),
         (status = 429, description = "This client has its limit of jobs queued or running (Retry-After)", body = super::error::Problem, content_type = "application/problem+json"),
         (status = 507, description = "The spool's disk is full: not accepted (Retry-After)", body = super::error::Problem, content_type = "application/problem+json"),
         (status = 503, description = "Queue full, or the job store not answering now: a database restarting, a lost connection (Retry-After)", body = super::error::Problem, content_type = "application/problem+json"),

@@ -58,6 +58,10 @@ pub enum Error {
     /// One client may not fill the queue for everyone.
     #[error("{client} has {active} jobs queued or running (the limit per client)")]
     ClientLimit { client: String, active: u64 },
+    /// An Idempotency-Key given again with a request other than the one its job was accepted
+    /// with: answering with that job would answer another question.
+    #[error("Idempotency-Key {} is job {job}'s, which was submitted with {what}: a new request needs a new key", crate::text::quote(.key))]
+    KeyReused { key: String, job: String, what: &'static str },
     #[error("job {id} is {state}")]
     WrongState { id: String, state: State },
     #[error("machine catalog: {0}")]
@@ -190,7 +194,8 @@ impl Queue {
 
     /// Accepts a job: the input is streamed to the spool and fsynced before the row commits, the
     /// limits counted as the row is inserted (the counts before spooling only refuse early).
-    /// With an idempotency key already seen, returns that job (and `false`).
+    /// With an idempotency key already seen, returns that job (and `false`), if this is the
+    /// request it was accepted with (`KeyReused` else).
     pub async fn submit(
         &self,
         settings: post::Settings,
@@ -200,10 +205,11 @@ impl Queue {
         client: Option<String>,
         input: impl tokio::io::AsyncRead + Unpin,
     ) -> Result<(Job, bool), Error> {
+        let options = store::options_digest(&settings);
         if let Some(k) = &idempotency_key
             && let Some(j) = self.store.by_key(k).await?
         {
-            return Ok((j, false));
+            return Ok((self.store.resubmitted(j, &options, input).await?, false));
         }
         let waiting = self.store.count(State::Queued).await?;
         if waiting >= self.config.max_queued {
@@ -226,6 +232,7 @@ impl Queue {
             client,
             filename,
             key: idempotency_key,
+            options,
             max_queued: self.config.max_queued,
             max_per_client: self.config.max_per_client,
         };

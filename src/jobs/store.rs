@@ -8,7 +8,7 @@ mod accept;
 mod retry;
 mod sweep;
 
-pub use accept::Submission;
+pub use accept::{Submission, options_digest};
 pub use retry::MAX_BACKOFF;
 
 use super::Error;
@@ -76,6 +76,9 @@ pub struct Job {
     pub settings: Settings,
     pub filename: Option<String>,
     pub idempotency_key: Option<String>,
+    /// What identifies the request a key was given with (`accept::digest`): the same key with
+    /// another request is refused. `None` in rows written before it was kept: the key alone.
+    pub request_digest: Option<String>,
     pub input_bytes: u64,
     pub created_ms: i64,
     pub started_ms: Option<i64>,
@@ -108,6 +111,7 @@ impl Job {
             settings: Settings::default(),
             filename: None,
             idempotency_key: None,
+            request_digest: None,
             input_bytes: 0,
             created_ms,
             started_ms: None,
@@ -218,18 +222,20 @@ const SCHEMA: &str = "CREATE TABLE IF NOT EXISTS jobs (
     heartbeat_ms BIGINT,
     client TEXT,
     cause TEXT,
-    not_before_ms BIGINT
+    not_before_ms BIGINT,
+    request_digest TEXT
 );
 CREATE INDEX IF NOT EXISTS jobs_state ON jobs (state, created_ms)";
 
 /// Columns added after the first release of the table, for stores made before them.
-const ADDED: [(&str, &str); 6] = [
+const ADDED: [(&str, &str); 7] = [
     ("machine_version", "BIGINT"),
     ("owner", "TEXT"),
     ("heartbeat_ms", "BIGINT"),
     ("client", "TEXT"),
     ("cause", "TEXT"),
     ("not_before_ms", "BIGINT"),
+    ("request_digest", "TEXT"),
 ];
 
 fn now_ms() -> i64 {
@@ -252,6 +258,7 @@ fn row_job(r: &AnyRow) -> Result<Job, Error> {
         settings: serde_json::from_str(&settings).map_err(|e| Error::Corrupt(format!("job settings: {e}")))?,
         filename: r.try_get("filename")?,
         idempotency_key: r.try_get("idempotency_key")?,
+        request_digest: r.try_get("request_digest")?,
         input_bytes: u("input_bytes")?,
         created_ms: r.try_get("created_ms")?,
         started_ms: r.try_get("started_ms")?,

@@ -1,13 +1,16 @@
 //! Accepting a job: its input made durable in the spool, then its row committed, the queue's
 //! limits counted in the same step. A job is acknowledged only once both exist. When the
 //! database's answer is lost (the connection cut at commit), the insert, idempotent on the job id,
-//! is asked again; the input is removed only once it is known that no row owns it.
+//! is asked again; the input is removed only once it is known that no row owns it. A job keeps
+//! a digest of its request, so that its Idempotency-Key, given again with another request, is
+//! refused rather than answered with a job that is not the one asked for.
 
 use super::{Backend, Job, Paths, State, Store, now_ms, sync_dir};
 use crate::jobs::Error;
 use crate::post::Settings;
+use sha2::{Digest, Sha256};
 use std::time::Duration;
-use tokio::io::AsyncWriteExt;
+use tokio::io::{AsyncReadExt, AsyncWriteExt};
 
 /// PostgreSQL: job inserts hold this transaction lock, so that the limits are counted and the
 /// row inserted as one step across replicas, and so that an insert cut off at commit has ended,
@@ -28,6 +31,8 @@ pub struct Submission {
     pub client: Option<String>,
     pub filename: Option<String>,
     pub key: Option<String>,
+    /// The options' half of the request's digest ([`options_digest`]).
+    pub options: String,
     /// Jobs queued at most (the new one not counted).
     pub max_queued: u64,
     /// Jobs queued or running for one client at most; 0: no limit.
@@ -63,8 +68,8 @@ fn outcome_unknown(e: &sqlx::Error) -> bool {
 /// The job row, limits checked in its `WHERE`: no row is inserted when the queue or the client is
 /// at its limit, or the idempotency key is taken, or the id exists (an earlier attempt's row).
 const INSERT: &str =
-    "INSERT INTO jobs (id, state, machine, machine_version, settings, filename, idempotency_key, input_bytes, created_ms, client)
-    SELECT $1, 'queued', $2, $3, $4, $5, $6, $7, $8, $9
+    "INSERT INTO jobs (id, state, machine, machine_version, settings, filename, idempotency_key, input_bytes, created_ms, client, request_digest)
+    SELECT $1, 'queued', $2, $3, $4, $5, $6, $7, $8, $9, $12
     WHERE (SELECT COUNT(*) FROM jobs WHERE state = 'queued') < $10
       AND (SELECT COUNT(*) FROM jobs WHERE client = $9 AND state IN ('queued', 'running')) < $11
     ON CONFLICT DO NOTHING";
@@ -79,13 +84,14 @@ impl Store {
     ) -> Result<(Job, bool), Error> {
         let id = uuid::Uuid::new_v4().simple().to_string();
         let p = Paths::new(&self.spool, &id, 0);
-        let n = self.spool_input(&id, &p, input).await?;
+        let (n, input_digest) = self.spool_input(&id, &p, input).await?;
         let machine = s.settings.machine.clone().unwrap_or_default();
         let job = Job {
             machine_version: Some(s.machine_version),
             settings: s.settings.clone(),
             filename: s.filename.clone(),
             idempotency_key: s.key.clone(),
+            request_digest: Some(format!("{}:{input_digest}", s.options)),
             input_bytes: n,
             ..Job::new(id, State::Queued, machine, now_ms())
         };
@@ -104,11 +110,12 @@ impl Store {
             }
             Ok(false) => {
                 let _ = tokio::fs::remove_file(&p.input).await;
-                // Two submissions with one key raced: the first one's job is the answer.
+                // Two submissions with one key raced: the first one's job is the answer, if it was
+                // the same request.
                 if let Some(k) = &s.key
                     && let Some(j) = self.by_key(k).await?
                 {
-                    return Ok((j, false));
+                    return same_request(j, &s.options, &input_digest).map(|j| (j, false));
                 }
                 Err(self.refusal(&s).await?)
             }
@@ -133,16 +140,35 @@ impl Store {
         }
     }
 
+    /// A submission whose key names `job`: that job, when the request is the one it was
+    /// accepted with. Its input is read to the end for its digest (the upload's bounds hold),
+    /// written nowhere.
+    pub(in crate::jobs) async fn resubmitted(
+        &self,
+        job: Job,
+        options: &str,
+        input: impl tokio::io::AsyncRead + Unpin,
+    ) -> Result<Job, Error> {
+        if job.request_digest.is_none() {
+            return Ok(job);
+        }
+        let (_, input_digest) = hashed_copy(input, &mut tokio::io::sink())
+            .await
+            .map_err(|e| Error::Upload(e.to_string()))?;
+        same_request(job, options, &input_digest)
+    }
+
     /// The upload, under a temporary name carrying this node (so that a sweep knows whose it
-    /// is), fsynced and renamed to the job's input. A full disk is `NoSpace`: nothing accepted.
-    async fn spool_input(&self, id: &str, p: &Paths, mut input: impl tokio::io::AsyncRead + Unpin) -> Result<u64, Error> {
+    /// is), fsynced and renamed to the job's input; its length and digest. A full disk is
+    /// `NoSpace`: nothing accepted.
+    async fn spool_input(&self, id: &str, p: &Paths, input: impl tokio::io::AsyncRead + Unpin) -> Result<(u64, String), Error> {
         let tmp = self.spool.join(super::sweep::upload_name(id, &self.node));
         let copied = async {
             let mut f = tokio::fs::File::create(&tmp).await?;
-            let n = tokio::io::copy(&mut input, &mut f).await?;
+            let n = hashed_copy(input, &mut f).await?;
             f.flush().await?;
             f.sync_all().await?;
-            Ok::<u64, std::io::Error>(n)
+            Ok::<_, std::io::Error>(n)
         }
         .await;
         let n = match copied {
@@ -204,7 +230,8 @@ impl Store {
             .bind(job.created_ms)
             .bind(&s.client)
             .bind(s.max_queued.min(i64::MAX as u64) as i64)
-            .bind(per_client);
+            .bind(per_client)
+            .bind(&job.request_digest);
         let exists = sqlx::query_scalar::<_, i64>("SELECT COUNT(*) FROM jobs WHERE id = $1").bind(&job.id);
         match self.backend {
             Backend::Sqlite => {
@@ -244,6 +271,63 @@ impl Store {
         }
         Ok(Error::Full(waiting.max(s.max_queued)))
     }
+}
+
+/// The options of a request as the client gave them, hashed: the machine, the options, its own
+/// tool table, the dialect it named; not what the service resolved (the versions of the tool
+/// table and the dialect, the threads), so that the same request asked again after a profile or
+/// table was written is still the same request. Canonical: keys sorted, absent options left out
+/// (an option a later version adds does not change the digest of a request without it).
+pub fn options_digest(settings: &Settings) -> String {
+    let given: std::collections::BTreeMap<String, serde_json::Value> = match serde_json::to_value(settings) {
+        Ok(serde_json::Value::Object(o)) => o
+            .into_iter()
+            .filter(|(k, v)| !v.is_null() && !matches!(k.as_str(), "machine_tools_version" | "dialect_version" | "threads"))
+            .collect(),
+        _ => Default::default(),
+    };
+    hex(&Sha256::digest(serde_json::to_string(&given).unwrap_or_default()))
+}
+
+/// `job`, when it was accepted with this request (`<options>:<input>`, as [`Store::insert`]
+/// keeps it), else the refusal saying what differs.
+fn same_request(job: Job, options: &str, input: &str) -> Result<Job, Error> {
+    let Some((o, i)) = job.request_digest.as_deref().and_then(|d| d.split_once(':')) else {
+        return Ok(job);
+    };
+    let what = match (o == options, i == input) {
+        (true, true) => return Ok(job),
+        (true, false) => "another CL input",
+        (false, true) => "other options (machine, settings, tool table or dialect)",
+        (false, false) => "another CL input and other options",
+    };
+    Err(Error::KeyReused {
+        key: job.idempotency_key.unwrap_or_default(),
+        job: job.id,
+        what,
+    })
+}
+
+/// Copies `input` to `out`: the bytes copied and their SHA-256.
+async fn hashed_copy(
+    mut input: impl tokio::io::AsyncRead + Unpin,
+    out: &mut (impl tokio::io::AsyncWrite + Unpin),
+) -> std::io::Result<(u64, String)> {
+    let (mut hash, mut n) = (Sha256::new(), 0u64);
+    let mut buf = vec![0u8; 64 << 10];
+    loop {
+        let got = input.read(&mut buf).await?;
+        if got == 0 {
+            return Ok((n, hex(&hash.finalize())));
+        }
+        hash.update(&buf[..got]);
+        out.write_all(&buf[..got]).await?;
+        n += got as u64;
+    }
+}
+
+fn hex(bytes: &[u8]) -> String {
+    bytes.iter().map(|b| format!("{b:02x}")).collect()
 }
 
 /// Whether a job's row is there, asked so that an insert cut off at commit has ended first
