@@ -112,6 +112,25 @@ pub(super) fn preselect(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record
     preselected(st, a, diags)
 }
 
+/// The most an `INTOL`/`OUTTOL` may say (CL units): a band wider than this is no tolerance.
+const MAX_TOLERANCE: f64 = 10.0;
+
+/// `INTOL/t` or `OUTTOL/t`: a tolerance of 0 up to [`MAX_TOLERANCE`].
+pub(super) fn tolerance(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
+    let Some(a) = st.args.first() else {
+        st.bad(diags, st.rest_col, format!("{}: expected a tolerance", st.major));
+        return None;
+    };
+    match a.text.trim().parse::<f64>() {
+        Ok(v) if (0.0..=MAX_TOLERANCE).contains(&v) => Some(Record::Tolerance { outer: st.major == "OUTTOL", value: v }),
+        _ => {
+            let msg = format!("{}: expected a tolerance of 0 to {MAX_TOLERANCE}, found {:?}", st.major, a.text.trim());
+            st.bad(diags, a.col, msg);
+            None
+        }
+    }
+}
+
 /// The tool `SELCTL` or `SELECT/TOOL` readies, from its argument.
 fn preselected(st: &Stmt, a: &Arg, diags: &mut Vec<Diagnostic>) -> Option<Record> {
     match a.text.trim().trim_end_matches('.').parse::<u32>() {

@@ -181,6 +181,9 @@ pub enum Record {
     BlockSkip(bool),
     /// `SELCTL/n`: tool `n` readied for the next change.
     Preselect(u32),
+    /// `INTOL/t` (`outer` false) or `OUTTOL/t`: the chordal tolerance the CAM cut the path
+    /// to, inside or outside; with `smoothing` `auto` it sets the control's smoothing word.
+    Tolerance { outer: bool, value: f64 },
     /// NX's `MSYS`: the operation's machine coordinate system (origin, X and Y axes, all in
     /// NX's absolute frame; unit and square); the points and axes after it are in it.
     Mcs { origin: [f64; 3], x: [f64; 3], y: [f64; 3] },
@@ -768,6 +771,7 @@ fn informational(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
         "OPSKIP" => super::flow::block_skip(st, diags),
         "AUXFUN" | "PREFUN" => super::flow::function(st, diags),
         "SELCTL" => super::flow::preselect(st, diags),
+        "INTOL" | "OUTTOL" => super::flow::tolerance(st, diags),
         "SELECT" => super::flow::select(st, diags),
         "MSYS" => super::frames::msys(st, diags),
         // SOLIDWORKS CAM's vendor records: tool and path parameters for its own posts.
