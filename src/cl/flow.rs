@@ -1,6 +1,7 @@
 //! Program-flow records: what the operator's switches and the control's own codes do between
-//! the moves (`OPSKIP`, `AUXFUN`, `PREFUN`, `SELCTL`), and cutter compensation (`CUTCOM`, with
-//! what the CL says its path is: Creo's `$$-> CUTCOM_GEOMETRY_TYPE` comment).
+//! the moves (`OPSKIP`, `AUXFUN`, `PREFUN`, `SELCTL`, `INTOL`/`OUTTOL`, `STOP`, `MODE`), and
+//! cutter compensation (`CUTCOM`, with what the CL says its path is: Creo's
+//! `$$-> CUTCOM_GEOMETRY_TYPE` comment).
 
 use super::record::{Arg, Record, Stmt, num};
 use crate::diag::Diagnostic;
@@ -182,6 +183,24 @@ pub(super) fn select(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
     }
 }
 
+/// An operator's instruction on a stop: CATIA writes it in parentheses, which an NC comment
+/// cannot hold.
+pub(super) fn stop_text(rest: &str) -> String {
+    let t = rest.trim();
+    let t = t.strip_prefix('(').and_then(|t| t.strip_suffix(')')).unwrap_or(t);
+    t.trim().to_string()
+}
+
+/// `MODE/TURN|LATHE` says the moves are a lathe's, `MODE/MILL` a mill's; other modes (a
+/// listing's) are informational.
+pub(super) fn mode(st: &Stmt) -> Option<Record> {
+    match st.args.first().map(Arg::word).as_deref() {
+        Some("TURN" | "LATHE") => Some(Record::Mode { turning: true }),
+        Some("MILL") => Some(Record::Mode { turning: false }),
+        _ => Some(Record::Ignored("MODE".into())),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -249,6 +268,22 @@ mod tests {
             "-> CUTCOM_GEOMETRY_TYPE / SOMETHING",
         ] {
             assert_eq!(rec(c), None, "{c}");
+        }
+    }
+
+    /// `INTOL`/`OUTTOL` read (`outer` for OUTTOL); a tolerance that is no number, negative or
+    /// wider than any is an error at its line, never a guessed band.
+    #[test]
+    fn intol_and_outtol_or_an_error() {
+        let read = |s: &str| {
+            let mut d = Vec::new();
+            (parse_statement(s, 4, &mut d), d)
+        };
+        assert_eq!(read("INTOL/0.005").0, Some(Record::Tolerance { outer: false, value: 0.005 }));
+        assert_eq!(read("OUTTOL/ 0.1 ").0, Some(Record::Tolerance { outer: true, value: 0.1 }));
+        for s in ["INTOL/", "INTOL/FINE", "OUTTOL/-0.01", "OUTTOL/1e9", "INTOL/NaN"] {
+            let (r, d) = read(s);
+            assert!(r.is_none() && d.len() == 1 && d[0].line == Some(4), "{s}: {r:?} {d:?}");
         }
     }
 }

@@ -763,9 +763,9 @@ fn informational(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
         "PPRINT" | "INSERT" => Some(Record::Comment(st.rest.trim().to_string())),
         "STOP" | "OPSTOP" => Some(Record::Stop {
             optional: st.major == "OPSTOP",
-            text: stop_text(st.rest),
+            text: super::flow::stop_text(st.rest),
         }),
-        "MODE" => mode(st),
+        "MODE" => super::flow::mode(st),
         "FINI" | "END" => Some(Record::End),
         "CUTCOM" => super::flow::cutcom(st, diags),
         "OPSKIP" => super::flow::block_skip(st, diags),
@@ -789,24 +789,6 @@ fn informational(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
             diags.push(Diagnostic::new(Code::UnknownRecord, Severity::Warning, Some(st.line), msg).at(st.lead + 1));
             None
         }
-    }
-}
-
-/// An operator's instruction on a stop: CATIA writes it in parentheses, which an NC comment
-/// cannot hold.
-fn stop_text(rest: &str) -> String {
-    let t = rest.trim();
-    let t = t.strip_prefix('(').and_then(|t| t.strip_suffix(')')).unwrap_or(t);
-    t.trim().to_string()
-}
-
-/// `MODE/TURN|LATHE` says the moves are a lathe's, `MODE/MILL` a mill's; other modes (a
-/// listing's) are informational.
-fn mode(st: &Stmt) -> Option<Record> {
-    match st.args.first().map(Arg::word).as_deref() {
-        Some("TURN" | "LATHE") => Some(Record::Mode { turning: true }),
-        Some("MILL") => Some(Record::Mode { turning: false }),
-        _ => Some(Record::Ignored("MODE".into())),
     }
 }
 
