@@ -1735,7 +1735,8 @@ fn smoothing_per_operation_on_every_dialect() {
     use post::Smoothing;
     let cl = two_operations(true);
     // Each dialect: the first operation's lines, the second's, the cancel.
-    let forms: [(&str, &[&str], &[&str], &[&str]); 5] = [
+    type Lines = &'static [&'static str];
+    let forms: [(&str, Lines, Lines, Lines); 5] = [
         ("haas", &["G187 P1 E0.200"], &["G187 P3 E0.010"], &["G187"]),
         ("siemens", &["CYCLE832(0.200, _ROUGH, 1)"], &["CYCLE832(0.010, _FINISH, 1)"], &["CYCLE832()"]),
         ("fanuc", &["G05.1 Q1 R1 (TOL 0.200)"], &["G05.1 Q1 R10 (TOL 0.010)"], &["G05.1 Q0"]),
