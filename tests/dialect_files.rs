@@ -374,3 +374,47 @@ fn a_dialects_keys_are_bounded_and_its_words_are_words() {
     // What a shop writes is still taken.
     kinepost::machines::dialects::parse(&format!("{SHOP}\n[clamps]\nC = [\"M10\", \"M11\"]\n[sequence]\nstart = 1\nstep = 1\nwidth = 5\n"), "ok.toml", None).unwrap();
 }
+
+/// `smoothing` where the job says none: the profile's `[policy] smoothing`, else the dialect's
+/// `[smoothing] default`; a dialect that extends one replaces its levels key by key. Bad values
+/// are refused naming the key.
+#[test]
+fn smoothing_defaults_from_the_profile_and_the_dialect() {
+    use kinepost::post::{Settings, Smoothing};
+    let shop = r#"id = "smooth"
+extends = "haas"
+title = "Haas, finish with high-speed look-ahead"
+[smoothing]
+default = "finish"
+finish = ["G187 P3 E{tol}", "G103 P1"]
+"#;
+    let d = std::sync::Arc::new(kinepost::machines::dialects::parse(shop, "smooth.toml", None).unwrap());
+    assert_eq!(d.smoothing.rough, ["G187 P1 E{tol}"], "the parent's rough level kept");
+    let lib = kinepost::machines::Library::load_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap();
+    let p = lib.get(MACHINE).unwrap();
+    let find = |id: &str| (id == "smooth").then(|| d.clone()).or_else(|| kinepost::nc::dialect(id));
+    let with = |s: Settings, p: &kinepost::machines::Profile| s.profile_options_with(p, None, &find).map(|o| o.smoothing);
+    let job = |v: Option<&str>| Settings { dialect: Some("smooth".into()), smoothing: v.map(Into::into), ..Default::default() };
+    assert_eq!(with(job(None), &p), Ok(Smoothing::Finish), "the dialect's default");
+    assert_eq!(with(job(Some("off")), &p), Ok(Smoothing::Off), "the job's over the dialect's");
+    let mut policed = (*p).clone();
+    policed.doc.policy.get_or_insert_with(|| toml::from_str("").unwrap()).smoothing = Some("rough".into());
+    assert_eq!(with(job(None), &policed), Ok(Smoothing::Rough), "the profile's over the dialect's");
+    assert_eq!(with(job(Some("auto")), &policed), Ok(Smoothing::Auto), "the job's over the profile's");
+    let e = with(job(Some("medium")), &p).unwrap_err();
+    assert!(e.contains("smoothing \"medium\""), "{e}");
+    // From the first feed move, the two finish lines at the job's tolerance (the CL says none).
+    let mut o = kinepost::post::Options::new(&p.machine);
+    o.dialect = d.clone();
+    o.smoothing = Smoothing::Finish;
+    let mut sink = common::collect::Collect::default();
+    kinepost::post::post(two_tools().as_bytes(), &p.machine, &o, &mut sink).unwrap();
+    assert!(sink.nc.contains("\nG187 P3 E0.0004\nG103 P1\n"), "{}", sink.nc);
+    let refused = |t: &str| kinepost::machines::dialects::parse(t, "smooth.toml", None).unwrap_err().to_string();
+    let e = refused(&shop.replace("\"finish\"\n", "\"smooth\"\n"));
+    assert!(e.contains("smoothing.default") && e.contains("\"smooth\""), "{e}");
+    let e = refused(&shop.replace("\"G103 P1\"]", "\"a\", \"b\", \"c\", \"d\"]"));
+    assert!(e.contains("smoothing: at most 4 lines"), "{e}");
+    let e = refused(&shop.replace("\"G103 P1\"]", "\"G103\\nP1\"]"));
+    assert!(e.contains("smoothing:") && e.contains("one line"), "{e}");
+}

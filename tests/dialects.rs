@@ -1699,3 +1699,91 @@ fn a_taps_feed_is_its_pitch_times_the_speed_and_its_hand_the_spindles() {
         }
     }
 }
+
+/// Two operations, the CAM's tolerance band 0.1+0.1 (a roughing) and 0.005+0.005 (a finish),
+/// with two tools and then one: the CL's words change at each `TOOL PATH`.
+fn two_operations(intol: bool) -> String {
+    let tol = |t: &str| if intol { format!("INTOL/{t}\nOUTTOL/{t}\n") } else { String::new() };
+    let op = |name: &str, t: &str, tool: u32, x: u32| {
+        format!(
+            "TOOL PATH/{name},TOOL,EM{tool}\n{}LOADTL/{tool}\nSPINDL/8000,CLW\nRAPID\nGOTO/0,0,50,0,0,1\nGOTO/0,0,5\nFEDRAT/1000\nGOTO/{x},0,5\nGOTO/{x},{x},5\nRAPID\nGOTO/{x},{x},50\n",
+            tol(t)
+        )
+    };
+    format!("UNITS/MM\n{}{}FINI\n", op("POCKET_A", "0.1", 1, 10), op("WALLS_B", "0.005", 2, 20))
+}
+
+fn post_smoothing(dialect: &str, smoothing: post::Smoothing, cl: &str) -> String {
+    let lib = Library::load_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap();
+    let m = lib.get("vmc-3axis").unwrap().machine.clone();
+    let mut o = Options::new(&m);
+    o.dialect = kinepost::nc::dialect(dialect).unwrap();
+    o.smoothing = smoothing;
+    let mut sink = Collect::default();
+    let s = post::post(cl.as_bytes(), &m, &o, &mut sink).unwrap();
+    assert_eq!(s.errors, 0, "{dialect}:\n{}", sink.nc);
+    sink.nc
+}
+
+/// `smoothing` `auto`: each operation's word from its INTOL+OUTTOL, after its OPERATION line
+/// and before its first feed move, each dialect's form and level; cancelled before the tool
+/// change and at the end. A CL that says no tolerance, and `off`, post as before smoothing
+/// existed (the dialect's `blend` only); `finish` forces the level, at the job's tolerance
+/// where the CL says none.
+#[test]
+fn smoothing_per_operation_on_every_dialect() {
+    use post::Smoothing;
+    let cl = two_operations(true);
+    // Each dialect: the first operation's lines, the second's, the cancel.
+    type Lines = &'static [&'static str];
+    let forms: [(&str, Lines, Lines, Lines); 5] = [
+        ("haas", &["G187 P1 E0.200"], &["G187 P3 E0.010"], &["G187"]),
+        ("siemens", &["CYCLE832(0.200, _ROUGH, 1)"], &["CYCLE832(0.010, _FINISH, 1)"], &["CYCLE832()"]),
+        ("fanuc", &["G05.1 Q1 R1 (TOL 0.200)"], &["G05.1 Q1 R10 (TOL 0.010)"], &["G05.1 Q0"]),
+        (
+            "heidenhain",
+            &["CYCL DEF 32.0 TOLERANCE", "CYCL DEF 32.1 T0.200", "CYCL DEF 32.2 HSC-MODE:1"],
+            &["CYCL DEF 32.0 TOLERANCE", "CYCL DEF 32.1 T0.010", "CYCL DEF 32.2 HSC-MODE:0"],
+            &["CYCL DEF 32.0 TOLERANCE", "CYCL DEF 32.1"],
+        ),
+        ("linuxcnc", &["G64 P0.200"], &["G64 P0.010"], &["G64"]),
+    ];
+    for (d, first, second, off) in forms {
+        let nc = post_smoothing(d, Smoothing::Auto, &cl);
+        // Heidenhain numbers every line: compare the words after the number.
+        let lines: Vec<&str> = nc
+            .lines()
+            .map(|l| if d == "heidenhain" { l.split_once(' ').map_or(l, |(_, w)| w) } else { l })
+            .collect();
+        let at = |want: &[&str], from: usize| {
+            (from..lines.len())
+                .find(|&i| lines[i..].starts_with(want))
+                .unwrap_or_else(|| panic!("{d}: {want:?} after line {from}:\n{nc}"))
+        };
+        let is_feed = |l: &str| l.contains("G1 ") || l.contains(" F1000");
+        let a = lines.iter().position(|l| l.contains("OPERATION POCKET_A")).unwrap();
+        let b = lines.iter().position(|l| l.contains("OPERATION WALLS_B")).unwrap();
+        let rough = at(first, a);
+        let finish = at(second, b);
+        assert!(rough < b, "{d}: the roughing word in its own operation:\n{nc}");
+        // Each before its operation's first feed move, none of which comes earlier.
+        let first_feed = |from: usize| (from..lines.len()).find(|&i| is_feed(lines[i])).unwrap();
+        assert_eq!(first_feed(a), rough + first.len(), "{d}: right before the first feed move:\n{nc}");
+        assert_eq!(first_feed(b), finish + second.len(), "{d}: right before the first feed move:\n{nc}");
+        // Cancelled before the second tool's change and at the end.
+        let change = (b..lines.len()).find(|&i| lines[i].contains("M6") || lines[i].starts_with("TOOL CALL 2")).unwrap();
+        let cancel = at(off, b);
+        assert!(cancel < change, "{d}: cancelled before the tool change:\n{nc}");
+        assert!(at(off, finish + second.len()) > finish, "{d}: cancelled at the end:\n{nc}");
+        // No INTOL/OUTTOL, and off: the program without smoothing, byte for byte.
+        let plain = post_smoothing(d, Smoothing::Off, &two_operations(false));
+        assert_eq!(post_smoothing(d, Smoothing::Auto, &two_operations(false)), plain, "{d}: auto without INTOL");
+        let off_nc = post_smoothing(d, Smoothing::Off, &cl);
+        assert!(!off_nc.contains(first[0]) && !off_nc.contains(second[0]), "{d}: off writes none:\n{off_nc}");
+    }
+    // finish: every operation the finish level; the job's tolerance where the CL says none.
+    let nc = post_smoothing("siemens", Smoothing::Finish, &two_operations(false));
+    assert_eq!(nc.matches("CYCLE832(0.010, _FINISH, 1)").count(), 2, "{nc}");
+    let nc = post_smoothing("haas", Smoothing::Rough, &cl);
+    assert!(nc.contains("G187 P1 E0.200") && nc.contains("G187 P1 E0.010"), "{nc}");
+}

@@ -313,6 +313,39 @@ async fn a_spindle_speed_for_a_cl_without_one() {
     assert!(nc.contains("\nS7500 M3\n"), "{nc}");
 }
 
+/// `smoothing=` as a query parameter and a form field: each operation's word in the dialect's
+/// form; a bad value refused with the setting named.
+#[tokio::test]
+async fn smoothing_per_operation_as_a_query_and_a_form_field() {
+    let base = server(cfg()).await;
+    let c = reqwest::Client::new();
+    let cl = "UNITS/MM\nTOOL PATH/A,TOOL,EM1\nINTOL/0.1\nOUTTOL/0.1\nLOADTL/1\nSPINDL/8000,CLW\nRAPID\nGOTO/0,0,50,0,0,1\nGOTO/0,0,5\nFEDRAT/1000\nGOTO/10,0,5\nFINI\n";
+    let post = |q: &str| {
+        c.post(format!("{base}/v1/post?machine=vmc-3axis&dialect=siemens{q}"))
+            .header("content-type", "text/plain")
+            .body(cl)
+    };
+    let nc = post("").text_ok().await;
+    assert!(nc.contains("\nCYCLE832(0.200, _ROUGH, 1)\n") && nc.contains("\nCYCLE832()\n"), "{nc}");
+    let nc = post("&smoothing=finish").text_ok().await;
+    assert!(nc.contains("\nCYCLE832(0.200, _FINISH, 1)\n"), "{nc}");
+    assert!(!post("&smoothing=off").text_ok().await.contains("CYCLE832"));
+    let r = post("&smoothing=medium").send().await.unwrap();
+    assert_eq!(r.status(), 400);
+    let e = r.text().await.unwrap();
+    assert!(e.contains("smoothing") && e.contains("medium"), "{e}");
+    let body = format!(
+        "--XYZ\r\nContent-Disposition: form-data; name=\"machine\"\r\n\r\nvmc-3axis\r\n--XYZ\r\nContent-Disposition: form-data; name=\"dialect\"\r\n\r\nhaas\r\n--XYZ\r\nContent-Disposition: form-data; name=\"smoothing\"\r\n\r\nfinish\r\n--XYZ\r\nContent-Disposition: form-data; name=\"file\"; filename=\"a.cls\"\r\nContent-Type: text/plain\r\n\r\n{cl}\r\n--XYZ--\r\n"
+    );
+    let nc = c
+        .post(format!("{base}/v1/post"))
+        .header("content-type", "multipart/form-data; boundary=XYZ")
+        .body(body)
+        .text_ok()
+        .await;
+    assert!(nc.contains("\nG187 P3 E0.200\n"), "{nc}");
+}
+
 /// Lenient text/plain answers 200 before the program is read: the outcome is in the text, the
 /// blocks with errors marked and a closing comment before the program end.
 #[tokio::test]

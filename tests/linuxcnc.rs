@@ -257,3 +257,35 @@ fn linuxcnc_reads_every_hole_cycle_it_has() {
     let _ = std::fs::remove_dir_all(&dir);
     assert!(failures.is_empty(), "{}", failures.join("\n"));
 }
+
+/// The smoothing words (`G64 P<tol>` per operation, `G64` before a tool change and at the end)
+/// as LinuxCNC's interpreter reads them: two operations at INTOL/OUTTOL 0.1 and 0.005, and the
+/// NX 5-axis file with every operation at the finish level (the job's tolerance: the profile is
+/// in inches).
+#[test]
+fn linuxcnc_reads_the_smoothing_words() {
+    let Some(rs274) = rs274() else { return };
+    let dir = std::env::temp_dir().join(format!("kinepost-rs274-smooth-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let op = |name: &str, t: &str, tool: u32, x: u32| {
+        format!(
+            "TOOL PATH/{name},TOOL,EM{tool}\nINTOL/{t}\nOUTTOL/{t}\nLOADTL/{tool}\nSPINDL/8000,CLW\nRAPID\nGOTO/0,0,50,0,0,1\nGOTO/0,0,5\nFEDRAT/1000\nGOTO/{x},0,5\nGOTO/{x},{x},5\nRAPID\nGOTO/{x},{x},50\n"
+        )
+    };
+    let cl = format!("UNITS/MM\n{}{}FINI\n", op("POCKET_A", "0.1", 1, 10), op("WALLS_B", "0.005", 2, 20));
+    let nc = post_linuxcnc(cl.as_bytes(), "vmc-3axis", |_| {});
+    assert!(nc.contains("\nG64 P0.200\n") && nc.contains("\nG64 P0.010\n") && nc.contains("\nG64\n"), "{nc}");
+    let mut failures: Vec<String> = interpret(&rs274, &dir, &nc).into_iter().collect();
+    let data = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data");
+    let cl = std::fs::read(Path::new(data).join("nx_clsf_mech491_variable_axis_inch_5ax.cls")).unwrap();
+    for mode in ["joint", "tcp"] {
+        let nc = post_linuxcnc(&cl, "haas-umc750", |s| {
+            s.mode = Some(mode.into());
+            s.smoothing = Some("finish".into());
+        });
+        assert!(nc.contains("\nG64 P0.0004\n"), "{mode}:\n{nc}");
+        failures.extend(interpret(&rs274, &dir, &nc).map(|e| format!("{mode}: {e}")));
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+}

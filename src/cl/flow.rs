@@ -1,6 +1,7 @@
 //! Program-flow records: what the operator's switches and the control's own codes do between
-//! the moves (`OPSKIP`, `AUXFUN`, `PREFUN`, `SELCTL`), and cutter compensation (`CUTCOM`, with
-//! what the CL says its path is: Creo's `$$-> CUTCOM_GEOMETRY_TYPE` comment).
+//! the moves (`OPSKIP`, `AUXFUN`, `PREFUN`, `SELCTL`, `INTOL`/`OUTTOL`, `STOP`, `MODE`), and
+//! cutter compensation (`CUTCOM`, with what the CL says its path is: Creo's
+//! `$$-> CUTCOM_GEOMETRY_TYPE` comment).
 
 use super::record::{Arg, Record, Stmt, num};
 use crate::diag::Diagnostic;
@@ -112,6 +113,25 @@ pub(super) fn preselect(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record
     preselected(st, a, diags)
 }
 
+/// The most an `INTOL`/`OUTTOL` may say (CL units): a band wider than this is no tolerance.
+const MAX_TOLERANCE: f64 = 10.0;
+
+/// `INTOL/t` or `OUTTOL/t`: a tolerance of 0 up to [`MAX_TOLERANCE`].
+pub(super) fn tolerance(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
+    let Some(a) = st.args.first() else {
+        st.bad(diags, st.rest_col, format!("{}: expected a tolerance", st.major));
+        return None;
+    };
+    match a.text.trim().parse::<f64>() {
+        Ok(v) if (0.0..=MAX_TOLERANCE).contains(&v) => Some(Record::Tolerance { outer: st.major == "OUTTOL", value: v }),
+        _ => {
+            let msg = format!("{}: expected a tolerance of 0 to {MAX_TOLERANCE}, found {:?}", st.major, a.text.trim());
+            st.bad(diags, a.col, msg);
+            None
+        }
+    }
+}
+
 /// The tool `SELCTL` or `SELECT/TOOL` readies, from its argument.
 fn preselected(st: &Stmt, a: &Arg, diags: &mut Vec<Diagnostic>) -> Option<Record> {
     match a.text.trim().trim_end_matches('.').parse::<u32>() {
@@ -160,6 +180,24 @@ pub(super) fn select(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
             st.bad(diags, st.rest_col, "SELECT: expected TOOL and a tool number".into());
             None
         }
+    }
+}
+
+/// An operator's instruction on a stop: CATIA writes it in parentheses, which an NC comment
+/// cannot hold.
+pub(super) fn stop_text(rest: &str) -> String {
+    let t = rest.trim();
+    let t = t.strip_prefix('(').and_then(|t| t.strip_suffix(')')).unwrap_or(t);
+    t.trim().to_string()
+}
+
+/// `MODE/TURN|LATHE` says the moves are a lathe's, `MODE/MILL` a mill's; other modes (a
+/// listing's) are informational.
+pub(super) fn mode(st: &Stmt) -> Option<Record> {
+    match st.args.first().map(Arg::word).as_deref() {
+        Some("TURN" | "LATHE") => Some(Record::Mode { turning: true }),
+        Some("MILL") => Some(Record::Mode { turning: false }),
+        _ => Some(Record::Ignored("MODE".into())),
     }
 }
 
@@ -230,6 +268,22 @@ mod tests {
             "-> CUTCOM_GEOMETRY_TYPE / SOMETHING",
         ] {
             assert_eq!(rec(c), None, "{c}");
+        }
+    }
+
+    /// `INTOL`/`OUTTOL` read (`outer` for OUTTOL); a tolerance that is no number, negative or
+    /// wider than any is an error at its line, never a guessed band.
+    #[test]
+    fn intol_and_outtol_or_an_error() {
+        let read = |s: &str| {
+            let mut d = Vec::new();
+            (parse_statement(s, 4, &mut d), d)
+        };
+        assert_eq!(read("INTOL/0.005").0, Some(Record::Tolerance { outer: false, value: 0.005 }));
+        assert_eq!(read("OUTTOL/ 0.1 ").0, Some(Record::Tolerance { outer: true, value: 0.1 }));
+        for s in ["INTOL/", "INTOL/FINE", "OUTTOL/-0.01", "OUTTOL/1e9", "INTOL/NaN"] {
+            let (r, d) = read(s);
+            assert!(r.is_none() && d.len() == 1 && d[0].line == Some(4), "{s}: {r:?} {d:?}");
         }
     }
 }

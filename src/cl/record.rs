@@ -181,6 +181,9 @@ pub enum Record {
     BlockSkip(bool),
     /// `SELCTL/n`: tool `n` readied for the next change.
     Preselect(u32),
+    /// `INTOL/t` (`outer` false) or `OUTTOL/t`: the chordal tolerance the CAM cut the path
+    /// to, inside or outside; with `smoothing` `auto` it sets the control's smoothing word.
+    Tolerance { outer: bool, value: f64 },
     /// NX's `MSYS`: the operation's machine coordinate system (origin, X and Y axes, all in
     /// NX's absolute frame; unit and square); the points and axes after it are in it.
     Mcs { origin: [f64; 3], x: [f64; 3], y: [f64; 3] },
@@ -625,14 +628,15 @@ fn informational(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
         "PPRINT" | "INSERT" => Some(Record::Comment(st.rest.trim().to_string())),
         "STOP" | "OPSTOP" => Some(Record::Stop {
             optional: st.major == "OPSTOP",
-            text: stop_text(st.rest),
+            text: super::flow::stop_text(st.rest),
         }),
-        "MODE" => mode(st),
+        "MODE" => super::flow::mode(st),
         "FINI" | "END" => Some(Record::End),
         "CUTCOM" => super::flow::cutcom(st, diags),
         "OPSKIP" => super::flow::block_skip(st, diags),
         "AUXFUN" | "PREFUN" => super::flow::function(st, diags),
         "SELCTL" => super::flow::preselect(st, diags),
+        "INTOL" | "OUTTOL" => super::flow::tolerance(st, diags),
         "SELECT" => super::flow::select(st, diags),
         "MSYS" => super::frames::msys(st, diags),
         // SOLIDWORKS CAM's vendor records: tool and path parameters for its own posts.
@@ -650,24 +654,6 @@ fn informational(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
             diags.push(Diagnostic::new(Code::UnknownRecord, Severity::Warning, Some(st.line), msg).at(st.lead + 1));
             None
         }
-    }
-}
-
-/// An operator's instruction on a stop: CATIA writes it in parentheses, which an NC comment
-/// cannot hold.
-fn stop_text(rest: &str) -> String {
-    let t = rest.trim();
-    let t = t.strip_prefix('(').and_then(|t| t.strip_suffix(')')).unwrap_or(t);
-    t.trim().to_string()
-}
-
-/// `MODE/TURN|LATHE` says the moves are a lathe's, `MODE/MILL` a mill's; other modes (a
-/// listing's) are informational.
-fn mode(st: &Stmt) -> Option<Record> {
-    match st.args.first().map(Arg::word).as_deref() {
-        Some("TURN" | "LATHE") => Some(Record::Mode { turning: true }),
-        Some("MILL") => Some(Record::Mode { turning: false }),
-        _ => Some(Record::Ignored("MODE".into())),
     }
 }
 

@@ -374,6 +374,10 @@ pub struct PostArgs {
     /// change, the next tool the CL loads), cl (where the CL says SELCTL) or off.
     #[arg(long)]
     pub preselect: Option<String>,
+    /// The smoothing word of each operation: auto (the default: once the CL says INTOL/OUTTOL,
+    /// each operation's level from its type, else its tolerance), off, rough or finish.
+    #[arg(long)]
+    pub smoothing: Option<String>,
     /// The collision check against the profile's bodies: on (the default) or off.
     #[arg(long)]
     pub collisions: Option<String>,
@@ -791,6 +795,7 @@ fn post_cmd(
         feed_mode: a.feed_mode.clone(),
         unwind: a.unwind.clone(),
         preselect: a.preselect.clone(),
+        smoothing: a.smoothing.clone(),
         collisions: a.collisions.clone(),
         collision_clearance: a.collision_clearance,
         threads: Some(a.threads),

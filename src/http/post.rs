@@ -97,6 +97,11 @@ pub struct PostParams {
     /// says `SELCTL`; a job's spooled CL is read twice), `cl` (where the CL says `SELCTL`) or
     /// `off`.
     pub preselect: Option<String>,
+    /// The smoothing word of each operation: `auto` (default: once the CL says `INTOL`/`OUTTOL`,
+    /// each operation's level from its type, else its tolerance), `off`, `rough` or `finish`;
+    /// the profile's `[policy] smoothing`, else the dialect's `[smoothing] default`, where
+    /// absent.
+    pub smoothing: Option<String>,
     /// The collision check against the profile's bodies: `on` (default) or `off`.
     pub collisions: Option<String>,
     /// Bodies closer than this (profile units; default 2 mm / 0.08 in): `near_collision`.
@@ -134,6 +139,7 @@ impl PostParams {
             feed_mode: self.feed_mode.clone(),
             unwind: self.unwind.clone(),
             preselect: self.preselect.clone(),
+            smoothing: self.smoothing.clone(),
             collisions: self.collisions.clone(),
             collision_clearance: self.collision_clearance,
             threads: None, // the server's to choose (`Config::post_threads`), not a request's
@@ -182,6 +188,7 @@ impl PostParams {
             "feed_mode" => self.feed_mode = Some(v).filter(|s| !s.is_empty()),
             "unwind" => self.unwind = Some(v).filter(|s| !s.is_empty()),
             "preselect" => self.preselect = Some(v).filter(|s| !s.is_empty()),
+            "smoothing" => self.smoothing = Some(v).filter(|s| !s.is_empty()),
             "collisions" => self.collisions = Some(v).filter(|s| !s.is_empty()),
             "collision_clearance" => self.collision_clearance = if v.trim().is_empty() { None } else { Some(num(&v)?) },
             "stock" => self.stock = Some(v).filter(|s| !s.trim().is_empty()),

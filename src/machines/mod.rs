@@ -115,6 +115,9 @@ pub struct PolicyDoc {
     /// `retract` or `rapids` (`post::Unwind`).
     #[serde(default)]
     pub unwind: Option<String>,
+    /// `auto`, `off`, `rough` or `finish` (`post::Smoothing`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub smoothing: Option<String>,
 }
 
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]

@@ -174,6 +174,11 @@ pub struct Dialect {
     /// none.
     #[serde(default)]
     pub blend: String,
+    /// The smoothing words of an operation by level, `{tol}` its tolerance (`[smoothing]`):
+    /// written before an operation's first feed move (`smoothing`), `off` before a tool change
+    /// and at the end where one is in force. No words: none.
+    #[serde(default)]
+    pub smoothing: Smoothing,
     /// Templates for the program's events (`[templates]`).
     #[serde(skip)]
     pub templates: Templates,
@@ -181,6 +186,27 @@ pub struct Dialect {
     #[serde(skip)]
     pub table: toml::Table,
 }
+
+/// A dialect's `[smoothing]` lines: one list per level, and the cancel.
+#[derive(Clone, Debug, Default, Deserialize, PartialEq, Eq)]
+#[serde(deny_unknown_fields)]
+pub struct Smoothing {
+    /// The job's `smoothing` where neither it nor the profile says (`auto`, `off`, `rough`,
+    /// `finish`; checked by `post::Smoothing`).
+    #[serde(default)]
+    pub default: Option<String>,
+    #[serde(default)]
+    pub rough: Vec<String>,
+    #[serde(default)]
+    pub semifinish: Vec<String>,
+    #[serde(default)]
+    pub finish: Vec<String>,
+    #[serde(default)]
+    pub off: Vec<String>,
+}
+
+/// The most lines a `[smoothing]` level may write (Heidenhain's cycle 32 takes three).
+const MAX_SMOOTHING_LINES: usize = 4;
 
 fn slash() -> String {
     "/".into()
@@ -200,7 +226,7 @@ fn three_or_none<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Option<[Strin
 }
 
 /// Keys whose values are tables merged key by key when a dialect extends another.
-const MERGED_TABLES: [&str; 5] = ["ranges", "format", "sequence", "templates", "clamps"];
+const MERGED_TABLES: [&str; 6] = ["ranges", "format", "sequence", "templates", "clamps", "smoothing"];
 
 /// The largest dialect file read.
 pub const MAX_DIALECT_BYTES: usize = 64 * 1024;
@@ -308,6 +334,10 @@ fn validate(d: &Dialect, file: &str, id: Option<&str>) -> Result<(), String> {
     Ok(())
 }
 
+fn smoothing_lines(s: &Smoothing) -> impl Iterator<Item = &String> {
+    s.rough.iter().chain(&s.semifinish).chain(&s.finish).chain(&s.off)
+}
+
 /// The most digits a block number is padded to.
 const MAX_SEQUENCE_WIDTH: u32 = 9;
 /// The longest a dialect's word key may be.
@@ -351,7 +381,15 @@ fn words(d: &Dialect) -> Result<(), (String, String)> {
         .map(|w| ("work_coordinates", w))
         .chain(d.inverse_time.iter().map(|w| ("inverse_time", w)))
         .chain(d.cutcom.iter().chain(d.cutcom_3d.iter().flatten()).map(|w| ("cutcom", w)))
-        .chain(d.harmless_g.iter().map(|w| ("harmless_g", w)));
+        .chain(d.harmless_g.iter().map(|w| ("harmless_g", w)))
+        .chain(smoothing_lines(&d.smoothing).map(|w| ("smoothing", w)));
+    let s = &d.smoothing;
+    if let Some(m) = s.default.as_deref().filter(|m| !matches!(*m, "auto" | "off" | "rough" | "finish")) {
+        return Err(("smoothing.default".into(), format!("{}: expected auto, off, rough or finish", crate::text::quote(m))));
+    }
+    if [&s.rough, &s.semifinish, &s.finish, &s.off].iter().any(|l| l.len() > MAX_SMOOTHING_LINES) {
+        return Err(("smoothing".into(), format!("at most {MAX_SMOOTHING_LINES} lines a level")));
+    }
     for (key, w) in one_line.into_iter().chain(lists) {
         if w.chars().count() > MAX_WORD || w.chars().any(char::is_control) {
             return Err((key.into(), format!("{}: one line of at most {MAX_WORD} characters", crate::text::quote(w))));

@@ -11,7 +11,7 @@ pub mod plane;
 pub mod read;
 
 pub use cycles::{Canned, CannedKind, CycleLines, Cycles, IsoTaps};
-pub use dialect::{Dialect, Frame, MAX_DIALECT_BYTES, Sequence, WordFormat, parse_dialect};
+pub use dialect::{Dialect, Frame, MAX_DIALECT_BYTES, Sequence, Smoothing, WordFormat, parse_dialect};
 pub use dialects::{BUILTIN_FILES, DIALECTS, Risk, builtins, dialect, function_risk};
 pub use number::{restyle, round_to, write_fixed};
 pub use plane::Planes;
@@ -374,6 +374,15 @@ impl Formatter {
             }
         }
         out
+    }
+
+    /// A dialect's `[smoothing]` lines as written, `{tol}` the operation's tolerance `tol`.
+    pub fn smoothing(&mut self, lines: &[String], tol: f64) -> Vec<String> {
+        let tol = format!("{:.*}", self.fmt.linear as usize, tol);
+        lines.iter().map(|l| {
+            let text = self.fill(&l.replace("{tol}", &tol), 0, 0);
+            self.words(&text).to_string()
+        }).collect()
     }
 
     /// Program end: spindle and coolant off, compensation off (then, `z_up`, the spindle to

@@ -22,7 +22,7 @@ pub mod tools;
 pub mod verify;
 
 pub use emit::linearize::{NONLINEAR_SAMPLES, seg_dist};
-pub use policy::{Prefer, Preselect, Retract, RotaryFeed, Unwind};
+pub use policy::{Prefer, Preselect, Retract, RotaryFeed, Smoothing, Unwind};
 pub use settings::{Budget, MAX_SPINDLE_SPEED, Mode, Options, Settings, parse_triple, threads};
 pub use sink::{AxisStats, AxisWords, BlockInfo, Sink, Summary, TextSink, ToolUse};
 pub use tools::LengthFrom;

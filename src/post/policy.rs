@@ -178,3 +178,34 @@ impl Preselect {
         }
     }
 }
+
+/// Which smoothing word an operation gets (`smoothing`): the dialect's `[smoothing]` lines.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Smoothing {
+    /// Once the CL says `INTOL`/`OUTTOL`: each operation's level from its type where its name
+    /// says (`ROUGH`, `SEMI`, `FINISH`), else from its tolerance; a CL that says none is posted
+    /// as without smoothing.
+    #[default]
+    Auto,
+    /// None: the dialect's `blend` after the safe start only, as before smoothing existed.
+    Off,
+    /// Every operation the rough level, at its tolerance (else the job's).
+    Rough,
+    /// Every operation the finish level, at its tolerance (else the job's).
+    Finish,
+}
+
+impl Smoothing {
+    /// `auto`, `off`, `rough` or `finish`.
+    pub fn parse(text: &str) -> Result<Smoothing, String> {
+        match text.trim() {
+            "auto" => Ok(Smoothing::Auto),
+            "off" => Ok(Smoothing::Off),
+            "rough" => Ok(Smoothing::Rough),
+            "finish" => Ok(Smoothing::Finish),
+            t => Err(format!(
+                "smoothing {t:?}: expected auto (each operation's from its INTOL/OUTTOL and type), off, rough or finish"
+            )),
+        }
+    }
+}

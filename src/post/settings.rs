@@ -48,6 +48,8 @@ pub struct Options {
     pub unwind: super::Unwind,
     /// Which tool is readied while another cuts (`Preselect`).
     pub preselect: super::Preselect,
+    /// Which smoothing word each operation gets (`Smoothing`).
+    pub smoothing: super::Smoothing,
     /// Cone (radians) around a singular direction within which blocks are marked `singular`.
     pub singular_cone: f64,
     /// Orientation tolerance (radians) the free rotary may use near a singular direction: 0 is
@@ -169,6 +171,7 @@ impl Options {
             rotary_feed: super::RotaryFeed::InverseTime,
             unwind: super::Unwind::RetractInCut,
             preselect: super::Preselect::Next,
+            smoothing: super::Smoothing::Auto,
             singular_cone: 2f64.to_radians(),
             singular_tolerance: 0.0,
             clamps: Default::default(),
@@ -297,6 +300,11 @@ pub struct Settings {
     /// `SELCTL`) or `off`.
     #[serde(default)]
     pub preselect: Option<String>,
+    /// The smoothing word of each operation: `auto` (default: once the CL says `INTOL`/`OUTTOL`,
+    /// each operation's level from its type or tolerance), `off`, `rough` or `finish`; the
+    /// profile's `[policy] smoothing`, else the dialect's `[smoothing] default`, where absent.
+    #[serde(default)]
+    pub smoothing: Option<String>,
     /// The collision check: `on` (the default: every block, where the profile gives bodies) or
     /// `off`.
     #[serde(default)]
@@ -352,6 +360,9 @@ impl Settings {
         if let (None, Some(u)) = (&self.unwind, policy(|d| &d.unwind)) {
             o.unwind = super::Unwind::parse(u)?;
         }
+        if let (None, Some(s)) = (self.smoothing.as_deref().filter(|s| !s.trim().is_empty()), policy(|d| &d.smoothing)) {
+            o.smoothing = super::Smoothing::parse(s)?;
+        }
         if let (None, Some(side)) = (o.prefer, policy(|d| &d.prefer)) {
             o.prefer = Some(super::Prefer::parse(side, &p.machine)?);
         }
@@ -406,6 +417,10 @@ impl Settings {
         }
         if let Some(p) = self.preselect.as_deref().filter(|p| !p.trim().is_empty()) {
             o.preselect = super::Preselect::parse(p)?;
+        }
+        let smoothing = self.smoothing.as_deref().filter(|s| !s.trim().is_empty());
+        if let Some(s) = smoothing.or(o.dialect.smoothing.default.as_deref()) {
+            o.smoothing = super::Smoothing::parse(s)?;
         }
         if let Some(u) = self.unwind.as_deref().filter(|u| !u.trim().is_empty()) {
             o.unwind = super::Unwind::parse(u)?;

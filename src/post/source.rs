@@ -121,6 +121,11 @@ pub enum ProgEvent {
         code: String,
         line: u32,
     },
+    /// `INTOL` (`outer` false) or `OUTTOL`: the CAM's tolerance (profile units).
+    Tolerance {
+        outer: bool,
+        value: f64,
+    },
     /// The next tool readied (`SELCTL`).
     Preselect {
         tool: u32,
@@ -624,6 +629,10 @@ impl<R: BufRead> Source<R> {
                 self.out.push_back(Item::Event(ProgEvent::Function { letter, code, line }))
             }
             Record::Preselect(tool) => self.out.push_back(Item::Event(ProgEvent::Preselect { tool, line })),
+            Record::Tolerance { outer, value } => {
+                let value = value * self.scale;
+                self.out.push_back(Item::Event(ProgEvent::Tolerance { outer, value }))
+            }
             Record::BlockSkip(on) => self.out.push_back(Item::Event(ProgEvent::BlockSkip { on, line })),
             Record::Mcs { origin, x, y } => self.mcs(origin, x, y, line),
             Record::CutterComp(comp) => {

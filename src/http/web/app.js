@@ -47,7 +47,7 @@ async function loadDialects() {
 function showSettings(s) {
   if (!s) return;
   $('mode').value = s.mode || 'joint';
-  for (const k of ['dialect', 'cycles', 'planes', 'work_coordinates', 'tool_length', 'work_offset', 'spindle_speed', 'retract', 'prefer', 'feed_mode', 'unwind', 'preselect']) {
+  for (const k of ['dialect', 'cycles', 'planes', 'work_coordinates', 'tool_length', 'work_offset', 'spindle_speed', 'retract', 'prefer', 'feed_mode', 'unwind', 'preselect', 'smoothing']) {
     const el = $(k);
     if (el) el.value = s[k] === undefined ? '' : String(s[k]);
   }
@@ -77,7 +77,7 @@ async function submit(ev) {
   const f = $('file').files[0];
   if (!f) return;
   const q = new URLSearchParams({ machine: $('machine').value, mode: $('mode').value });
-  for (const k of ['dialect', 'cycles', 'planes', 'work_coordinates', 'tool_length', 'work_offset', 'spindle_speed', 'retract', 'prefer', 'feed_mode', 'unwind', 'preselect']) if ($(k).value.trim()) q.set(k, $(k).value.trim());
+  for (const k of ['dialect', 'cycles', 'planes', 'work_coordinates', 'tool_length', 'work_offset', 'spindle_speed', 'retract', 'prefer', 'feed_mode', 'unwind', 'preselect', 'smoothing']) if ($(k).value.trim()) q.set(k, $(k).value.trim());
   $('go').disabled = true;
   $('error').hidden = true;
   $('result').hidden = true; // never show the previous file's result as this one's

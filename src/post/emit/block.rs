@@ -73,6 +73,9 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             None => comment,
         };
         self.unlock_moving(&to.joints)?;
+        if self.smooth.due && !rapid {
+            self.smooth_now()?;
+        }
         let arc = self.arc.take();
         let motion = match (&arc, rapid) {
             (_, true) => Motion::Rapid,

@@ -15,6 +15,7 @@
 //! | the feed and the time of a block | `feed.rs` |
 //! | the block writer and its FK replay | `block.rs` |
 //! | the collision check of each block and the motion to it | `collide.rs` |
+//! | smoothing per operation | `smooth.rs` |
 
 mod arcs;
 mod block;
@@ -31,6 +32,7 @@ mod position;
 mod program;
 mod setups;
 mod singular;
+pub(super) mod smooth;
 mod templates;
 
 use super::{AxisStats, Error, Options, Sink, Source, Summary};
@@ -105,6 +107,8 @@ pub(super) struct Emitter<'a, S: Sink + ?Sized> {
     pub(in crate::post) load_order: Option<Vec<u32>>,
     pub(super) changes: usize,
     pub(super) operation: Option<String>,
+    /// The operation's smoothing word: what it is made from, what is in force.
+    pub(super) smooth: smooth::Smooth,
     /// The next compensation on is a tool's first move (the `first_move` template).
     pub(super) first_move_due: bool,
     /// The tool's length offset register where the CL names one other than its number.
@@ -224,6 +228,7 @@ impl<'a, S: Sink + ?Sized> Emitter<'a, S> {
             changes: 0,
             first_move_due: true,
             operation: None,
+            smooth: smooth::Smooth::new(o.smoothing),
             tool: None,
             cl_cutter: None,
             adjust: None,

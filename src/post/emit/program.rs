@@ -105,6 +105,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         self.retract_up()?;
         self.cut_turns = false;
         self.lock_all()?;
+        self.smooth_off()?;
         // TCP: X Y Z are the tip, and the retract above went the clearance along the tool axis;
         // machine Z home takes the spindle clear of the part whatever comes next.
         let z_up = self.o.mode == Mode::Tcp && self.at.is_some();
@@ -134,6 +135,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                 | ProgEvent::End
                 | ProgEvent::PathMeaning { .. }
                 | ProgEvent::Cutter { .. }
+                | ProgEvent::Tolerance { .. }
         ) {
             self.cancel_cycle()?;
         }
@@ -166,6 +168,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                 }
                 let c = self.f.comment(&format!("OPERATION {name}")).to_string();
                 self.out(&c)?;
+                self.smooth_operation(&name);
                 self.operation = Some(name);
                 self.template("operation_start", None)?;
             }
@@ -174,6 +177,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             ProgEvent::Function { letter, code, line } => self.function(letter, &code, line)?,
             ProgEvent::BlockSkip { on, line } => self.block_skip(on, line)?,
             ProgEvent::Preselect { tool, line } => self.selctl(tool, line)?,
+            ProgEvent::Tolerance { outer, value } => self.cl_tolerance(outer, value),
             ProgEvent::Setup { shift, turned, line, comment } => self.setup_change(shift, turned, line, &comment)?,
             ProgEvent::CutterComp { comp, line, turns } => self.cutter_comp(comp, line, turns),
             ProgEvent::PathMeaning { centre, said, line } => self.path_meaning(centre, said, line),
@@ -233,6 +237,9 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         self.cutcom_end("a tool change")?;
         self.leave_plane(false)?;
         self.retract_up()?;
+        // Fanuc's AI contour control must be off for M6; on every control the next tool's
+        // operation says its own.
+        self.smooth_off()?;
         if self.comp_on {
             let templated = self.o.mode == Mode::Tcp && self.template("tcp_off", Some(line))?;
             if !templated && let Some(l) = self.f.line(&d.tcp_off, number, 0) {
