@@ -2879,8 +2879,8 @@ fn catias_positional_cycle_with_an_empty_field_is_read_by_position() {
 }
 
 /// A word told again and again (an unknown record, a word kinepost does not act on: 72 to 1 559
-/// lines of one in a file) is told once, at its first line, and its count once at the end: one
-/// warning per line drowned the diagnostics that matter.
+/// lines of one in a file) is told by one record a program, naming its first line and its count:
+/// one warning per line drowned the diagnostics that matter, and so did two records a word.
 #[test]
 fn a_repeated_word_is_told_once_with_its_count() {
     let m = machine("vmc-3axis");
@@ -2890,11 +2890,11 @@ fn a_repeated_word_is_told_once_with_its_count() {
     }
     let (sink, s) = run(&m, cl.as_bytes(), &Options::new(&m));
     for (code, first) in [(Code::UnknownRecord, 5), (Code::IgnoredRecord, 6)] {
-        let told: Vec<_> = sink.diags.iter().filter(|d| d.code == code && d.line == Some(first)).collect();
-        let all = sink.diags.iter().filter(|d| d.code == code && d.severity >= Severity::Warning).count();
-        assert_eq!(all, 1, "{:?}", sink.diags);
+        let told: Vec<_> = sink.diags.iter().filter(|d| d.code == code && d.line.is_some()).collect();
         assert!(
-            told.len() == 2 && told[1].severity == Severity::Info && told[1].message.contains("50 records in all, the first at line"),
+            told.len() == 1
+                && told[0].line == Some(first)
+                && told[0].message.contains("(50 records in all, the first at line"),
             "{told:?}"
         );
     }

@@ -99,6 +99,7 @@ fn turning(at: u32, what: &str, first_move: u32) -> Diagnostic {
 /// Why input with no CL record is refused: what it looks like, where.
 fn not_cl<R: BufRead>(reader: &Reader<R>, first: Option<Diagnostic>, read: usize) -> Diagnostic {
     let what = "not CL data (APT/CLSF): post the CL file the CAM system wrote, not an NC program";
+    let first = first.or_else(|| reader.first_held().cloned());
     let (line, message) = match (&reader.nc_seen().first, first) {
         (Some((kind, line, text)), _) => (
             Some(*line),
