@@ -12,6 +12,7 @@ mod foreign;
 mod frames;
 mod moves;
 mod record;
+mod tool;
 pub mod vocabulary;
 
 pub use flow::{CutterComp, Side};
