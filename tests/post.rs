@@ -2901,6 +2901,50 @@ fn a_repeated_word_is_told_once_with_its_count() {
     assert_eq!(s.warnings, 2, "{:?}", sink.diags);
 }
 
+/// A post that stops before the end of its input (strict mode's first error, the budget) still
+/// tells the words the reader held to tell at the end, each with its count so far, on one
+/// thread and on two: held, they were never told.
+#[test]
+fn held_words_are_told_when_a_post_stops_early() {
+    use kinepost::post::Budget;
+    let m = machine("vmc-3axis");
+    let mut cl = String::from("UNITS/MM\nFEDRAT/100,MMPM\nSPINDL/1000\nGOTO/0,0,1\n");
+    for i in 0..40 {
+        cl += &format!("FOOWORD/{i}\nSWITCH/{i}\nGOTO/{},{},1\n", i % 7, i % 5);
+    }
+    let strict = format!("{cl}GOTO/1,2\nGOTO/3,4,5\n");
+    let mut long = cl.clone();
+    for i in 0..3000 {
+        long += &format!("GOTO/{},{},1\n", i % 7, i % 5);
+    }
+    for threads in [1, 2] {
+        let mut o = Options::new(&m);
+        o.threads = threads;
+        o.strict = true;
+        let mut sink = Collect::default();
+        let r = post::post(strict.as_bytes(), &m, &o, &mut sink);
+        assert!(matches!(r, Err(post::Error::Strict(_))), "{r:?}");
+        let mut o = Options::new(&m);
+        o.threads = threads;
+        o.budget = Budget { floor_blocks: 500, blocks_per_byte: 0, seconds: f64::INFINITY };
+        let mut over = Collect::default();
+        let r = post::post(long.as_bytes(), &m, &o, &mut over);
+        assert!(matches!(r, Err(post::Error::Budget(_))), "{r:?}");
+        for sink in [&sink, &over] {
+            for (code, first) in [(Code::UnknownRecord, 5), (Code::IgnoredRecord, 6)] {
+                let told: Vec<_> = sink.diags.iter().filter(|d| d.code == code && d.line.is_some()).collect();
+                assert!(
+                    told.len() == 1
+                        && told[0].line == Some(first)
+                        && told[0].message.contains("(40 records before the post stopped, the first at line"),
+                    "threads {threads}: {:?}",
+                    sink.diags
+                );
+            }
+        }
+    }
+}
+
 /// `GOHOME` is honoured, not an error and nothing: without a point, the tool up to the top of Z
 /// travel and the next move positioning from there; with one, a rapid to it.
 #[test]

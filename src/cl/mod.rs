@@ -395,15 +395,31 @@ impl<R: BufRead> Reader<R> {
     /// At the end: each word held, told once at its first line, with its count where it came
     /// more than once.
     fn tally(&mut self) {
-        let mut told: Vec<_> = self.repeats.drain().map(|(_, r)| r).collect();
-        told.sort_by_key(|(d, _)| d.line);
-        for (mut d, n) in told {
-            if n > 1 {
-                let first = d.line.unwrap_or(0);
-                d.message = format!("{} ({n} records in all, the first at line {first})", d.message);
-            }
+        for d in self.held("in all") {
             self.queue.push_back(Event::Diagnostic(d));
         }
+    }
+
+    /// The words held and not yet told, each at its first line with its count (`whence` says
+    /// over what the count runs), in line order; none are held after. A post that stops before
+    /// the end of its input (an error, its budget, a reader gone) takes them so: held, they
+    /// would never be told, and "nothing silent" would break where it matters most.
+    pub fn take_held(&mut self) -> Vec<Diagnostic> {
+        self.held("before the post stopped")
+    }
+
+    fn held(&mut self, whence: &str) -> Vec<Diagnostic> {
+        let mut told: Vec<_> = self.repeats.drain().map(|(_, r)| r).collect();
+        told.sort_by_key(|(d, _)| d.line);
+        told.into_iter()
+            .map(|(mut d, n)| {
+                if n > 1 {
+                    let first = d.line.unwrap_or(0);
+                    d.message = format!("{} ({n} records {whence}, the first at line {first})", d.message);
+                }
+                d
+            })
+            .collect()
     }
 }
 

@@ -370,6 +370,11 @@ impl<R: BufRead> Source<R> {
         }
     }
 
+    /// The reader's held words not yet told ([`crate::cl::Reader::take_held`]).
+    pub fn take_held(&mut self) -> Vec<Diagnostic> {
+        self.reader.take_held()
+    }
+
     /// CL bytes consumed so far.
     pub fn bytes_read(&self) -> u64 {
         self.reader.bytes_read()
