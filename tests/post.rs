@@ -2738,6 +2738,61 @@ fn a_program_with_no_feed_at_all_is_an_error() {
     assert_eq!((s.errors, sink.only(Code::NoFeed).severity), (0, Severity::Warning));
 }
 
+/// A turning program no record names as one (no lathe tool, no `MODE/TURN`): its cutting moves
+/// fed per revolution (`MMPR`) in one plane through the spindle axis (Y/Z at X0, as CATIA's are)
+/// are a lathe's, refused before anything is written. A milling program fed per revolution off
+/// that plane, or per minute in it, is posted as before.
+#[test]
+fn a_turning_program_is_told_by_its_motion() {
+    let m = machine("vmc-3axis");
+    let head = "UNITS/MM\nLOADTL/1\nSPINDL/500,CCLW\nRAPID\nGOTO/0,40,5\n";
+    let cut = "FEDRAT/0.2,MMPR\nGOTO/0,40,0\nGOTO/0,40,-30\nGOTO/0,45,-30\nGOTO/0,45,-60\nGOTO/0,50,-60\nRAPID\nGOTO/0,60,5\n";
+    let cl = format!("{head}{cut}");
+    let mut sink = Collect::default();
+    match post::post(cl.as_bytes(), &m, &Options::new(&m), &mut sink) {
+        Err(post::Error::NotCl(d)) => {
+            assert_eq!((d.code, d.line), (Code::Turning, Some(7)), "{d}");
+            assert!(d.message.contains("kinepost posts milling") && d.message.contains("per revolution"), "{d}");
+        }
+        other => panic!("{other:?}\n{}", sink.nc),
+    }
+    assert!(sink.nc.is_empty(), "{}", sink.nc);
+    for milling in [
+        cut.replace("MMPR", "MMPM"),
+        cut.replace("GOTO/0,45,-30", "GOTO/3,45,-30"),
+        format!("CUTTER/10\nTLDATA/MILL,10,0,50\n{cut}"),
+    ] {
+        let cl = format!("{head}{milling}");
+        let (sink, s) = run(&m, cl.as_bytes(), &Options::new(&m));
+        assert!(sink.nc.contains("M30") && s.errors == 0, "{cl}\n{:?}", sink.diags);
+    }
+}
+
+/// A `UNITS` record its own file's values contradict (a part 8 m wide under `UNITS/INCHES`: CAM
+/// output in millimetres; a whole program inside 0.3 mm under `UNITS/MM`: metres) is told at the
+/// record, with what was assumed; an ordinary part in either units is not.
+#[test]
+fn a_units_record_its_magnitudes_contradict_is_told() {
+    let m = machine("vmc-3axis");
+    let cl = |u: &str, k: f64| {
+        let mut t = format!("{u}\nLOADTL/1\nFEDRAT/100\n");
+        for i in 0..20 {
+            t += &format!("GOTO/{},{},{}\n", f64::from(i) * 16.0 * k, f64::from(i % 4) * 10.0 * k, k);
+        }
+        t
+    };
+    for (u, k, looks) in [("UNITS/INCHES", 1.0, "millimetres"), ("UNITS/MM", 0.001, "metres")] {
+        let (sink, _) = run(&m, cl(u, k).as_bytes(), &Options::new(&m));
+        let d = sink.only(Code::UnitsAssumed);
+        assert_eq!((d.line, d.severity), (Some(1), Severity::Warning), "{d}");
+        assert!(d.message.contains(looks) && d.message.contains("taken in"), "{d}");
+    }
+    for (u, k) in [("UNITS/INCHES", 0.05), ("UNITS/MM", 1.0)] {
+        let (sink, _) = run(&m, cl(u, k).as_bytes(), &Options::new(&m));
+        assert!(!sink.diags.iter().any(|d| d.code == Code::UnitsAssumed), "{u} {k}: {:?}", sink.diags);
+    }
+}
+
 /// A feed unit that contradicts the file's UNITS (Fusion: `UNITS/INCHES`, `FEDRAT/35.,MMPM`) is
 /// told at its line once, and the slower of the two readings taken: 35 mm/min, not 35 in/min;
 /// 10 mm/min under `UNITS/MM` with `IPM`, not 254.
