@@ -2761,6 +2761,8 @@ fn a_turning_program_is_told_by_its_motion() {
         cut.replace("MMPR", "MMPM"),
         cut.replace("GOTO/0,45,-30", "GOTO/3,45,-30"),
         format!("CUTTER/10\nTLDATA/MILL,10,0,50\n{cut}"),
+        // Taps fed per revolution, in a row through the spindle axis: holes, not a lathe's path.
+        "FEDRAT/1.25,MMPR\nCYCLE/TAP,FEDTO,12,MMPR,1.25,RAPTO,3,RTRCTO,15\nGOTO/0,10,0\nGOTO/0,20,0\nGOTO/0,30,0\nCYCLE/OFF\n".into(),
     ] {
         let cl = format!("{head}{milling}");
         let (sink, s) = run(&m, cl.as_bytes(), &Options::new(&m));

@@ -37,6 +37,9 @@ struct Shape {
     points: u32,
     rapid_next: bool,
     per_rev: bool,
+    /// A hole cycle is on: its points are holes, not a path (taps fed per revolution, holes in
+    /// a row through the origin are no lathe's).
+    cycle: bool,
     /// A cutting move that is no lathe's was seen (fed per minute, off the plane, a milling
     /// tool): the program is milling, whatever follows.
     milling: bool,
@@ -54,6 +57,9 @@ impl Shape {
     fn see(&mut self, r: &Record, line: u32) {
         match r {
             Record::Rapid => self.rapid_next = true,
+            Record::Cycle(_) => self.cycle = true,
+            Record::CycleOff => self.cycle = false,
+            Record::Goto { .. } if self.cycle => {}
             Record::Feedrate { unit, .. } => self.per_rev = *unit == FeedUnit::PerRev,
             Record::ToolData { turning: Some(false), .. } => self.milling = true,
             Record::Goto { p, .. } => self.point(*p, line),
