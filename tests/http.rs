@@ -521,6 +521,42 @@ async fn g_code_given_as_cl_is_refused_with_422() {
     assert!(j["error"].as_str().unwrap().contains("looks like G-code"), "{j}");
 }
 
+/// A lathe's program is its own problem (`turning`, saying kinepost posts milling), not "Not CL
+/// data": the file is CL, the machine is the wrong kind. A job of it fails with that reason.
+#[tokio::test]
+async fn a_turning_program_is_refused_as_turning() {
+    let base = server(cfg()).await;
+    let c = reqwest::Client::new();
+    let cl = "UNITS/MM\nMODE/TURN\nLOADTL/1\nFEDRAT/0.1,MMPR\nGOTO/17,0,2\nGOTO/17,0,-190\n";
+    for accept in ["text/plain", "application/x-ndjson"] {
+        let r = c
+            .post(format!("{base}/v1/post?machine=vmc-3axis"))
+            .header("content-type", "text/plain")
+            .header("accept", accept)
+            .body(cl)
+            .send()
+            .await
+            .unwrap();
+        assert_eq!(r.status(), 422, "{accept}");
+        let p: Value = r.json().await.unwrap();
+        assert_eq!(p["type"], "https://kinepost.dev/problems/turning", "{p}");
+        assert!(p["title"].as_str().unwrap().contains("kinepost posts milling"), "{p}");
+        assert_eq!((p["code"].as_str(), p["line"].as_u64()), (Some("turning"), Some(2)), "{p}");
+    }
+    let r = c
+        .post(format!("{base}/v1/jobs?machine=vmc-3axis"))
+        .header("content-type", "text/plain")
+        .body(cl)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 202);
+    let id = r.json::<Value>().await.unwrap()["id"].as_str().unwrap().to_string();
+    let j = common::wait_finished(&c, &base, &id, std::time::Duration::from_secs(60)).await;
+    assert_eq!(j["state"], "failed", "{j}");
+    assert!(j["error"].as_str().unwrap().contains("kinepost posts milling"), "{j}");
+}
+
 #[tokio::test]
 async fn nc_bytes_arrive_before_the_upload_completes() {
     let base = server(cfg()).await;

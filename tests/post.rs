@@ -2738,6 +2738,63 @@ fn a_program_with_no_feed_at_all_is_an_error() {
     assert_eq!((s.errors, sink.only(Code::NoFeed).severity), (0, Severity::Warning));
 }
 
+/// A turning program no record names as one (no lathe tool, no `MODE/TURN`): its cutting moves
+/// fed per revolution (`MMPR`) in one plane through the spindle axis (Y/Z at X0, as CATIA's are)
+/// are a lathe's, refused before anything is written. A milling program fed per revolution off
+/// that plane, or per minute in it, is posted as before.
+#[test]
+fn a_turning_program_is_told_by_its_motion() {
+    let m = machine("vmc-3axis");
+    let head = "UNITS/MM\nLOADTL/1\nSPINDL/500,CCLW\nRAPID\nGOTO/0,40,5\n";
+    let cut = "FEDRAT/0.2,MMPR\nGOTO/0,40,0\nGOTO/0,40,-30\nGOTO/0,45,-30\nGOTO/0,45,-60\nGOTO/0,50,-60\nRAPID\nGOTO/0,60,5\n";
+    let cl = format!("{head}{cut}");
+    let mut sink = Collect::default();
+    match post::post(cl.as_bytes(), &m, &Options::new(&m), &mut sink) {
+        Err(post::Error::NotCl(d)) => {
+            assert_eq!((d.code, d.line), (Code::Turning, Some(7)), "{d}");
+            assert!(d.message.contains("kinepost posts milling") && d.message.contains("per revolution"), "{d}");
+        }
+        other => panic!("{other:?}\n{}", sink.nc),
+    }
+    assert!(sink.nc.is_empty(), "{}", sink.nc);
+    for milling in [
+        cut.replace("MMPR", "MMPM"),
+        cut.replace("GOTO/0,45,-30", "GOTO/3,45,-30"),
+        format!("CUTTER/10\nTLDATA/MILL,10,0,50\n{cut}"),
+        // Taps fed per revolution, in a row through the spindle axis: holes, not a lathe's path.
+        "FEDRAT/1.25,MMPR\nCYCLE/TAP,FEDTO,12,MMPR,1.25,RAPTO,3,RTRCTO,15\nGOTO/0,10,0\nGOTO/0,20,0\nGOTO/0,30,0\nCYCLE/OFF\n".into(),
+    ] {
+        let cl = format!("{head}{milling}");
+        let (sink, s) = run(&m, cl.as_bytes(), &Options::new(&m));
+        assert!(sink.nc.contains("M30") && s.errors == 0, "{cl}\n{:?}", sink.diags);
+    }
+}
+
+/// A `UNITS` record its own file's values contradict (a part 8 m wide under `UNITS/INCHES`: CAM
+/// output in millimetres; a whole program inside 0.3 mm under `UNITS/MM`: metres) is told at the
+/// record, with what was assumed; an ordinary part in either units is not.
+#[test]
+fn a_units_record_its_magnitudes_contradict_is_told() {
+    let m = machine("vmc-3axis");
+    let cl = |u: &str, k: f64| {
+        let mut t = format!("{u}\nLOADTL/1\nFEDRAT/100\n");
+        for i in 0..20 {
+            t += &format!("GOTO/{},{},{}\n", f64::from(i) * 16.0 * k, f64::from(i % 4) * 10.0 * k, k);
+        }
+        t
+    };
+    for (u, k, looks) in [("UNITS/INCHES", 1.0, "millimetres"), ("UNITS/MM", 0.001, "metres")] {
+        let (sink, _) = run(&m, cl(u, k).as_bytes(), &Options::new(&m));
+        let d = sink.only(Code::UnitsAssumed);
+        assert_eq!((d.line, d.severity), (Some(1), Severity::Warning), "{d}");
+        assert!(d.message.contains(looks) && d.message.contains("taken in"), "{d}");
+    }
+    for (u, k) in [("UNITS/INCHES", 0.05), ("UNITS/MM", 1.0)] {
+        let (sink, _) = run(&m, cl(u, k).as_bytes(), &Options::new(&m));
+        assert!(!sink.diags.iter().any(|d| d.code == Code::UnitsAssumed), "{u} {k}: {:?}", sink.diags);
+    }
+}
+
 /// A feed unit that contradicts the file's UNITS (Fusion: `UNITS/INCHES`, `FEDRAT/35.,MMPM`) is
 /// told at its line once, and the slower of the two readings taken: 35 mm/min, not 35 in/min;
 /// 10 mm/min under `UNITS/MM` with `IPM`, not 254.
@@ -2879,8 +2936,8 @@ fn catias_positional_cycle_with_an_empty_field_is_read_by_position() {
 }
 
 /// A word told again and again (an unknown record, a word kinepost does not act on: 72 to 1 559
-/// lines of one in a file) is told once, at its first line, and its count once at the end: one
-/// warning per line drowned the diagnostics that matter.
+/// lines of one in a file) is told by one record a program, naming its first line and its count:
+/// one warning per line drowned the diagnostics that matter, and so did two records a word.
 #[test]
 fn a_repeated_word_is_told_once_with_its_count() {
     let m = machine("vmc-3axis");
@@ -2890,15 +2947,59 @@ fn a_repeated_word_is_told_once_with_its_count() {
     }
     let (sink, s) = run(&m, cl.as_bytes(), &Options::new(&m));
     for (code, first) in [(Code::UnknownRecord, 5), (Code::IgnoredRecord, 6)] {
-        let told: Vec<_> = sink.diags.iter().filter(|d| d.code == code && d.line == Some(first)).collect();
-        let all = sink.diags.iter().filter(|d| d.code == code && d.severity >= Severity::Warning).count();
-        assert_eq!(all, 1, "{:?}", sink.diags);
+        let told: Vec<_> = sink.diags.iter().filter(|d| d.code == code && d.line.is_some()).collect();
         assert!(
-            told.len() == 2 && told[1].severity == Severity::Info && told[1].message.contains("50 records in all, the first at line"),
+            told.len() == 1
+                && told[0].line == Some(first)
+                && told[0].message.contains("(50 records in all, the first at line"),
             "{told:?}"
         );
     }
     assert_eq!(s.warnings, 2, "{:?}", sink.diags);
+}
+
+/// A post that stops before the end of its input (strict mode's first error, the budget) still
+/// tells the words the reader held to tell at the end, each with its count so far, on one
+/// thread and on two: held, they were never told.
+#[test]
+fn held_words_are_told_when_a_post_stops_early() {
+    use kinepost::post::Budget;
+    let m = machine("vmc-3axis");
+    let mut cl = String::from("UNITS/MM\nFEDRAT/100,MMPM\nSPINDL/1000\nGOTO/0,0,1\n");
+    for i in 0..40 {
+        cl += &format!("FOOWORD/{i}\nSWITCH/{i}\nGOTO/{},{},1\n", i % 7, i % 5);
+    }
+    let strict = format!("{cl}GOTO/1,2\nGOTO/3,4,5\n");
+    let mut long = cl.clone();
+    for i in 0..3000 {
+        long += &format!("GOTO/{},{},1\n", i % 7, i % 5);
+    }
+    for threads in [1, 2] {
+        let mut o = Options::new(&m);
+        o.threads = threads;
+        o.strict = true;
+        let mut sink = Collect::default();
+        let r = post::post(strict.as_bytes(), &m, &o, &mut sink);
+        assert!(matches!(r, Err(post::Error::Strict(_))), "{r:?}");
+        let mut o = Options::new(&m);
+        o.threads = threads;
+        o.budget = Budget { floor_blocks: 500, blocks_per_byte: 0, seconds: f64::INFINITY };
+        let mut over = Collect::default();
+        let r = post::post(long.as_bytes(), &m, &o, &mut over);
+        assert!(matches!(r, Err(post::Error::Budget(_))), "{r:?}");
+        for sink in [&sink, &over] {
+            for (code, first) in [(Code::UnknownRecord, 5), (Code::IgnoredRecord, 6)] {
+                let told: Vec<_> = sink.diags.iter().filter(|d| d.code == code && d.line.is_some()).collect();
+                assert!(
+                    told.len() == 1
+                        && told[0].line == Some(first)
+                        && told[0].message.contains("(40 records before the post stopped, the first at line"),
+                    "threads {threads}: {:?}",
+                    sink.diags
+                );
+            }
+        }
+    }
 }
 
 /// `GOHOME` is honoured, not an error and nothing: without a point, the tool up to the top of Z

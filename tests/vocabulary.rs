@@ -84,8 +84,8 @@ fn the_documented_vocabulary_is_the_one_in_the_code() {
          Every major word kinepost knows, and what it does with it (generated from\n\
          `src/cl/vocabulary.rs` by `tests/vocabulary.rs`: `KINEPOST_UPDATE_DOCS=1 cargo test --test vocabulary`).\n\
          A word not listed here is unknown: a warning naming its line, and the record is not used.\n\
-         A word told again (unknown, or told below) is told once a program, at its first line, and its count\n\
-         at the end (an info).\n\
+         A word told again (unknown, or told below) is told by one record a program, at the end of the\n\
+         input, naming its first line and its count.\n\
          SOLIDWORKS CAM's vendor records (`CSI_…`) are informational: tool and path parameters for its own posts.\n",
     );
     for (title, pick) in [("Honoured: acted on", 0), ("Informational: read past in silence", 1), ("Told: not acted on, a diagnostic at its line", 2)] {

@@ -72,9 +72,9 @@ pub struct Reader<R> {
     /// the program (CATIA's demo ends in a stray line of letters).
     end: Option<u32>,
     /// A word told again and again (an unknown record, a word not acted on: 72 to 1 559 lines of
-    /// one in a file) is told once, at its first line, and its count at the end: by message,
-    /// its code, first line and count.
-    repeats: std::collections::HashMap<String, (Code, u32, u64)>,
+    /// one in a file) is told by one record a program, at the end, naming its first line and its
+    /// count: by message, the first diagnostic held and the count.
+    repeats: std::collections::HashMap<String, (Diagnostic, u64)>,
 }
 
 impl<R: BufRead> Reader<R> {
@@ -367,30 +367,59 @@ impl<R: BufRead> Reader<R> {
 }
 
 impl<R: BufRead> Reader<R> {
-    /// Whether `d` repeats a warning or info about a word already told (then it is counted).
-    /// Errors are each told: each one is something missing from the program, at its place.
+    /// Whether `d` is a warning or info about a word, held to be told once at the end (the
+    /// first one is held, the rest counted): one record a word a program, with its count, so
+    /// that 1 559 lines of `REMARK` do not drown what matters. Errors are each told at once:
+    /// each one is something missing from the program, at its place.
     fn repeated(&mut self, d: &Diagnostic) -> bool {
         if !matches!(d.code, Code::UnknownRecord | Code::IgnoredRecord) || d.severity == Severity::Error {
             return false;
         }
         if let Some(r) = self.repeats.get_mut(&d.message) {
-            r.2 += 1;
+            r.1 += 1;
             return true;
         }
         if self.repeats.len() < MAX_REPEATS {
-            self.repeats.insert(d.message.clone(), (d.code, d.line.unwrap_or(0), 1));
+            self.repeats.insert(d.message.clone(), (d.clone(), 1));
+            return true;
         }
         false
     }
 
-    /// At the end: how many times each word told once came, where it came more than once.
+    /// The first word held to be told at the end (the look-ahead's witness where the input
+    /// holds no CL: an unknown word is held, not yet an event).
+    pub fn first_held(&self) -> Option<&Diagnostic> {
+        self.repeats.values().map(|(d, _)| d).min_by_key(|d| d.line)
+    }
+
+    /// At the end: each word held, told once at its first line, with its count where it came
+    /// more than once.
     fn tally(&mut self) {
-        let mut told: Vec<_> = self.repeats.drain().filter(|(_, r)| r.2 > 1).collect();
-        told.sort_by_key(|(_, r)| r.1);
-        for (message, (code, first, n)) in told {
-            let msg = format!("{message} ({n} records in all, the first at line {first}: told there only)");
-            self.queue.push_back(Event::Diagnostic(Diagnostic::new(code, Severity::Info, Some(first), msg)));
+        for d in self.held("in all") {
+            self.queue.push_back(Event::Diagnostic(d));
         }
+    }
+
+    /// The words held and not yet told, each at its first line with its count (`whence` says
+    /// over what the count runs), in line order; none are held after. A post that stops before
+    /// the end of its input (an error, its budget, a reader gone) takes them so: held, they
+    /// would never be told, and "nothing silent" would break where it matters most.
+    pub fn take_held(&mut self) -> Vec<Diagnostic> {
+        self.held("before the post stopped")
+    }
+
+    fn held(&mut self, whence: &str) -> Vec<Diagnostic> {
+        let mut told: Vec<_> = self.repeats.drain().map(|(_, r)| r).collect();
+        told.sort_by_key(|(d, _)| d.line);
+        told.into_iter()
+            .map(|(mut d, n)| {
+                if n > 1 {
+                    let first = d.line.unwrap_or(0);
+                    d.message = format!("{} ({n} records {whence}, the first at line {first})", d.message);
+                }
+                d
+            })
+            .collect()
     }
 }
 

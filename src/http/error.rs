@@ -26,6 +26,10 @@ pub enum ApiError {
     /// The upload is no CL data (an NC program, nothing recognisable): the line it is told by.
     #[error("{message}")]
     NotCl { message: String, line: Option<u32> },
+    /// The upload is a lathe's program (code `turning`): CL data, but kinepost posts milling.
+    /// Its own problem, so that a client tells "wrong file" from "wrong kind of machine".
+    #[error("{message}")]
+    Turning { message: String, line: Option<u32> },
     /// The limit in bytes where the handler knows it (else the service's `--max-upload`).
     #[error("upload larger than {}", .0.map_or("the service's limit (--max-upload)".to_string(), |n| format!("the limit of {n} bytes")))]
     TooLarge(Option<u64>),
@@ -113,6 +117,7 @@ impl ApiError {
             ApiError::NotAcceptable(_) => (StatusCode::NOT_ACCEPTABLE, "not-acceptable", "Not acceptable"),
             ApiError::BadRecord { .. } => (StatusCode::UNPROCESSABLE_ENTITY, "bad-record", "Bad CL record"),
             ApiError::NotCl { .. } => (StatusCode::UNPROCESSABLE_ENTITY, "not-cl-data", "Not CL data"),
+            ApiError::Turning { .. } => (StatusCode::UNPROCESSABLE_ENTITY, "turning", "A turning program: kinepost posts milling"),
             ApiError::TooLarge(_) => (StatusCode::PAYLOAD_TOO_LARGE, "too-large", "Upload too large"),
             ApiError::FieldTooLarge { .. } => (StatusCode::PAYLOAD_TOO_LARGE, "field-too-large", "Form field too large"),
             ApiError::UploadTooSlow(_) => (StatusCode::REQUEST_TIMEOUT, "upload-too-slow", "Upload too slow"),
@@ -143,6 +148,7 @@ impl ApiError {
         let (line, column, code) = match self {
             ApiError::BadRecord { line, column, code, .. } => (*line, *column, Some(code.to_string())),
             ApiError::NotCl { line, .. } => (*line, None, Some(crate::diag::Code::NotCl.as_str().to_string())),
+            ApiError::Turning { line, .. } => (*line, None, Some(crate::diag::Code::Turning.as_str().to_string())),
             _ => (None, None, None),
         };
         let key = match self {

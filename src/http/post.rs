@@ -308,6 +308,10 @@ fn engine_error(e: post::Error) -> ApiError {
             column: d.column,
             code: d.code.as_str(),
         },
+        post::Error::NotCl(d) if d.code == crate::diag::Code::Turning => ApiError::Turning {
+            message: d.message,
+            line: d.line,
+        },
         post::Error::NotCl(d) => ApiError::NotCl {
             message: d.message,
             line: d.line,
@@ -366,7 +370,7 @@ pub(super) async fn refuse_unread<T>(checked: Result<T, ApiError>, body: Body) -
         (status = 408, description = "Upload slower than --min-upload-rate (once the program has begun, it ends with the error instead)", body = super::error::Problem, content_type = "application/problem+json"),
         (status = 413, description = "Upload too large, or a form field over 64 KiB", body = super::error::Problem, content_type = "application/problem+json"),
         (status = 415, description = "Unsupported media type", body = super::error::Problem, content_type = "application/problem+json"),
-        (status = 422, description = "Bad CL record (strict mode) with line and column, input that is no CL data (`not-cl-data`: an NC program, nothing recognisable), or over the server's bound on output or time before the first byte (`over-budget`)", body = super::error::Problem, content_type = "application/problem+json"),
+        (status = 422, description = "Bad CL record (strict mode) with line and column, input that is no CL data (`not-cl-data`: an NC program, nothing recognisable), a lathe's program (`turning`: kinepost posts milling), or over the server's bound on output or time before the first byte (`over-budget`)", body = super::error::Problem, content_type = "application/problem+json"),
         (status = 503, description = "--max-streams post streams running (Retry-After)", body = super::error::Problem, content_type = "application/problem+json"),
     ),
     tag = "post"

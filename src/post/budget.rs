@@ -11,7 +11,9 @@ use std::time::Instant;
 
 /// The caller's sink, behind the budget: past it, every write fails and `tripped` says why.
 pub(super) struct Metered<'a, S: Sink + ?Sized> {
-    inner: &'a mut S,
+    /// The caller's sink: what must be told past the bound (the reader's held words at a stop)
+    /// is written to it directly.
+    pub inner: &'a mut S,
     budget: Budget,
     /// CL bytes read so far, as the driver last said.
     pub read: u64,

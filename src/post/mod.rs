@@ -106,7 +106,16 @@ fn post_with<R: BufRead + Send, S: Sink + ?Sized>(
     order: Option<Vec<u32>>,
 ) -> Result<Summary, Error> {
     let mut sink = budget::Metered::new(sink, o.budget);
-    let r = run(input, m, o, &mut sink, order);
+    let held = std::sync::Mutex::new(Vec::new());
+    let r = run(input, m, o, &mut sink, order, &held);
+    if r.is_err() {
+        // The words the reader held to tell at the end of the input, which the run did not
+        // reach: told now, before the caller's error record, past the budget (at most one a
+        // word) and whether or not the reader is still there to read them.
+        for d in held.into_inner().unwrap_or_default() {
+            let _ = sink.inner.diagnostic(&d);
+        }
+    }
     match (r, sink.tripped) {
         (Err(_), Some(why)) => Err(Error::Budget(why)),
         (r, _) => r,
@@ -119,6 +128,7 @@ fn run<R: BufRead + Send, S: Sink + ?Sized>(
     o: &Options,
     sink: &mut budget::Metered<'_, S>,
     order: Option<Vec<u32>>,
+    held: &std::sync::Mutex<Vec<Diagnostic>>,
 ) -> Result<Summary, Error> {
     let mut src = Source::new(input, m.units, o.cl_units, o.strict)?;
     src.canned_cycles = o.canned_cycles;
@@ -134,6 +144,7 @@ fn run<R: BufRead + Send, S: Sink + ?Sized>(
         planner: Planner::new(m, setup, o.prefer),
         lengths,
         o,
+        held,
     };
     let apply = Apply {
         e,
@@ -242,12 +253,26 @@ struct Plan<'m, R> {
     planner: Planner<'m>,
     lengths: tools::Lengths<'m>,
     o: &'m Options,
+    /// Where the reader's held words go when the reading ends before the input does.
+    held: &'m std::sync::Mutex<Vec<Diagnostic>>,
 }
 
 impl<R: BufRead> Plan<'_, R> {
     /// Reads and plans the whole CL, handing every emitter call to `down` in order. Stops at
-    /// the first op `down` refuses, or at the source's strict error.
+    /// the first op `down` refuses, or at the source's strict error; then the words the reader
+    /// still holds go to `held`, for the caller to tell.
     fn produce(mut self, down: &mut impl Down) -> Result<(), Error> {
+        let r = self.items(down);
+        let left = self.src.take_held();
+        if !left.is_empty()
+            && let Ok(mut h) = self.held.lock()
+        {
+            *h = left;
+        }
+        r
+    }
+
+    fn items(&mut self, down: &mut impl Down) -> Result<(), Error> {
         let o = self.o;
         loop {
             let item = match self.src.next_item() {

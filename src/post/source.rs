@@ -262,8 +262,8 @@ impl<R: BufRead> Source<R> {
     /// first motion.
     pub fn new(input: R, profile_units: Units, cl_units: Option<Units>, strict: bool) -> Result<Self, Error> {
         let mut reader = Reader::new(input);
-        let Start { ahead, units, source } = look_ahead(&mut reader, profile_units, cl_units)?;
-        let mut out = VecDeque::new();
+        let Start { ahead, units, source, told } = look_ahead(&mut reader, profile_units, cl_units)?;
+        let mut out: VecDeque<Item> = told.map(|d| Item::Event(ProgEvent::Diag(d))).into_iter().collect();
         if source.starts_with("assumed") {
             out.push_back(Item::Event(ProgEvent::Diag(Diagnostic::new(
                 Code::UnitsAssumed,
@@ -373,6 +373,11 @@ impl<R: BufRead> Source<R> {
             }
             k += 1;
         }
+    }
+
+    /// The reader's held words not yet told ([`crate::cl::Reader::take_held`]).
+    pub fn take_held(&mut self) -> Vec<Diagnostic> {
+        self.reader.take_held()
     }
 
     /// CL bytes consumed so far.
