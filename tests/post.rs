@@ -3175,3 +3175,24 @@ fn the_next_tool_is_readied_right_after_each_tool_change() {
     assert!(!l.iter().any(|x| x == "T2" || x == "T7" || x == "T9"), "{l:?}");
     assert!(post::Preselect::parse("later").is_err());
 }
+
+/// Fusion's APT post writes `LOADTL/t, 0, length, offset`: the length and register were read past
+/// without a word, and the tool ran at the profile's length. Positions after the tool number mean
+/// different things to different CAM systems, so they are told, on the record's line.
+#[test]
+fn positional_values_after_the_tool_number_are_told() {
+    let m = machine("vmc-3axis");
+    let cl = "UNITS/MM\nFEDRAT/500,MMPM\nLOADTL/3, 0, 75.000000, 3\nGOTO/10,20,5\nEND\n";
+    let (sink, _) = run(&m, cl.as_bytes(), &fanuc(&m, Mode::Joint));
+    let d = sink
+        .diags
+        .iter()
+        .find(|d| d.line == Some(3) && d.severity == Severity::Warning && d.code == Code::IgnoredRecord)
+        .unwrap_or_else(|| panic!("{:?}", sink.diags));
+    assert!(d.message.contains("0, 75.000000, 3") && d.message.contains("not read"), "{d}");
+    assert!(sink.nc.lines().any(|l| l.contains("T3 M6")), "{}", sink.nc);
+    // The forms kinepost reads say nothing.
+    let cl = "UNITS/MM\nFEDRAT/500,MMPM\nLOADTL/3,LENGTH,75,ADJUST,4\nGOTO/10,20,5\nEND\n";
+    let (sink, _) = run(&m, cl.as_bytes(), &fanuc(&m, Mode::Joint));
+    assert!(!sink.diags.iter().any(|d| d.line == Some(3)), "{:?}", sink.diags);
+}

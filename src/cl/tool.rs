@@ -8,6 +8,7 @@ use crate::diag::{Code, Diagnostic, Severity};
 pub(super) fn load_tool(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
     let args = &st.args;
     let (mut number, mut length, mut adjust) = (None, None, None);
+    let mut unread: Vec<&Arg> = Vec::new();
     let mut i = 0;
     while i < args.len() {
         let w = args[i].word();
@@ -23,12 +24,23 @@ pub(super) fn load_tool(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record
             }
             _ => match num(args[i].text) {
                 Some(x) if number.is_none() => number = Some(tool_number(st, &args[i], x, diags)?),
-                Some(_) => {}
+                Some(_) => unread.push(&args[i]),
                 None if w.is_empty() || matches!(w.as_str(), "MILL" | "LATHE") => {}
                 None => st.unused(diags, &args[i], &w),
             },
         }
         i += 1;
+    }
+    if let Some(first) = unread.first() {
+        // Fusion's APT post writes `LOADTL/t, 0, length, offset` and CATIA `LOADTL/t,1`: the
+        // positions mean different things in each, so they are told rather than guessed.
+        let values: Vec<&str> = unread.iter().map(|a| a.text.trim()).collect();
+        let msg = format!(
+            "{}: {} after the tool number not read (kinepost reads LENGTH,l and ADJUST,n): the tool's length and register come from a tool table, the profile or the tool's own number",
+            st.major,
+            values.join(", ")
+        );
+        diags.push(Diagnostic::new(Code::IgnoredRecord, Severity::Warning, Some(st.line), msg).at(first.col));
     }
     let Some(number) = number else {
         st.bad(
