@@ -304,41 +304,35 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         if self.cut_turns {
             return Ok(());
         }
-        for i in 0..3 {
-            if let Some((lock, _)) = &self.o.clamps[i]
-                && !self.locked[i]
-                && !self.clamp_unknown[i]
-            {
-                let (open, close) = self.o.dialect.comment.clone();
-                let l = format!(
-                    "{} {open}{} LOCK{close}",
-                    self.f.words(&lock.clone()),
-                    self.m.rotaries[i].name
-                );
-                self.out(&l)?;
-                self.locked[i] = true;
-            }
-        }
-        Ok(())
+        self.set_clamps(true)
     }
 
     /// Unlock every locked clamp: before an operation that turns a rotary while cutting.
     pub(in crate::post) fn unlock_all(&mut self) -> std::io::Result<()> {
+        self.set_clamps(false)
+    }
+
+    /// Lock (or unlock) every clamped rotary not already so.
+    fn set_clamps(&mut self, lock: bool) -> std::io::Result<()> {
         for i in 0..self.m.rotaries.len() {
-            if let Some((_, unlock)) = &self.o.clamps[i]
-                && self.locked[i]
-                && !self.clamp_unknown[i]
-            {
-                let (open, close) = self.o.dialect.comment.clone();
-                let l = format!(
-                    "{} {open}{} UNLOCK{close}",
-                    self.f.words(&unlock.clone()),
-                    self.m.rotaries[i].name
-                );
-                self.out(&l)?;
-                self.locked[i] = false;
-            }
+            self.clamp(i, lock)?;
         }
+        Ok(())
+    }
+
+    /// Write rotary `i`'s lock (or unlock) word where its clamp's state differs, and note the
+    /// new state; a clamp whose state is unknown (a passed-through word set it) is left alone.
+    fn clamp(&mut self, i: usize, lock: bool) -> std::io::Result<()> {
+        let Some((on, off)) = &self.o.clamps[i] else { return Ok(()) };
+        if self.locked[i] == lock || self.clamp_unknown[i] {
+            return Ok(());
+        }
+        let (open, close) = self.o.dialect.comment.clone();
+        let word = if lock { on.clone() } else { off.clone() };
+        let what = if lock { "LOCK" } else { "UNLOCK" };
+        let l = format!("{} {open}{} {what}{close}", self.f.words(&word), self.m.rotaries[i].name);
+        self.out(&l)?;
+        self.locked[i] = lock;
         Ok(())
     }
 
@@ -347,19 +341,8 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         // Before the first block the machine stands at home: rotaries at 0.
         let from = self.at.map_or([0.0; 3], |p| p.joints.rotary);
         for i in 0..self.m.rotaries.len() {
-            if let Some((_, unlock)) = &self.o.clamps[i]
-                && self.locked[i]
-                && !self.clamp_unknown[i]
-                && (to.rotary[i] - from[i]).abs() > 1e-12
-            {
-                let (open, close) = self.o.dialect.comment.clone();
-                let l = format!(
-                    "{} {open}{} UNLOCK{close}",
-                    self.f.words(&unlock.clone()),
-                    self.m.rotaries[i].name
-                );
-                self.out(&l)?;
-                self.locked[i] = false;
+            if (to.rotary[i] - from[i]).abs() > 1e-12 {
+                self.clamp(i, false)?;
             }
         }
         Ok(())
