@@ -321,6 +321,9 @@ async fn a_spool_full_for_a_moment_fails_no_job() {
     cfg.spool_dir = Some(fs.0.join("spool"));
     cfg.workers = 2;
     cfg.job_retry_backoff = Duration::from_millis(500);
+    // The spool stays full until two stopped runs are seen requeued, which on a loaded machine
+    // can take many seconds: eight attempts cover 64 s of backoff, five only 7.5 s.
+    cfg.job_max_attempts = 8;
     let base = common::server(cfg.clone()).await;
     let c = reqwest::Client::new();
 
