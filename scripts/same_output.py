@@ -90,7 +90,7 @@ def main():
     print(f"{len(results)} posts")
     if a.against:
         before = json.loads(pathlib.Path(a.against).read_text())
-        diff = [k for k in sorted(before) if before[k] != results.get(k)]
+        diff = [k for k in sorted(before) if before[k] != list(results.get(k) or [])]
         for k in diff[:40]:
             print("DIFFERS:", k, before[k], results.get(k))
         print(f"{len(diff)} of {len(before)} differ")
