@@ -945,3 +945,150 @@ async fn collision_fields_are_taken_and_checked() {
         assert!(r.text().await.unwrap().contains(key), "{q}");
     }
 }
+
+/// The shelves' routes (profiles, tool tables, dialects), the machine computations and the
+/// uploads: each refusal provoked, and each status the route answers is one its OpenAPI
+/// responses list. (Debug builds also check every refusal of every test as it is answered.)
+#[tokio::test]
+async fn every_refusal_a_route_answers_is_documented_for_it() {
+    let doc: Value = serde_json::from_str(&openapi_json()).unwrap();
+    const TOKEN: &str = "documented-admin";
+    let base = server(Config {
+        admin_token: Some(TOKEN.into()),
+        ..cfg()
+    })
+    .await;
+    let off = server(cfg()).await;
+    let c = reqwest::Client::new();
+    let profile = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/machines/vmc-3axis.toml")).unwrap();
+    let spare = profile.replace("id = \"vmc-3axis\"", "id = \"spare\"");
+    let table = "units = \"mm\"\n[[tool]]\nnumber = 1\nlength = 100.0\n";
+    let dialect = "id = \"shop\"\nextends = \"fanuc\"\n";
+    let bad = "id = \"spare\"\nthis is = [ not toml";
+    let big = "#".repeat((1 << 20) + 1);
+    let auth = format!("Bearer {TOKEN}");
+    // (method, the route as documented, the request's path, Authorization, If-Match, content type, body, the status)
+    type Case<'a> = (&'a str, String, String, Option<&'a str>, Option<&'a [u8]>, &'a str, String, u16);
+    let a = Some(auth.as_str());
+    let mut cases: Vec<Case> = Vec::new();
+    for (one, id, create, body, kind) in [
+        ("/v1/machines/{id}", "vmc-3axis", Some("/v1/machines"), spare.clone(), "machine"),
+        ("/v1/machines/{id}/tools", "vmc-3axis", None, table.to_string(), "tools"),
+        ("/v1/dialects/{id}", "fanuc", Some("/v1/dialects"), dialect.to_string(), "dialect"),
+    ] {
+        let at = |id: &str| one.replace("{id}", id);
+        let toml = "application/toml";
+        cases.extend([
+            ("get", one.to_string(), at("nope"), None, None, toml, String::new(), 404),
+            ("get", format!("{one}/versions"), at("nope") + "/versions", None, None, toml, String::new(), 404),
+            ("get", format!("{one}/versions/{{version}}"), at(id) + "/versions/x", None, None, toml, String::new(), 404),
+            ("get", format!("{one}/versions/{{version}}"), at(id) + "/versions/99", None, None, toml, String::new(), 404),
+            ("put", one.to_string(), at(id), None, None, toml, body.clone(), 401),
+            ("put", one.to_string(), at(id), Some("Bearer not-the-token"), None, toml, body.clone(), 401),
+            ("delete", one.to_string(), at(id), None, None, toml, String::new(), 401),
+            ("delete", one.to_string(), at(id), Some("Bearer not-the-token"), None, toml, String::new(), 401),
+            ("put", one.to_string(), at(id), a, Some(b"\"nope-v1\"".as_slice()), toml, body.clone(), 412),
+            ("put", one.to_string(), at(id), a, Some(b"\xff".as_slice()), toml, body.clone(), 400),
+            ("put", one.to_string(), at(id), a, None, "image/png", body.clone(), 415),
+            ("put", one.to_string(), at(id), a, None, toml, big.clone(), 413),
+            ("put", one.to_string(), at(id), a, None, toml, bad.to_string(), 422),
+            ("delete", one.to_string(), at(id), a, Some(b"\"nope-v1\"".as_slice()), toml, String::new(), 412),
+            ("delete", one.to_string(), at(id), a, Some(b"\xff".as_slice()), toml, String::new(), 400),
+            ("delete", one.to_string(), at("nope"), a, None, toml, String::new(), 404),
+        ]);
+        if kind == "tools" {
+            // A table for no machine, and a machine without a table.
+            cases.push(("put", one.to_string(), at("nope"), a, None, toml, body.clone(), 404));
+            cases.push(("get", one.to_string(), at(id), None, None, toml, String::new(), 404));
+            cases.push(("delete", one.to_string(), at(id), a, None, toml, String::new(), 404));
+        }
+        if let Some(create) = create {
+            cases.extend([
+                ("post", create.to_string(), create.to_string(), None, None, toml, body.clone(), 401),
+                ("post", create.to_string(), create.to_string(), a, None, "text/html", body.clone(), 415),
+                ("post", create.to_string(), create.to_string(), a, None, toml, big.clone(), 413),
+                ("post", create.to_string(), create.to_string(), a, None, toml, bad.to_string(), 422),
+                ("post", create.to_string(), create.to_string(), a, None, toml, body.clone(), 201),
+                ("post", create.to_string(), create.to_string(), a, None, toml, body.clone(), 409),
+            ]);
+        }
+    }
+    for op in ["fk", "ik", "validate-pose", "angle-error-fit", "calibrate"] {
+        let route = format!("/v1/machines/{{id}}/{op}");
+        let json = "application/json";
+        cases.extend([
+            ("post", route.clone(), format!("/v1/machines/vmc-3axis/{op}"), None, None, "text/plain", "{}".to_string(), 415),
+            ("post", route.clone(), format!("/v1/machines/vmc-3axis/{op}"), None, None, json, "{".to_string(), 400),
+        ]);
+    }
+    let fk = r#"{"joints": {"X": 0}}"#.to_string();
+    cases.push(("post", "/v1/machines/{id}/fk".to_string(), "/v1/machines/nope/fk".into(), None, None, "application/json", fk, 404));
+    let unreachable = r#"{"tip": [0, 0, 0], "axis": [1, 0, 0]}"#.to_string();
+    cases.push(("post", "/v1/machines/{id}/ik".to_string(), "/v1/machines/vmc-3axis/ik".into(), None, None, "application/json", unreachable, 422));
+    for route in ["/v1/post", "/v1/jobs"] {
+        cases.extend([
+            ("post", route.to_string(), format!("{route}?machine=nope"), None, None, "text/plain", "GOTO/1,2,3".to_string(), 404),
+            ("post", route.to_string(), format!("{route}?machine=vmc-3axis&colour=red"), None, None, "text/plain", "GOTO/1,2,3".to_string(), 400),
+            ("post", route.to_string(), format!("{route}?machine=vmc-3axis"), None, None, "application/json", "{}".to_string(), 415),
+        ]);
+    }
+    let mut seen = std::collections::BTreeMap::<String, std::collections::BTreeSet<u16>>::new();
+    for (method, route, path, authorization, if_match, ctype, body, want) in cases {
+        let method_ = reqwest::Method::from_bytes(method.to_ascii_uppercase().as_bytes()).unwrap();
+        let mut rq = c.request(method_, format!("{base}{path}")).header("content-type", ctype).body(body.clone());
+        if let Some(v) = authorization {
+            rq = rq.header("authorization", v);
+        }
+        if let Some(v) = if_match {
+            rq = rq.header("if-match", reqwest::header::HeaderValue::from_bytes(v).unwrap());
+        }
+        let got = rq.send().await.unwrap().status().as_u16();
+        assert_eq!(got, want, "{method} {path}");
+        if got >= 400 {
+            let listed = &doc["paths"][&route][method]["responses"];
+            assert!(listed.is_object(), "{method} {route} is documented");
+            assert!(listed[got.to_string()].is_object(), "{method} {route} answers {got}, which its OpenAPI responses do not list: {listed}");
+            seen.entry(format!("{method} {route}")).or_default().insert(got);
+        }
+    }
+    // Writes with no admin token configured are off.
+    const WRITES: [(&str, &str); 8] = [
+        ("post", "/v1/machines"),
+        ("put", "/v1/machines/{id}"),
+        ("delete", "/v1/machines/{id}"),
+        ("put", "/v1/machines/{id}/tools"),
+        ("delete", "/v1/machines/{id}/tools"),
+        ("post", "/v1/dialects"),
+        ("put", "/v1/dialects/{id}"),
+        ("delete", "/v1/dialects/{id}"),
+    ];
+    for (method, route) in WRITES {
+        let path = route.replace("{id}", if route.starts_with("/v1/dialects") { "fanuc" } else { "vmc-3axis" });
+        let m = reqwest::Method::from_bytes(method.to_ascii_uppercase().as_bytes()).unwrap();
+        let got = c
+            .request(m, format!("{off}{path}"))
+            .header("authorization", "Bearer anything")
+            .header("content-type", "application/toml")
+            .body(table)
+            .send()
+            .await
+            .unwrap()
+            .status()
+            .as_u16();
+        assert_eq!(got, 403, "{method} {path} with writes off");
+        assert!(doc["paths"][route][method]["responses"]["403"].is_object(), "{method} {route} lists 403");
+        seen.entry(format!("{method} {route}")).or_default().insert(got);
+    }
+    // Every write of the three shelves was refused for its token both ways, its version or id,
+    // and (with a body) its document; every read for what is not there.
+    for (method, route) in WRITES {
+        let want: &[u16] = match method {
+            "post" => &[401, 403, 409, 413, 415, 422],
+            "put" => &[400, 401, 403, 412, 413, 415, 422],
+            _ => &[400, 401, 403, 404, 412],
+        };
+        let got = &seen[&format!("{method} {route}")];
+        assert!(want.iter().all(|s| got.contains(s)), "{method} {route}: {got:?}");
+    }
+    assert_eq!(seen.keys().filter(|r| r.starts_with("get")).count(), 9, "{seen:?}");
+}

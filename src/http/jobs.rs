@@ -3,7 +3,9 @@
 
 use super::AppState;
 use super::error::{ApiError, ApiQuery};
-use super::post::{PostParams, nc_attachment, upload, upload_error};
+use super::post::{PostParams, nc_attachment, upload_error};
+use super::refusals::{NotFound, QueueBusy, TooManyDownloads, UploadRefusals};
+use super::upload::ClUpload;
 use crate::jobs::{self, Job, Output, Queue, State as JobState};
 use axum::Json;
 use axum::body::Body;
@@ -201,11 +203,7 @@ fn job_id(id: &str) -> Result<&str, ApiError> {
     request_body(content = String, description = "CL data (APT/CLSF text), raw or as the `file` part of multipart/form-data", content_type = "text/plain"),
     responses(
         (status = 202, description = "Accepted: on disk, queued", body = JobView),
-        (status = 400, description = "Bad parameter", body = super::error::Problem, content_type = "application/problem+json"),
-        (status = 404, description = "Unknown machine", body = super::error::Problem, content_type = "application/problem+json"),
-        (status = 408, description = "Upload slower than --min-upload-rate: not accepted", body = super::error::Problem, content_type = "application/problem+json"),
-        (status = 413, description = "Upload too large, or a form field over 64 KiB", body = super::error::Problem, content_type = "application/problem+json"),
-        (status = 415, description = "Unsupported media type", body = super::error::Problem, content_type = "application/problem+json"),
+        UploadRefusals,
         (status = 422, description = "The Idempotency-Key is another request's: a job was accepted with it for another CL input, machine or options (type `idempotency-key-reused`)", body = super::error::Problem, content_type = "application/problem+json"),
         (status = 429, description = "This client has its limit of jobs queued or running (Retry-After)", body = super::error::Problem, content_type = "application/problem+json"),
         (status = 507, description = "The spool's disk is full: not accepted (Retry-After)", body = super::error::Problem, content_type = "application/problem+json"),
@@ -215,12 +213,12 @@ fn job_id(id: &str) -> Result<&str, ApiError> {
 )]
 pub async fn submit(
     State(st): State<Arc<AppState>>,
-    ApiQuery(query): ApiQuery<PostParams>,
-    req: Request,
+    headers: axum::http::HeaderMap,
+    peer: Option<axum::Extension<axum::extract::ConnectInfo<std::net::SocketAddr>>>,
+    ClUpload { params, filename, body }: ClUpload,
 ) -> Result<Response, ApiError> {
     let q = queue(&st)?.clone();
-    let key = req
-        .headers()
+    let key = headers
         .get("idempotency-key")
         .map(|v| v.to_str().map(str::to_string))
         .transpose()
@@ -229,11 +227,7 @@ pub async fn submit(
         return Err(ApiError::BadParameter("Idempotency-Key: 1 to 200 characters".into()));
     }
     // The peer address: behind a proxy every client is the proxy (set the limit accordingly).
-    let client = req
-        .extensions()
-        .get::<axum::extract::ConnectInfo<std::net::SocketAddr>>()
-        .map(|c| c.0.ip().to_string());
-    let (params, filename, body) = upload(&st, query, req).await?;
+    let client = peer.map(|c| c.0.0.ip().to_string());
     // Settings are checked now, so a job never fails for a typo hours later.
     let checked = params.profile(&st).and_then(|current| {
         let mut settings = params.settings();
@@ -262,8 +256,8 @@ pub async fn submit(
 
 /// A job: state, progress, timings, and the summary once done.
 #[utoipa::path(get, path = "/v1/jobs/{id}", params(("id" = String, Path)),
-    responses((status = 200, description = "Success", body = JobView), (status = 404, description = "Not found", body = super::error::Problem, content_type = "application/problem+json"),
-        (status = 503, description = "Not ready or overloaded: retry later", body = super::error::Problem, content_type = "application/problem+json")),
+    responses((status = 200, description = "Success", body = JobView), NotFound,
+        QueueBusy),
     tag = "jobs")]
 pub async fn get_job(State(st): State<Arc<AppState>>, Path(id): Path<String>) -> Result<Json<JobView>, ApiError> {
     Ok(Json(queue(&st)?.store.get(job_id(&id)?).await?.into()))
@@ -272,7 +266,7 @@ pub async fn get_job(State(st): State<Arc<AppState>>, Path(id): Path<String>) ->
 /// Jobs, newest first, a page at a time.
 #[utoipa::path(get, path = "/v1/jobs", params(ListParams),
     responses((status = 200, description = "Success", body = JobList), (status = 400, description = "A parameter is malformed: the problem document names it", body = super::error::Problem, content_type = "application/problem+json"),
-        (status = 503, description = "Not ready or overloaded: retry later", body = super::error::Problem, content_type = "application/problem+json")),
+        QueueBusy),
     tag = "jobs")]
 pub async fn list_jobs(State(st): State<Arc<AppState>>, ApiQuery(p): ApiQuery<ListParams>) -> Result<Json<JobList>, ApiError> {
     let state = match p.state.as_deref() {
@@ -300,8 +294,8 @@ pub async fn list_jobs(State(st): State<Arc<AppState>>, ApiQuery(p): ApiQuery<Li
 /// Cancels a queued or running job; removes a finished one and its files.
 #[utoipa::path(delete, path = "/v1/jobs/{id}", params(("id" = String, Path)),
     responses((status = 200, description = "Cancelled", body = JobView), (status = 204, description = "Finished job removed"),
-        (status = 404, description = "Not found", body = super::error::Problem, content_type = "application/problem+json"),
-        (status = 503, description = "Not ready or overloaded: retry later", body = super::error::Problem, content_type = "application/problem+json")),
+        NotFound,
+        QueueBusy),
     tag = "jobs")]
 pub async fn delete_job(State(st): State<Arc<AppState>>, Path(id): Path<String>) -> Result<Response, ApiError> {
     let q = queue(&st)?;
@@ -321,10 +315,10 @@ pub async fn delete_job(State(st): State<Arc<AppState>>, Path(id): Path<String>)
     responses((status = 200, description = "The NC program", content_type = "text/plain"),
         (status = 206, description = "Part of it (Range)", content_type = "text/plain"),
         (status = 304, description = "Not modified (If-None-Match)"),
-        (status = 404, description = "Not found", body = super::error::Problem, content_type = "application/problem+json"),
+        NotFound,
         (status = 409, description = "Not finished, or failed", body = super::error::Problem, content_type = "application/problem+json"),
         (status = 416, description = "Range not satisfiable"),
-        (status = 503, description = "Not ready or overloaded: retry later", body = super::error::Problem, content_type = "application/problem+json")),
+        QueueBusy, TooManyDownloads),
     tag = "jobs")]
 pub async fn job_nc(st: State<Arc<AppState>>, Path(id): Path<String>, req: Request) -> Result<Response, ApiError> {
     output(st, id, Output::Nc, req).await
@@ -339,10 +333,10 @@ pub async fn job_nc(st: State<Arc<AppState>>, Path(id): Path<String>, req: Reque
     responses((status = 200, description = "One JSON object per line", content_type = "application/x-ndjson"),
         (status = 206, description = "Part of it (Range; only a job run before the compact store)", content_type = "application/x-ndjson"),
         (status = 304, description = "Not modified (If-None-Match)"),
-        (status = 404, description = "Not found", body = super::error::Problem, content_type = "application/problem+json"),
+        NotFound,
         (status = 409, description = "Not finished", body = super::error::Problem, content_type = "application/problem+json"),
         (status = 416, description = "Range not satisfiable"),
-        (status = 503, description = "Not ready or overloaded: retry later", body = super::error::Problem, content_type = "application/problem+json")),
+        QueueBusy, TooManyDownloads),
     tag = "jobs")]
 pub async fn job_diagnostics(st: State<Arc<AppState>>, Path(id): Path<String>, req: Request) -> Result<Response, ApiError> {
     output(st, id, Output::Diagnostics, req).await
@@ -358,7 +352,7 @@ pub async fn job_diagnostics(st: State<Arc<AppState>>, Path(id): Path<String>, r
         (status = 304, description = "Not modified (If-None-Match)"),
         (status = 404, description = "No such job, or a job finished before previews existed", body = super::error::Problem, content_type = "application/problem+json"),
         (status = 409, description = "Not finished", body = super::error::Problem, content_type = "application/problem+json"),
-        (status = 503, description = "Not ready or overloaded: retry later", body = super::error::Problem, content_type = "application/problem+json")),
+        QueueBusy),
     tag = "jobs")]
 pub async fn job_preview(st: State<Arc<AppState>>, Path(id): Path<String>, req: Request) -> Result<Response, ApiError> {
     output(st, id, Output::Preview, req).await
@@ -370,9 +364,9 @@ pub async fn job_preview(st: State<Arc<AppState>>, Path(id): Path<String>, req: 
     responses((status = 200, description = "The CL data", content_type = "text/plain"),
         (status = 206, description = "Part of it (Range)", content_type = "text/plain"),
         (status = 304, description = "Not modified (If-None-Match)"),
-        (status = 404, description = "Not found", body = super::error::Problem, content_type = "application/problem+json"),
+        NotFound,
         (status = 416, description = "Range not satisfiable"),
-        (status = 503, description = "Not ready or overloaded: retry later", body = super::error::Problem, content_type = "application/problem+json")),
+        QueueBusy, TooManyDownloads),
     tag = "jobs")]
 pub async fn job_input(st: State<Arc<AppState>>, Path(id): Path<String>, req: Request) -> Result<Response, ApiError> {
     output(st, id, Output::Input, req).await
@@ -390,7 +384,7 @@ pub async fn job_input(st: State<Arc<AppState>>, Path(id): Path<String>, req: Re
         (status = 404, description = "No such job, or a job finished before line maps existed", body = super::error::Problem, content_type = "application/problem+json"),
         (status = 409, description = "Not finished, or failed", body = super::error::Problem, content_type = "application/problem+json"),
         (status = 416, description = "Range not satisfiable"),
-        (status = 503, description = "Not ready or overloaded: retry later", body = super::error::Problem, content_type = "application/problem+json")),
+        QueueBusy, TooManyDownloads),
     tag = "jobs")]
 pub async fn job_lines(st: State<Arc<AppState>>, Path(id): Path<String>, req: Request) -> Result<Response, ApiError> {
     output(st, id, Output::Lines, req).await

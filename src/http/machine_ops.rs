@@ -4,6 +4,7 @@
 
 use super::AppState;
 use super::error::{ApiError, ApiJson};
+use super::refusals::MachineOpRefusals;
 use crate::calib::{self, Measurement};
 use crate::kinematics::{self, IkOptions, Joints, Machine, Pose, Setup, Units, Vec3};
 use crate::machines::Profile;
@@ -188,7 +189,7 @@ fn pose(m: &Machine, r: &PoseRequest) -> Result<Pose, ApiError> {
 
 /// Forward kinematics: axis words → tool pose in the part frame.
 #[utoipa::path(post, path = "/v1/machines/{id}/fk", params(("id" = String, Path)), request_body = FkRequest,
-    responses((status = 200, description = "Success", body = PoseDto), (status = 400, description = "A parameter is malformed: the problem document names it", body = super::Problem, content_type = "application/problem+json"), (status = 404, description = "Not found", body = super::Problem, content_type = "application/problem+json"), (status = 415, description = "Unsupported content type", body = super::Problem, content_type = "application/problem+json"), (status = 422, description = "Read and refused: the problem document says why", body = super::Problem, content_type = "application/problem+json")), tag = "machines")]
+    responses((status = 200, description = "Success", body = PoseDto), MachineOpRefusals), tag = "machines")]
 pub async fn fk_route(
     State(st): State<Arc<AppState>>,
     Path(id): Path<String>,
@@ -208,7 +209,8 @@ pub async fn fk_route(
 
 /// Inverse kinematics: every joint solution of a pose, in limits or not.
 #[utoipa::path(post, path = "/v1/machines/{id}/ik", params(("id" = String, Path)), request_body = PoseRequest,
-    responses((status = 200, description = "{\"solutions\": [{axis words…, branch, within_limits, singular}]}", body = Object), (status = 400, description = "A parameter is malformed: the problem document names it", body = super::Problem, content_type = "application/problem+json"), (status = 404, description = "Not found", body = super::Problem, content_type = "application/problem+json"), (status = 415, description = "Unsupported content type", body = super::Problem, content_type = "application/problem+json"), (status = 422, description = "Read and refused: the problem document says why", body = super::Problem, content_type = "application/problem+json")), tag = "machines")]
+    responses((status = 200, description = "{\"solutions\": [{axis words…, branch, within_limits, singular}]}", body = Object), MachineOpRefusals,
+        (status = 422, description = "The pose is unreachable on this machine (code `unreachable`)", body = super::Problem, content_type = "application/problem+json")), tag = "machines")]
 pub async fn ik_route(
     State(st): State<Arc<AppState>>,
     Path(id): Path<String>,
@@ -237,7 +239,7 @@ pub async fn ik_route(
 
 /// Whether a pose can be reached, and within travel: a check before posting.
 #[utoipa::path(post, path = "/v1/machines/{id}/validate-pose", params(("id" = String, Path)), request_body = PoseRequest,
-    responses((status = 200, description = "Success", body = ReachDto), (status = 400, description = "A parameter is malformed: the problem document names it", body = super::Problem, content_type = "application/problem+json"), (status = 404, description = "Not found", body = super::Problem, content_type = "application/problem+json"), (status = 415, description = "Unsupported content type", body = super::Problem, content_type = "application/problem+json"), (status = 422, description = "Read and refused: the problem document says why", body = super::Problem, content_type = "application/problem+json")), tag = "machines")]
+    responses((status = 200, description = "Success", body = ReachDto), MachineOpRefusals), tag = "machines")]
 pub async fn validate_pose(
     State(st): State<Arc<AppState>>,
     Path(id): Path<String>,
@@ -285,7 +287,7 @@ fn reach(m: &Machine, r: &PoseRequest) -> Result<ReachDto, ApiError> {
 
 /// Fits a rotary's angle-error polynomial (degrees 2–5) from measurements.
 #[utoipa::path(post, path = "/v1/machines/{id}/angle-error-fit", params(("id" = String, Path)), request_body = AngleFitRequest,
-    responses((status = 200, description = "Success", body = AngleFitResponse), (status = 400, description = "A parameter is malformed: the problem document names it", body = super::Problem, content_type = "application/problem+json"), (status = 404, description = "Not found", body = super::Problem, content_type = "application/problem+json"), (status = 415, description = "Unsupported content type", body = super::Problem, content_type = "application/problem+json"), (status = 422, description = "Read and refused: the problem document says why", body = super::Problem, content_type = "application/problem+json")), tag = "machines")]
+    responses((status = 200, description = "Success", body = AngleFitResponse), MachineOpRefusals), tag = "machines")]
 pub async fn angle_error_fit(
     State(st): State<Arc<AppState>>,
     Path(id): Path<String>,
@@ -340,7 +342,7 @@ pub async fn angle_error_fit(
 
 /// Fits pivot offsets from test cuts (measured tip deviations at known joint positions).
 #[utoipa::path(post, path = "/v1/machines/{id}/calibrate", params(("id" = String, Path)), request_body = CalibrateRequest,
-    responses((status = 200, description = "Success", body = CalibrateResponse), (status = 400, description = "A parameter is malformed: the problem document names it", body = super::Problem, content_type = "application/problem+json"), (status = 404, description = "Not found", body = super::Problem, content_type = "application/problem+json"), (status = 415, description = "Unsupported content type", body = super::Problem, content_type = "application/problem+json"), (status = 422, description = "Read and refused: the problem document says why", body = super::Problem, content_type = "application/problem+json")), tag = "machines")]
+    responses((status = 200, description = "Success", body = CalibrateResponse), MachineOpRefusals), tag = "machines")]
 pub async fn calibrate(
     State(st): State<Arc<AppState>>,
     Path(id): Path<String>,

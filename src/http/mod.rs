@@ -12,8 +12,11 @@ mod machine_ops;
 mod machines;
 mod metrics;
 mod post;
+pub mod refusals;
 mod server;
+mod shelf;
 mod tools;
+mod upload;
 
 pub use error::{ApiError, ApiJson, Problem};
 pub use metrics::Metrics;
@@ -176,7 +179,7 @@ pub struct AppState {
         jobs::submit, jobs::list_jobs, jobs::get_job, jobs::delete_job, jobs::job_nc, jobs::job_diagnostics, jobs::job_preview,
         jobs::job_input, jobs::job_lines),
     components(schemas(Problem, machines::MachineDto, machines::LinearDto, machines::RotaryDto, machines::AngleErrorDto,
-        machines::VersionsDto, machines::VersionDto, tools::ToolTableDto, tools::ToolDto, tools::HolderDto, dialects::DialectDto, PostParams, machine_ops::FkRequest,
+        shelf::VersionsDto, shelf::VersionDto, tools::ToolTableDto, tools::ToolDto, tools::HolderDto, dialects::DialectDto, PostParams, machine_ops::FkRequest,
         machine_ops::PoseDto, machine_ops::PoseRequest, machine_ops::ReachDto, machine_ops::AngleFitRequest, machine_ops::FitDto,
         machine_ops::AngleFitResponse, machine_ops::MeasurementDto, machine_ops::CalibrateRequest, machine_ops::CalibrateResponse,
         jobs::JobView, jobs::JobProgress, jobs::JobLinks, jobs::JobList)),
@@ -313,6 +316,12 @@ pub fn app(state: Arc<AppState>) -> axum::Router {
             .expose_headers(CORS_EXPOSED_HEADERS.map(HeaderName::from_static))
             .max_age(Duration::from_secs(600))
     };
+    // Debug builds: a refusal the document does not list for its route is a bug (`refusals`).
+    #[cfg(debug_assertions)]
+    let (streaming, api) = (
+        streaming.route_layer(middleware::from_fn(refusals::undocumented_refusal)),
+        api.route_layer(middleware::from_fn(refusals::undocumented_refusal)),
+    );
     let api = api
         // The UI loads the document this service serves at /openapi.json (its own route).
         .merge(utoipa_swagger_ui::SwaggerUi::new("/docs").config(utoipa_swagger_ui::Config::new(["/openapi.json"])))

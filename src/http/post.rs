@@ -5,14 +5,16 @@
 //! memory stays bounded and a client that goes away stops the work. Output is held back until
 //! 16 KiB are ready (or the program ends): an error before that still gets its HTTP status.
 
-use super::error::{ApiError, ApiQuery};
+use super::error::ApiError;
+use super::refusals::UploadRefusals;
+use super::upload::ClUpload;
 use super::{AppState, limits};
 use crate::diag::Diagnostic;
 use crate::output::{ErrorBody, Header, Record};
 use crate::post::{self, BlockInfo, Settings, Sink, Summary};
 use axum::body::Body;
-use axum::extract::multipart::Field;
-use axum::extract::{FromRequest, Multipart, Request, State};
+use axum::Extension;
+use axum::extract::{FromRequestParts, State};
 use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use bytes::Bytes;
@@ -20,7 +22,7 @@ use futures_util::StreamExt;
 use serde::Deserialize;
 use std::io::Read;
 use std::sync::Arc;
-use tokio::sync::{mpsc, oneshot};
+use tokio::sync::mpsc;
 use tokio_util::io::{StreamReader, SyncIoBridge};
 
 /// Bytes of output held back before the response starts (so early errors keep their status).
@@ -158,7 +160,7 @@ impl PostParams {
     }
 
     /// A multipart text field, by name.
-    fn set(&mut self, name: &str, v: String) -> Result<(), ApiError> {
+    pub(super) fn set(&mut self, name: &str, v: String) -> Result<(), ApiError> {
         let bad = |what: &str| ApiError::BadParameter(format!("{name}: {what}"));
         let num = |v: &str| v.trim().parse::<f64>().map_err(|_| bad("expected a number"));
         let flag = |v: &str| match v.trim() {
@@ -205,7 +207,18 @@ impl PostParams {
     }
 }
 
-/// Whether the client wants NDJSON blocks instead of the NC text.
+/// Whether the client wants NDJSON blocks instead of the NC text (`Accept`), refused (406) before
+/// the upload is read.
+pub struct Negotiated(bool);
+
+impl<S: Send + Sync> FromRequestParts<S> for Negotiated {
+    type Rejection = ApiError;
+
+    async fn from_request_parts(parts: &mut axum::http::request::Parts, _: &S) -> Result<Self, ApiError> {
+        wants_ndjson(&parts.headers).map(Negotiated)
+    }
+}
+
 fn wants_ndjson(h: &HeaderMap) -> Result<bool, ApiError> {
     let Some(a) = h.get(header::ACCEPT).and_then(|v| v.to_str().ok()) else {
         return Ok(false);
@@ -365,11 +378,8 @@ pub(super) async fn refuse_unread<T>(checked: Result<T, ApiError>, body: Body) -
     request_body(content = String, description = "CL data (APT/CLSF text), raw or as the `file` part of multipart/form-data", content_type = "text/plain"),
     responses(
         (status = 200, description = "The NC program (text/plain), or one JSON object per line (application/x-ndjson): header, block…, summary, and error on failure", content_type = "text/plain"),
-        (status = 400, description = "Bad parameter", body = super::error::Problem, content_type = "application/problem+json"),
-        (status = 404, description = "Unknown machine", body = super::error::Problem, content_type = "application/problem+json"),
-        (status = 408, description = "Upload slower than --min-upload-rate (once the program has begun, it ends with the error instead)", body = super::error::Problem, content_type = "application/problem+json"),
-        (status = 413, description = "Upload too large, or a form field over 64 KiB", body = super::error::Problem, content_type = "application/problem+json"),
-        (status = 415, description = "Unsupported media type", body = super::error::Problem, content_type = "application/problem+json"),
+        UploadRefusals,
+        (status = 406, description = "Accept names neither text/plain nor application/x-ndjson", body = super::error::Problem, content_type = "application/problem+json"),
         (status = 422, description = "Bad CL record (strict mode) with line and column, input that is no CL data (`not-cl-data`: an NC program, nothing recognisable), a lathe's program (`turning`: kinepost posts milling), or over the server's bound on output or time before the first byte (`over-budget`)", body = super::error::Problem, content_type = "application/problem+json"),
         (status = 503, description = "--max-streams post streams running (Retry-After)", body = super::error::Problem, content_type = "application/problem+json"),
     ),
@@ -377,12 +387,12 @@ pub(super) async fn refuse_unread<T>(checked: Result<T, ApiError>, body: Body) -
 )]
 pub async fn post_cl(
     State(st): State<Arc<AppState>>,
-    ApiQuery(query): ApiQuery<PostParams>,
-    mut req: Request,
+    Negotiated(ndjson): Negotiated,
+    slot: Option<Extension<Arc<limits::StreamSlot>>>,
+    ClUpload { params, filename, body }: ClUpload,
 ) -> Result<Response, ApiError> {
-    let ndjson = wants_ndjson(req.headers())?;
-    let slot = req.extensions_mut().remove::<Arc<limits::StreamSlot>>();
-    let (params, filename, body) = upload(&st, query, req).await?;
+    // Held until the stream ends (the one in the request's extensions went with the request).
+    let slot = slot.map(|Extension(s)| s);
     let checked = params.profile(&st).and_then(|c| {
         let standing = super::tools::standing(&st, &c.id);
         let opts = params.settings().profile_options_with(&c.item, standing, &|id| st.machines.dialect(id));
@@ -476,95 +486,4 @@ pub(super) fn nc_attachment(upload: Option<&str>, fallback: &str) -> HeaderValue
         .collect();
     let stem = if safe.is_empty() { fallback } else { &safe };
     HeaderValue::from_str(&format!("attachment; filename=\"{stem}.nc\"")).unwrap_or(HeaderValue::from_static("attachment"))
-}
-
-/// The CL upload of `/v1/post` and `/v1/jobs`: a raw body with query parameters, or a multipart
-/// form whose fields come before its `file` part.
-pub(super) async fn upload(
-    st: &Arc<AppState>,
-    query: PostParams,
-    req: Request,
-) -> Result<(PostParams, Option<String>, Body), ApiError> {
-    let ctype = req
-        .headers()
-        .get(header::CONTENT_TYPE)
-        .and_then(|v| v.to_str().ok())
-        .unwrap_or("text/plain")
-        .to_ascii_lowercase();
-    if ctype.starts_with("multipart/form-data") {
-        multipart_body(st, query, req).await
-    } else if ctype.starts_with("text/plain") || ctype.starts_with("application/octet-stream") || ctype.is_empty() {
-        Ok((query, None, req.into_body()))
-    } else {
-        Err(ApiError::UnsupportedMediaType(ctype))
-    }
-}
-
-/// Reads form fields up to the file part, then hands the file's bytes over as a body stream fed
-/// by a task that owns the form (fields after the file are not read).
-async fn multipart_body(
-    st: &Arc<AppState>,
-    query: PostParams,
-    req: Request,
-) -> Result<(PostParams, Option<String>, Body), ApiError> {
-    let mp = Multipart::from_request(req, st)
-        .await
-        .map_err(|e| ApiError::BadParameter(format!("multipart: {e}")))?;
-    let (ptx, prx) = oneshot::channel::<FormHead>();
-    let (btx, brx) = mpsc::channel::<Result<Bytes, std::io::Error>>(8);
-    tokio::spawn(read_form(mp, query, ptx, btx));
-    let (params, fname) = prx.await.map_err(|_| ApiError::Internal("multipart reader ended".into()))??;
-    let stream = futures_util::stream::unfold(brx, |mut rx| async move { rx.recv().await.map(|item| (item, rx)) });
-    Ok((params, fname, Body::from_stream(stream)))
-}
-
-/// What a form says before its file: the parameters and the file's name, or why it is refused.
-type FormHead = Result<(PostParams, Option<String>), ApiError>;
-
-/// The form task: text fields into `params` until the file part, then `params` and the file's
-/// name to `ptx` and its bytes to `btx`. A form that fails before its file says so on `ptx`.
-async fn read_form(
-    mut mp: Multipart,
-    mut params: PostParams,
-    ptx: oneshot::Sender<FormHead>,
-    btx: mpsc::Sender<Result<Bytes, std::io::Error>>,
-) {
-    let failure = loop {
-        let field = match mp.next_field().await {
-            Ok(Some(field)) => field,
-            Ok(None) => break ApiError::BadParameter("multipart: no file part (name it \"file\")".into()),
-            Err(e) => break limits::multipart_error(e),
-        };
-        let name = field.name().unwrap_or("").to_string();
-        if field.file_name().is_some() || name == "file" {
-            let fname = field.file_name().map(str::to_string);
-            let _ = ptx.send(Ok((params, fname)));
-            return stream_file(field, btx).await;
-        }
-        let set = limits::read_field(&name, field).await.and_then(|v| params.set(&name, v));
-        if let Err(e) = set {
-            break e;
-        }
-    };
-    let _ = ptx.send(Err(failure));
-}
-
-/// The file part's bytes into the body channel until the part ends, the upload breaks (the
-/// error goes on to the engine) or the handler is gone.
-async fn stream_file(mut field: Field<'_>, btx: mpsc::Sender<Result<Bytes, std::io::Error>>) {
-    loop {
-        match field.chunk().await {
-            Ok(Some(b)) => {
-                if btx.send(Ok(b)).await.is_err() {
-                    return;
-                }
-            }
-            Ok(None) => return,
-            Err(e) => {
-                let text = limits::multipart_error(e).to_string();
-                let _ = btx.send(Err(std::io::Error::other(text))).await;
-                return;
-            }
-        }
-    }
 }

@@ -3,17 +3,16 @@
 //! post or job without its own `tool_table` uses the machine's; a job records the version.
 
 use super::AppState;
-use super::error::{ApiError, Problem};
-use super::machines::{
-    VersionsDto, authorize, etag_header, expectation_of, toml_body, toml_response, version_toml, versions_of, wants_toml, written,
-};
-use crate::machines::Current;
+use super::error::ApiError;
+use super::refusals::{AuthRefusals, BodyRefusals, MatchRefusals, NotFound, StoreBusy, StoreFull};
+use super::shelf::{self, Document, VersionsDto};
 use crate::machines::tools::{ToolTable, ToolTableDoc};
+use crate::machines::{Current, Shelf};
 use crate::text::quote;
 use axum::Json;
 use axum::extract::{Path, Request, State};
-use axum::http::{HeaderMap, StatusCode, header};
-use axum::response::{IntoResponse, Response};
+use axum::http::{HeaderMap, StatusCode};
+use axum::response::Response;
 use serde::Serialize;
 use std::sync::Arc;
 
@@ -73,16 +72,38 @@ impl From<&Current<ToolTable>> for ToolTableDto {
     }
 }
 
-/// The machine must exist: a table for no profile would never be used.
-fn machine(st: &AppState, id: &str) -> Result<(), ApiError> {
-    st.machines
-        .get(id)
-        .map(|_| ())
-        .map_err(|_| ApiError::UnknownMachine(id.to_string()))
-}
-
-fn no_table(id: &str) -> ApiError {
-    ApiError::NotFound(format!("machine {} has no tool table", quote(id)))
+impl Document for ToolTable {
+    type Dto = ToolTableDto;
+    type Doc = ToolTableDoc;
+    const BODY: &'static str = "tool table";
+    const NOUN: &'static str = "tool table";
+    fn shelf(st: &AppState) -> &Shelf<ToolTable> {
+        &st.machines.tools
+    }
+    fn dto(_: &AppState, c: &Current<ToolTable>) -> ToolTableDto {
+        ToolTableDto::from(c)
+    }
+    fn location(id: &str) -> String {
+        format!("/v1/machines/{id}/tools")
+    }
+    fn invalid(message: String, key: Option<String>) -> ApiError {
+        ApiError::BadToolTable { message, key }
+    }
+    fn served_text(st: &AppState, c: &Current<ToolTable>) -> Result<String, ApiError> {
+        crate::machines::read_text(&crate::machines::tools::table_path(&st.config.machines, &c.id))
+            .map_err(|e| ApiError::Internal(e.to_string()))
+    }
+    /// No table is a machine's that has none, not an unknown machine.
+    fn missing(id: &str) -> ApiError {
+        ApiError::NotFound(format!("machine {} has no tool table", quote(id)))
+    }
+    /// The machine must exist: a table for no profile would never be used.
+    fn owner(st: &AppState, id: &str) -> Result<(), ApiError> {
+        st.machines
+            .get(id)
+            .map(|_| ())
+            .map_err(|_| ApiError::UnknownMachine(id.to_string()))
+    }
 }
 
 /// A machine's tool table: JSON, or its TOML exactly as stored with `Accept: application/toml`.
@@ -92,34 +113,14 @@ fn no_table(id: &str) -> ApiError {
             content((ToolTableDto = "application/json"), (String = "application/toml")),
             headers(("ETag" = String, description = "The version, e.g. \"fryer-5x-45-tools-v2\""))),
         (status = 304, description = "Not modified (If-None-Match)"),
-        (status = 404, description = "No such machine, or it has no tool table", body = Problem, content_type = "application/problem+json")),
+        NotFound, StoreBusy),
     tag = "machines")]
 pub(super) async fn get_tools(
     State(st): State<Arc<AppState>>,
     Path(id): Path<String>,
     headers: HeaderMap,
 ) -> Result<Response, ApiError> {
-    machine(&st, &id)?;
-    let c = st.machines.tools.get(&id).map_err(|_| no_table(&id))?;
-    if let Some(r) = super::not_modified(&headers, &c.etag()) {
-        return Ok(r);
-    }
-    let mut r = if wants_toml(&headers) {
-        let text = match st.machines.tools.text(&id, c.version).await {
-            Ok(t) => t,
-            // Files only: no store to hold the text; the file's own words.
-            Err(crate::machines::Error::ReadOnly) => {
-                crate::machines::read_text(&crate::machines::tools::table_path(&st.config.machines, &id))
-                    .map_err(|e| ApiError::Internal(e.to_string()))?
-            }
-            Err(e) => return Err(e.into()),
-        };
-        toml_response(StatusCode::OK, text)
-    } else {
-        Json(ToolTableDto::from(&c)).into_response()
-    };
-    r.headers_mut().insert(header::ETAG, etag_header(&c));
-    Ok(r)
+    shelf::get::<ToolTable>(&st, &id, &headers).await
 }
 
 /// Replaces (or creates) a machine's tool table; with `If-Match`, only if it is still that
@@ -130,14 +131,7 @@ pub(super) async fn get_tools(
         content((String = "application/toml"), (Object = "application/json"))),
     responses((status = 200, description = "Replaced: a new version", body = ToolTableDto, headers(("ETag" = String))),
         (status = 201, description = "Created", body = ToolTableDto, headers(("ETag" = String), ("Location" = String))),
-        (status = 401, description = "No admin token given", body = Problem, content_type = "application/problem+json"),
-        (status = 403, description = "The admin token is wrong", body = Problem, content_type = "application/problem+json"),
-        (status = 404, description = "No such machine", body = Problem, content_type = "application/problem+json"),
-        (status = 412, description = "If-Match names another version", body = Problem, content_type = "application/problem+json"),
-        (status = 413, description = "The body or a field is too large", body = Problem, content_type = "application/problem+json"),
-        (status = 415, description = "Unsupported content type", body = Problem, content_type = "application/problem+json"),
-        (status = 422, description = "Invalid table: `key` names the entry to fix", body = Problem, content_type = "application/problem+json"),
-        (status = 507, description = "The store's disk is full: nothing written (Retry-After)", body = Problem, content_type = "application/problem+json")),
+        AuthRefusals, MatchRefusals, BodyRefusals, NotFound, StoreBusy, StoreFull),
     security(("admin" = [])),
     tag = "machines")]
 pub(super) async fn put_tools(
@@ -145,31 +139,14 @@ pub(super) async fn put_tools(
     Path(id): Path<String>,
     req: Request,
 ) -> Result<Response, ApiError> {
-    authorize(&st, req.headers())?;
-    machine(&st, &id)?;
-    let expect = expectation_of::<ToolTable>(req.headers(), &id)?;
-    // The loader's refusals are the table's, not a profile's.
-    let table_err = |e: ApiError| match e {
-        ApiError::BadProfile { message, key } => ApiError::BadToolTable { message, key },
-        e => e,
-    };
-    let text = toml_body::<ToolTableDoc>(req, "tool table").await.map_err(table_err)?;
-    let (c, created) = st.machines.tools.put(&text, Some(&id), expect).await.map_err(|e| table_err(e.into()))?;
-    tracing::info!(machine = %id, version = c.version, "tool table written");
-    let status = if created { StatusCode::CREATED } else { StatusCode::OK };
-    Ok(written(status, &c, ToolTableDto::from(&c), &format!("/v1/machines/{id}/tools")))
+    shelf::put::<ToolTable>(&st, &id, req).await
 }
 
 /// Deletes a machine's tool table (a version marking the deletion): posts go back to the CL's
 /// lengths and the profile's; jobs already queued keep theirs.
 #[utoipa::path(delete, path = "/v1/machines/{id}/tools", params(("id" = String, Path),
         ("If-Match" = Option<String>, Header, description = "Delete only this version")),
-    responses((status = 204, description = "Deleted"),
-        (status = 401, description = "No admin token given", body = Problem, content_type = "application/problem+json"),
-        (status = 403, description = "The admin token is wrong", body = Problem, content_type = "application/problem+json"),
-        (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json"),
-        (status = 412, description = "If-Match names another version", body = Problem, content_type = "application/problem+json"),
-        (status = 507, description = "The store's disk is full: nothing written (Retry-After)", body = Problem, content_type = "application/problem+json")),
+    responses((status = 204, description = "Deleted"), AuthRefusals, MatchRefusals, NotFound, StoreBusy, StoreFull),
     security(("admin" = [])),
     tag = "machines")]
 pub(super) async fn delete_tools(
@@ -177,40 +154,29 @@ pub(super) async fn delete_tools(
     Path(id): Path<String>,
     headers: HeaderMap,
 ) -> Result<StatusCode, ApiError> {
-    authorize(&st, &headers)?;
-    let expect = expectation_of::<ToolTable>(&headers, &id)?;
-    let v = match st.machines.tools.delete(&id, expect).await {
-        Err(crate::machines::Error::NotFound(_)) => return Err(no_table(&id)),
-        r => r?,
-    };
-    tracing::info!(machine = %id, version = v, "tool table deleted");
-    Ok(StatusCode::NO_CONTENT)
+    shelf::delete::<ToolTable>(&st, &id, &headers).await
 }
 
 /// A tool table's history: every version, who made it (file or API) and when.
 #[utoipa::path(get, path = "/v1/machines/{id}/tools/versions", params(("id" = String, Path)),
-    responses((status = 200, description = "Success", body = VersionsDto), (status = 404, description = "Not found", body = Problem, content_type = "application/problem+json")),
+    responses((status = 200, description = "Success", body = VersionsDto), NotFound, StoreBusy),
     tag = "machines")]
 pub(super) async fn list_tool_versions(
     State(st): State<Arc<AppState>>,
     Path(id): Path<String>,
 ) -> Result<Json<VersionsDto>, ApiError> {
-    versions_of(&st.machines.tools, id.clone())
-        .await?
-        .map(Json)
-        .ok_or_else(|| no_table(&id))
+    shelf::versions::<ToolTable>(&st, &id).await
 }
 
 /// One version's TOML, exactly as written: what a job that used it ran with.
 #[utoipa::path(get, path = "/v1/machines/{id}/tools/versions/{version}", params(("id" = String, Path), ("version" = i64, Path)),
-    responses((status = 200, description = "Success", body = String, content_type = "application/toml"),
-        (status = 404, description = "No such version, or a deletion", body = Problem, content_type = "application/problem+json")),
+    responses((status = 200, description = "Success", body = String, content_type = "application/toml"), NotFound),
     tag = "machines")]
 pub(super) async fn get_tool_version(
     State(st): State<Arc<AppState>>,
     Path((id, version)): Path<(String, String)>,
 ) -> Result<Response, ApiError> {
-    version_toml(&st.machines.tools, &id, &version).await
+    shelf::version::<ToolTable>(&st, &id, &version).await
 }
 
 /// The machine's current table for a post that brings none, as `Settings::profile_options`

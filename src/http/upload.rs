@@ -1,0 +1,130 @@
+//! A CL upload, as every route that takes one reads it: the CL as a raw body (`text/plain`,
+//! `application/octet-stream`) with the post's parameters in the query, or a multipart form
+//! whose text fields (over the query's) come before its `file` part. Either way the handler
+//! gets the parameters, the file's name, and the CL as a body it reads as it arrives: nothing
+//! is buffered whole, whatever its size.
+
+use super::error::{ApiError, ApiQuery};
+use super::post::PostParams;
+use super::{AppState, limits};
+use axum::body::Body;
+use axum::extract::multipart::Field;
+use axum::extract::{FromRequest, FromRequestParts, Multipart, Request};
+use axum::http::header;
+use bytes::Bytes;
+use std::sync::Arc;
+use tokio::sync::{mpsc, oneshot};
+
+/// The extractor: the last argument of a handler that takes CL (`POST /v1/post`,
+/// `POST /v1/jobs`). Refuses with [`super::refusals::UploadRefusals`]' statuses: a parameter
+/// (400), the content type (415), a form's field (400, 413) before its file.
+pub(super) struct ClUpload {
+    /// The query's parameters, then the form's fields.
+    pub params: PostParams,
+    /// The form's file name (none for a raw body).
+    pub filename: Option<String>,
+    /// The CL bytes as they arrive; a read that fails says why (`post::upload_error`).
+    pub body: Body,
+}
+
+impl FromRequest<Arc<AppState>> for ClUpload {
+    type Rejection = ApiError;
+
+    async fn from_request(req: Request, st: &Arc<AppState>) -> Result<Self, ApiError> {
+        let (mut parts, body) = req.into_parts();
+        let ApiQuery(query) = ApiQuery::<PostParams>::from_request_parts(&mut parts, st).await?;
+        let (params, filename, body) = upload(st, query, Request::from_parts(parts, body)).await?;
+        Ok(ClUpload { params, filename, body })
+    }
+}
+
+/// The CL upload: a raw body with query parameters, or a multipart form whose fields come
+/// before its `file` part.
+async fn upload(
+    st: &Arc<AppState>,
+    query: PostParams,
+    req: Request,
+) -> Result<(PostParams, Option<String>, Body), ApiError> {
+    let ctype = req
+        .headers()
+        .get(header::CONTENT_TYPE)
+        .and_then(|v| v.to_str().ok())
+        .unwrap_or("text/plain")
+        .to_ascii_lowercase();
+    if ctype.starts_with("multipart/form-data") {
+        multipart_body(st, query, req).await
+    } else if ctype.starts_with("text/plain") || ctype.starts_with("application/octet-stream") || ctype.is_empty() {
+        Ok((query, None, req.into_body()))
+    } else {
+        Err(ApiError::UnsupportedMediaType(ctype))
+    }
+}
+
+/// Reads form fields up to the file part, then hands the file's bytes over as a body stream fed
+/// by a task that owns the form (fields after the file are not read).
+async fn multipart_body(
+    st: &Arc<AppState>,
+    query: PostParams,
+    req: Request,
+) -> Result<(PostParams, Option<String>, Body), ApiError> {
+    let mp = Multipart::from_request(req, st)
+        .await
+        .map_err(|e| ApiError::BadParameter(format!("multipart: {e}")))?;
+    let (ptx, prx) = oneshot::channel::<FormHead>();
+    let (btx, brx) = mpsc::channel::<Result<Bytes, std::io::Error>>(8);
+    tokio::spawn(read_form(mp, query, ptx, btx));
+    let (params, fname) = prx.await.map_err(|_| ApiError::Internal("multipart reader ended".into()))??;
+    let stream = futures_util::stream::unfold(brx, |mut rx| async move { rx.recv().await.map(|item| (item, rx)) });
+    Ok((params, fname, Body::from_stream(stream)))
+}
+
+/// What a form says before its file: the parameters and the file's name, or why it is refused.
+type FormHead = Result<(PostParams, Option<String>), ApiError>;
+
+/// The form task: text fields into `params` until the file part, then `params` and the file's
+/// name to `ptx` and its bytes to `btx`. A form that fails before its file says so on `ptx`.
+async fn read_form(
+    mut mp: Multipart,
+    mut params: PostParams,
+    ptx: oneshot::Sender<FormHead>,
+    btx: mpsc::Sender<Result<Bytes, std::io::Error>>,
+) {
+    let failure = loop {
+        let field = match mp.next_field().await {
+            Ok(Some(field)) => field,
+            Ok(None) => break ApiError::BadParameter("multipart: no file part (name it \"file\")".into()),
+            Err(e) => break limits::multipart_error(e),
+        };
+        let name = field.name().unwrap_or("").to_string();
+        if field.file_name().is_some() || name == "file" {
+            let fname = field.file_name().map(str::to_string);
+            let _ = ptx.send(Ok((params, fname)));
+            return stream_file(field, btx).await;
+        }
+        let set = limits::read_field(&name, field).await.and_then(|v| params.set(&name, v));
+        if let Err(e) = set {
+            break e;
+        }
+    };
+    let _ = ptx.send(Err(failure));
+}
+
+/// The file part's bytes into the body channel until the part ends, the upload breaks (the
+/// error goes on to the engine) or the handler is gone.
+async fn stream_file(mut field: Field<'_>, btx: mpsc::Sender<Result<Bytes, std::io::Error>>) {
+    loop {
+        match field.chunk().await {
+            Ok(Some(b)) => {
+                if btx.send(Ok(b)).await.is_err() {
+                    return;
+                }
+            }
+            Ok(None) => return,
+            Err(e) => {
+                let text = limits::multipart_error(e).to_string();
+                let _ = btx.send(Err(std::io::Error::other(text))).await;
+                return;
+            }
+        }
+    }
+}
