@@ -65,13 +65,16 @@ def run(kinepost, machine, mode, opts, cl, tmp, keep=None):
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--kinepost", required=True)
-    ap.add_argument("--shared", default=str(ROOT.parent / "shared"))
+    ap.add_argument("--shared", default=str(ROOT.parent / "shared"),
+                    help="the shared folder whose corpus/ is posted too (default: ../shared)")
     ap.add_argument("--out", required=True)
     ap.add_argument("--against")
     ap.add_argument("--keep", help="a folder to keep every NC and NDJSON in, to diff two runs")
     ap.add_argument("--jobs", type=int, default=os.cpu_count() or 2)
     a = ap.parse_args()
     kinepost = os.path.abspath(a.kinepost)
+    if not (pathlib.Path(a.shared) / "corpus").is_dir():
+        print(f"no corpus at {a.shared}/corpus: only tests/data is posted (--shared)", file=sys.stderr)
     machines = sorted(p.stem for p in (ROOT / "machines").glob("*.toml") if not p.name.endswith(".tools.toml"))
     work = pathlib.Path(tempfile.mkdtemp())
     cases = []
