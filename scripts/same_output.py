@@ -16,6 +16,7 @@ import json
 import os
 import pathlib
 import re
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -97,6 +98,7 @@ def main():
 
     with concurrent.futures.ThreadPoolExecutor(a.jobs) as ex:
         results = dict(ex.map(one, cases))
+    shutil.rmtree(work, ignore_errors=True)
     pathlib.Path(a.out).write_text(json.dumps(results, indent=0, sort_keys=True))
     print(f"{len(results)} posts")
     if a.against:

@@ -1168,7 +1168,7 @@ fn options_that_multiply_the_checks_cost_are_refused_or_bounded() {
         (Settings { collision_clearance: Some(1e-9), ..Default::default() }, "0 (none) or at least 0.001"),
     ] {
         let e = s.profile_options(&p, None).map(|_| ()).expect_err("refused");
-        assert!(e.contains(want), "{e}");
+        assert!(e.message.contains(want), "{e}");
     }
     // The smallest fixture taken: every move of the path would want thousands of samples.
     let cl = String::from_utf8(common::generated("spinner-u5-620", 6, 1)).unwrap();
@@ -1212,7 +1212,7 @@ fn the_triangle_bound_counts_bodies_and_names_the_count() {
 #[test]
 fn huge_and_tiny_numbers_are_refused_and_quoted_short() {
     let p = shipped_profile("spinner-u5-620");
-    let e = Settings { tolerance: Some(1e-300), ..Default::default() }.profile_options(&p, None).err().unwrap();
+    let e = Settings { tolerance: Some(1e-300), ..Default::default() }.profile_options(&p, None).err().unwrap().message;
     assert!(e.len() <= 160 && e.contains("1e-300"), "{} characters: {e}", e.len());
     let (c, s) = run(&p, "UNITS/MM\nMSYS/1e300,0,0,1,0,0,0,1,0\nGOTO/0,0,100,0,0,1\nFINI\n", Settings::default());
     s.unwrap();

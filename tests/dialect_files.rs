@@ -398,11 +398,11 @@ finish = ["G187 P3 E{tol}", "G103 P1"]
     assert_eq!(with(job(None), &p), Ok(Smoothing::Finish), "the dialect's default");
     assert_eq!(with(job(Some("off")), &p), Ok(Smoothing::Off), "the job's over the dialect's");
     let mut policed = (*p).clone();
-    policed.doc.policy.get_or_insert_with(|| toml::from_str("").unwrap()).smoothing = Some("rough".into());
+    policed.policy.smoothing = Some(Smoothing::Rough);
     assert_eq!(with(job(None), &policed), Ok(Smoothing::Rough), "the profile's over the dialect's");
     assert_eq!(with(job(Some("auto")), &policed), Ok(Smoothing::Auto), "the job's over the profile's");
     let e = with(job(Some("medium")), &p).unwrap_err();
-    assert!(e.contains("smoothing \"medium\""), "{e}");
+    assert!(e.field == "smoothing" && e.message.contains("smoothing \"medium\""), "{e}");
     // From the first feed move, the two finish lines at the job's tolerance (the CL says none).
     let mut o = kinepost::post::Options::new(&p.machine);
     o.dialect = d.clone();

@@ -1058,7 +1058,7 @@ fn program_numbers_are_checked_against_the_dialects_program_frame() {
             Some(max) => {
                 assert!(settings(dialect, max).options(m).is_ok());
                 for bad in [0, max + 1, u32::MAX] {
-                    let e = settings(dialect, bad).options(m).unwrap_err();
+                    let e = settings(dialect, bad).options(m).unwrap_err().message;
                     assert_eq!(e, format!("program_number {bad}: {dialect} takes 1 to {max}"));
                 }
             }

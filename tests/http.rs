@@ -1092,3 +1092,158 @@ async fn every_refusal_a_route_answers_is_documented_for_it() {
     }
     assert_eq!(seen.keys().filter(|r| r.starts_with("get")).count(), 9, "{seen:?}");
 }
+
+/// Every post option is taken by the CLI, the query and the form alike, and each gives the same
+/// program. The options are listed from their one definition (`post::Settings`), so an option
+/// added there without a sample here fails, and so does one an edge does not take.
+#[tokio::test]
+async fn every_post_option_is_taken_by_the_cli_the_query_and_the_form_alike() {
+    const MACHINE: &str = "haas-umc750";
+    let samples: &[(&str, &str)] = &[
+        ("dialect", "fanuc"),
+        ("mode", "tcp"),
+        ("tool_length", "4"),
+        ("tool_table", "units = \"inch\"\n[[tool]]\nnumber = 1\nlength = 4.5\n"),
+        ("work_offset", "0.1,0.1,0.1"),
+        ("tolerance", "0.001"),
+        ("sequence_numbers", "true"),
+        ("program_number", "1234"),
+        ("strict", "true"),
+        ("singular_tolerance", "0.5"),
+        ("cl_units", "inch"),
+        ("cycles", "canned"),
+        ("planes", "tilted"),
+        ("work_coordinates", "G55"),
+        ("setups", "work-offsets"),
+        ("spindle_speed", "5000"),
+        ("retract", "axis:1"),
+        ("prefer", "B-"),
+        ("feed_mode", "combined"),
+        ("unwind", "rapids"),
+        ("preselect", "off"),
+        ("smoothing", "finish"),
+        ("collisions", "off"),
+        ("collision_clearance", "0.05"),
+        ("stock", "-5,-5,-5,5,5,5"),
+        ("fixtures", "20,20,0,21,21,1;-21,-21,0,-20,-20,1"),
+    ];
+    let Value::Object(defined) = serde_json::to_value(kinepost::post::Settings::default()).unwrap() else {
+        panic!("the post options serialize as an object");
+    };
+    for name in defined.keys().filter(|k| *k != "machine") {
+        assert!(samples.iter().any(|(k, _)| k == name), "post option {name}: give it a sample here");
+    }
+    let base = server(cfg()).await;
+    let c = reqwest::Client::new();
+    let dir = std::env::temp_dir().join(format!("kinepost-options-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let cl_path = dir.join("path.cls");
+    let cl = common::generated(MACHINE, 40, 3);
+    std::fs::write(&cl_path, &cl).unwrap();
+    // What two runs of the same program share: the words, not the comments naming the run.
+    let words = |nc: &str| -> Vec<String> {
+        common::body_lines(nc).into_iter().filter(|l| !l.starts_with('(')).map(str::to_string).collect()
+    };
+    let plain = words(
+        &c.post(format!("{base}/v1/post?machine={MACHINE}"))
+            .header("content-type", "text/plain")
+            .body(cl.clone())
+            .text_ok()
+            .await,
+    );
+    let mut unchanged = Vec::new();
+    for (name, value) in samples {
+        let flag = format!("--{}", name.replace('_', "-"));
+        let out = dir.join("out.nc");
+        let mut cli = std::process::Command::new(env!("CARGO_BIN_EXE_kinepost"));
+        cli.args(["post", "--machine", MACHINE, "-o"]).arg(&out);
+        match *name {
+            "tool_table" => {
+                let table = dir.join("tools.toml");
+                std::fs::write(&table, value).unwrap();
+                cli.arg(&flag).arg(&table);
+            }
+            "sequence_numbers" | "strict" => {
+                cli.arg(&flag);
+            }
+            _ => {
+                cli.arg(&flag).arg(value);
+            }
+        }
+        let run = cli.arg(&cl_path).output().unwrap();
+        let stderr = String::from_utf8_lossy(&run.stderr);
+        assert_ne!(run.status.code(), Some(2), "{flag} {value}: the CLI refused it: {stderr}");
+        let by_cli = std::fs::read_to_string(&out).unwrap();
+        let by_query = c
+            .post(format!("{base}/v1/post?{}", serde_urlencoded::to_string([("machine", MACHINE), (name, value)]).unwrap()))
+            .header("content-type", "text/plain")
+            .body(cl.clone())
+            .text_ok()
+            .await;
+        let mut form = String::new();
+        for (k, v) in [("machine", MACHINE), (name, value)] {
+            form += &format!("--XYZ\r\nContent-Disposition: form-data; name=\"{k}\"\r\n\r\n{v}\r\n");
+        }
+        form += &format!(
+            "--XYZ\r\nContent-Disposition: form-data; name=\"file\"; filename=\"path.cls\"\r\nContent-Type: text/plain\r\n\r\n{}\r\n--XYZ--\r\n",
+            String::from_utf8(cl.clone()).unwrap()
+        );
+        let by_form = c
+            .post(format!("{base}/v1/post"))
+            .header("content-type", "multipart/form-data; boundary=XYZ")
+            .body(form)
+            .text_ok()
+            .await;
+        assert_eq!(words(&by_query), words(&by_cli), "{name}={value}: the query's program is not the CLI's");
+        assert_eq!(words(&by_form), words(&by_cli), "{name}={value}: the form's program is not the CLI's");
+        if words(&by_cli) == plain {
+            unchanged.push(*name);
+        }
+    }
+    // A generated path has no holes, no second tool, no rapids to unwind at: those options leave
+    // it as it was. The rest must each have written another program, the same by every edge.
+    assert!(unchanged.len() <= 14, "options that changed nothing: {unchanged:?}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A setting refused names its field in the problem document, as the query and the form give it.
+#[tokio::test]
+async fn a_refused_setting_is_named_in_the_problem() {
+    let base = server(cfg()).await;
+    let c = reqwest::Client::new();
+    let r = c
+        .post(format!("{base}/v1/post?machine=haas-umc750&unwind=never"))
+        .header("content-type", "text/plain")
+        .body("UNITS/MM\nGOTO/0,0,0\nFINI\n")
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 400);
+    let p: Value = r.json().await.unwrap();
+    assert_eq!(p["field"], "unwind", "{p}");
+    assert!(p["detail"].as_str().unwrap().contains("never"), "{p}");
+    let form = "--XYZ\r\nContent-Disposition: form-data; name=\"machine\"\r\n\r\nhaas-umc750\r\n--XYZ\r\nContent-Disposition: form-data; name=\"feed_mode\"\r\n\r\nslow\r\n--XYZ\r\nContent-Disposition: form-data; name=\"file\"; filename=\"a.cls\"\r\nContent-Type: text/plain\r\n\r\nGOTO/0,0,0\r\n--XYZ--\r\n";
+    let r = c
+        .post(format!("{base}/v1/jobs"))
+        .header("content-type", "multipart/form-data; boundary=XYZ")
+        .body(form)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 400);
+    let p: Value = r.json().await.unwrap();
+    assert_eq!(p["field"], "feed_mode", "{p}");
+    // An unknown field, in the query or the form, is refused.
+    let r = c.post(format!("{base}/v1/post?machine=haas-umc750&feed=1")).body("GOTO/0,0,0\n").send().await.unwrap();
+    assert_eq!(r.status(), 400);
+    let form = form.replace("feed_mode", "feed");
+    let r = c
+        .post(format!("{base}/v1/post"))
+        .header("content-type", "multipart/form-data; boundary=XYZ")
+        .body(form)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 400);
+    assert!(r.text().await.unwrap().contains("unknown form field"));
+}

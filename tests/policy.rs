@@ -103,9 +103,41 @@ fn a_profile_states_its_default_and_a_job_overrides_it() {
     };
     assert!(matches!(tcp.profile_options(&mz, None).unwrap().retract, Retract::Axis(_)));
     let e = with_retract("tcp", "machine-z").profile_options(&mz, None).unwrap_err();
-    assert!(e.contains("TCP"), "{e}");
+    assert!(e.field == "retract" && e.message.contains("TCP"), "{e}");
     let bad = parse_profile(&format!("{text}\n[policy]\nretract = \"up\"\n"), "bad.toml", None).unwrap_err();
     assert!(bad.to_string().contains("policy.retract"), "{bad}");
+}
+
+/// A profile's `[policy]` is parsed when it loads, every key: a bad value is refused there,
+/// naming the file and the key, not blamed later on a post's parameter the client never sent.
+#[test]
+fn a_bad_policy_value_is_refused_at_load_naming_the_file_and_key() {
+    let text = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/machines/spinner-u5-620.toml")).unwrap();
+    for (key, bad) in [("retract", "up"), ("prefer", "A-"), ("feed_mode", "fast"), ("unwind", "never"), ("smoothing", "medium")] {
+        let shop = format!("{text}\n[policy]\n{key} = \"{bad}\"\n");
+        let e = parse_profile(&shop, "shop.toml", None).unwrap_err();
+        let msg = e.to_string();
+        assert!(msg.starts_with("shop.toml: ") && msg.contains(&format!("policy.{key}")) && msg.contains(bad), "{key}: {msg}");
+        assert!(matches!(e, kinepost::machines::Error::Invalid { key: ref k, .. } if *k == format!("policy.{key}")), "{key}: {e:?}");
+    }
+    // Each good value loads typed, and a post without the setting takes it.
+    let shop = format!("{text}\n[policy]\nretract = \"axis:30\"\nprefer = \"B-\"\nfeed_mode = \"dpm\"\nunwind = \"rapids\"\nsmoothing = \"off\"\n");
+    let p = parse_profile(&shop, "shop.toml", None).unwrap();
+    assert_eq!(p.policy.feed_mode, Some(post::RotaryFeed::DegreesPerMinute));
+    assert_eq!(p.policy.unwind, Some(post::Unwind::AtRapids));
+    let o = Settings::default().profile_options(&p, None).unwrap();
+    assert_eq!(o.retract, Retract::Axis(30.0));
+    assert_eq!((o.prefer.unwrap().rotary, o.prefer.unwrap().sign), (0, -1.0));
+    assert_eq!((o.rotary_feed, o.unwind, o.smoothing), (post::RotaryFeed::DegreesPerMinute, post::Unwind::AtRapids, post::Smoothing::Off));
+    // The job's own wins over each.
+    let job = Settings {
+        feed_mode: Some("combined".into()),
+        unwind: Some("retract".into()),
+        smoothing: Some("rough".into()),
+        ..Default::default()
+    };
+    let o = job.profile_options(&p, None).unwrap();
+    assert_eq!((o.rotary_feed, o.unwind, o.smoothing), (post::RotaryFeed::Combined, post::Unwind::RetractInCut, post::Smoothing::Rough));
 }
 
 #[test]
@@ -114,7 +146,7 @@ fn bad_retracts_are_refused_naming_the_setting() {
     let m = &lib.get("spinner-u5-620").unwrap().machine;
     for bad in ["up", "axis:", "axis:-5", "axis:0", "plane:x", "plane:NaN", "plane:1e300", "machine-z:1"] {
         let e = with_retract("joint", bad).options(m).unwrap_err();
-        assert!(e.starts_with("retract"), "{bad}: {e}");
+        assert!(e.field == "retract" && e.message.starts_with("retract"), "{bad}: {e}");
     }
     for (good, want) in [("machine-z", Retract::MachineZ), ("axis:5", Retract::Axis(5.0)), ("plane:-20", Retract::Plane(-20.0))] {
         assert_eq!(with_retract("joint", good).options(m).unwrap().retract, want);
@@ -168,7 +200,7 @@ fn prefer_keeps_a_rotary_on_the_side_asked_for() {
             prefer: Some(bad.into()),
             ..Default::default()
         };
-        assert!(s.profile_options(&p, None).unwrap_err().starts_with("prefer"), "{bad}");
+        assert_eq!(s.profile_options(&p, None).unwrap_err().field, "prefer", "{bad}");
     }
 }
 
@@ -248,5 +280,5 @@ fn feed_mode_dpm_writes_no_inverse_time_and_keeps_each_blocks_time() {
         feed_mode: Some("per-tooth".into()),
         ..Default::default()
     };
-    assert!(s.profile_options(&p, None).unwrap_err().starts_with("feed_mode"));
+    assert_eq!(s.profile_options(&p, None).unwrap_err().field, "feed_mode");
 }

@@ -717,7 +717,7 @@ fn a_bounded_rotary_unwinds_with_a_marked_retract() {
     assert!(s2.errors >= 1 && strict.nc.contains("UNWIND") && strict.nc.contains("ERROR UNWIND"), "{}", strict.nc);
     assert_eq!(strict.blocks.len(), sink.blocks.len(), "the same motion");
     let bad = kinepost::post::Settings { unwind: Some("never".into()), ..Default::default() };
-    assert!(bad.options(&m).unwrap_err().starts_with("unwind"));
+    assert!(bad.options(&m).unwrap_err().message.starts_with("unwind"));
 }
 
 /// `turns` of a 30°-tilted tool axis swept about Z around a rising circle: every GOTO turns C by
@@ -2084,7 +2084,7 @@ fn a_default_spindle_speed_starts_what_the_cl_does_not() {
             spindle_speed: Some(bad),
             ..Default::default()
         };
-        assert!(s.options(&m).unwrap_err().contains("spindle_speed"), "{bad}");
+        assert!(s.options(&m).unwrap_err().message.contains("spindle_speed"), "{bad}");
     }
 }
 
@@ -2445,7 +2445,7 @@ fn a_tolerance_below_the_words_resolution_is_refused() {
                 tolerance: Some(t),
                 ..Default::default()
             };
-            let e = s.options(&m).unwrap_err();
+            let e = s.options(&m).unwrap_err().message;
             assert!(e.contains(&format!("smallest that works is {least}")), "{id} {t}: {e}");
         }
         let least: f64 = least.split(' ').next().unwrap().parse().unwrap();
@@ -2546,7 +2546,7 @@ fn spindle_speeds_stay_within_the_profiles_range() {
             spindle_speed: Some(hi + 1.0),
             ..Default::default()
         };
-        let e = too_fast.profile_options(p, None).unwrap_err();
+        let e = too_fast.profile_options(p, None).unwrap_err().message;
         assert!(e.contains("spindle_speed") && e.contains(&p.doc.id), "{e}");
     }
 }

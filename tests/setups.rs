@@ -170,11 +170,11 @@ fn work_offsets_are_refused_where_the_program_selects_none_or_uses_planes() {
             setups: Some("work-offsets".into()),
             ..Default::default()
         };
-        let e = s.options(&m).unwrap_err();
+        let e = s.options(&m).unwrap_err().message;
         assert!(e.starts_with("setups work-offsets"), "{dialect} {wcs:?} {planes:?}: {e}");
     }
     let bad = post::Settings { setups: Some("offsets".into()), ..Default::default() };
-    assert!(bad.options(&m).unwrap_err().contains("expected transform or work-offsets"));
+    assert!(bad.options(&m).unwrap_err().message.contains("expected transform or work-offsets"));
 }
 
 /// A file can be read twice: the CLI's header lists the offsets before the program starts,

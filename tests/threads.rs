@@ -298,11 +298,11 @@ fn posts_failing_mid_way_fail_the_same_and_leave_no_thread() {
     assert_eq!(threads_named("kinepost-read"), 0, "a reading thread left running");
 }
 
+/// Each edge chooses a post's threads (the CLI's `--threads`, the server's configuration): a
+/// request cannot; every choice is checked by the one function.
 #[test]
 fn threads_are_one_or_two() {
-    let lib = library();
-    let p = lib.get("spinner-u5-620").unwrap();
-    let with = |n| post::Settings { threads: n, ..Default::default() }.profile_options(&p, None).map(|o| o.threads);
+    let with = post::threads;
     assert_eq!(with(None), Ok(1));
     assert_eq!(with(Some(1)), Ok(1));
     assert_eq!(with(Some(2)), Ok(2));

@@ -258,7 +258,7 @@ fn bad_tables_are_refused_naming_the_entry() {
             tool_table: Some(table.into()),
             ..Default::default()
         };
-        let e = s.profile_options(&p, None).unwrap_err();
+        let e = s.profile_options(&p, None).unwrap_err().message;
         assert!(e.starts_with("tool_table") && e.contains(names), "{e}");
     }
 }

@@ -294,110 +294,25 @@ impl From<UnitsArg> for Units {
     }
 }
 
+/// `kinepost post`: the post options (one definition, `post::Settings`, which HTTP takes too)
+/// and what only the command line has: its input and output files, the tool table as a file,
+/// the threads, the budget, and the shorthand flags it had before `--cycles` and `--planes`.
 #[derive(clap::Args, Debug, Clone)]
 pub struct PostArgs {
-    #[arg(long)]
-    pub machine: String,
-    /// NC dialect (default: the profile's controller).
-    #[arg(long)]
-    pub dialect: Option<String>,
-    /// joint (no TCP on the control) or tcp (X Y Z are the tip, the control does the rest).
-    #[arg(long, value_enum, default_value = "joint")]
-    pub mode: ModeArg,
     #[command(flatten)]
-    pub setup: SetupArgs,
-    /// Chord tolerance in profile units (default 0.01 mm / 0.0004 in, at most 1 mm / 0.04 in):
-    /// also the bound of the FK replay's tip check.
-    #[arg(long, allow_hyphen_values = true)]
-    pub tolerance: Option<f64>,
-    /// Units of the CL file when it does not say (mm or inch).
-    #[arg(long)]
-    #[arg(value_enum)]
-    pub cl_units: Option<UnitsArg>,
-    /// N numbers on blocks.
-    #[arg(long)]
-    pub sequence_numbers: bool,
-    #[arg(long, default_value_t = 1000, allow_hyphen_values = true)]
-    pub program_number: u32,
-    /// Stop at the first error (bad record, unreachable pose, limit) with a non-zero exit.
-    #[arg(long)]
-    pub strict: bool,
+    pub settings: kinepost::post::Settings,
+    /// Hole cycles as the control's canned cycles: `--cycles canned`.
+    #[arg(long, conflicts_with = "cycles")]
+    pub canned_cycles: bool,
+    /// Fixed-axis (3+2) runs in a tilted working plane: `--planes tilted`.
+    #[arg(long, conflicts_with = "planes")]
+    pub tilted_planes: bool,
     #[command(flatten)]
     pub budget: BudgetArgs,
-    /// Orientation tolerance in degrees near a singular direction: the free rotary is held
-    /// while the tool axis stays within it of the CL orientation (e.g. 0.5 for ball-end tools).
-    /// Default 0: exact.
-    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
-    pub singular_tolerance: f64,
-    /// Hole cycles as the control's canned cycles (G81–G89, CYCLE81–89, CYCL DEF 200–207) where
-    /// the hole runs along the machine's Z; default: expanded into moves (taps and bores that
-    /// stop the spindle are always cycles, or an error).
-    #[arg(long)]
-    pub canned_cycles: bool,
-    /// Fixed-axis (3+2) runs in a tilted working plane (G68.2 + G53.1, G254, CYCLE800, PLANE
-    /// SPATIAL) with their motion in plane coordinates; default: 5-axis positioning.
-    #[arg(long)]
-    pub tilted_planes: bool,
-    /// Work coordinate system the program selects: G54 (default) to G59 (siemens: G57), or none
-    /// (the control's active one). Its origin must be where X Y Z are measured from (joint
-    /// mode: the profile's origin; TCP: the part's).
-    #[arg(long)]
-    pub work_coordinates: Option<String>,
-    /// Programs of several setups (NX MSYS per operation): transform (default: every operation
-    /// taken into the first's MCS) or work-offsets (each distinct MCS in the next work offset,
-    /// G55 …, the program listing where to set each).
-    #[arg(long)]
-    pub setups: Option<String>,
-    /// Where positioning retracts to before the rotaries turn, at a tool change and at the end:
-    /// machine-z (joint mode's default: the top of Z travel), axis:D (D along the tool axis;
-    /// TCP mode's default is the clearance) or plane:Z (along the tool axis up to z = Z in the
-    /// part frame); the profile's [policy] retract where not given.
-    #[arg(long, allow_hyphen_values = true)]
-    pub retract: Option<String>,
-    /// A rotary's side the planner keeps to where both IK branches can cut a run: B- or A+ (a
-    /// preference: never a branch change inside a cut); the profile's [policy] prefer where not
-    /// given.
-    #[arg(long, allow_hyphen_values = true)]
-    pub prefer: Option<String>,
-    /// How a feed move that turns a rotary writes F: inverse-time (G93, the default where the
-    /// control has it), dpm (the linear feed, or degrees per minute when only rotaries move, as
-    /// LinuxCNC and Haas read G94) or combined (along the machine axes, units and degrees); the
-    /// profile's [policy] feed_mode where not given.
-    #[arg(long)]
-    pub feed_mode: Option<String>,
-    /// Where a bounded rotary may unwind: retract (in the cut too, retracting along the tool
-    /// axis) or rapids (one inside a cut is an error); the profile's [policy] unwind where not
-    /// given.
-    #[arg(long)]
-    pub unwind: Option<String>,
-    /// Which tool is readied while another cuts: next (the default: right after each tool
-    /// change, the next tool the CL loads), cl (where the CL says SELCTL) or off.
-    #[arg(long)]
-    pub preselect: Option<String>,
-    /// The smoothing word of each operation: auto (the default: once the CL says INTOL/OUTTOL,
-    /// each operation's level from its type, else its tolerance), off, rough or finish.
-    #[arg(long)]
-    pub smoothing: Option<String>,
-    /// The collision check against the profile's bodies: on (the default) or off.
-    #[arg(long)]
-    pub collisions: Option<String>,
-    /// Bodies closer than this (profile units; default 2 mm / 0.08 in) are a near_collision.
-    #[arg(long)]
-    pub collision_clearance: Option<f64>,
     /// Threads for the post: 1, or 2 (the CL read and planned beside the NC written; the same
     /// output). Default: 2 where the machine has two cores or more.
     #[arg(long, default_value_t = default_threads())]
     pub threads: u32,
-    /// The stock: a box x0,y0,z0,x1,y1,z1 in the CL's frame and units.
-    #[arg(long, allow_hyphen_values = true)]
-    pub stock: Option<String>,
-    /// Fixtures: boxes as the stock's, separated by ';'.
-    #[arg(long, allow_hyphen_values = true)]
-    pub fixtures: Option<String>,
-    /// Spindle speed (RPM, clockwise) for a tool the CL starts no spindle for before its first
-    /// move (NX CLSF listings carry no SPINDL); the CL's own SPINDL and SPINDL/OFF win.
-    #[arg(long, allow_hyphen_values = true)]
-    pub spindle_speed: Option<f64>,
     /// A tool table (TOML: units, [[tool]] number, length …): each tool's length in joint mode
     /// on a head machine. Replaces the machine's (`machines/<id>.tools.toml`) for this job.
     #[arg(long)]
@@ -690,8 +605,9 @@ fn run(cli: Cli) -> Result<(), Failure> {
             }
         }
         Command::Post(a) => {
-            let p = lib.get(&a.machine).map_err(|e| e.to_string())?;
-            let standing = lib.tools(&a.machine).map(|t| (t, "THE MACHINE'S TOOL TABLE".to_string()));
+            let machine = a.settings.machine.as_deref().unwrap_or_default();
+            let p = lib.get(machine).map_err(|e| e.to_string())?;
+            let standing = lib.tools(machine).map(|t| (t, "THE MACHINE'S TOOL TABLE".to_string()));
             post_cmd(&p, standing, &lib.dialects, &a)
         }
         Command::Dialects { json } => {
@@ -768,51 +684,22 @@ fn post_cmd(
     a: &PostArgs,
 ) -> Result<(), Failure> {
     let m = &p.machine;
-    use kinepost::post::{self, Settings, Sink};
+    use kinepost::post::{self, Sink};
     use std::io::Write;
-    let settings = Settings {
-        machine: Some(a.machine.clone()),
-        dialect: a.dialect.clone(),
-        mode: Some(match a.mode {
-            ModeArg::Joint => "joint".into(),
-            ModeArg::Tcp => "tcp".into(),
-        }),
-        tool_length: a.setup.tool_length,
-        work_offset: a.setup.work_offset.clone(),
-        tolerance: a.tolerance,
-        sequence_numbers: Some(a.sequence_numbers),
-        program_number: Some(a.program_number),
-        strict: Some(a.strict),
-        singular_tolerance: Some(a.singular_tolerance),
-        cl_units: a.cl_units.map(|u| Units::from(u).as_str().to_string()),
-        cycles: a.canned_cycles.then(|| "canned".into()),
-        planes: a.tilted_planes.then(|| "tilted".into()),
-        work_coordinates: a.work_coordinates.clone(),
-        setups: a.setups.clone(),
-        spindle_speed: a.spindle_speed,
-        retract: a.retract.clone(),
-        prefer: a.prefer.clone(),
-        feed_mode: a.feed_mode.clone(),
-        unwind: a.unwind.clone(),
-        preselect: a.preselect.clone(),
-        smoothing: a.smoothing.clone(),
-        collisions: a.collisions.clone(),
-        collision_clearance: a.collision_clearance,
-        threads: Some(a.threads),
-        stock: a.stock.clone(),
-        fixtures: a.fixtures.clone(),
-        tool_table: match &a.tool_table {
-            // Read and checked here, so that an error names the file.
-            Some(f) => {
-                machines::tools::load_tool_table(f).map_err(|e| e.to_string())?;
-                Some(machines::read_text(f).map_err(|e| format!("{}: {e}", f.display()))?)
-            }
-            None => None,
-        },
-        machine_tools_version: None,
-        dialect_version: None,
-    };
-    let mut o = settings.profile_options_with(p, standing, &|id| dialects.get(id))?;
+    let mut settings = a.settings.clone();
+    if a.canned_cycles {
+        settings.cycles = Some("canned".into());
+    }
+    if a.tilted_planes {
+        settings.planes = Some("tilted".into());
+    }
+    if let Some(f) = &a.tool_table {
+        // Read and checked here, so that an error names the file.
+        machines::tools::load_tool_table(f).map_err(|e| e.to_string())?;
+        settings.tool_table = Some(machines::read_text(f).map_err(|e| format!("{}: {e}", f.display()))?);
+    }
+    let mut o = settings.profile_options_with(p, standing, &|id| dialects.get(id)).map_err(|e| e.to_string())?;
+    o.threads = post::threads(Some(a.threads))?;
     o.budget = a.budget.budget()?;
     o.header.push(format!("DATE {} UTC", utc_now()));
     o.header.push(format!(
@@ -865,7 +752,7 @@ fn post_cmd(
     if s.smoothed_blocks > 0 {
         eprintln!(
             "kinepost: singular tolerance {}°: {} blocks held the free rotary, {:.1}° of travel saved, largest deviation {:.4}°",
-            a.singular_tolerance, s.smoothed_blocks, s.smoothing_travel_saved_deg, s.smoothing_max_deviation_deg
+            settings.singular_tolerance.unwrap_or(0.0), s.smoothed_blocks, s.smoothing_travel_saved_deg, s.smoothing_max_deviation_deg
         );
     }
     eprintln!(

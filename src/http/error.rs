@@ -11,6 +11,9 @@ pub enum ApiError {
     UnknownMachine(String),
     #[error("{0}")]
     BadParameter(String),
+    /// A post setting refused: the problem names its field.
+    #[error("{0}")]
+    BadSetting(#[from] crate::post::SettingError),
     #[error("unsupported content type {}: send text/plain, application/octet-stream or multipart/form-data", quote(.0))]
     UnsupportedMediaType(String),
     #[error("not acceptable: {}; this route produces text/plain or application/x-ndjson", quote(.0))]
@@ -100,6 +103,9 @@ pub struct Problem {
     /// The profile key to fix (`rotary[0].axis`), for an invalid machine profile.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub key: Option<String>,
+    /// The request's field to fix (`feed_mode`), for a post setting refused.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub field: Option<String>,
 }
 
 pub const PROBLEM_BASE: &str = "https://kinepost.dev/problems/";
@@ -108,7 +114,7 @@ impl ApiError {
     pub fn problem(&self) -> Problem {
         let (status, slug, title) = match self {
             ApiError::UnknownMachine(_) => (StatusCode::NOT_FOUND, "unknown-machine", "Unknown machine"),
-            ApiError::BadParameter(_) => (StatusCode::BAD_REQUEST, "bad-parameter", "Bad parameter"),
+            ApiError::BadParameter(_) | ApiError::BadSetting(_) => (StatusCode::BAD_REQUEST, "bad-parameter", "Bad parameter"),
             ApiError::UnsupportedMediaType(_) => (
                 StatusCode::UNSUPPORTED_MEDIA_TYPE,
                 "unsupported-media-type",
@@ -164,6 +170,10 @@ impl ApiError {
             column,
             code,
             key,
+            field: match self {
+                ApiError::BadSetting(e) => Some(e.field.to_string()),
+                _ => None,
+            },
         }
     }
 }

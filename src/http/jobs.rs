@@ -3,10 +3,11 @@
 
 use super::AppState;
 use super::error::{ApiError, ApiQuery};
-use super::post::{PostParams, nc_attachment, upload_error};
+use super::post::{nc_attachment, upload_error};
 use super::refusals::{NotFound, QueueBusy, TooManyDownloads, UploadRefusals};
 use super::upload::ClUpload;
-use crate::jobs::{self, Job, Output, Queue, State as JobState};
+use crate::jobs::{self, Job, JobSettings, Output, Queue, State as JobState};
+use crate::post::Settings;
 use axum::Json;
 use axum::body::Body;
 use axum::extract::{Path, Request, State};
@@ -119,7 +120,7 @@ impl From<Job> for JobView {
             machine_version: j.machine_version,
             tool_table_version: j.settings.machine_tools_version,
             dialect_version: j.settings.dialect_version,
-            own_tool_table: j.settings.tool_table.is_some(),
+            own_tool_table: j.settings.post.tool_table.is_some(),
             filename: j.filename,
             idempotency_key: j.idempotency_key,
             created_ms: j.created_ms,
@@ -199,7 +200,7 @@ fn job_id(id: &str) -> Result<&str, ApiError> {
 #[utoipa::path(
     post,
     path = "/v1/jobs",
-    params(PostParams, ("Idempotency-Key" = Option<String>, Header, description = "1–200 characters; the same key with the same request (CL input, machine, options) returns the same job, with another request it is refused (422)")),
+    params(Settings, ("Idempotency-Key" = Option<String>, Header, description = "1–200 characters; the same key with the same request (CL input, machine, options) returns the same job, with another request it is refused (422)")),
     request_body(content = String, description = "CL data (APT/CLSF text), raw or as the `file` part of multipart/form-data", content_type = "text/plain"),
     responses(
         (status = 202, description = "Accepted: on disk, queued", body = JobView),
@@ -229,18 +230,17 @@ pub async fn submit(
     // The peer address: behind a proxy every client is the proxy (set the limit accordingly).
     let client = peer.map(|c| c.0.0.ip().to_string());
     // Settings are checked now, so a job never fails for a typo hours later.
-    let checked = params.profile(&st).and_then(|current| {
-        let mut settings = params.settings();
+    let checked = super::post::profile(&st, &params).and_then(|current| {
         let standing = super::tools::standing(&st, &current.id);
-        if settings.tool_table.is_none() {
+        params.profile_options_with(&current.item, standing, &|id| st.machines.dialect(id))?;
+        let mut settings = JobSettings::default();
+        if params.tool_table.is_none() {
             // The machine's table as it is now, whatever is written to it before the job runs.
             settings.machine_tools_version = st.machines.tools.get(&current.id).ok().map(|c| c.version);
         }
-        let dialect = settings.dialect.clone().unwrap_or_else(|| current.item.machine.controller.clone());
+        let dialect = params.dialect.clone().unwrap_or_else(|| current.item.machine.controller.clone());
         settings.dialect_version = st.machines.dialects.get(&dialect).ok().map(|c| c.version);
-        settings
-            .profile_options_with(&current.item, standing, &|id| st.machines.dialect(id))
-            .map_err(ApiError::BadParameter)?;
+        settings.post = params;
         Ok((current, settings))
     });
     let ((current, settings), body) = super::post::refuse_unread(checked, body).await?;

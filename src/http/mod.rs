@@ -20,7 +20,6 @@ mod upload;
 
 pub use error::{ApiError, ApiJson, Problem};
 pub use metrics::Metrics;
-pub use post::PostParams;
 pub use server::{connection_budget, run};
 
 use crate::machines::Library;
@@ -179,7 +178,7 @@ pub struct AppState {
         jobs::submit, jobs::list_jobs, jobs::get_job, jobs::delete_job, jobs::job_nc, jobs::job_diagnostics, jobs::job_preview,
         jobs::job_input, jobs::job_lines),
     components(schemas(Problem, machines::MachineDto, machines::LinearDto, machines::RotaryDto, machines::AngleErrorDto,
-        shelf::VersionsDto, shelf::VersionDto, tools::ToolTableDto, tools::ToolDto, tools::HolderDto, dialects::DialectDto, PostParams, machine_ops::FkRequest,
+        shelf::VersionsDto, shelf::VersionDto, tools::ToolTableDto, tools::ToolDto, tools::HolderDto, dialects::DialectDto, crate::post::Settings, machine_ops::FkRequest,
         machine_ops::PoseDto, machine_ops::PoseRequest, machine_ops::ReachDto, machine_ops::AngleFitRequest, machine_ops::FitDto,
         machine_ops::AngleFitResponse, machine_ops::MeasurementDto, machine_ops::CalibrateRequest, machine_ops::CalibrateResponse,
         jobs::JobView, jobs::JobProgress, jobs::JobLinks, jobs::JobList)),

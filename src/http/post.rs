@@ -12,14 +12,13 @@ use super::{AppState, limits};
 use crate::diag::Diagnostic;
 use crate::output::{ErrorBody, Header, Record};
 use crate::post::{self, BlockInfo, Settings, Sink, Summary};
-use axum::body::Body;
 use axum::Extension;
+use axum::body::Body;
 use axum::extract::{FromRequestParts, State};
 use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use bytes::Bytes;
 use futures_util::StreamExt;
-use serde::Deserialize;
 use std::io::Read;
 use std::sync::Arc;
 use tokio::sync::mpsc;
@@ -32,179 +31,13 @@ const CHUNK: usize = 32 * 1024;
 /// Most of an upload read after the engine stopped early (beyond it the connection may reset).
 const DRAIN_MAX: u64 = 64 << 20;
 
-/// Query (or multipart form) parameters of `POST /v1/post`.
-#[derive(Clone, Debug, Default, Deserialize, utoipa::IntoParams, utoipa::ToSchema)]
-#[serde(deny_unknown_fields)]
-#[into_params(parameter_in = Query)]
-pub struct PostParams {
-    /// Machine profile id (required).
-    pub machine: Option<String>,
-    /// NC dialect; default: the profile's controller.
-    pub dialect: Option<String>,
-    /// `joint` (default) or `tcp`.
-    pub mode: Option<String>,
-    /// Tool length (gauge line to tip), profile units, one for every tool (a single-tool job);
-    /// default per tool: the tool table's, else the CL file's, else the profile's.
-    pub tool_length: Option<f64>,
-    /// The job's own tool table, as TOML text (`units = "mm"`, `[[tool]] number = 3, length =
-    /// 112.5 …`): each tool's length; it replaces the machine's (`/v1/machines/{id}/tools`).
-    pub tool_table: Option<String>,
-    /// Work offset `x,y,z` in profile units.
-    pub work_offset: Option<String>,
-    /// Chord tolerance in profile units (default 0.01 mm / 0.0004 in, at most 1 mm / 0.04 in):
-    /// also the bound of the FK replay's tip check.
-    pub tolerance: Option<f64>,
-    pub sequence_numbers: Option<bool>,
-    /// Program number (default 1000): 1 to 9999 on fanuc (`O` and four digits), 1 to 99999 on
-    /// haas; any on the others, which name the program.
-    pub program_number: Option<u32>,
-    /// Stop at the first error instead of reporting it and going on.
-    pub strict: Option<bool>,
-    /// Degrees of orientation the free rotary may use near a singular direction (0: exact).
-    pub singular_tolerance: Option<f64>,
-    /// Units of the CL when the file does not say: `mm` or `inch`.
-    pub cl_units: Option<String>,
-    /// Drilling cycles: `expand` (default: moves) or `canned` (the control's canned cycles where
-    /// the hole runs along the machine's Z in joint mode; elsewhere still expanded).
-    pub cycles: Option<String>,
-    /// 3+2 work: `positioning` (default) or `tilted` (a tilted working plane per fixed-axis run:
-    /// G68.2/G53.1, G254, CYCLE800, PLANE SPATIAL; joint mode).
-    pub planes: Option<String>,
-    /// Work coordinate system the program selects: `G54` (default) to `G59` (siemens: `G57`), or
-    /// `none`; its origin must be where X Y Z are measured from (joint mode: the profile's
-    /// origin; TCP: the part's). heidenhain: none only.
-    pub work_coordinates: Option<String>,
-    /// Programs of several setups (NX `MSYS` per operation): `transform` (default: every
-    /// operation taken into the first's MCS) or `work-offsets` (each distinct MCS in the next
-    /// work offset, G55 …).
-    pub setups: Option<String>,
-    /// Spindle speed (RPM, clockwise, 1 to 200000) for a tool the CL starts no spindle for
-    /// before its first move (NX CLSF carries no SPINDL); the CL's SPINDL and SPINDL/OFF win.
-    pub spindle_speed: Option<f64>,
-    /// Where positioning retracts to: `machine-z` (joint mode's default: the top of Z travel),
-    /// `axis:D` (along the tool axis; TCP mode's default is the clearance) or `plane:Z` (along
-    /// the tool axis up to z = Z in the part frame); the profile's default where absent.
-    pub retract: Option<String>,
-    /// A rotary's side the planner keeps to where both IK branches can cut a run: `B-`, `A+`;
-    /// the profile's default where absent.
-    pub prefer: Option<String>,
-    /// How a feed move with rotaries writes F: `inverse-time`, `dpm` or `combined`; the
-    /// profile's `[policy] feed_mode`, else inverse time where the control has it.
-    pub feed_mode: Option<String>,
-    /// Where a bounded rotary may unwind: `retract` (in the cut too) or `rapids` (one inside a
-    /// cut is an error); the profile's `[policy] unwind` where absent.
-    pub unwind: Option<String>,
-    /// Which tool is readied while another cuts: `next` (default: right after each tool change,
-    /// the next tool the CL loads; a streamed post, whose CL is read once, readies where the CL
-    /// says `SELCTL`; a job's spooled CL is read twice), `cl` (where the CL says `SELCTL`) or
-    /// `off`.
-    pub preselect: Option<String>,
-    /// The smoothing word of each operation: `auto` (default: once the CL says `INTOL`/`OUTTOL`,
-    /// each operation's level from its type, else its tolerance), `off`, `rough` or `finish`;
-    /// the profile's `[policy] smoothing`, else the dialect's `[smoothing] default`, where
-    /// absent.
-    pub smoothing: Option<String>,
-    /// The collision check against the profile's bodies: `on` (default) or `off`.
-    pub collisions: Option<String>,
-    /// Bodies closer than this (profile units; default 2 mm / 0.08 in): `near_collision`.
-    pub collision_clearance: Option<f64>,
-    /// The stock: a box `x0,y0,z0,x1,y1,z1` in the CL's frame and units.
-    pub stock: Option<String>,
-    /// Fixtures: boxes as the stock's, separated by `;`.
-    pub fixtures: Option<String>,
-}
-
-impl PostParams {
-    pub(super) fn settings(&self) -> Settings {
-        Settings {
-            machine: self.machine.clone(),
-            dialect: self.dialect.clone(),
-            mode: self.mode.clone(),
-            tool_length: self.tool_length,
-            tool_table: self.tool_table.clone(),
-            machine_tools_version: None,
-            dialect_version: None,
-            work_offset: self.work_offset.clone(),
-            tolerance: self.tolerance,
-            sequence_numbers: self.sequence_numbers,
-            program_number: self.program_number,
-            strict: self.strict,
-            singular_tolerance: self.singular_tolerance,
-            cl_units: self.cl_units.clone(),
-            cycles: self.cycles.clone(),
-            planes: self.planes.clone(),
-            work_coordinates: self.work_coordinates.clone(),
-            setups: self.setups.clone(),
-            spindle_speed: self.spindle_speed,
-            retract: self.retract.clone(),
-            prefer: self.prefer.clone(),
-            feed_mode: self.feed_mode.clone(),
-            unwind: self.unwind.clone(),
-            preselect: self.preselect.clone(),
-            smoothing: self.smoothing.clone(),
-            collisions: self.collisions.clone(),
-            collision_clearance: self.collision_clearance,
-            threads: None, // the server's to choose (`Config::post_threads`), not a request's
-            stock: self.stock.clone(),
-            fixtures: self.fixtures.clone(),
-        }
-    }
-
-    /// The machine profile named by `machine` (required).
-    pub(super) fn profile(&self, st: &AppState) -> Result<crate::machines::Current, ApiError> {
-        let id = self
-            .machine
-            .as_deref()
-            .ok_or_else(|| ApiError::BadParameter("machine: required (e.g. ?machine=haas-umc750)".into()))?;
-        st.machines.get(id).map_err(|_| ApiError::UnknownMachine(id.to_string()))
-    }
-
-    /// A multipart text field, by name.
-    pub(super) fn set(&mut self, name: &str, v: String) -> Result<(), ApiError> {
-        let bad = |what: &str| ApiError::BadParameter(format!("{name}: {what}"));
-        let num = |v: &str| v.trim().parse::<f64>().map_err(|_| bad("expected a number"));
-        let flag = |v: &str| match v.trim() {
-            "true" | "1" | "on" | "yes" => Ok(true),
-            "false" | "0" | "off" | "no" | "" => Ok(false),
-            _ => Err(bad("expected true or false")),
-        };
-        match name {
-            "machine" => self.machine = Some(v),
-            "dialect" => self.dialect = Some(v).filter(|s| !s.is_empty()),
-            "mode" => self.mode = Some(v).filter(|s| !s.is_empty()),
-            "tool_length" => self.tool_length = if v.trim().is_empty() { None } else { Some(num(&v)?) },
-            "tool_table" => self.tool_table = Some(v).filter(|s| !s.trim().is_empty()),
-            "work_offset" => self.work_offset = Some(v).filter(|s| !s.trim().is_empty()),
-            "tolerance" => self.tolerance = if v.trim().is_empty() { None } else { Some(num(&v)?) },
-            "sequence_numbers" => self.sequence_numbers = Some(flag(&v)?),
-            "program_number" => self.program_number = Some(v.trim().parse().map_err(|_| bad("expected a whole number"))?),
-            "strict" => self.strict = Some(flag(&v)?),
-            "singular_tolerance" => self.singular_tolerance = if v.trim().is_empty() { None } else { Some(num(&v)?) },
-            "cl_units" => self.cl_units = Some(v).filter(|s| !s.is_empty()),
-            "cycles" => self.cycles = Some(v).filter(|s| !s.is_empty()),
-            "planes" => self.planes = Some(v).filter(|s| !s.is_empty()),
-            "work_coordinates" => self.work_coordinates = Some(v).filter(|s| !s.is_empty()),
-            "setups" => self.setups = Some(v).filter(|s| !s.is_empty()),
-            "retract" => self.retract = Some(v).filter(|s| !s.is_empty()),
-            "prefer" => self.prefer = Some(v).filter(|s| !s.is_empty()),
-            "feed_mode" => self.feed_mode = Some(v).filter(|s| !s.is_empty()),
-            "unwind" => self.unwind = Some(v).filter(|s| !s.is_empty()),
-            "preselect" => self.preselect = Some(v).filter(|s| !s.is_empty()),
-            "smoothing" => self.smoothing = Some(v).filter(|s| !s.is_empty()),
-            "collisions" => self.collisions = Some(v).filter(|s| !s.is_empty()),
-            "collision_clearance" => self.collision_clearance = if v.trim().is_empty() { None } else { Some(num(&v)?) },
-            "stock" => self.stock = Some(v).filter(|s| !s.trim().is_empty()),
-            "fixtures" => self.fixtures = Some(v).filter(|s| !s.trim().is_empty()),
-            "spindle_speed" => self.spindle_speed = if v.trim().is_empty() { None } else { Some(num(&v)?) },
-            other => {
-                return Err(ApiError::BadParameter(format!(
-                    "unknown form field {}",
-                    crate::text::quote(other)
-                )));
-            }
-        }
-        Ok(())
-    }
+/// The machine profile a post's settings name (`machine`, required).
+pub(super) fn profile(st: &AppState, settings: &Settings) -> Result<crate::machines::Current, ApiError> {
+    let id = settings
+        .machine
+        .as_deref()
+        .ok_or_else(|| ApiError::BadParameter("machine: required (e.g. ?machine=haas-umc750)".into()))?;
+    st.machines.get(id).map_err(|_| ApiError::UnknownMachine(id.to_string()))
 }
 
 /// Whether the client wants NDJSON blocks instead of the NC text (`Accept`), refused (406) before
@@ -374,7 +207,7 @@ pub(super) async fn refuse_unread<T>(checked: Result<T, ApiError>, body: Body) -
 #[utoipa::path(
     post,
     path = "/v1/post",
-    params(PostParams),
+    params(Settings),
     request_body(content = String, description = "CL data (APT/CLSF text), raw or as the `file` part of multipart/form-data", content_type = "text/plain"),
     responses(
         (status = 200, description = "The NC program (text/plain), or one JSON object per line (application/x-ndjson): header, block…, summary, and error on failure", content_type = "text/plain"),
@@ -393,10 +226,10 @@ pub async fn post_cl(
 ) -> Result<Response, ApiError> {
     // Held until the stream ends (the one in the request's extensions went with the request).
     let slot = slot.map(|Extension(s)| s);
-    let checked = params.profile(&st).and_then(|c| {
+    let checked = profile(&st, &params).and_then(|c| {
         let standing = super::tools::standing(&st, &c.id);
-        let opts = params.settings().profile_options_with(&c.item, standing, &|id| st.machines.dialect(id));
-        Ok((c.item, opts.map_err(ApiError::BadParameter)?))
+        let opts = params.profile_options_with(&c.item, standing, &|id| st.machines.dialect(id));
+        Ok((c.item, opts?))
     });
     let ((profile, mut opts), body) = refuse_unread(checked, body).await?;
     opts.budget = st.config.post_budget;

@@ -16,7 +16,7 @@ mod store;
 mod varint;
 
 pub use diagnostics::Diagnostics;
-pub use store::{Job, Output, State, Store, Submission};
+pub use store::{Job, JobSettings, Output, State, Store, Submission};
 
 use crate::machines::{Catalog, Library, Profile};
 use crate::output::preview::{Caps, PreviewBuilder};
@@ -198,7 +198,7 @@ impl Queue {
     /// request it was accepted with (`KeyReused` else).
     pub async fn submit(
         &self,
-        settings: post::Settings,
+        settings: JobSettings,
         machine_version: i64,
         filename: Option<String>,
         idempotency_key: Option<String>,
@@ -317,7 +317,7 @@ impl Queue {
         // And the dialect's version, where the job recorded one (the built-ins else).
         let dialect = match (&profile, job.settings.dialect_version) {
             (Ok(p), Some(v)) => {
-                let id = job.settings.dialect.clone().unwrap_or_else(|| p.machine.controller.clone());
+                let id = job.settings.post.dialect.clone().unwrap_or_else(|| p.machine.controller.clone());
                 self.machines
                     .dialects
                     .version(&id, v)
@@ -559,11 +559,12 @@ fn execute(
     let paths = store::Paths::new(spool, &job.id, job.attempts);
     let mut opts = job
         .settings
+        .post
         .profile_options_with(&profile, tools, &|id| match &dialect {
             Some(d) if d.name == id => Some(d.clone()),
             _ => crate::nc::dialect(id),
         })
-        .map_err(Failed::Job)?;
+        .map_err(|e| Failed::Job(e.to_string()))?;
     opts.budget = budget;
     opts.threads = threads;
     opts.header.push(format!("JOB {}", job.id));

@@ -12,7 +12,7 @@ pub use accept::{Submission, options_digest};
 pub use retry::MAX_BACKOFF;
 
 use super::Error;
-use crate::post::{Settings, Summary};
+use crate::post::Summary;
 use serde::{Deserialize, Serialize};
 use sqlx::AnyPool;
 use sqlx::Row;
@@ -64,6 +64,21 @@ impl std::fmt::Display for State {
     }
 }
 
+/// A job's settings as its row records them: the post's as the request gave them, and what the
+/// service chose when it accepted the job, never a request: the versions of the machine's tool
+/// table (none: the machine had none, or the job brings its own) and of the dialect (the one
+/// named, else the profile's controller) the job runs with. One JSON object, as before the two
+/// were apart.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct JobSettings {
+    #[serde(flatten)]
+    pub post: crate::post::Settings,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub machine_tools_version: Option<i64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub dialect_version: Option<i64>,
+}
+
 /// A job as stored. Times are Unix milliseconds.
 #[derive(Clone, Debug)]
 pub struct Job {
@@ -73,7 +88,7 @@ pub struct Job {
     /// The profile version the job was submitted with (and runs with). `None` in rows written
     /// before profiles had versions: those run with the current one.
     pub machine_version: Option<i64>,
-    pub settings: Settings,
+    pub settings: JobSettings,
     pub filename: Option<String>,
     pub idempotency_key: Option<String>,
     /// What identifies the request a key was given with (`accept::digest`): the same key with
@@ -108,7 +123,7 @@ impl Job {
             state,
             machine,
             machine_version: None,
-            settings: Settings::default(),
+            settings: JobSettings::default(),
             filename: None,
             idempotency_key: None,
             request_digest: None,

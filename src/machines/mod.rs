@@ -13,6 +13,7 @@ use std::sync::Arc;
 pub mod catalog;
 pub mod dialects;
 pub mod meshes;
+pub mod policy;
 pub mod tools;
 pub use catalog::{Catalog, Current, Expect, Kind, Shelf};
 
@@ -100,22 +101,23 @@ pub struct CylinderDoc {
 }
 
 /// How the shop wants this machine to move where the CL does not say: a job may override each.
+/// The text as written (the API shows it); [`Profile::policy`] holds it parsed.
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct PolicyDoc {
-    /// `machine-z`, `axis:D` or `plane:Z` (`post::Retract`).
+    /// `machine-z`, `axis:D` or `plane:Z` (`policy::Retract`).
     #[serde(default)]
     pub retract: Option<String>,
-    /// A rotary's side where both IK branches can cut: `B-`, `A+` (`post::Prefer`).
+    /// A rotary's side where both IK branches can cut: `B-`, `A+` (`policy::Prefer`).
     #[serde(default)]
     pub prefer: Option<String>,
-    /// `inverse-time`, `dpm` or `combined` (`post::RotaryFeed`).
+    /// `inverse-time`, `dpm` or `combined` (`policy::RotaryFeed`).
     #[serde(default)]
     pub feed_mode: Option<String>,
-    /// `retract` or `rapids` (`post::Unwind`).
+    /// `retract` or `rapids` (`policy::Unwind`).
     #[serde(default)]
     pub unwind: Option<String>,
-    /// `auto`, `off`, `rough` or `finish` (`post::Smoothing`).
+    /// `auto`, `off`, `rough` or `finish` (`policy::Smoothing`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub smoothing: Option<String>,
 }
@@ -199,15 +201,21 @@ impl Profile {
     pub fn spindle_range(&self) -> (f64, f64) {
         let s = self.doc.spindle.as_ref();
         let min = s.and_then(|s| s.min_rpm).unwrap_or(1.0);
-        (min, s.map_or(crate::post::MAX_SPINDLE_SPEED, |s| s.max_rpm))
+        (min, s.map_or(MAX_SPINDLE_SPEED, |s| s.max_rpm))
     }
 }
+
+/// The largest spindle speed taken, a profile's or a job's: above any machining spindle (a
+/// typo's extra digit fails).
+pub const MAX_SPINDLE_SPEED: f64 = 200_000.0;
 
 /// A loaded profile: the validated machine plus the document it came from (for listings/API).
 #[derive(Clone, Debug)]
 pub struct Profile {
     pub machine: Machine,
     pub doc: ProfileDoc,
+    /// The `[policy]` keys, parsed at load.
+    pub policy: policy::Policy,
     /// Built once: a mesh is read and its BVH built here, not per post.
     bodies: crate::collide::Geometry,
 }
@@ -314,9 +322,6 @@ pub fn parse_profile_in(text: &str, file: &str, stem: Option<&str>, dir: Option<
                 .map(|e| AngleError::new(e.coefficients.clone(), (e.range[0], e.range[1]))),
         });
     }
-    if let Some(r) = doc.policy.as_ref().and_then(|p| p.retract.as_deref()) {
-        crate::post::Retract::parse(r).map_err(|e| invalid("policy.retract", e))?;
-    }
     if let Some(s) = &doc.spindle {
         check_spindle(s).map_err(|(key, problem)| invalid(key, problem))?;
     }
@@ -348,11 +353,12 @@ pub fn parse_profile_in(text: &str, file: &str, stem: Option<&str>, dir: Option<
         kinematics::Error::Profile { key, problem } => invalid(&key, problem),
         other => invalid("", other.to_string()),
     })?;
-    if let Some(side) = doc.policy.as_ref().and_then(|p| p.prefer.as_deref()) {
-        crate::post::Prefer::parse(side, &machine).map_err(|e| invalid("policy.prefer", e))?;
-    }
+    let policy = match &doc.policy {
+        Some(p) => policy::Policy::parse(p, &machine).map_err(|(key, problem)| invalid(&key, problem))?,
+        None => policy::Policy::default(),
+    };
     let bodies = geometry(&doc, &machine, &mut meshes::MeshReader::new(dir)).map_err(|(key, problem)| invalid(&key, problem))?;
-    Ok(Profile { machine, doc, bodies })
+    Ok(Profile { machine, doc, policy, bodies })
 }
 
 /// The profile's `[[body]]` entries as bodies, or the key that is wrong and why.
@@ -394,7 +400,7 @@ fn geometry(doc: &ProfileDoc, m: &Machine, meshes: &mut meshes::MeshReader) -> R
 
 /// The spindle's range, or the key that is wrong and why.
 fn check_spindle(s: &SpindleDoc) -> Result<(), (&'static str, String)> {
-    let top = crate::post::MAX_SPINDLE_SPEED;
+    let top = MAX_SPINDLE_SPEED;
     if !(s.max_rpm.is_finite() && (1.0..=top).contains(&s.max_rpm)) {
         return Err(("spindle.max_rpm", format!("{} is not from 1 to {top}", s.max_rpm)));
     }

@@ -13,7 +13,6 @@ mod emit;
 mod lookahead;
 mod pipe;
 mod plan;
-mod policy;
 mod settings;
 pub mod setups;
 mod sink;
@@ -22,8 +21,8 @@ pub mod tools;
 pub mod verify;
 
 pub use emit::linearize::{NONLINEAR_SAMPLES, seg_dist};
-pub use policy::{Prefer, Preselect, Retract, RotaryFeed, Smoothing, Unwind};
-pub use settings::{Budget, MAX_SPINDLE_SPEED, Mode, Options, Settings, parse_triple, threads};
+pub use crate::machines::policy::{Prefer, Preselect, Retract, RotaryFeed, Smoothing, Unwind};
+pub use settings::{Budget, MAX_SPINDLE_SPEED, Mode, Options, SettingError, Settings, parse_triple, threads};
 pub use sink::{AxisStats, AxisWords, BlockInfo, Sink, Summary, TextSink, ToolUse};
 pub use tools::LengthFrom;
 pub use source::{ArcSpec, Hole, HolePart, Item, MotionPt, ProgEvent, Source};

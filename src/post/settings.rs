@@ -1,7 +1,10 @@
-//! Post options: [`Settings`] as users give them (CLI flags, HTTP fields), validated in one
-//! place, [`Settings::options`], into the engine's [`Options`].
+//! Post options: [`Settings`] as users give them, defined once for the CLI's flags, HTTP's
+//! fields and the OpenAPI schema (the derives below are the one place the engine meets clap and
+//! utoipa), validated in one place, [`Settings::options`], into the engine's [`Options`].
 
 use crate::kinematics::{Machine, Units, Vec3};
+pub use crate::machines::MAX_SPINDLE_SPEED;
+use crate::machines::policy::{Prefer, Preselect, Retract, RotaryFeed, Smoothing, Unwind};
 use crate::machines::tools::{ToolTable, parse_tool_table};
 use crate::nc::Dialect;
 use crate::text::quote;
@@ -39,17 +42,17 @@ pub struct Options {
     /// Retract distance along the tool axis for unwinds and repositions (profile units).
     pub clearance: f64,
     /// Where positioning retracts to (`Retract::resolve`).
-    pub retract: super::Retract,
+    pub retract: Retract,
     /// The side of one rotary the planner keeps to where both branches can cut.
-    pub prefer: Option<super::Prefer>,
+    pub prefer: Option<Prefer>,
     /// How a feed move with rotaries says its speed (`RotaryFeed`).
-    pub rotary_feed: super::RotaryFeed,
+    pub rotary_feed: RotaryFeed,
     /// Where a bounded rotary may unwind (`Unwind`).
-    pub unwind: super::Unwind,
+    pub unwind: Unwind,
     /// Which tool is readied while another cuts (`Preselect`).
-    pub preselect: super::Preselect,
+    pub preselect: Preselect,
     /// Which smoothing word each operation gets (`Smoothing`).
-    pub smoothing: super::Smoothing,
+    pub smoothing: Smoothing,
     /// Cone (radians) around a singular direction within which blocks are marked `singular`.
     pub singular_cone: f64,
     /// Orientation tolerance (radians) the free rotary may use near a singular direction: 0 is
@@ -166,12 +169,12 @@ impl Options {
             cl_units: None,
             max_rotary_step: 10f64.to_radians(),
             clearance: if mm { 50.0 } else { 2.0 },
-            retract: super::Retract::MachineZ,
+            retract: Retract::MachineZ,
             prefer: None,
-            rotary_feed: super::RotaryFeed::InverseTime,
-            unwind: super::Unwind::RetractInCut,
-            preselect: super::Preselect::Next,
-            smoothing: super::Smoothing::Auto,
+            rotary_feed: RotaryFeed::InverseTime,
+            unwind: Unwind::RetractInCut,
+            preselect: Preselect::Next,
+            smoothing: Smoothing::Auto,
             singular_cone: 2f64.to_radians(),
             singular_tolerance: 0.0,
             clamps: Default::default(),
@@ -211,128 +214,200 @@ pub fn threads(n: Option<u32>) -> Result<usize, String> {
     }
 }
 
-/// Post settings as users give them (CLI flags, HTTP query or form fields): plain values,
-/// validated once, here, into [`Options`].
-#[derive(Clone, Debug, Default, Serialize, serde::Deserialize)]
+/// The post options as users give them, defined once: the CLI's flags (`--feed-mode`), the HTTP
+/// query and form fields (`feed_mode=`), the OpenAPI schema and the page's fields all come from
+/// this struct and its doc comments. Plain values, validated in one place, [`Settings::options`],
+/// into [`Options`]; so its error names the field ([`SettingError`]).
+///
+/// What each edge does its own way stays out: the CL input, the output files, the threads (the
+/// CLI's flag, the server's configuration), a job's versions (`jobs`), and the CLI's
+/// `--tool-table`, a file, which it reads into `tool_table`.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, serde::Deserialize, clap::Args, utoipa::ToSchema, utoipa::IntoParams)]
+#[serde(deny_unknown_fields)]
+#[schema(as = PostParams)]
+#[into_params(parameter_in = Query)]
 pub struct Settings {
-    /// Machine profile id (required over HTTP; the CLI has its own flag).
+    /// Machine profile id (required).
+    #[arg(long, required = true)]
     pub machine: Option<String>,
     /// NC dialect; default: the profile's controller.
+    #[arg(long)]
     pub dialect: Option<String>,
-    /// `joint` (default) or `tcp`.
+    /// `joint` (default: no TCP on the control, X Y Z are the machine's linear joints) or `tcp`
+    /// (X Y Z are the tip, the control does the rest).
+    #[arg(long)]
     pub mode: Option<String>,
-    /// Tool length (gauge line to tip), profile units, for every tool: a single-tool job's;
-    /// default: per tool, the tool table's, else the CL file's, else the profile's.
+    /// Tool length (gauge line to tip), profile units, one for every tool (a single-tool job);
+    /// default per tool: the tool table's, else the CL file's, else the profile's.
+    #[arg(long, allow_hyphen_values = true)]
     pub tool_length: Option<f64>,
-    /// The job's own tool table (TOML text: `units`, `[[tool]] number, length, …`); it replaces
-    /// the machine's for this job.
-    #[serde(default)]
+    /// The job's own tool table, as TOML text (`units = "mm"`, `[[tool]] number = 3, length =
+    /// 112.5 …`): each tool's length; it replaces the machine's (`/v1/machines/{id}/tools`,
+    /// `machines/<id>.tools.toml`) for this job. The CLI's `--tool-table` names a file.
+    #[arg(skip)]
     pub tool_table: Option<String>,
-    /// Set by the service when it accepts a job, never by a request: the version of the
-    /// machine's tool table the job runs with (none: the machine had none, or the job brings
-    /// its own).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub machine_tools_version: Option<i64>,
-    /// Set by the service when it accepts a job, never by a request: the version of the dialect
-    /// the job is written in (the one named, else the profile's controller).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub dialect_version: Option<i64>,
-    /// Work offset `x,y,z` in profile units.
+    /// Work offset `x,y,z` in profile units: the part origin in the machine frame at home.
+    #[arg(long, allow_hyphen_values = true)]
     pub work_offset: Option<String>,
     /// Chord tolerance in profile units (default 0.01 mm / 0.0004 in, at most 1 mm / 0.04 in):
     /// also the bound of the FK replay's tip check.
+    #[arg(long, allow_hyphen_values = true)]
     pub tolerance: Option<f64>,
+    /// N numbers on blocks.
+    #[arg(long, num_args = 0, default_missing_value = "true")]
+    #[serde(default, deserialize_with = "flag")]
     pub sequence_numbers: Option<bool>,
     /// Program number (default 1000): 1 to 9999 on fanuc (`O` and four digits), 1 to 99999 on
     /// haas; any on the others, which name the program.
+    #[arg(long, allow_hyphen_values = true)]
     pub program_number: Option<u32>,
-    /// Stop at the first error instead of reporting it and going on.
+    /// Stop at the first error (bad record, unreachable pose, limit, collision) instead of
+    /// reporting it and going on.
+    #[arg(long, num_args = 0, default_missing_value = "true")]
+    #[serde(default, deserialize_with = "flag")]
     pub strict: Option<bool>,
-    /// Degrees of orientation the free rotary may use near a singular direction (0: exact).
+    /// Degrees of orientation the free rotary may use near a singular direction (default 0:
+    /// exact): it is held while the tool axis stays within them of the CL's (e.g. 0.5 for a
+    /// ball-end tool).
+    #[arg(long, allow_hyphen_values = true)]
     pub singular_tolerance: Option<f64>,
     /// Units of the CL when the file does not say: `mm` or `inch`.
+    #[arg(long)]
     pub cl_units: Option<String>,
-    /// Hole cycles: `expand` (default: moves; taps and bores that stop the spindle are cycles
-    /// even so) or `canned` (G81–G89, CYCLE81–89, CYCL DEF 200–207 where the hole runs along
-    /// the machine's Z).
-    #[serde(default)]
+    /// Drilling cycles: `expand` (default: moves; taps and bores that stop the spindle are
+    /// cycles even so) or `canned` (G81–G89, CYCLE81–89, CYCL DEF 200–207 where the hole runs
+    /// along the machine's Z in joint mode; elsewhere still expanded).
+    #[arg(long)]
     pub cycles: Option<String>,
-    /// 3+2 work: `positioning` (default: 5-axis positioning, machine coordinates) or `tilted`
-    /// (a tilted working plane per fixed-axis run, motion in plane coordinates; joint mode).
-    #[serde(default)]
+    /// 3+2 work: `positioning` (default: 5-axis positioning, machine coordinates) or `tilted` (a
+    /// tilted working plane per fixed-axis run, G68.2/G53.1, G254, CYCLE800, PLANE SPATIAL, with
+    /// its motion in plane coordinates; joint mode).
+    #[arg(long)]
     pub planes: Option<String>,
-    /// Work coordinate system the program selects: `G54` (default) to `G59` (Sinumerik: `G57`),
-    /// or `none` (the control's active one). Its origin must be where the X Y Z words are measured
-    /// from (joint mode: the profile's origin; TCP: the part's). A Heidenhain program selects none
-    /// (the TNC's preset is chosen on the control).
-    #[serde(default)]
+    /// Work coordinate system the program selects: `G54` (default) to `G59` (siemens: `G57`), or
+    /// `none` (the control's active one). Its origin must be where X Y Z are measured from (joint
+    /// mode: the profile's origin; TCP: the part's). heidenhain: none only (the TNC's preset is
+    /// chosen on the control).
+    #[arg(long)]
     pub work_coordinates: Option<String>,
     /// Programs of several setups (NX `MSYS` per operation): `transform` (default: every
-    /// operation's points taken into the first's MCS) or `work-offsets` (each distinct MCS in
-    /// the next work offset, G55 …; the program lists where to set each).
-    #[serde(default)]
+    /// operation's points taken into the first's MCS) or `work-offsets` (each distinct MCS in the
+    /// next work offset, G55 …; the program lists where to set each).
+    #[arg(long)]
     pub setups: Option<String>,
-    /// Spindle speed (RPM, clockwise) for a tool the CL starts no spindle for before its first
-    /// move (NX's CLSF listings carry no SPINDL); the CL's own SPINDL, and SPINDL/OFF, win.
-    #[serde(default)]
+    /// Spindle speed (RPM, clockwise, 1 to 200000) for a tool the CL starts no spindle for before
+    /// its first move (NX CLSF listings carry no SPINDL); the CL's own SPINDL and SPINDL/OFF win.
+    #[arg(long, allow_hyphen_values = true)]
     pub spindle_speed: Option<f64>,
-    /// Where positioning retracts to: `machine-z`, `axis:D` or `plane:Z` (`Retract::parse`);
-    /// the profile's `[policy] retract`, else the mode's own, where absent.
-    #[serde(default)]
+    /// Where positioning retracts to before the rotaries turn, at a tool change and at the end:
+    /// `machine-z` (joint mode's default: the top of Z travel), `axis:D` (D along the tool axis;
+    /// TCP mode's default is the clearance) or `plane:Z` (along the tool axis up to z = Z in the
+    /// part frame); the profile's `[policy] retract` where absent.
+    #[arg(long, allow_hyphen_values = true)]
     pub retract: Option<String>,
-    /// A rotary's side where both IK branches can cut: `B-`, `A+` (`Prefer::parse`); the
-    /// profile's `[policy] prefer` where absent.
-    #[serde(default)]
+    /// A rotary's side the planner keeps to where both IK branches can cut a run: `B-`, `A+` (a
+    /// preference, never a branch change inside a cut); and the angle the program starts nearest
+    /// (`C=180`), items separated by commas; the profile's `[policy] prefer` where absent.
+    #[arg(long, allow_hyphen_values = true)]
     pub prefer: Option<String>,
     /// How a feed move that turns a rotary writes F: `inverse-time` (G93, the default where the
     /// control has it), `dpm` (LinuxCNC's and Haas's per-minute rule: the linear axes' feed, or
-    /// degrees per minute when only rotaries move) or `combined` (along the machine axes,
-    /// units and degrees); the profile's `[policy] feed_mode` where absent.
-    #[serde(default)]
+    /// degrees per minute when only rotaries move) or `combined` (along the machine axes, units
+    /// and degrees); the profile's `[policy] feed_mode` where absent.
+    #[arg(long)]
     pub feed_mode: Option<String>,
-    /// Where a bounded rotary may unwind: `retract` (in the cut too, retracting along the tool
-    /// axis; the default) or `rapids` (one inside a cut is an error); the profile's `[policy]
+    /// Where a bounded rotary may unwind: `retract` (the default: in the cut too, retracting
+    /// along the tool axis) or `rapids` (one inside a cut is an error); the profile's `[policy]
     /// unwind` where absent.
-    #[serde(default)]
+    #[arg(long)]
     pub unwind: Option<String>,
     /// Which tool is readied while another cuts: `next` (default: right after each tool change,
-    /// the next tool the CL loads, where the CL can be read twice), `cl` (where the CL says
-    /// `SELCTL`) or `off`.
-    #[serde(default)]
+    /// the next tool the CL loads; a streamed post, whose CL is read once, readies where the CL
+    /// says `SELCTL`), `cl` (where the CL says `SELCTL`) or `off`.
+    #[arg(long)]
     pub preselect: Option<String>,
     /// The smoothing word of each operation: `auto` (default: once the CL says `INTOL`/`OUTTOL`,
-    /// each operation's level from its type or tolerance), `off`, `rough` or `finish`; the
+    /// each operation's level from its type, else its tolerance), `off`, `rough` or `finish`; the
     /// profile's `[policy] smoothing`, else the dialect's `[smoothing] default`, where absent.
-    #[serde(default)]
+    #[arg(long)]
     pub smoothing: Option<String>,
-    /// The collision check: `on` (the default: every block, where the profile gives bodies) or
-    /// `off`.
-    #[serde(default)]
+    /// The collision check against the profile's bodies: `on` (default: every block, where the
+    /// profile gives bodies) or `off`.
+    #[arg(long)]
     pub collisions: Option<String>,
     /// Bodies closer than this (profile units; default 2 mm / 0.08 in) are a `near_collision`.
-    #[serde(default)]
+    #[arg(long)]
     pub collision_clearance: Option<f64>,
-    /// The stock, a box `x0,y0,z0,x1,y1,z1` in the CL's frame and units.
-    #[serde(default)]
+    /// The stock: a box `x0,y0,z0,x1,y1,z1` in the CL's frame and units.
+    #[arg(long, allow_hyphen_values = true)]
     pub stock: Option<String>,
     /// Fixtures: boxes as the stock's, separated by `;`.
-    #[serde(default)]
+    #[arg(long, allow_hyphen_values = true)]
     pub fixtures: Option<String>,
-    /// Threads one post runs on, 1 or 2 ([`threads`]); 1 where absent. Each edge sets its own
-    /// default (the CLI two where there are two cores, the service one: see reliability.md).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub threads: Option<u32>,
+}
+
+/// A yes-or-no setting: a bool (JSON, a job's record), or the text a query or form sends
+/// (`true`, `1`, `on`, `yes`; `false`, `0`, `off`, `no` or nothing).
+fn flag<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Option<bool>, D::Error> {
+    struct Flag;
+    impl serde::de::Visitor<'_> for Flag {
+        type Value = Option<bool>;
+        fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+            f.write_str("true or false")
+        }
+        fn visit_bool<E: serde::de::Error>(self, v: bool) -> Result<Option<bool>, E> {
+            Ok(Some(v))
+        }
+        fn visit_unit<E: serde::de::Error>(self) -> Result<Option<bool>, E> {
+            Ok(None)
+        }
+        fn visit_none<E: serde::de::Error>(self) -> Result<Option<bool>, E> {
+            Ok(None)
+        }
+        fn visit_str<E: serde::de::Error>(self, v: &str) -> Result<Option<bool>, E> {
+            match v.trim() {
+                "true" | "1" | "on" | "yes" => Ok(Some(true)),
+                "false" | "0" | "off" | "no" | "" => Ok(Some(false)),
+                _ => Err(E::invalid_value(serde::de::Unexpected::Str(v), &self)),
+            }
+        }
+    }
+    d.deserialize_any(Flag)
+}
+
+/// A setting refused: the field it came in (`feed_mode`, as HTTP names it; the CLI's flag is
+/// the same with dashes) and why, the message naming it too.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[error("{message}")]
+pub struct SettingError {
+    pub field: &'static str,
+    pub message: String,
+}
+
+/// Where an edge reports errors as text (the CLI, a job's `error`): the message, which names the
+/// field too.
+impl From<SettingError> for String {
+    fn from(e: SettingError) -> String {
+        e.message
+    }
+}
+
+impl SettingError {
+    /// `Err` of `field` for a parser's message.
+    fn of(field: &'static str) -> impl Fn(String) -> SettingError {
+        move |message| SettingError { field, message }
+    }
 }
 
 impl Settings {
     /// Options for a loaded profile: [`Settings::options`] plus what the profile adds beyond
-    /// its kinematics (rotary clamp words) and the machine's standing tool table (`label` names
-    /// it in the header), which the job's own replaces.
+    /// its kinematics (rotary clamp words, its `[policy]`) and the machine's standing tool table
+    /// (`label` names it in the header), which the job's own replaces.
     pub fn profile_options(
         &self,
         p: &crate::machines::Profile,
         standing: Option<(Arc<ToolTable>, String)>,
-    ) -> Result<Options, String> {
+    ) -> Result<Options, SettingError> {
         self.profile_options_with(p, standing, &crate::nc::dialect)
     }
 
@@ -343,7 +418,7 @@ impl Settings {
         p: &crate::machines::Profile,
         standing: Option<(Arc<ToolTable>, String)>,
         dialects: &dyn Fn(&str) -> Option<Arc<Dialect>>,
-    ) -> Result<Options, String> {
+    ) -> Result<Options, SettingError> {
         let mut o = self.options_with(&p.machine, dialects)?;
         o.clamps = p.clamps();
         for (i, r) in p.machine.rotaries.iter().enumerate().take(3) {
@@ -351,20 +426,20 @@ impl Settings {
                 o.clamps[i] = Some((lock.clone(), unlock.clone()));
             }
         }
-        // The profile's motion policies, where the job gives none.
-        let policy = |pick: fn(&crate::machines::PolicyDoc) -> &Option<String>| p.doc.policy.as_ref().and_then(|d| pick(d).as_deref());
-        o.retract = super::Retract::resolve(self.retract.as_deref(), policy(|d| &d.retract), o.mode, o.clearance)?;
-        if let (None, Some(f)) = (&self.feed_mode, policy(|d| &d.feed_mode)) {
-            o.rotary_feed = super::RotaryFeed::parse(f)?;
+        // The profile's motion policies (parsed when it loaded), where the job gives none.
+        let policy = &p.policy;
+        o.retract = retract(self.retract.as_deref(), policy.retract, o.mode, o.clearance)?;
+        if let (None, Some(f)) = (&self.feed_mode, policy.feed_mode) {
+            o.rotary_feed = f;
         }
-        if let (None, Some(u)) = (&self.unwind, policy(|d| &d.unwind)) {
-            o.unwind = super::Unwind::parse(u)?;
+        if let (None, Some(u)) = (&self.unwind, policy.unwind) {
+            o.unwind = u;
         }
-        if let (None, Some(s)) = (self.smoothing.as_deref().filter(|s| !s.trim().is_empty()), policy(|d| &d.smoothing)) {
-            o.smoothing = super::Smoothing::parse(s)?;
+        if let (None, Some(s)) = (self.smoothing.as_deref().filter(|s| !s.trim().is_empty()), policy.smoothing) {
+            o.smoothing = s;
         }
-        if let (None, Some(side)) = (o.prefer, policy(|d| &d.prefer)) {
-            o.prefer = Some(super::Prefer::parse(side, &p.machine)?);
+        if o.prefer.is_none() {
+            o.prefer = policy.prefer;
         }
         o.spindle_range = p.spindle_range();
         if self.collisions.as_deref() != Some("off") {
@@ -375,7 +450,7 @@ impl Settings {
             && !(o.spindle_range.0..=o.spindle_range.1).contains(&s)
         {
             let (lo, hi) = o.spindle_range;
-            return Err(format!("spindle_speed {s}: {}'s spindle turns from {lo} to {hi} RPM", p.doc.id));
+            return Err(SettingError::of("spindle_speed")(format!("spindle_speed {s}: {}'s spindle turns from {lo} to {hi} RPM", p.doc.id)));
         }
         if o.tool_table.is_none()
             && let Some((t, label)) = standing
@@ -387,98 +462,66 @@ impl Settings {
     }
 
     /// Validated options for machine `m`; the error names the setting.
-    pub fn options(&self, m: &Machine) -> Result<Options, String> {
+    pub fn options(&self, m: &Machine) -> Result<Options, SettingError> {
         self.options_with(m, &crate::nc::dialect)
     }
 
     /// [`Settings::options`] with the dialects `dialects` finds by id.
-    pub fn options_with(&self, m: &Machine, dialects: &dyn Fn(&str) -> Option<Arc<Dialect>>) -> Result<Options, String> {
+    pub fn options_with(&self, m: &Machine, dialects: &dyn Fn(&str) -> Option<Arc<Dialect>>) -> Result<Options, SettingError> {
         let mut o = Options::new(m);
         let name = self.dialect.as_deref().filter(|d| !d.is_empty()).unwrap_or(&m.controller);
         o.dialect = match dialects(name) {
             Some(d) => d,
             None if self.dialect.is_none() => o.dialect,
             None => {
-                return Err(format!(
+                return Err(SettingError::of("dialect")(format!(
                     "dialect {}: no such dialect (the built-ins are {}; GET /v1/dialects lists a service's)",
                     quote(name),
                     crate::nc::DIALECTS.join(", ")
-                ));
+                )));
             }
         };
         o.mode = match self.mode.as_deref() {
             None | Some("joint") => Mode::Joint,
             Some("tcp") => Mode::Tcp,
-            Some(x) => return Err(format!("mode {}: expected joint or tcp", quote(x))),
+            Some(x) => return Err(SettingError::of("mode")(format!("mode {}: expected joint or tcp", quote(x)))),
         };
-        o.retract = super::Retract::resolve(self.retract.as_deref(), None, o.mode, o.clearance)?;
-        if let Some(f) = self.feed_mode.as_deref().filter(|f| !f.trim().is_empty()) {
-            o.rotary_feed = super::RotaryFeed::parse(f)?;
+        o.retract = retract(self.retract.as_deref(), None, o.mode, o.clearance)?;
+        if let Some(f) = given(&self.feed_mode) {
+            o.rotary_feed = RotaryFeed::parse(f).map_err(SettingError::of("feed_mode"))?;
         }
-        if let Some(p) = self.preselect.as_deref().filter(|p| !p.trim().is_empty()) {
-            o.preselect = super::Preselect::parse(p)?;
+        if let Some(p) = given(&self.preselect) {
+            o.preselect = Preselect::parse(p).map_err(SettingError::of("preselect"))?;
         }
-        let smoothing = self.smoothing.as_deref().filter(|s| !s.trim().is_empty());
-        if let Some(s) = smoothing.or(o.dialect.smoothing.default.as_deref()) {
-            o.smoothing = super::Smoothing::parse(s)?;
+        if let Some(s) = given(&self.smoothing) {
+            o.smoothing = Smoothing::parse(s).map_err(SettingError::of("smoothing"))?;
+        } else if let Some(s) = o.dialect.smoothing.default.as_deref() {
+            // The dialect's file was checked when it was read; a bad default is its own error.
+            o.smoothing = Smoothing::parse(s).map_err(SettingError::of("dialect"))?;
         }
-        if let Some(u) = self.unwind.as_deref().filter(|u| !u.trim().is_empty()) {
-            o.unwind = super::Unwind::parse(u)?;
+        if let Some(u) = given(&self.unwind) {
+            o.unwind = Unwind::parse(u).map_err(SettingError::of("unwind"))?;
         }
-        if let Some(p) = self.prefer.as_deref().filter(|p| !p.trim().is_empty()) {
-            o.prefer = Some(super::Prefer::parse(p, m)?);
+        if let Some(p) = given(&self.prefer) {
+            o.prefer = Some(Prefer::parse(p, m).map_err(SettingError::of("prefer"))?);
         }
-        if let Some(l) = self.tool_length {
-            if !(l >= 0.0 && crate::kinematics::coordinate_ok(l)) {
-                return Err(format!(
-                    "tool_length must be a length from 0 to {:e}",
-                    crate::kinematics::MAX_COORD
-                ));
-            }
-            o.tool_length = Some(l);
-        }
-        if let Some(text) = self.tool_table.as_deref().filter(|t| !t.trim().is_empty()) {
-            let t = parse_tool_table(text, "tool_table").map_err(|e| e.to_string())?;
-            o.tool_table = Some(Arc::new(t));
-            o.tool_table_label = "THE JOB'S TOOL TABLE".into();
-        }
-        if let Some(w) = &self.work_offset {
-            o.work_offset = parse_triple(w).map_err(|e| format!("work_offset: {e}"))?;
-        }
-        if let Some(t) = self.tolerance {
-            // It is also the FK replay's bound: a huge one would switch the self-verification off.
-            let (max, unit) = if m.units == Units::Mm { (1.0, "mm") } else { (0.04, "in") };
-            if !(t.is_finite() && t > 0.0 && t <= max) {
-                return Err(format!("tolerance must be a positive number up to {max} {unit}"));
-            }
-            // Finer than the X Y Z words can say, every block's rounding alone would be an
-            // FK-replay error: two units of the word's last digit is the least that works.
-            let least = 2.0 / 10f64.powi(crate::nc::Formats::for_dialect(&o.dialect, m.units).linear as i32);
-            if t < least * (1.0 - 1e-9) {
-                return Err(format!(
-                    "tolerance {} {unit} is finer than the X Y Z words can hold; the smallest that works is {least} {unit}",
-                    short(t)
-                ));
-            }
-            o.tolerance = t;
-        }
-        o.threads = threads(self.threads)?;
+        self.tool_options(&mut o, m)?;
         o.sequence_numbers = self.sequence_numbers.unwrap_or(false);
         o.program_number = self.program_number.unwrap_or(1000);
         let numbers = o.dialect.program_numbers();
         if !numbers.contains(&o.program_number) {
-            return Err(format!(
+            return Err(SettingError::of("program_number")(format!(
                 "program_number {}: {} takes {} to {}",
                 o.program_number,
                 o.dialect.name,
                 numbers.start(),
                 numbers.end()
-            ));
+            )));
         }
         o.strict = self.strict.unwrap_or(false);
         if let Some(t) = self.singular_tolerance {
             if !(t.is_finite() && (0.0..=10.0).contains(&t)) {
-                return Err("singular_tolerance must be between 0 and 10 degrees".into());
+                return Err(SettingError::of("singular_tolerance")("singular_tolerance must be between 0 and 10 degrees".into()));
             }
             o.singular_tolerance = t.to_radians();
         }
@@ -486,51 +529,12 @@ impl Settings {
             None => None,
             Some("mm") => Some(Units::Mm),
             Some("inch") => Some(Units::Inch),
-            Some(u) => return Err(format!("cl_units {}: expected mm or inch", quote(u))),
+            Some(u) => return Err(SettingError::of("cl_units")(format!("cl_units {}: expected mm or inch", quote(u)))),
         };
-        o.canned_cycles = match self.cycles.as_deref() {
-            None | Some("expand") => false,
-            Some("canned") => true,
-            Some(x) => return Err(format!("cycles {}: expected expand or canned", quote(x))),
-        };
-        o.tilted_planes = match self.planes.as_deref() {
-            None | Some("positioning") => false,
-            Some("tilted") => true,
-            Some(x) => return Err(format!("planes {}: expected positioning or tilted", quote(x))),
-        };
-        if let Some(w) = self.work_coordinates.as_deref().map(str::trim).filter(|w| !w.is_empty()) {
-            let known = o.dialect.work_coordinates.clone();
-            let w = w.to_ascii_uppercase();
-            if w == "NONE" {
-                o.work_coordinates = Some("none".into());
-            } else if known.contains(&w) {
-                o.work_coordinates = Some(w);
-            } else if known.is_empty() {
-                return Err(format!(
-                    "work_coordinates {}: {} selects none (its datum is the control's preset); expected none",
-                    quote(&w),
-                    o.dialect.name
-                ));
-            } else {
-                return Err(format!(
-                    "work_coordinates {}: {} takes {} or none",
-                    quote(&w),
-                    o.dialect.name,
-                    known.join(", ")
-                ));
-            }
-        }
-        o.setup_offsets = match self.setups.as_deref() {
-            None | Some("transform") => false,
-            Some("work-offsets") => true,
-            Some(x) => return Err(format!("setups {}: expected transform or work-offsets", quote(x))),
-        };
-        if o.setup_offsets {
-            setups_allowed(&o)?;
-        }
+        self.program_options(&mut o)?;
         if let Some(s) = self.spindle_speed {
             if !(s.is_finite() && (1.0..=MAX_SPINDLE_SPEED).contains(&s)) {
-                return Err(format!("spindle_speed must be from 1 to {MAX_SPINDLE_SPEED} RPM"));
+                return Err(SettingError::of("spindle_speed")(format!("spindle_speed must be from 1 to {MAX_SPINDLE_SPEED} RPM")));
             }
             o.spindle_speed = Some(s);
         }
@@ -538,36 +542,150 @@ impl Settings {
         Ok(o)
     }
 
+    /// The tool and the part: tool length and table, work offset, tolerance.
+    fn tool_options(&self, o: &mut Options, m: &Machine) -> Result<(), SettingError> {
+        if let Some(l) = self.tool_length {
+            if !(l >= 0.0 && crate::kinematics::coordinate_ok(l)) {
+                return Err(SettingError::of("tool_length")(format!(
+                    "tool_length must be a length from 0 to {:e}",
+                    crate::kinematics::MAX_COORD
+                )));
+            }
+            o.tool_length = Some(l);
+        }
+        if let Some(text) = self.tool_table.as_deref().filter(|t| !t.trim().is_empty()) {
+            let t = parse_tool_table(text, "tool_table").map_err(|e| SettingError::of("tool_table")(e.to_string()))?;
+            o.tool_table = Some(Arc::new(t));
+            o.tool_table_label = "THE JOB'S TOOL TABLE".into();
+        }
+        if let Some(w) = &self.work_offset {
+            o.work_offset = parse_triple(w).map_err(|e| SettingError::of("work_offset")(format!("work_offset: {e}")))?;
+        }
+        if let Some(t) = self.tolerance {
+            let bad = SettingError::of("tolerance");
+            // It is also the FK replay's bound: a huge one would switch the self-verification off.
+            let (max, unit) = if m.units == Units::Mm { (1.0, "mm") } else { (0.04, "in") };
+            if !(t.is_finite() && t > 0.0 && t <= max) {
+                return Err(bad(format!("tolerance must be a positive number up to {max} {unit}")));
+            }
+            // Finer than the X Y Z words can say, every block's rounding alone would be an
+            // FK-replay error: two units of the word's last digit is the least that works.
+            let least = 2.0 / 10f64.powi(crate::nc::Formats::for_dialect(&o.dialect, m.units).linear as i32);
+            if t < least * (1.0 - 1e-9) {
+                return Err(bad(format!(
+                    "tolerance {} {unit} is finer than the X Y Z words can hold; the smallest that works is {least} {unit}",
+                    short(t)
+                )));
+            }
+            o.tolerance = t;
+        }
+        Ok(())
+    }
+
+    /// What the program is written as: canned cycles, tilted planes, the work coordinates and
+    /// the setups' offsets.
+    fn program_options(&self, o: &mut Options) -> Result<(), SettingError> {
+        o.canned_cycles = match self.cycles.as_deref() {
+            None | Some("expand") => false,
+            Some("canned") => true,
+            Some(x) => return Err(SettingError::of("cycles")(format!("cycles {}: expected expand or canned", quote(x)))),
+        };
+        o.tilted_planes = match self.planes.as_deref() {
+            None | Some("positioning") => false,
+            Some("tilted") => true,
+            Some(x) => return Err(SettingError::of("planes")(format!("planes {}: expected positioning or tilted", quote(x)))),
+        };
+        if let Some(w) = self.work_coordinates.as_deref().map(str::trim).filter(|w| !w.is_empty()) {
+            let bad = SettingError::of("work_coordinates");
+            let known = o.dialect.work_coordinates.clone();
+            let w = w.to_ascii_uppercase();
+            if w == "NONE" {
+                o.work_coordinates = Some("none".into());
+            } else if known.contains(&w) {
+                o.work_coordinates = Some(w);
+            } else if known.is_empty() {
+                return Err(bad(format!(
+                    "work_coordinates {}: {} selects none (its datum is the control's preset); expected none",
+                    quote(&w),
+                    o.dialect.name
+                )));
+            } else {
+                return Err(bad(format!(
+                    "work_coordinates {}: {} takes {} or none",
+                    quote(&w),
+                    o.dialect.name,
+                    known.join(", ")
+                )));
+            }
+        }
+        o.setup_offsets = match self.setups.as_deref() {
+            None | Some("transform") => false,
+            Some("work-offsets") => true,
+            Some(x) => return Err(SettingError::of("setups")(format!("setups {}: expected transform or work-offsets", quote(x)))),
+        };
+        if o.setup_offsets {
+            setups_allowed(o).map_err(SettingError::of("setups"))?;
+        }
+        Ok(())
+    }
+
     /// The collision check's settings: on or off, the clearance, the stock and fixtures.
-    fn collision_options(&self, o: &mut Options) -> Result<(), String> {
+    fn collision_options(&self, o: &mut Options) -> Result<(), SettingError> {
         match self.collisions.as_deref().map(str::trim) {
             None | Some("") | Some("on") | Some("off") => {}
-            Some(x) => return Err(format!("collisions {}: expected on or off", quote(x))),
+            Some(x) => return Err(SettingError::of("collisions")(format!("collisions {}: expected on or off", quote(x)))),
         }
         if let Some(c) = self.collision_clearance {
+            let bad = SettingError::of("collision_clearance");
             if !(c.is_finite() && c >= 0.0 && crate::kinematics::coordinate_ok(c)) {
-                return Err("collision_clearance must be a length of 0 or more".into());
+                return Err(bad("collision_clearance must be a length of 0 or more".into()));
             }
             // Samples are kept within the clearance: a 1e-9 one asked the most of every move.
             if c > 0.0 && c < MIN_CLEARANCE {
-                return Err(format!("collision_clearance must be 0 (none) or at least {MIN_CLEARANCE}"));
+                return Err(bad(format!("collision_clearance must be 0 (none) or at least {MIN_CLEARANCE}")));
             }
             o.collision_clearance = c;
         }
         if let Some(s) = self.stock.as_deref().filter(|s| !s.trim().is_empty()) {
-            o.stock = vec![parse_box(s).map_err(|e| format!("stock: {e}"))?];
+            o.stock = vec![parse_box(s).map_err(|e| SettingError::of("stock")(format!("stock: {e}")))?];
         }
         if let Some(f) = self.fixtures.as_deref().filter(|s| !s.trim().is_empty()) {
+            let bad = SettingError::of("fixtures");
             o.fixtures = f
                 .split(';')
                 .filter(|b| !b.trim().is_empty())
-                .map(|b| parse_box(b).map_err(|e| format!("fixtures: {e}")))
+                .map(|b| parse_box(b).map_err(|e| bad(format!("fixtures: {e}"))))
                 .collect::<Result<_, _>>()?;
             if o.fixtures.len() > 16 {
-                return Err("fixtures: at most 16 boxes".into());
+                return Err(bad("fixtures: at most 16 boxes".into()));
             }
         }
         Ok(())
+    }
+}
+
+/// A text setting that says something (an empty form field is none).
+fn given(v: &Option<String>) -> Option<&str> {
+    v.as_deref().filter(|v| !v.trim().is_empty())
+}
+
+/// Where positioning retracts to: the job's, else the profile's, else the mode's own (the top of
+/// Z in joint mode; `clearance` along the tool axis in TCP mode, where X Y Z are the tip). A job
+/// that asks for the top of Z in TCP mode is refused; a profile's default yields to the mode.
+fn retract(job: Option<&str>, profile: Option<Retract>, mode: Mode, clearance: f64) -> Result<Retract, SettingError> {
+    let bad = SettingError::of("retract");
+    let by_mode = match mode {
+        Mode::Joint => Retract::MachineZ,
+        Mode::Tcp => Retract::Axis(clearance),
+    };
+    match (job.map(Retract::parse).transpose().map_err(&bad)?, profile) {
+        (Some(Retract::MachineZ), _) if mode == Mode::Tcp => Err(bad(
+            "retract machine-z: in TCP mode X Y Z are the tip, not the machine's Z; use axis:D or plane:Z".into(),
+        )),
+        (Some(r), _) => Ok(r),
+        (None, Some(Retract::MachineZ)) => Ok(by_mode),
+        (None, Some(r)) => Ok(r),
+        (None, None) => Ok(by_mode),
     }
 }
 
@@ -624,9 +742,6 @@ fn setups_allowed(o: &Options) -> Result<(), String> {
     }
     Ok(())
 }
-
-/// The largest `spindle_speed` taken: above any machining spindle (a typo's extra digit fails).
-pub const MAX_SPINDLE_SPEED: f64 = 200_000.0;
 
 /// `x,y,z`: three finite coordinates (a work offset, a point on the command line).
 pub fn parse_triple(s: &str) -> Result<Vec3, String> {

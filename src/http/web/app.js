@@ -10,6 +10,7 @@ let machines = [];
 let shown = null; // { id, preview, list, view, sim, plots }
 let token = 0; // the job on screen; a newer one stops the older's polling
 let program = null; // the program view (ncview.js) of the job on screen
+let fields = []; // the post options, as the service defines them (its OpenAPI document)
 
 async function problem(r) {
   const p = await r.json().catch(() => ({ detail: r.statusText }));
@@ -42,14 +43,48 @@ async function loadDialects() {
   }
 }
 
+/** The post options, named once by the service (`post::Settings`, the schema `PostParams` of
+ *  its OpenAPI document): the form's own controls lay out the common ones; every other option
+ *  gets a plain field under "More options", its description as its title, so an option the
+ *  service adds is on the page without a change here. */
+async function loadFields() {
+  const r = await fetch('/openapi.json');
+  const schema = (await r.json()).components.schemas.PostParams;
+  const more = $('more-fields');
+  fields = Object.keys(schema.properties).filter((k) => k !== 'machine');
+  for (const k of fields) {
+    if ($(k)) continue;
+    const p = schema.properties[k];
+    const kind = [].concat(p.type)[0];
+    const label = document.createElement('label');
+    const input = document.createElement('input');
+    input.id = k;
+    input.name = k;
+    input.type = kind === 'boolean' ? 'checkbox' : (kind === 'number' || kind === 'integer') ? 'number' : 'text';
+    if (input.type === 'number') input.step = 'any';
+    input.title = p.description || '';
+    label.append(k.replace(/_/g, ' ') + ' ', input);
+    more.appendChild(label);
+  }
+}
+
+/** A field's value as the form sends it ('' for none). */
+function fieldValue(el) {
+  return el.type === 'checkbox' ? (el.checked ? 'true' : '') : el.value.trim();
+}
+
 /** The form shows the settings a job was posted with: a link opens the job as it was posted,
  *  and posting again repeats them (a TCP job showed "Joint"). */
 function showSettings(s) {
   if (!s) return;
-  $('mode').value = s.mode || 'joint';
-  for (const k of ['dialect', 'cycles', 'planes', 'work_coordinates', 'tool_length', 'work_offset', 'spindle_speed', 'retract', 'prefer', 'feed_mode', 'unwind', 'preselect', 'smoothing']) {
+  for (const k of fields) {
     const el = $(k);
-    if (el) el.value = s[k] === undefined ? '' : String(s[k]);
+    if (!el) continue;
+    const v = s[k] === undefined || s[k] === null ? '' : String(s[k]);
+    if (el.type === 'checkbox') el.checked = v === 'true';
+    else el.value = v;
+    // A choice without an empty one shows its first, the default ("Joint" for no mode).
+    if (el.tagName === 'SELECT' && el.selectedIndex < 0) el.selectedIndex = 0;
   }
 }
 
@@ -76,8 +111,8 @@ async function submit(ev) {
   ev.preventDefault();
   const f = $('file').files[0];
   if (!f) return;
-  const q = new URLSearchParams({ machine: $('machine').value, mode: $('mode').value });
-  for (const k of ['dialect', 'cycles', 'planes', 'work_coordinates', 'tool_length', 'work_offset', 'spindle_speed', 'retract', 'prefer', 'feed_mode', 'unwind', 'preselect', 'smoothing']) if ($(k).value.trim()) q.set(k, $(k).value.trim());
+  const q = new URLSearchParams({ machine: $('machine').value });
+  for (const k of fields) if ($(k) && fieldValue($(k))) q.set(k, fieldValue($(k)));
   $('go').disabled = true;
   $('error').hidden = true;
   $('result').hidden = true; // never show the previous file's result as this one's
@@ -309,4 +344,4 @@ drop.addEventListener('dragleave', () => drop.classList.remove('over'));
 drop.addEventListener('drop', (e) => { e.preventDefault(); drop.classList.remove('over'); if (e.dataTransfer.files[0]) setFile(e.dataTransfer.files[0]); });
 window.addEventListener('popstate', fromUrl);
 // Both lists before a job's settings are shown in them.
-Promise.all([loadMachines(), loadDialects()]).then(fromUrl, fail);
+Promise.all([loadMachines(), loadDialects(), loadFields()]).then(fromUrl, fail);

@@ -7,7 +7,7 @@
 
 use super::{Backend, Job, Paths, State, Store, now_ms, sync_dir};
 use crate::jobs::Error;
-use crate::post::Settings;
+use super::JobSettings;
 use sha2::{Digest, Sha256};
 use std::time::Duration;
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
@@ -26,7 +26,7 @@ const ATTEMPT: Duration = Duration::from_secs(5);
 
 /// Who submits what, and the limits the insert keeps.
 pub struct Submission {
-    pub settings: Settings,
+    pub settings: JobSettings,
     pub machine_version: i64,
     pub client: Option<String>,
     pub filename: Option<String>,
@@ -85,7 +85,7 @@ impl Store {
         let id = uuid::Uuid::new_v4().simple().to_string();
         let p = Paths::new(&self.spool, &id, 0);
         let (n, input_digest) = self.spool_input(&id, &p, input).await?;
-        let machine = s.settings.machine.clone().unwrap_or_default();
+        let machine = s.settings.post.machine.clone().unwrap_or_default();
         let job = Job {
             machine_version: Some(s.machine_version),
             settings: s.settings.clone(),
@@ -278,7 +278,7 @@ impl Store {
 /// table and the dialect, the threads), so that the same request asked again after a profile or
 /// table was written is still the same request. Canonical: keys sorted, absent options left out
 /// (an option a later version adds does not change the digest of a request without it).
-pub fn options_digest(settings: &Settings) -> String {
+pub fn options_digest(settings: &JobSettings) -> String {
     let given: std::collections::BTreeMap<String, serde_json::Value> = match serde_json::to_value(settings) {
         Ok(serde_json::Value::Object(o)) => o
             .into_iter()

@@ -1,7 +1,9 @@
-//! Motion policies: how the shop wants the machine to move where the CL does not say, a profile
-//! default that a job may override.
+//! Motion policies: how the shop wants the machine to move where the CL does not say. A
+//! profile's `[policy]` is parsed into these at load, every key, so a bad value is refused with
+//! the file and the key (not blamed on a post's parameter later); a job may override each, its
+//! text parsed by the same functions.
 
-use super::Mode;
+use crate::kinematics::Machine;
 
 /// Where positioning takes the tool before the rotaries turn, at a tool change and at the
 /// program's end.
@@ -37,25 +39,6 @@ impl Retract {
             _ => Err(format!("retract {text:?}: expected machine-z, axis:D or plane:Z")),
         }
     }
-
-    /// The policy in force: the job's, else the profile's, else the mode's own (the top of Z in
-    /// joint mode; `clearance` along the tool axis in TCP mode, where X Y Z are the tip). A job
-    /// that asks for the top of Z in TCP mode is refused; a profile's default yields to the mode.
-    pub fn resolve(job: Option<&str>, profile: Option<&str>, mode: Mode, clearance: f64) -> Result<Retract, String> {
-        let by_mode = match mode {
-            Mode::Joint => Retract::MachineZ,
-            Mode::Tcp => Retract::Axis(clearance),
-        };
-        match (job.map(Retract::parse).transpose()?, profile.map(Retract::parse).transpose()?) {
-            (Some(Retract::MachineZ), _) if mode == Mode::Tcp => Err(
-                "retract machine-z: in TCP mode X Y Z are the tip, not the machine's Z; use axis:D or plane:Z".into(),
-            ),
-            (Some(r), _) => Ok(r),
-            (None, Some(Retract::MachineZ)) => Ok(by_mode),
-            (None, Some(r)) => Ok(r),
-            (None, None) => Ok(by_mode),
-        }
-    }
 }
 
 /// One rotary's side where both IK branches can cut a run (`B-`, `A+`): a trunnion tilted away
@@ -76,7 +59,7 @@ pub struct Prefer {
 impl Prefer {
     /// Items separated by commas: a rotary of `m` and a sign (`B-`, `A+`; one at most), a rotary
     /// and the angle the program starts nearest (`C=180`, degrees).
-    pub fn parse(text: &str, m: &crate::kinematics::Machine) -> Result<Prefer, String> {
+    pub fn parse(text: &str, m: &Machine) -> Result<Prefer, String> {
         let mut p = Prefer { rotary: 0, sign: 0.0, start: [None; 3] };
         for item in text.split(',').map(str::trim).filter(|i| !i.is_empty()) {
             let mut chars = item.chars();
@@ -207,5 +190,32 @@ impl Smoothing {
                 "smoothing {t:?}: expected auto (each operation's from its INTOL/OUTTOL and type), off, rough or finish"
             )),
         }
+    }
+}
+
+/// A profile's `[policy]`, every key parsed when the profile loads: what a post takes where the
+/// job says nothing.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Policy {
+    pub retract: Option<Retract>,
+    pub prefer: Option<Prefer>,
+    pub feed_mode: Option<RotaryFeed>,
+    pub unwind: Option<Unwind>,
+    pub smoothing: Option<Smoothing>,
+}
+
+impl Policy {
+    /// Each key of `doc` parsed for machine `m`; the error names the key (`policy.unwind`).
+    pub fn parse(doc: &super::PolicyDoc, m: &Machine) -> Result<Policy, (String, String)> {
+        fn key<T>(name: &str, text: &Option<String>, parse: impl FnOnce(&str) -> Result<T, String>) -> Result<Option<T>, (String, String)> {
+            text.as_deref().map(parse).transpose().map_err(|e| (format!("policy.{name}"), e))
+        }
+        Ok(Policy {
+            retract: key("retract", &doc.retract, Retract::parse)?,
+            prefer: key("prefer", &doc.prefer, |t| Prefer::parse(t, m))?,
+            feed_mode: key("feed_mode", &doc.feed_mode, RotaryFeed::parse)?,
+            unwind: key("unwind", &doc.unwind, Unwind::parse)?,
+            smoothing: key("smoothing", &doc.smoothing, Smoothing::parse)?,
+        })
     }
 }
