@@ -7,7 +7,7 @@ show its output unchanged byte for byte:
     scripts/same_output.py --kinepost OLD/kinepost --out /tmp/before.json
     scripts/same_output.py --kinepost NEW/kinepost --out /tmp/after.json --against /tmp/before.json
 
-Time stamps in the NDJSON (the header's and summary's clock fields) are the only values dropped.
+The clock is the only thing dropped: the NC header's DATE line, the NDJSON's time fields.
 """
 import argparse
 import concurrent.futures
@@ -21,6 +21,7 @@ import sys
 import tempfile
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
+DATE = re.compile(rb"DATE \d{4}-\d\d-\d\d \d\d:\d\d( UTC)?")
 CLOCK = re.compile(r'"(started|finished|elapsed_ms|elapsed_s|wall_ms|time_stamp|at)":[^,}]*')
 OPTION_SETS = [
     [],
@@ -38,7 +39,7 @@ def inputs(shared):
     return files
 
 
-def run(kinepost, machine, mode, opts, cl, tmp):
+def run(kinepost, machine, mode, opts, cl, tmp, keep=None):
     nc = tmp / "out.nc"
     diag = tmp / "out.ndjson"
     for f in (nc, diag):
@@ -49,10 +50,15 @@ def run(kinepost, machine, mode, opts, cl, tmp):
                        capture_output=True, timeout=600)
     h = hashlib.sha256()
     h.update(b"rc=%d\n" % r.returncode)
-    h.update(nc.read_bytes() if nc.exists() else b"<no nc>")
+    h.update(DATE.sub(b"DATE", nc.read_bytes()) if nc.exists() else b"<no nc>")
     d = hashlib.sha256()
     if diag.exists():
         d.update(CLOCK.sub("", diag.read_text()).encode())
+    if keep is not None:
+        keep.mkdir(parents=True, exist_ok=True)
+        for f in (nc, diag):
+            if f.exists():
+                f.rename(keep / f.name)
     return h.hexdigest()[:16], d.hexdigest()[:16]
 
 
@@ -62,6 +68,7 @@ def main():
     ap.add_argument("--shared", default=str(ROOT.parent / "shared"))
     ap.add_argument("--out", required=True)
     ap.add_argument("--against")
+    ap.add_argument("--keep", help="a folder to keep every NC and NDJSON in, to diff two runs")
     ap.add_argument("--jobs", type=int, default=os.cpu_count() or 2)
     a = ap.parse_args()
     kinepost = os.path.abspath(a.kinepost)
@@ -82,7 +89,8 @@ def main():
         m, mode, i, cl = case
         tmp = pathlib.Path(tempfile.mkdtemp(dir=work))
         key = f"{cl.name} {m} {mode} opts{i}"
-        return key, run(kinepost, m, mode, OPTION_SETS[i], cl, tmp)
+        keep = pathlib.Path(a.keep) / key.replace(" ", "_") if a.keep else None
+        return key, run(kinepost, m, mode, OPTION_SETS[i], cl, tmp, keep)
 
     with concurrent.futures.ThreadPoolExecutor(a.jobs) as ex:
         results = dict(ex.map(one, cases))
@@ -90,7 +98,7 @@ def main():
     print(f"{len(results)} posts")
     if a.against:
         before = json.loads(pathlib.Path(a.against).read_text())
-        diff = [k for k in sorted(before) if before[k] != results.get(k)]
+        diff = [k for k in sorted(before) if before[k] != list(results.get(k) or [])]
         for k in diff[:40]:
             print("DIFFERS:", k, before[k], results.get(k))
         print(f"{len(diff)} of {len(before)} differ")

@@ -286,7 +286,7 @@ fn posts_failing_mid_way_fail_the_same_and_leave_no_thread() {
         seconds: f64::INFINITY,
     };
     let out = same("output bound", &cl, m, &o, None);
-    assert!(out.result.starts_with("error Budget"), "{}", out.result);
+    assert!(out.result.starts_with("error Stop(Budget"), "{}", out.result);
     o.budget = Budget::default();
     // The reader fails mid-way.
     for left in [100_000, 1_500_000] {
