@@ -437,7 +437,7 @@ pub async fn post_cl(
     let rest = futures_util::stream::unfold(rx, |mut rx| async move {
         match rx.recv().await {
             Some(Msg::Data(b)) => Some((Ok::<Bytes, std::io::Error>(b), rx)),
-            Some(Msg::Fail(e)) => Some((Err(std::io::Error::other(e.to_string())), rx)),
+            Some(Msg::Fail(e)) => Some((Err(std::io::Error::other(e)), rx)),
             None => None,
         }
     });
