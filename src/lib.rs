@@ -3,6 +3,7 @@
 pub mod calib;
 pub mod collide;
 pub mod cl;
+pub mod db;
 pub mod diag;
 pub mod http;
 pub mod jobs;
@@ -11,5 +12,6 @@ pub mod machines;
 pub mod nc;
 pub mod output;
 pub mod post;
+pub mod spool;
 pub mod testgen;
 pub mod text;

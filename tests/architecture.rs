@@ -88,6 +88,8 @@ fn the_engine_knows_no_output_format_http_or_files() {
             "crate::http",
             "crate::jobs",
             "crate::output",
+            "crate::spool",
+            "crate::db",
         ],
         "the engine (cl, nc, post) writes into a Sink: no JSON, schema, HTTP, job or file code",
     );
@@ -101,6 +103,15 @@ fn machines_know_nothing_of_the_engine() {
         &["machines"],
         &["crate::post", "crate::cl", "crate::http", "crate::jobs", "crate::output"],
         "machines loads profiles for the engine and imports nothing from it or above it",
+    );
+}
+
+#[test]
+fn the_job_file_formats_know_neither_edge() {
+    forbid(
+        &["spool", "db"],
+        &["crate::jobs", "crate::http", "axum", "tokio"],
+        "spool (the job file formats) and db (the store's tables) sit below the queue and HTTP",
     );
 }
 

@@ -311,13 +311,13 @@ fn canned(machine: &str, dialect: Option<&str>, mode: Mode) -> (Collect, post::S
     #[derive(Default)]
     struct WithDiags(Collect, Vec<kinepost::diag::Diagnostic>);
     impl Sink for WithDiags {
-        fn line(&mut self, text: &str, b: Option<&BlockInfo>) -> std::io::Result<()> {
+        fn line(&mut self, text: &str, b: Option<&BlockInfo>) -> Result<(), kinepost::post::Stop> {
             if let Some(b) = b {
                 self.1.extend(b.diagnostics.iter().cloned());
             }
             self.0.line(text, b)
         }
-        fn diagnostic(&mut self, d: &kinepost::diag::Diagnostic) -> std::io::Result<()> {
+        fn diagnostic(&mut self, d: &kinepost::diag::Diagnostic) -> Result<(), kinepost::post::Stop> {
             self.1.push(d.clone());
             Ok(())
         }

@@ -11,7 +11,7 @@ use std::path::Path;
 
 struct Null(usize);
 impl Sink for Null {
-    fn line(&mut self, t: &str, _: Option<&post::BlockInfo>) -> std::io::Result<()> {
+    fn line(&mut self, t: &str, _: Option<&post::BlockInfo>) -> Result<(), kinepost::post::Stop> {
         self.0 += t.len();
         Ok(())
     }

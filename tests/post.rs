@@ -399,7 +399,7 @@ fn input_that_is_no_cl_is_refused_saying_what_it_looks_like() {
 struct ByLine(std::collections::BTreeMap<u32, String>);
 
 impl Sink for ByLine {
-    fn line(&mut self, text: &str, b: Option<&BlockInfo>) -> std::io::Result<()> {
+    fn line(&mut self, text: &str, b: Option<&BlockInfo>) -> Result<(), kinepost::post::Stop> {
         if let Some(l) = b.and_then(|b| b.source_line) {
             self.0.insert(l, text.to_string());
         }
@@ -757,7 +757,7 @@ fn a_post_stops_at_its_output_and_time_budget() {
     };
     let tight = Budget { floor_blocks: 500, blocks_per_byte: 0, seconds: f64::INFINITY };
     let (r, sink) = post_with(tight);
-    let Err(post::Error::Budget(why)) = r else { panic!("{r:?}") };
+    let Err(post::Error::Stop(post::Stop::Budget(why))) = r else { panic!("{r:?}") };
     assert!(why.contains("output bound") && why.contains("500"), "{why}");
     let written = sink.nc.lines().filter(|l| l.starts_with('X') || l.starts_with("G")).count();
     assert!((500..520).contains(&written), "stops at the bound: {written} lines");
@@ -766,7 +766,7 @@ fn a_post_stops_at_its_output_and_time_budget() {
     let (r, _) = post_with(per_byte);
     assert_eq!(r.unwrap().blocks, whole.blocks);
     let (r, _) = post_with(Budget { seconds: 0.0, ..Budget::default() });
-    let Err(post::Error::Budget(why)) = r else { panic!("{r:?}") };
+    let Err(post::Error::Stop(post::Stop::Budget(why))) = r else { panic!("{r:?}") };
     assert!(why.contains("time bound"), "{why}");
     o.budget = Budget::new(0, 0.0).unwrap();
     assert_eq!(run(&m, cl.as_bytes(), &o).1.blocks, whole.blocks, "0: no bound");
@@ -1200,12 +1200,12 @@ fn inverse_time_keeps_its_precision_and_no_feed_word_is_zero() {
     #[derive(Default)]
     struct Lines(Vec<(String, Option<BlockInfo>)>, Vec<Diagnostic>);
     impl Sink for Lines {
-        fn line(&mut self, text: &str, b: Option<&BlockInfo>) -> std::io::Result<()> {
+        fn line(&mut self, text: &str, b: Option<&BlockInfo>) -> Result<(), kinepost::post::Stop> {
             self.1.extend(b.iter().flat_map(|b| b.diagnostics.iter().cloned()));
             self.0.push((text.to_string(), b.cloned()));
             Ok(())
         }
-        fn diagnostic(&mut self, _: &Diagnostic) -> std::io::Result<()> {
+        fn diagnostic(&mut self, _: &Diagnostic) -> Result<(), kinepost::post::Stop> {
             Ok(())
         }
     }
@@ -2986,7 +2986,7 @@ fn held_words_are_told_when_a_post_stops_early() {
         o.budget = Budget { floor_blocks: 500, blocks_per_byte: 0, seconds: f64::INFINITY };
         let mut over = Collect::default();
         let r = post::post(long.as_bytes(), &m, &o, &mut over);
-        assert!(matches!(r, Err(post::Error::Budget(_))), "{r:?}");
+        assert!(matches!(r, Err(post::Error::Stop(post::Stop::Budget(_)))), "{r:?}");
         for sink in [&sink, &over] {
             for (code, first) in [(Code::UnknownRecord, 5), (Code::IgnoredRecord, 6)] {
                 let told: Vec<_> = sink.diags.iter().filter(|d| d.code == code && d.line.is_some()).collect();

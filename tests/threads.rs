@@ -40,21 +40,21 @@ impl Everything {
 }
 
 impl Sink for Everything {
-    fn line(&mut self, text: &str, block: Option<&BlockInfo>) -> std::io::Result<()> {
+    fn line(&mut self, text: &str, block: Option<&BlockInfo>) -> Result<(), kinepost::post::Stop> {
         self.lines += 1;
         if self.fail_at == Some(self.lines) {
-            return Err(std::io::Error::other("disk full"));
+            return Err(std::io::Error::other("disk full").into());
         }
         self.files.line(text, block)
     }
-    fn diagnostic(&mut self, d: &Diagnostic) -> std::io::Result<()> {
+    fn diagnostic(&mut self, d: &Diagnostic) -> Result<(), kinepost::post::Stop> {
         self.files.diagnostic(d)
     }
-    fn diagnostic_at(&mut self, d: &Diagnostic, pose: &Pose) -> std::io::Result<()> {
+    fn diagnostic_at(&mut self, d: &Diagnostic, pose: &Pose) -> Result<(), kinepost::post::Stop> {
         self.calls += &format!("at {:?} {:?}\n", pose.tip, pose.axis);
         self.files.diagnostic_at(d, pose)
     }
-    fn summary(&mut self, s: &Summary) -> std::io::Result<()> {
+    fn summary(&mut self, s: &Summary) -> Result<(), kinepost::post::Stop> {
         self.files.summary(s)
     }
     fn tool(&mut self, first_block: u64, t: &ToolShape) {
@@ -286,7 +286,7 @@ fn posts_failing_mid_way_fail_the_same_and_leave_no_thread() {
         seconds: f64::INFINITY,
     };
     let out = same("output bound", &cl, m, &o, None);
-    assert!(out.result.starts_with("error Budget"), "{}", out.result);
+    assert!(out.result.starts_with("error Stop(Budget"), "{}", out.result);
     o.budget = Budget::default();
     // The reader fails mid-way.
     for left in [100_000, 1_500_000] {

@@ -20,7 +20,7 @@ struct Collect {
 }
 
 impl Sink for Collect {
-    fn line(&mut self, text: &str, b: Option<&BlockInfo>) -> std::io::Result<()> {
+    fn line(&mut self, text: &str, b: Option<&BlockInfo>) -> Result<(), kinepost::post::Stop> {
         // The date is the run's, not the program's.
         if !text.contains("DATE ") {
             self.nc.push(text.to_string());
@@ -28,7 +28,7 @@ impl Sink for Collect {
         self.diags.extend(b.iter().flat_map(|b| b.diagnostics.iter().cloned()));
         Ok(())
     }
-    fn diagnostic(&mut self, d: &Diagnostic) -> std::io::Result<()> {
+    fn diagnostic(&mut self, d: &Diagnostic) -> Result<(), kinepost::post::Stop> {
         self.diags.push(d.clone());
         Ok(())
     }

@@ -2,12 +2,15 @@
 //! run in the background, and fetched when it is done.
 
 use super::AppState;
+use super::download::{if_range, pumped};
 use super::error::{ApiError, ApiQuery};
-use super::post::{nc_attachment, upload_error};
+use super::post::nc_attachment;
 use super::refusals::{NotFound, QueueBusy, TooManyDownloads, UploadRefusals};
 use super::upload::ClUpload;
-use crate::jobs::{self, Job, JobSettings, Output, Queue, State as JobState};
+use crate::jobs::{self, Job, JobSettings, JobState, Queue};
 use crate::post::Settings;
+use crate::spool::seal::Diagnostics;
+use crate::spool::{Output, lines::LineIndex};
 use axum::Json;
 use axum::body::Body;
 use axum::extract::{Path, Request, State};
@@ -176,7 +179,7 @@ impl From<jobs::Error> for ApiError {
             e @ jobs::Error::ClientLimit { .. } => ApiError::TooManyRequests(e.to_string()),
             e @ jobs::Error::KeyReused { .. } => ApiError::KeyReused(e.to_string()),
             jobs::Error::WrongState { id, state } => ApiError::Conflict(format!("job {id} is {state}")),
-            jobs::Error::Upload(m) => upload_error(m),
+            jobs::Error::Upload(e) => super::limits::upload_error(Some(&e), &e),
             e @ jobs::Error::NoSpace(_) => ApiError::InsufficientStorage(e.to_string()),
             jobs::Error::Machines(m) => m.into(),
             // The database restarting, a lost connection, a pool without one to give: not now.
@@ -429,11 +432,11 @@ async fn output(State(st): State<Arc<AppState>>, id: String, what: Output, req: 
 
 /// A line map stored compactly, and when it was written; `None`: a file of the fixed-size
 /// entries (a job run before the compact store), or none at all (served as files are).
-async fn compact_lines(path: &std::path::Path) -> Result<Option<(jobs::lines::Store, Option<std::time::SystemTime>)>, ApiError> {
+async fn compact_lines(path: &std::path::Path) -> Result<Option<(LineIndex, Option<std::time::SystemTime>)>, ApiError> {
     let path = path.to_path_buf();
     let opened = tokio::task::spawn_blocking(move || -> std::io::Result<_> {
         let modified = std::fs::metadata(&path)?.modified().ok();
-        Ok(jobs::lines::Store::open(&path)?.map(|s| (s, modified)))
+        Ok(LineIndex::open(&path)?.map(|s| (s, modified)))
     });
     match opened.await.map_err(|e| ApiError::Internal(e.to_string()))? {
         Ok(found) => Ok(found),
@@ -446,15 +449,15 @@ async fn compact_lines(path: &std::path::Path) -> Result<Option<(jobs::lines::St
 /// file of a job run before the store (mended where a failed job's does not end with its error).
 async fn diagnostics(q: &Queue, job: &Job, req: Request) -> Result<Response, ApiError> {
     match q.store.diagnostics(job).await? {
-        jobs::Diagnostics::Whole(path) => serve_file(job, &path, Output::Diagnostics, req).await,
-        jobs::Diagnostics::Mended { path, keep, tail } => mended(&path, keep, tail).await,
-        jobs::Diagnostics::Rebuilt { store, nc, end, len } => {
+        Diagnostics::Whole(path) => serve_file(job, &path, Output::Diagnostics, req).await,
+        Diagnostics::Mended { path, keep, tail } => mended(&path, keep, tail).await,
+        Diagnostics::Rebuilt { store, nc, end, len } => {
             // The store never changes once the job has finished: its length is a validator.
             let etag = format!("\"{}-b-{len}\"", job.id);
             if let Some(r) = super::not_modified(req.headers(), &etag) {
                 return Ok(r);
             }
-            let reader = tokio::task::spawn_blocking(move || jobs::blocks::rebuild(&store, &nc, end))
+            let reader = tokio::task::spawn_blocking(move || crate::spool::blocks::rebuild(&store, &nc, end))
                 .await
                 .map_err(|e| ApiError::Internal(e.to_string()))?
                 .map_err(|e| ApiError::Internal(format!("job diagnostics: {e}")))?;
@@ -467,37 +470,6 @@ async fn diagnostics(q: &Queue, job: &Job, req: Request) -> Result<Response, Api
             Ok(resp)
         }
     }
-}
-
-/// A blocking reader as a body, a 64 KiB chunk at a time: each chunk is read on the blocking
-/// pool when the client has taken the last one, the reader handed back and forth, so a client
-/// that reads nothing holds no thread (hundreds of them once took every thread of the pool, and
-/// no post could start) and a chunk of memory at most; a read error ends the body with an error
-/// (never a silent cut).
-pub(super) fn pumped(r: impl std::io::Read + Send + 'static) -> Body {
-    Body::from_stream(futures_util::stream::unfold(Some(r), |r| async move {
-        let mut r = r?;
-        let read = tokio::task::spawn_blocking(move || {
-            let mut buf = vec![0u8; 64 << 10];
-            loop {
-                match r.read(&mut buf) {
-                    Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
-                    Ok(n) => {
-                        buf.truncate(n);
-                        return (r, Ok(buf));
-                    }
-                    Err(e) => return (r, Err(e)),
-                }
-            }
-        })
-        .await;
-        match read {
-            Ok((_, Ok(buf))) if buf.is_empty() => None,
-            Ok((r, Ok(buf))) => Some((Ok(bytes::Bytes::from(buf)), Some(r))),
-            Ok((_, Err(e))) => Some((Err(e), None)),
-            Err(e) => Some((Err(std::io::Error::other(e)), None)),
-        }
-    }))
 }
 
 /// A published output file (Range with If-Range, ETag).
@@ -539,26 +511,6 @@ async fn serve_file(job: &Job, path: &std::path::Path, what: Output, req: Reques
         h.insert(header::CONTENT_DISPOSITION, nc_attachment(job.filename.as_deref(), &job.id));
     }
     Ok(resp)
-}
-
-/// RFC 9110 §13.1.5: a Range sent with an If-Range that does not name this output (its strong
-/// ETag, or the Last-Modified date served with it) is ignored, so that a client resuming a
-/// download of something else gets the whole output (200), never a part spliced onto another.
-pub(super) fn if_range(mut req: Request, etag: &str, modified: Option<std::time::SystemTime>) -> Request {
-    let Some(v) = req.headers().get(header::IF_RANGE) else {
-        return req;
-    };
-    let v = v.to_str().unwrap_or_default().trim();
-    // A weak ETag (`W/"…"`) never matches: a range needs byte-for-byte identity.
-    let same = if v.starts_with('"') {
-        v == etag
-    } else {
-        modified.is_some_and(|m| v.parse::<httpdate::HttpDate>().ok() == Some(httpdate::HttpDate::from(m)))
-    };
-    if !same {
-        req.headers_mut().remove(header::RANGE);
-    }
-    req
 }
 
 /// A failed job's diagnostics whose file does not end with the error record: its complete lines,

@@ -97,18 +97,68 @@ pub(super) async fn admit_download(State(st): State<Arc<AppState>>, req: Request
     })
 }
 
-/// What every too-slow upload's message starts with, however many layers it passed through.
-const TOO_SLOW: &str = "upload slower than the minimum of";
-
-/// The upload error text names a client that sent too slowly: its message from there on.
-pub(super) fn too_slow(text: &str) -> Option<&str> {
-    text.find(TOO_SLOW).map(|i| &text[i..])
+/// Why an upload's bytes stopped coming, as its reader (the engine, the spool) gets it: inside
+/// the I/O error it reads, through the layers between (body, multipart, bridge), and told by
+/// its type where the request's answer is made, never by its words.
+#[derive(Clone, Debug, thiserror::Error)]
+pub(super) enum Cut {
+    /// Slower than `--min-upload-rate` (408).
+    #[error("upload slower than the minimum of {rate} bytes/s over {secs} s (--min-upload-rate)")]
+    TooSlow { rate: u64, secs: f64 },
+    /// Over the body limit (413).
+    #[error("{}", ApiError::TooLarge(None))]
+    TooLarge,
+    /// A form that broke off (400): multipart's words.
+    #[error("multipart: {0}")]
+    Form(String),
 }
 
-/// An error whose chain of sources says the upload was too slow, as the error the client gets.
-pub(super) fn too_slow_in(e: &(dyn std::error::Error + 'static)) -> Option<ApiError> {
-    std::iter::successors(Some(e), |e| e.source())
-        .find_map(|e| too_slow(&e.to_string()).map(|m| ApiError::UploadTooSlow(m.to_string())))
+impl Cut {
+    /// A failed read of a multipart form: the pace or the limit where either cut it.
+    pub(super) fn of_multipart(e: axum::extract::multipart::MultipartError) -> Cut {
+        if let Some(cut) = cut_in(&e) {
+            return cut;
+        }
+        if e.status() == axum::http::StatusCode::PAYLOAD_TOO_LARGE {
+            return Cut::TooLarge;
+        }
+        Cut::Form(e.body_text())
+    }
+}
+
+impl From<Cut> for ApiError {
+    fn from(c: Cut) -> ApiError {
+        match c {
+            c @ Cut::TooSlow { .. } => ApiError::UploadTooSlow(c.to_string()),
+            Cut::TooLarge => ApiError::TooLarge(None),
+            c @ Cut::Form(_) => ApiError::BadParameter(c.to_string()),
+        }
+    }
+}
+
+/// Where an error's chain of causes says how the upload was cut: a [`Cut`], or the body
+/// limit's own error. An I/O error's cause is what it wraps (its `source` skips that).
+fn cut_in(e: &(dyn std::error::Error + 'static)) -> Option<Cut> {
+    fn next<'a>(e: &&'a (dyn std::error::Error + 'static)) -> Option<&'a (dyn std::error::Error + 'static)> {
+        match e.downcast_ref::<std::io::Error>() {
+            Some(io) => io.get_ref().map(|inner| inner as &(dyn std::error::Error + 'static)),
+            None => e.source(),
+        }
+    }
+    std::iter::successors(Some(e), next).find_map(|e| match e.downcast_ref::<Cut>() {
+        Some(c) => Some(c.clone()),
+        None => e.is::<http_body_util::LengthLimitError>().then_some(Cut::TooLarge),
+    })
+}
+
+/// A failed read of an upload (the engine's or the spool's, `io` where an I/O error is what
+/// failed; `e` the whole error): too slow (408), over the body limit (413), else a broken
+/// upload (400) in `e`'s words.
+pub(super) fn upload_error(io: Option<&std::io::Error>, e: &dyn std::fmt::Display) -> ApiError {
+    match io.and_then(|io| cut_in(io)) {
+        Some(c @ (Cut::TooSlow { .. } | Cut::TooLarge)) => c.into(),
+        Some(Cut::Form(_)) | None => ApiError::BadParameter(format!("reading the upload: {e}")),
+    }
 }
 
 /// Upload routes: a body that arrives slower than `--min-upload-rate` (bytes a second, averaged
@@ -132,11 +182,10 @@ fn metered(body: Body, rate: u64, window: Duration) -> Body {
         bytes: 0,
     };
     let slow = move || -> axum::BoxError {
-        format!(
-            "{TOO_SLOW} {rate} bytes/s over {} s (--min-upload-rate)",
-            window.as_secs_f64()
-        )
-        .into()
+        Box::new(Cut::TooSlow {
+            rate,
+            secs: window.as_secs_f64(),
+        })
     };
     Body::from_stream(futures_util::stream::unfold(Some(meter), move |m| async move {
         let mut m = m?;
@@ -193,11 +242,5 @@ pub(super) async fn read_field(name: &str, mut field: Field<'_>) -> Result<Strin
 
 /// A failed multipart read: too slow (408), over the body limit (413), else malformed (400).
 pub(super) fn multipart_error(e: axum::extract::multipart::MultipartError) -> ApiError {
-    if let Some(slow) = too_slow_in(&e) {
-        return slow;
-    }
-    if e.status() == axum::http::StatusCode::PAYLOAD_TOO_LARGE {
-        return ApiError::TooLarge(None);
-    }
-    ApiError::BadParameter(format!("multipart: {}", e.body_text()))
+    Cut::of_multipart(e).into()
 }

@@ -1,11 +1,11 @@
-//! `GET /v1/jobs/{id}/lines` for a job whose line map is stored compactly (`jobs::lines`): the
+//! `GET /v1/jobs/{id}/lines` for a job whose line map is stored compactly (`spool::lines`): the
 //! fixed-size entries rebuilt as they stream, answered as a file of them would be (the same
 //! ETag, Range and If-Range, validators, 416s), so a viewer cannot tell which format a job left.
 
+use super::download::{if_range, pumped};
 use super::error::ApiError;
-use super::jobs::{if_range, pumped};
 use crate::jobs::Job;
-use crate::jobs::lines::Store;
+use crate::spool::lines::LineIndex;
 use axum::body::Body;
 use axum::extract::Request;
 use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
@@ -14,7 +14,7 @@ use httpdate::HttpDate;
 use std::time::SystemTime;
 
 /// Serves the map of `store`, a job's compact line map last modified at `modified`.
-pub(super) async fn serve(job: &Job, store: Store, modified: Option<SystemTime>, req: Request) -> Result<Response, ApiError> {
+pub(super) async fn serve(job: &Job, store: LineIndex, modified: Option<SystemTime>, req: Request) -> Result<Response, ApiError> {
     let len = store.len();
     // The fixed-size file's ETag: its length, which the store keeps.
     let etag = format!("\"{}-l-{len}\"", job.id);
@@ -35,7 +35,7 @@ pub(super) async fn serve(job: &Job, store: Store, modified: Option<SystemTime>,
 }
 
 /// The whole map, the one range asked for, or a 416.
-async fn ranged(store: Store, modified: Option<HttpDate>, req: Request) -> Result<Response, ApiError> {
+async fn ranged(store: LineIndex, modified: Option<HttpDate>, req: Request) -> Result<Response, ApiError> {
     let len = store.len();
     let range = req.headers().get(header::RANGE).and_then(|v| v.to_str().ok());
     let (status, start, end) = match range.map(|r| parse_range(r, len)) {

@@ -3,7 +3,7 @@
 //! that appears only with its first event breaks alerts (`rate`, `absent`) and dashboards.
 
 use super::AppState;
-use crate::jobs::State as JobState;
+use crate::jobs::JobState;
 use axum::extract::{MatchedPath, Request, State};
 use axum::http::header;
 use axum::middleware::Next;

@@ -4,6 +4,7 @@
 //! in flight.
 
 mod dialects;
+mod download;
 mod error;
 mod jobs;
 mod limits;

@@ -11,7 +11,7 @@ use super::upload::ClUpload;
 use super::{AppState, limits};
 use crate::diag::Diagnostic;
 use crate::output::{ErrorBody, Header, Record};
-use crate::post::{self, BlockInfo, Settings, Sink, Summary};
+use crate::post::{self, BlockInfo, Settings, Sink, Stop, Summary};
 use axum::Extension;
 use axum::body::Body;
 use axum::extract::{FromRequestParts, State};
@@ -82,19 +82,19 @@ struct ChannelSink {
 }
 
 impl ChannelSink {
-    fn send(&mut self, force: bool) -> std::io::Result<()> {
+    /// Sends what is buffered, from `limit` bytes on (all of it with `force`); a response
+    /// dropped by now ([`Stop::Gone`]) has lost its client.
+    fn send(&mut self, force: bool) -> Result<(), Stop> {
         let limit = if self.started { CHUNK } else { PRELUDE };
         if self.buf.is_empty() || (!force && self.buf.len() < limit) {
             return Ok(());
         }
         let data = Bytes::from(std::mem::replace(&mut self.buf, Vec::with_capacity(CHUNK + 4096)));
         self.started = true;
-        self.tx
-            .blocking_send(Msg::Data(data))
-            .map_err(|_| std::io::Error::new(std::io::ErrorKind::BrokenPipe, "client went away"))
+        self.tx.blocking_send(Msg::Data(data)).map_err(|_| Stop::Gone)
     }
 
-    fn record(&mut self, r: &Record) -> std::io::Result<()> {
+    fn record(&mut self, r: &Record) -> Result<(), Stop> {
         r.write_to(&mut self.buf)?;
         self.send(false)
     }
@@ -118,7 +118,7 @@ impl ChannelSink {
 }
 
 impl Sink for ChannelSink {
-    fn line(&mut self, text: &str, b: Option<&BlockInfo>) -> std::io::Result<()> {
+    fn line(&mut self, text: &str, b: Option<&BlockInfo>) -> Result<(), Stop> {
         if self.ndjson {
             return self.record(&Record::line(text, b));
         }
@@ -127,7 +127,7 @@ impl Sink for ChannelSink {
         self.send(false)
     }
 
-    fn diagnostic(&mut self, d: &Diagnostic) -> std::io::Result<()> {
+    fn diagnostic(&mut self, d: &Diagnostic) -> Result<(), Stop> {
         if self.ndjson {
             return self.record(&Record::Diagnostic { diagnostic: d });
         }
@@ -135,10 +135,10 @@ impl Sink for ChannelSink {
     }
 
     /// The response has been dropped: its client left.
-    fn halted(&mut self) -> bool {
-        self.tx.is_closed()
+    fn halted(&mut self) -> Option<Stop> {
+        self.tx.is_closed().then_some(Stop::Gone)
     }
-    fn summary(&mut self, s: &Summary) -> std::io::Result<()> {
+    fn summary(&mut self, s: &Summary) -> Result<(), Stop> {
         if self.ndjson {
             return self.record(&Record::Summary { summary: s });
         }
@@ -162,21 +162,12 @@ fn engine_error(e: post::Error) -> ApiError {
             message: d.message,
             line: d.line,
         },
-        post::Error::Read(e) => upload_error(e.to_string()),
-        post::Error::Io(e) => ApiError::Internal(e.to_string()),
-        post::Error::Budget(why) => ApiError::OverBudget(why),
-    }
-}
-
-/// A failed read of the request body: too slow (408), over the body limit (413), else a broken
-/// upload (400).
-pub(super) fn upload_error(text: String) -> ApiError {
-    if let Some(slow) = limits::too_slow(&text) {
-        ApiError::UploadTooSlow(slow.to_string())
-    } else if text.contains("length limit") || text.contains("too large") || text.contains("upload larger than") {
-        ApiError::TooLarge(None)
-    } else {
-        ApiError::BadParameter(format!("reading the upload: {text}"))
+        e @ post::Error::Read(_) => limits::upload_error(e.io(), &e),
+        post::Error::Stop(Stop::Budget(why)) => ApiError::OverBudget(why),
+        post::Error::Stop(Stop::Io(e)) => ApiError::Internal(e.to_string()),
+        // Nobody reads this answer: the client left, or no job is waiting for it.
+        e @ post::Error::Stop(Stop::Gone | Stop::Cancelled) => ApiError::Internal(e.to_string()),
+        post::Error::Engine(why) => ApiError::Internal(why.to_string()),
     }
 }
 
@@ -289,7 +280,7 @@ pub async fn post_cl(
     let rest = futures_util::stream::unfold(rx, |mut rx| async move {
         match rx.recv().await {
             Some(Msg::Data(b)) => Some((Ok::<Bytes, std::io::Error>(b), rx)),
-            Some(Msg::Fail(e)) => Some((Err(std::io::Error::other(e.to_string())), rx)),
+            Some(Msg::Fail(e)) => Some((Err(std::io::Error::other(e)), rx)),
             None => None,
         }
     });

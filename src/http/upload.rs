@@ -150,8 +150,8 @@ async fn stream_file(mut field: Field<'_>, btx: mpsc::Sender<Result<Bytes, std::
             }
             Ok(None) => return,
             Err(e) => {
-                let text = limits::multipart_error(e).to_string();
-                let _ = btx.send(Err(std::io::Error::other(text))).await;
+                let cut = limits::Cut::of_multipart(e);
+                let _ = btx.send(Err(std::io::Error::other(cut))).await;
                 return;
             }
         }

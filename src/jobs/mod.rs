@@ -9,20 +9,16 @@
 //!
 //! Knows nothing of HTTP: the service edge maps [`Error`] to statuses and [`Job`] to its DTO.
 
-pub mod blocks;
-mod diagnostics;
-pub mod lines;
 mod store;
-mod varint;
 
-pub use diagnostics::Diagnostics;
-pub use store::{Job, JobSettings, Output, State, Store, Submission};
+pub use store::{Job, JobSettings, JobState, Store, Submission};
 
 use crate::machines::{Catalog, Library, Profile};
 use crate::output::preview::{Caps, PreviewBuilder};
 use crate::output::{ErrorBody, FileSink, Record};
-use crate::post::{self, BlockInfo, Sink, Summary};
-use blocks::BlockWriter;
+use crate::post::{self, BlockInfo, Sink, Stop, Summary};
+use crate::spool::blocks::BlockWriter;
+use crate::spool::{Paths, lines};
 use std::collections::HashMap;
 use std::io::Read;
 use std::path::PathBuf;
@@ -36,8 +32,9 @@ pub enum Error {
     Db(#[from] sqlx::Error),
     #[error("job spool: {0}")]
     Io(#[from] std::io::Error),
+    /// The upload broke off (the client, its pace, its size): the error it broke with.
     #[error("reading the upload: {0}")]
-    Upload(String),
+    Upload(std::io::Error),
     /// The spool's disk is full: nothing was accepted.
     #[error("no room for the upload in the job spool: {0}")]
     NoSpace(String),
@@ -63,7 +60,7 @@ pub enum Error {
     #[error("Idempotency-Key {} is job {job}'s, which was submitted with {what}: a new request needs a new key", crate::text::quote(.key))]
     KeyReused { key: String, job: String, what: &'static str },
     #[error("job {id} is {state}")]
-    WrongState { id: String, state: State },
+    WrongState { id: String, state: JobState },
     #[error("machine catalog: {0}")]
     Machines(#[from] crate::machines::Error),
 }
@@ -106,7 +103,7 @@ impl Error {
     /// connection to give): asked again later, the same thing may succeed.
     pub fn not_now(&self) -> bool {
         match self {
-            Error::Db(e) => crate::machines::catalog::not_now(e),
+            Error::Db(e) => crate::db::not_now(e),
             Error::Machines(crate::machines::Error::Unavailable(_)) => true,
             _ => false,
         }
@@ -118,13 +115,14 @@ impl Error {
 enum Failed {
     /// The job's own fault (its input, its settings, its budget): it fails, naming it.
     Job(String),
+    /// The job was cancelled while it ran.
+    Cancelled,
     /// A cause outside the job (the spool, the store): it runs again.
     Fault(String),
 }
 
-/// An operating system's error on a spool file (a full disk, an I/O error), as opposed to one
-/// the engine made up (a cancel, a budget, a thread that stopped): the former is no fault of
-/// the job's.
+/// An operating system's error on a spool file (a full disk, an I/O error): no fault of the
+/// job's. (A cancel or a budget is a [`Stop`] of its own, never an I/O error.)
 fn os_fault(e: &std::io::Error) -> bool {
     e.raw_os_error().is_some() || matches!(e.kind(), std::io::ErrorKind::StorageFull | std::io::ErrorKind::QuotaExceeded)
 }
@@ -211,7 +209,7 @@ impl Queue {
         {
             return Ok((self.store.resubmitted(j, &options, input).await?, false));
         }
-        let waiting = self.store.count(State::Queued).await?;
+        let waiting = self.store.count(JobState::Queued).await?;
         if waiting >= self.config.max_queued {
             return Err(Error::Full(waiting));
         }
@@ -358,6 +356,7 @@ impl Queue {
         let cancelled = cancel.load(Ordering::Relaxed);
         let end = match result {
             Ok(Ok(s)) => End::Succeeded(Box::new(s)),
+            Ok(Err(Failed::Cancelled)) => End::Cancelled,
             Ok(Err(_)) if cancelled => End::Cancelled,
             Ok(Err(Failed::Fault(cause))) => End::Fault(cause),
             Ok(Err(Failed::Job(msg))) => End::Failed(msg),
@@ -402,7 +401,7 @@ impl Queue {
                 Err(Error::Io(e)) if matches!(end, End::Succeeded(_)) && os_fault(&e) => {
                     end = End::Fault(format!("job spool: publishing the outputs: {e}"));
                 }
-                Err(e) if e.not_now() || matches!(&e, Error::Db(d) if crate::machines::catalog::disk_full(d)) => {
+                Err(e) if e.not_now() || matches!(&e, Error::Db(d) if crate::db::disk_full(d)) => {
                     last = Some(e);
                 }
                 Err(e) => {
@@ -512,11 +511,11 @@ struct JobSink<'a> {
 }
 
 impl Sink for JobSink<'_> {
-    fn line(&mut self, text: &str, b: Option<&BlockInfo>) -> std::io::Result<()> {
+    fn line(&mut self, text: &str, b: Option<&BlockInfo>) -> Result<(), Stop> {
         // Motion blocks, as the summary counts them (it counted every line, header and M codes).
         let n = self.progress.blocks.fetch_add(b.is_some() as u64, Ordering::Relaxed);
         if n % 1024 == 0 && self.cancel.load(Ordering::Relaxed) {
-            return Err(std::io::Error::other("cancelled"));
+            return Err(Stop::Cancelled);
         }
         if let Some(b) = b {
             self.preview.block(text, b);
@@ -525,22 +524,22 @@ impl Sink for JobSink<'_> {
         self.blocks.line(text, b)?;
         self.files.line(text, b)
     }
-    fn diagnostic(&mut self, d: &crate::diag::Diagnostic) -> std::io::Result<()> {
+    fn diagnostic(&mut self, d: &crate::diag::Diagnostic) -> Result<(), Stop> {
         self.preview.note(d, None);
-        self.blocks.record(&Record::Diagnostic { diagnostic: d })
+        Ok(self.blocks.record(&Record::Diagnostic { diagnostic: d })?)
     }
-    fn diagnostic_at(&mut self, d: &crate::diag::Diagnostic, pose: &crate::kinematics::Pose) -> std::io::Result<()> {
+    fn diagnostic_at(&mut self, d: &crate::diag::Diagnostic, pose: &crate::kinematics::Pose) -> Result<(), Stop> {
         self.preview.note(d, Some(pose));
-        self.blocks.record(&Record::Diagnostic { diagnostic: d })
+        Ok(self.blocks.record(&Record::Diagnostic { diagnostic: d })?)
     }
-    fn summary(&mut self, s: &Summary) -> std::io::Result<()> {
-        self.blocks.record(&Record::Summary { summary: s })
+    fn summary(&mut self, s: &Summary) -> Result<(), Stop> {
+        Ok(self.blocks.record(&Record::Summary { summary: s })?)
     }
     fn tool(&mut self, first_block: u64, t: &crate::collide::ToolShape) {
         self.preview.tool(first_block, t)
     }
-    fn halted(&mut self) -> bool {
-        self.cancel.load(Ordering::Relaxed)
+    fn halted(&mut self) -> Option<Stop> {
+        self.cancel.load(Ordering::Relaxed).then_some(Stop::Cancelled)
     }
 }
 
@@ -556,7 +555,7 @@ fn execute(
     cancel: &AtomicBool,
     progress: &Arc<Progress>,
 ) -> Result<Summary, Failed> {
-    let paths = store::Paths::new(spool, &job.id, job.attempts);
+    let paths = Paths::new(spool, &job.id, job.attempts);
     let mut opts = job
         .settings
         .post
@@ -615,10 +614,10 @@ fn execute(
                 error: ErrorBody::from_engine(&e),
             });
             // A spool file the system failed (full, an I/O error) is no fault of the job's.
-            Err(if e.io().is_some_and(os_fault) {
-                Failed::Fault(msg)
-            } else {
-                Failed::Job(msg)
+            Err(match e {
+                post::Error::Stop(Stop::Cancelled) => Failed::Cancelled,
+                e if e.io().is_some_and(os_fault) => Failed::Fault(msg),
+                _ => Failed::Job(msg),
             })
         }
     };

@@ -12,7 +12,10 @@ pub use accept::{Submission, options_digest};
 pub use retry::MAX_BACKOFF;
 
 use super::Error;
+pub use crate::db::Backend;
 use crate::post::Summary;
+use crate::spool::seal::Diagnostics;
+use crate::spool::{Output, Paths, sync_dir};
 use serde::{Deserialize, Serialize};
 use sqlx::AnyPool;
 use sqlx::Row;
@@ -22,7 +25,7 @@ use std::time::Duration;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
-pub enum State {
+pub enum JobState {
     Queued,
     Running,
     Succeeded,
@@ -30,35 +33,35 @@ pub enum State {
     Cancelled,
 }
 
-impl State {
-    pub const ALL: [State; 5] = [
-        State::Queued,
-        State::Running,
-        State::Succeeded,
-        State::Failed,
-        State::Cancelled,
+impl JobState {
+    pub const ALL: [JobState; 5] = [
+        JobState::Queued,
+        JobState::Running,
+        JobState::Succeeded,
+        JobState::Failed,
+        JobState::Cancelled,
     ];
 
     pub fn as_str(self) -> &'static str {
         match self {
-            State::Queued => "queued",
-            State::Running => "running",
-            State::Succeeded => "succeeded",
-            State::Failed => "failed",
-            State::Cancelled => "cancelled",
+            JobState::Queued => "queued",
+            JobState::Running => "running",
+            JobState::Succeeded => "succeeded",
+            JobState::Failed => "failed",
+            JobState::Cancelled => "cancelled",
         }
     }
 
-    pub fn parse(s: &str) -> Option<State> {
-        State::ALL.into_iter().find(|x| x.as_str() == s)
+    pub fn parse(s: &str) -> Option<JobState> {
+        JobState::ALL.into_iter().find(|x| x.as_str() == s)
     }
 
     pub fn finished(self) -> bool {
-        matches!(self, State::Succeeded | State::Failed | State::Cancelled)
+        matches!(self, JobState::Succeeded | JobState::Failed | JobState::Cancelled)
     }
 }
 
-impl std::fmt::Display for State {
+impl std::fmt::Display for JobState {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.write_str(self.as_str())
     }
@@ -83,7 +86,7 @@ pub struct JobSettings {
 #[derive(Clone, Debug)]
 pub struct Job {
     pub id: String,
-    pub state: State,
+    pub state: JobState,
     pub machine: String,
     /// The profile version the job was submitted with (and runs with). `None` in rows written
     /// before profiles had versions: those run with the current one.
@@ -117,7 +120,7 @@ pub struct Job {
 
 impl Job {
     /// A job of `machine` in `state`, nothing run or recorded yet.
-    pub(super) fn new(id: String, state: State, machine: String, created_ms: i64) -> Job {
+    pub(super) fn new(id: String, state: JobState, machine: String, created_ms: i64) -> Job {
         Job {
             id,
             state,
@@ -144,66 +147,6 @@ impl Job {
     }
 }
 
-/// What a finished job publishes.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Output {
-    /// The NC program (succeeded jobs).
-    Nc,
-    /// The NDJSON of blocks, diagnostics and the summary or the error (finished jobs).
-    Diagnostics,
-    /// The decimated path, joints and marks (`output::preview`) for display (finished jobs).
-    Preview,
-    /// Each NC line's offset, CL line and flags (`output::linemap`; succeeded jobs).
-    Lines,
-    /// The CL data as it was uploaded (every job, until it is removed).
-    Input,
-}
-
-/// A job's files in the spool.
-pub(super) struct Paths {
-    pub input: PathBuf,
-    pub nc: PathBuf,
-    /// The NDJSON of a job run before the block store (served as it is; written no more).
-    pub diag: PathBuf,
-    /// The diagnostics' block store (`jobs::blocks`), which points into the NC.
-    pub blocks: PathBuf,
-    /// A failed job's partial NC: its diagnostics' text, never served as a program.
-    pub nc_partial: PathBuf,
-    pub preview: PathBuf,
-    pub lines: PathBuf,
-    /// Where one run writes, before it publishes: a run cut off and its successor (perhaps on
-    /// another replica) never write the same file.
-    pub nc_tmp: PathBuf,
-    pub blocks_tmp: PathBuf,
-    pub preview_tmp: PathBuf,
-    pub lines_tmp: PathBuf,
-}
-
-impl Paths {
-    pub fn new(spool: &Path, id: &str, attempt: i64) -> Paths {
-        Paths {
-            input: spool.join(format!("{id}.cl")),
-            nc: spool.join(format!("{id}.nc")),
-            diag: spool.join(format!("{id}.ndjson")),
-            blocks: spool.join(format!("{id}.blocks")),
-            nc_partial: spool.join(format!("{id}.nc.partial")),
-            preview: spool.join(format!("{id}.preview.json")),
-            lines: spool.join(format!("{id}.lines")),
-            nc_tmp: spool.join(format!("{id}.nc.{attempt}.tmp")),
-            blocks_tmp: spool.join(format!("{id}.blocks.{attempt}.tmp")),
-            preview_tmp: spool.join(format!("{id}.preview.json.{attempt}.tmp")),
-            lines_tmp: spool.join(format!("{id}.lines.{attempt}.tmp")),
-        }
-    }
-}
-
-/// Which database the store is on.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Backend {
-    Sqlite,
-    Postgres,
-}
-
 pub struct Store {
     pool: AnyPool,
     backend: Backend,
@@ -214,44 +157,6 @@ pub struct Store {
     lease: Duration,
     startup: tokio::sync::Mutex<Option<sqlx::pool::PoolConnection<sqlx::Any>>>,
 }
-
-const SCHEMA: &str = "CREATE TABLE IF NOT EXISTS jobs (
-    id TEXT PRIMARY KEY,
-    state TEXT NOT NULL,
-    machine TEXT NOT NULL,
-    machine_version BIGINT,
-    settings TEXT NOT NULL,
-    filename TEXT,
-    idempotency_key TEXT UNIQUE,
-    input_bytes BIGINT NOT NULL,
-    created_ms BIGINT NOT NULL,
-    started_ms BIGINT,
-    finished_ms BIGINT,
-    bytes_read BIGINT NOT NULL DEFAULT 0,
-    blocks BIGINT NOT NULL DEFAULT 0,
-    attempts BIGINT NOT NULL DEFAULT 0,
-    summary TEXT,
-    error TEXT,
-    nc_bytes BIGINT,
-    owner TEXT,
-    heartbeat_ms BIGINT,
-    client TEXT,
-    cause TEXT,
-    not_before_ms BIGINT,
-    request_digest TEXT
-);
-CREATE INDEX IF NOT EXISTS jobs_state ON jobs (state, created_ms)";
-
-/// Columns added after the first release of the table, for stores made before them.
-const ADDED: [(&str, &str); 7] = [
-    ("machine_version", "BIGINT"),
-    ("owner", "TEXT"),
-    ("heartbeat_ms", "BIGINT"),
-    ("client", "TEXT"),
-    ("cause", "TEXT"),
-    ("not_before_ms", "BIGINT"),
-    ("request_digest", "TEXT"),
-];
 
 fn now_ms() -> i64 {
     std::time::SystemTime::now()
@@ -267,7 +172,7 @@ fn row_job(r: &AnyRow) -> Result<Job, Error> {
     let u = |name: &str| -> Result<u64, Error> { Ok(r.try_get::<i64, _>(name)?.max(0) as u64) };
     Ok(Job {
         id: r.try_get("id")?,
-        state: State::parse(&state).ok_or_else(|| Error::Corrupt(format!("job state {state:?}")))?,
+        state: JobState::parse(&state).ok_or_else(|| Error::Corrupt(format!("job state {state:?}")))?,
         machine: r.try_get("machine")?,
         machine_version: r.try_get("machine_version")?,
         settings: serde_json::from_str(&settings).map_err(|e| Error::Corrupt(format!("job settings: {e}")))?,
@@ -365,37 +270,6 @@ async fn connect_sqlite(path: &Path) -> Result<AnyPool, Error> {
         .map_err(|e| named(e.to_string()))
 }
 
-/// The job table, and the columns added since its first release.
-async fn migrate(pool: &AnyPool, backend: Backend) -> Result<(), sqlx::Error> {
-    for stmt in SCHEMA.split(';') {
-        sqlx::query(stmt).execute(pool).await?;
-    }
-    for (col, ty) in ADDED {
-        let has: i64 = match backend {
-            Backend::Sqlite => {
-                sqlx::query_scalar("SELECT COUNT(*) FROM pragma_table_info('jobs') WHERE name = $1")
-                    .bind(col)
-                    .fetch_one(pool)
-                    .await?
-            }
-            Backend::Postgres => {
-                sqlx::query_scalar(
-                    "SELECT COUNT(*) FROM information_schema.columns WHERE table_name = 'jobs' AND column_name = $1",
-                )
-                .bind(col)
-                .fetch_one(pool)
-                .await?
-            }
-        };
-        if has == 0 {
-            sqlx::query(sqlx::AssertSqlSafe(format!("ALTER TABLE jobs ADD COLUMN {col} {ty}")))
-                .execute(pool)
-                .await?;
-        }
-    }
-    Ok(())
-}
-
 /// This node's name as the owner of its runs and uploads: kept in the data directory, so that a
 /// restarted process knows what its predecessor left in a shared spool. One process per data
 /// directory.
@@ -437,17 +311,9 @@ fn row_shown(r: &AnyRow) -> Job {
         Job {
             error: Some(error),
             idempotency_key: r.try_get("idempotency_key").unwrap_or_default(),
-            ..Job::new(id, State::Failed, machine, created_ms)
+            ..Job::new(id, JobState::Failed, machine, created_ms)
         }
     })
-}
-
-/// Makes a rename or a new file durable: the directory entry itself is fsynced.
-fn sync_dir(dir: &Path) -> std::io::Result<()> {
-    #[cfg(unix)]
-    std::fs::File::open(dir)?.sync_all()?;
-    let _ = dir;
-    Ok(())
 }
 
 impl Store {
@@ -491,7 +357,7 @@ impl Store {
             }
             Backend::Sqlite => None,
         };
-        migrate(&pool, backend).await.map_err(open_error(&named))?;
+        crate::db::schema::jobs(&pool, backend).await.map_err(open_error(&named))?;
         let store = Store {
             pool,
             backend,
@@ -509,7 +375,7 @@ impl Store {
 
     /// A cheap read of the job table: the store answers (readiness, start-up).
     pub async fn check(&self) -> Result<u64, Error> {
-        self.count(State::Queued).await
+        self.count(JobState::Queued).await
     }
 
     /// Start-up is over (schema, recovery, catalog seeding): the next replica may start.
@@ -574,7 +440,7 @@ impl Store {
     }
 
     /// Newest first.
-    pub async fn list(&self, state: Option<State>, limit: u32, offset: u64) -> Result<Vec<Job>, Error> {
+    pub async fn list(&self, state: Option<JobState>, limit: u32, offset: u64) -> Result<Vec<Job>, Error> {
         let offset = offset.min(i64::MAX as u64) as i64;
         let rows = match state {
             Some(st) => {
@@ -596,7 +462,7 @@ impl Store {
         Ok(rows.iter().map(row_shown).collect())
     }
 
-    pub async fn count(&self, state: State) -> Result<u64, Error> {
+    pub async fn count(&self, state: JobState) -> Result<u64, Error> {
         let n: i64 = sqlx::query_scalar("SELECT COUNT(*) FROM jobs WHERE state = $1")
             .bind(state.as_str())
             .fetch_one(&self.pool)
@@ -701,7 +567,7 @@ impl Store {
     }
 
     fn still_mine(&self, j: &Job) -> bool {
-        j.state == State::Running && j.owner.as_deref() == Some(self.node.as_str())
+        j.state == JobState::Running && j.owner.as_deref() == Some(self.node.as_str())
     }
 
     /// Publishes one run's outputs (rename, then the row), unless the job was cancelled or taken
@@ -757,7 +623,7 @@ impl Store {
         let _ = tokio::fs::rename(&p.preview_tmp, &p.preview).await;
         // Before the row says failed, so that its diagnostics are never read unclosed.
         let (diag, message) = (p.blocks.clone(), msg.to_string());
-        match tokio::task::spawn_blocking(move || super::diagnostics::close(&diag, &message)).await {
+        match tokio::task::spawn_blocking(move || crate::spool::seal::close(&diag, &message)).await {
             Ok(Ok(())) => {}
             Ok(Err(e)) => tracing::warn!(job = %id, error = %e, "closing a failed job's diagnostics (served mended)"),
             Err(e) => tracing::warn!(job = %id, error = %e, "closing a failed job's diagnostics (served mended)"),
@@ -860,7 +726,7 @@ impl Store {
     }
 
     /// Jobs by state, for `/metrics`.
-    pub async fn counts(&self) -> Result<Vec<(State, u64)>, Error> {
+    pub async fn counts(&self) -> Result<Vec<(JobState, u64)>, Error> {
         let rows = sqlx::query("SELECT state, COUNT(*) FROM jobs GROUP BY state")
             .fetch_all(&self.pool)
             .await?;
@@ -868,22 +734,24 @@ impl Store {
         for r in rows {
             let st: String = r.try_get(0)?;
             let n: i64 = r.try_get(1)?;
-            if let Some(st) = State::parse(&st) {
+            if let Some(st) = JobState::parse(&st) {
                 out.push((st, n.max(0) as u64));
             }
         }
         Ok(out)
     }
 
+    /// How a finished job's diagnostics are served: rebuilt from its block store, or its NDJSON
+    /// file where a version before the store ran it; a failed job's end with its error record.
+    pub async fn diagnostics(&self, job: &Job) -> Result<Diagnostics, Error> {
+        let p = Paths::new(self.spool(), &job.id, 0);
+        let failed = (job.state == JobState::Failed).then(|| job.error.clone().unwrap_or_else(|| "the job failed".into()));
+        let read = tokio::task::spawn_blocking(move || crate::spool::seal::locate(p, failed));
+        Ok(read.await.map_err(std::io::Error::other)??)
+    }
+
     /// Where a finished job's output lives.
     pub fn output_path(&self, id: &str, o: Output) -> PathBuf {
-        let p = Paths::new(&self.spool, id, 0);
-        match o {
-            Output::Nc => p.nc,
-            Output::Diagnostics => p.diag,
-            Output::Preview => p.preview,
-            Output::Lines => p.lines,
-            Output::Input => p.input,
-        }
+        Paths::new(&self.spool, id, 0).output(o)
     }
 }

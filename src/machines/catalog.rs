@@ -220,19 +220,6 @@ pub struct Shelf<T: Kind> {
     write: tokio::sync::Mutex<()>,
 }
 
-fn schema(table: &str) -> String {
-    format!(
-        "CREATE TABLE IF NOT EXISTS {table} (
-    id TEXT NOT NULL,
-    version BIGINT NOT NULL,
-    toml TEXT,
-    source TEXT NOT NULL,
-    created_ms BIGINT NOT NULL,
-    PRIMARY KEY (id, version)
-)"
-    )
-}
-
 /// A statement on kind `T`'s table: `{table}` in `sql` names it (a constant, never input).
 fn sql<T: Kind>(sql: &str) -> sqlx::AssertSqlSafe<String> {
     sqlx::AssertSqlSafe(sql.replace("{table}", T::TABLE))
@@ -245,43 +232,7 @@ fn now_ms() -> i64 {
         .unwrap_or(0)
 }
 
-/// Whether a database error is its disk being full: SQLite's `SQLITE_FULL`, PostgreSQL's
-/// `disk_full`, or the OS's `ENOSPC`/`EDQUOT` (the job store asks too).
-pub(crate) fn disk_full(e: &sqlx::Error) -> bool {
-    match e {
-        sqlx::Error::Database(d) => d
-            .code()
-            .is_some_and(|c| c == "53100" || c.parse::<i32>().is_ok_and(|n| n & 0xff == 13)),
-        sqlx::Error::Io(e) => matches!(e.kind(), std::io::ErrorKind::StorageFull | std::io::ErrorKind::QuotaExceeded),
-        _ => false,
-    }
-}
-
-/// A database error that means "not now", not "no": the connection went (reset, closed, the
-/// server shut down or restarting: PostgreSQL's class 08 and 57P01–57P03), the pool had no
-/// connection to give in time, too many clients, or the server asks for the transaction again
-/// (serialization failure, deadlock; SQLite busy or locked). The same request asked again later
-/// may well succeed, so the service answers 503 with `Retry-After` and a job's run goes back to
-/// the queue, where any other error is the request's or the job's own. PostgreSQL's codes are
-/// always five characters, SQLite's are its numeric (extended) result codes: the two never meet.
-pub(crate) fn not_now(e: &sqlx::Error) -> bool {
-    match e {
-        sqlx::Error::Database(d) => d.code().is_some_and(|c| {
-            c.starts_with("08")
-                || matches!(
-                    c.as_ref(),
-                    "57P01" | "57P02" | "57P03" | "40001" | "40P01" | "53300" | "5" | "6" | "261" | "262" | "517" | "773"
-                )
-        }),
-        sqlx::Error::Io(_)
-        | sqlx::Error::Tls(_)
-        | sqlx::Error::Protocol(_)
-        | sqlx::Error::PoolTimedOut
-        | sqlx::Error::PoolClosed
-        | sqlx::Error::WorkerCrashed => true,
-        _ => false,
-    }
-}
+use crate::db::{disk_full, not_now};
 
 fn db_err(e: sqlx::Error) -> Error {
     if disk_full(&e) {
@@ -321,7 +272,7 @@ impl<T: Kind> Shelf<T> {
     /// last version that came from a file and no API write or deletion came after it: a shop's
     /// own changes are never overwritten by a file at start-up.
     async fn open(files: &Library, db: AnyPool) -> Result<Shelf<T>, Error> {
-        sqlx::query(sqlx::AssertSqlSafe(schema(T::TABLE))).execute(&db).await.map_err(db_err)?;
+        crate::db::schema::versions(&db, T::TABLE).await.map_err(db_err)?;
         for (id, _) in T::files(files) {
             let id = &id;
             let text = &T::file_text(files, id).map_err(|source| Error::Io {

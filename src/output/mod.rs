@@ -1,9 +1,8 @@
 //! What the edges write besides NC text: the NDJSON records (one definition, used by the CLI,
-//! HTTP and jobs alike), the files a run writes, a job's line map, the preview, and the JSON of
+//! HTTP and jobs alike), the files a run writes, the preview, and the JSON of
 //! an IK solution.
 //! The engine knows none of it: it pushes blocks into a [`crate::post::Sink`].
 
-pub mod linemap;
 pub mod model;
 pub mod ndjson;
 pub mod preview;

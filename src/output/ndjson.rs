@@ -2,7 +2,7 @@
 //! header, a block, a diagnostic, the summary, and the error that ends a failed run.
 
 use crate::diag::Diagnostic;
-use crate::post::{AxisWords, BlockInfo, Mode, Sink, Summary};
+use crate::post::{AxisWords, BlockInfo, Mode, Sink, Stop, Summary};
 use serde::Serialize;
 use std::io::Write;
 
@@ -134,7 +134,7 @@ impl<W: Write, D: Write> FileSink<W, D> {
 }
 
 impl<W: Write, D: Write> Sink for FileSink<W, D> {
-    fn line(&mut self, text: &str, b: Option<&BlockInfo>) -> std::io::Result<()> {
+    fn line(&mut self, text: &str, b: Option<&BlockInfo>) -> Result<(), Stop> {
         self.nc.write_all(text.as_bytes())?;
         self.nc.write_all(b"\n")?;
         // Only motion blocks: the file's NDJSON has no records for the program's other lines.
@@ -143,15 +143,15 @@ impl<W: Write, D: Write> Sink for FileSink<W, D> {
         }
         Ok(())
     }
-    fn diagnostic(&mut self, d: &Diagnostic) -> std::io::Result<()> {
+    fn diagnostic(&mut self, d: &Diagnostic) -> Result<(), Stop> {
         self.record(&Record::Diagnostic { diagnostic: d })?;
         if self.echo_warnings && d.severity >= crate::diag::Severity::Warning {
             eprintln!("kinepost: {d}");
         }
         Ok(())
     }
-    fn summary(&mut self, s: &Summary) -> std::io::Result<()> {
-        self.record(&Record::Summary { summary: s })
+    fn summary(&mut self, s: &Summary) -> Result<(), Stop> {
+        Ok(self.record(&Record::Summary { summary: s })?)
     }
 }
 
@@ -171,7 +171,7 @@ impl ErrorBody {
                 column: None,
                 code: Some(d.code.as_str()),
             },
-            crate::post::Error::Budget(why) => ErrorBody {
+            crate::post::Error::Stop(Stop::Budget(why)) => ErrorBody {
                 code: Some("over_budget"),
                 ..ErrorBody::new(why.clone())
             },

@@ -4,12 +4,12 @@
 //! items, between a collision check's samples: [`Sink::halted`]), so that the run stops within a
 //! second of either, not at its next write.
 
-use super::{BlockInfo, Budget, Sink, Summary};
+use super::{BlockInfo, Budget, Sink, Stop, Summary};
 use crate::diag::Diagnostic;
 use crate::kinematics::Pose;
 use std::time::Instant;
 
-/// The caller's sink, behind the budget: past it, every write fails and `tripped` says why.
+/// The caller's sink, behind the budget: past it, every write fails with [`Stop::Budget`].
 pub(super) struct Metered<'a, S: Sink + ?Sized> {
     /// The caller's sink: what must be told past the bound (the reader's held words at a stop)
     /// is written to it directly.
@@ -23,7 +23,8 @@ pub(super) struct Metered<'a, S: Sink + ?Sized> {
     next_check: u64,
     /// Looks since the clock was last read ([`Sink::halted`]).
     polls: u32,
-    pub tripped: Option<String>,
+    /// Why the budget stopped the run, once it has: every write after fails the same way.
+    tripped: Option<String>,
 }
 
 impl<'a, S: Sink + ?Sized> Metered<'a, S> {
@@ -42,9 +43,9 @@ impl<'a, S: Sink + ?Sized> Metered<'a, S> {
 
     /// Counts one record; fails past the bound. The bound and the clock are looked at every
     /// 256 records (the clock per block would cost a few percent).
-    fn count(&mut self) -> std::io::Result<()> {
+    fn count(&mut self) -> Result<(), Stop> {
         if let Some(why) = &self.tripped {
-            return Err(std::io::Error::other(why.clone()));
+            return Err(Stop::Budget(why.clone()));
         }
         self.written += 1;
         if self.written < self.next_check {
@@ -55,7 +56,7 @@ impl<'a, S: Sink + ?Sized> Metered<'a, S> {
         match self.budget.exceeded(self.written, self.read, secs) {
             Some(why) => {
                 self.tripped = Some(why.clone());
-                Err(std::io::Error::other(why))
+                Err(Stop::Budget(why))
             }
             None => Ok(()),
         }
@@ -63,19 +64,19 @@ impl<'a, S: Sink + ?Sized> Metered<'a, S> {
 }
 
 impl<S: Sink + ?Sized> Sink for Metered<'_, S> {
-    fn line(&mut self, text: &str, block: Option<&BlockInfo>) -> std::io::Result<()> {
+    fn line(&mut self, text: &str, block: Option<&BlockInfo>) -> Result<(), Stop> {
         self.count()?;
         self.inner.line(text, block)
     }
-    fn diagnostic(&mut self, d: &Diagnostic) -> std::io::Result<()> {
+    fn diagnostic(&mut self, d: &Diagnostic) -> Result<(), Stop> {
         self.count()?;
         self.inner.diagnostic(d)
     }
-    fn diagnostic_at(&mut self, d: &Diagnostic, pose: &Pose) -> std::io::Result<()> {
+    fn diagnostic_at(&mut self, d: &Diagnostic, pose: &Pose) -> Result<(), Stop> {
         self.count()?;
         self.inner.diagnostic_at(d, pose)
     }
-    fn summary(&mut self, s: &Summary) -> std::io::Result<()> {
+    fn summary(&mut self, s: &Summary) -> Result<(), Stop> {
         self.inner.summary(s)
     }
     fn tool(&mut self, first_block: u64, t: &crate::collide::ToolShape) {
@@ -83,22 +84,22 @@ impl<S: Sink + ?Sized> Sink for Metered<'_, S> {
     }
     /// The reader's going at every look, the clock at every 16th (a look costs a few ns, the
     /// clock some 25; looks come at least once per CL item and per collision sample).
-    fn halted(&mut self) -> bool {
-        if self.tripped.is_some() {
-            return true;
+    fn halted(&mut self) -> Option<Stop> {
+        if let Some(why) = &self.tripped {
+            return Some(Stop::Budget(why.clone()));
         }
-        if self.inner.halted() {
-            self.tripped = Some("stopped: the output's reader has gone (a client that left, a cancelled job)".into());
-            return true;
+        // The caller's reason (a cancel, a reader gone): it keeps it, and says it again.
+        if let Some(stop) = self.inner.halted() {
+            return Some(stop);
         }
         self.polls += 1;
         if self.polls < 16 {
-            return false;
+            return None;
         }
         self.polls = 0;
         // The time only: the output bound is counted where output is written, as before.
         let secs = self.started.elapsed().as_secs_f64();
         self.tripped = self.budget.exceeded(0, self.read, secs);
-        self.tripped.is_some()
+        self.tripped.clone().map(Stop::Budget)
     }
 }

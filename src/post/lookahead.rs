@@ -5,6 +5,7 @@
 use super::emit::Emitter;
 use super::plan::Out;
 use super::{Error, ProgEvent, Sink};
+use super::Stop;
 use crate::kinematics::{Vec3, angle_between};
 use std::collections::VecDeque;
 
@@ -141,7 +142,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
 
     /// At a rapid or an operation's start: whether the cut ahead turns a rotary while cutting,
     /// and if so the clamps released now, before its first move (see [`turns_while_cutting`]).
-    fn clamps_ahead(&mut self, axis: Option<Vec3>, ahead: &VecDeque<Out>) -> std::io::Result<()> {
+    fn clamps_ahead(&mut self, axis: Option<Vec3>, ahead: &VecDeque<Out>) -> Result<(), Stop> {
         let Some(axis) = axis.filter(|_| self.o.clamps.iter().any(Option::is_some)) else {
             return Ok(());
         };

@@ -23,7 +23,7 @@ pub mod verify;
 pub use emit::linearize::{NONLINEAR_SAMPLES, seg_dist};
 pub use crate::machines::policy::{Prefer, Preselect, Retract, RotaryFeed, Smoothing, Unwind};
 pub use settings::{Budget, MAX_SPINDLE_SPEED, Mode, Options, SettingError, Settings, parse_triple, threads};
-pub use sink::{AxisStats, AxisWords, BlockInfo, Sink, Summary, TextSink, ToolUse};
+pub use sink::{AxisStats, AxisWords, BlockInfo, Sink, Stop, Summary, TextSink, ToolUse};
 pub use tools::LengthFrom;
 pub use source::{ArcSpec, Hole, HolePart, Item, MotionPt, ProgEvent, Source};
 
@@ -42,14 +42,23 @@ pub enum Error {
     /// The input is no CL data (NC, or nothing recognisable): refused before anything is written.
     #[error("{}", .0.message)]
     NotCl(Diagnostic),
-    #[error("writing output: {0}")]
-    Io(#[from] std::io::Error),
     /// Strict mode: the first error diagnostic ends the run.
     #[error("{0}")]
     Strict(Diagnostic),
-    /// The run went over its [`Budget`]: what it wrote before is all it writes.
-    #[error("{0}")]
-    Budget(String),
+    /// The sink stopped the run (its budget, a cancel, a reader gone, a failed write): what it
+    /// wrote before is all it writes.
+    #[error(transparent)]
+    Stop(#[from] Stop),
+    /// The engine's own fault: one of its two threads ended without its end.
+    #[error("writing output: {0}")]
+    Engine(&'static str),
+}
+
+/// Reading a file twice (the CL's seek) fails as a write does.
+impl From<std::io::Error> for Error {
+    fn from(e: std::io::Error) -> Self {
+        Error::Stop(Stop::Io(e))
+    }
 }
 
 impl Error {
@@ -57,7 +66,7 @@ impl Error {
     /// caller tells a failing file from a fault of the input by it.
     pub fn io(&self) -> Option<&std::io::Error> {
         match self {
-            Error::Io(e) | Error::Read(source::Error::Read(crate::cl::Error::Io(e))) => Some(e),
+            Error::Stop(Stop::Io(e)) | Error::Read(source::Error::Read(crate::cl::Error::Io(e))) => Some(e),
             _ => None,
         }
     }
@@ -115,10 +124,7 @@ fn post_with<R: BufRead + Send, S: Sink + ?Sized>(
             let _ = sink.inner.diagnostic(&d);
         }
     }
-    match (r, sink.tripped) {
-        (Err(_), Some(why)) => Err(Error::Budget(why)),
-        (r, _) => r,
-    }
+    r
 }
 
 fn run<R: BufRead + Send, S: Sink + ?Sized>(
@@ -155,7 +161,7 @@ fn run<R: BufRead + Send, S: Sink + ?Sized>(
     }
     let mut direct = Direct { apply, summary: None };
     plan.produce(&mut direct)?;
-    direct.summary.ok_or_else(|| Error::Io(std::io::Error::other("the post ended without its end")))
+    direct.summary.ok_or(Error::Engine("the post ended without its end"))
 }
 
 /// What the reading and planning half asks of the emitting half, in the order a single thread
@@ -200,8 +206,8 @@ impl<S: Sink + ?Sized> Apply<'_, '_, S> {
                 if let Some(err) = self.failed.take() {
                     return Err(err);
                 }
-                if e.sink.halted() {
-                    return Err(Error::Io(std::io::Error::other("halted")));
+                if let Some(stop) = e.sink.halted() {
+                    return Err(stop.into());
                 }
                 e.drain(&mut self.pending, false)?;
                 if let Some(d) = e.strict_error.take().or(src_strict) {

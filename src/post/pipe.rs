@@ -53,10 +53,10 @@ pub(super) fn run<R: BufRead + Send, S: Sink + ?Sized>(plan: Plan<'_, R>, mut ap
     match threaded {
         Some(r) => r,
         None => {
-            let plan = slot.into_inner().ok().flatten().ok_or_else(|| Error::Io(std::io::Error::other("no reading thread")))?;
+            let plan = slot.into_inner().ok().flatten().ok_or(Error::Engine("no reading thread"))?;
             let mut direct = super::Direct { apply, summary: None };
             plan.produce(&mut direct)?;
-            direct.summary.ok_or_else(|| Error::Io(std::io::Error::other("the post ended without its end")))
+            direct.summary.ok_or(Error::Engine("the post ended without its end"))
         }
     }
 }
@@ -74,7 +74,7 @@ fn consume<S: Sink + ?Sized>(rx: Receiver<Vec<Op>>, back: SyncSender<Vec<Op>>, a
         let _ = back.try_send(batch);
     }
     // The reading half ended without its end: it panicked (the scope says so when it joins).
-    Err(Error::Io(std::io::Error::other("the reading thread stopped")))
+    Err(Error::Engine("the reading thread stopped"))
 }
 
 /// The reading half's end of the queue.
@@ -104,7 +104,7 @@ impl Down for Batches {
         let last = matches!(op, Op::End | Op::Fail(_) | Op::Strict(_) | Op::ItemEnd(Some(_)));
         self.buf.push(op);
         if (last || self.buf.len() >= BATCH) && !self.flush() {
-            return Err(Error::Io(std::io::Error::other("the emitting half stopped")));
+            return Err(Error::Engine("the emitting half stopped"));
         }
         Ok(())
     }

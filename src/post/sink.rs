@@ -1,5 +1,5 @@
-//! Where the program goes: the [`Sink`] a run pushes into, what it is told per block, and the
-//! run's [`Summary`].
+//! Where the program goes: the [`Sink`] a run pushes into, what it is told per block, why it
+//! may stop the run ([`Stop`]), and the run's [`Summary`].
 
 use crate::diag::Diagnostic;
 use crate::kinematics::Pose;
@@ -43,29 +43,49 @@ impl Serialize for AxisWords {
     }
 }
 
+/// Why a sink stops a run before its end. Each edge tells the reasons apart by the variant
+/// (HTTP's status, a job's end), never by a message's words; the text is what a user reads.
+#[derive(Debug, thiserror::Error)]
+pub enum Stop {
+    /// The run went over its [`Budget`](super::Budget): output per CL byte, or time. The
+    /// message names the bound.
+    #[error("{0}")]
+    Budget(String),
+    /// The job it writes for was cancelled.
+    #[error("cancelled")]
+    Cancelled,
+    /// Whoever reads the output has gone (a client that left): nobody is told.
+    #[error("the output's reader has gone")]
+    Gone,
+    /// Writing the output failed (a full disk, a closed pipe).
+    #[error("writing output: {0}")]
+    Io(#[from] std::io::Error),
+}
+
 /// Where the program goes. The NC file, the NDJSON stream and a golden test are all sinks.
+/// Every method but [`Sink::tool`] may stop the run, saying why.
 pub trait Sink {
-    fn line(&mut self, text: &str, block: Option<&BlockInfo>) -> std::io::Result<()>;
+    fn line(&mut self, text: &str, block: Option<&BlockInfo>) -> Result<(), Stop>;
     /// A diagnostic not attached to a block (reader problems, program-level notes).
-    fn diagnostic(&mut self, _d: &Diagnostic) -> std::io::Result<()> {
+    fn diagnostic(&mut self, _d: &Diagnostic) -> Result<(), Stop> {
         Ok(())
     }
     /// A diagnostic about a CL pose (part frame, profile units) that got no block.
-    fn diagnostic_at(&mut self, d: &Diagnostic, _pose: &Pose) -> std::io::Result<()> {
+    fn diagnostic_at(&mut self, d: &Diagnostic, _pose: &Pose) -> Result<(), Stop> {
         self.diagnostic(d)
     }
-    fn summary(&mut self, _s: &Summary) -> std::io::Result<()> {
+    fn summary(&mut self, _s: &Summary) -> Result<(), Stop> {
         Ok(())
     }
     /// The tool in the spindle from motion block `first_block` on (its length in force, its
     /// cutter and holder as the collision check sees them): what a preview draws.
     fn tool(&mut self, _first_block: u64, _t: &crate::collide::ToolShape) {}
-    /// Whether the run should stop now, though nothing is being written: whoever reads the
-    /// output has gone (a client that left, a cancelled job). The engine looks between CL items
-    /// and between the samples of a collision check, so a run stops within a second of it
-    /// rather than at its next write, which a long check can hold back for minutes.
-    fn halted(&mut self) -> bool {
-        false
+    /// Whether the run should stop now, though nothing is being written, and why: whoever
+    /// reads the output has gone (a client that left), the job was cancelled. The engine looks
+    /// between CL items and between the samples of a collision check, so a run stops within a
+    /// second of it rather than at its next write, which a long check can hold back for minutes.
+    fn halted(&mut self) -> Option<Stop> {
+        None
     }
 }
 
@@ -73,9 +93,9 @@ pub trait Sink {
 pub struct TextSink<W: std::io::Write>(pub W);
 
 impl<W: std::io::Write> Sink for TextSink<W> {
-    fn line(&mut self, text: &str, _b: Option<&BlockInfo>) -> std::io::Result<()> {
+    fn line(&mut self, text: &str, _b: Option<&BlockInfo>) -> Result<(), Stop> {
         self.0.write_all(text.as_bytes())?;
-        self.0.write_all(b"\n")
+        Ok(self.0.write_all(b"\n")?)
     }
 }
 

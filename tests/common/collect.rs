@@ -13,7 +13,7 @@ pub struct Collect {
 }
 
 impl Sink for Collect {
-    fn line(&mut self, text: &str, b: Option<&BlockInfo>) -> std::io::Result<()> {
+    fn line(&mut self, text: &str, b: Option<&BlockInfo>) -> Result<(), kinepost::post::Stop> {
         self.nc.push_str(text);
         self.nc.push('\n');
         if let Some(b) = b {
@@ -23,7 +23,7 @@ impl Sink for Collect {
         }
         Ok(())
     }
-    fn diagnostic(&mut self, d: &Diagnostic) -> std::io::Result<()> {
+    fn diagnostic(&mut self, d: &Diagnostic) -> Result<(), kinepost::post::Stop> {
         self.diags.push(d.clone());
         Ok(())
     }

@@ -5,7 +5,8 @@
 //! a digest of its request, so that its Idempotency-Key, given again with another request, is
 //! refused rather than answered with a job that is not the one asked for.
 
-use super::{Backend, Job, Paths, State, Store, now_ms, sync_dir};
+use super::{Backend, Job, JobState, Store, now_ms};
+use crate::spool::{Paths, sync_dir};
 use crate::jobs::Error;
 use super::JobSettings;
 use sha2::{Digest, Sha256};
@@ -93,7 +94,7 @@ impl Store {
             idempotency_key: s.key.clone(),
             request_digest: Some(format!("{}:{input_digest}", s.options)),
             input_bytes: n,
-            ..Job::new(id, State::Queued, machine, now_ms())
+            ..Job::new(id, JobState::Queued, machine, now_ms())
         };
         match self.commit_row(&job, &s).await {
             Ok(true) if tokio::fs::try_exists(&p.input).await.unwrap_or(false) => Ok((job, true)),
@@ -121,7 +122,7 @@ impl Store {
             }
             Err(Failure::Refused(e)) => {
                 let _ = tokio::fs::remove_file(&p.input).await;
-                Err(if crate::machines::catalog::disk_full(&e) {
+                Err(if crate::db::disk_full(&e) {
                     Error::NoSpace(e.to_string())
                 } else {
                     e.into()
@@ -154,7 +155,7 @@ impl Store {
         }
         let (_, input_digest) = hashed_copy(input, &mut tokio::io::sink())
             .await
-            .map_err(|e| Error::Upload(e.to_string()))?;
+            .map_err(Error::Upload)?;
         same_request(job, options, &input_digest)
     }
 
@@ -178,7 +179,7 @@ impl Store {
                 if e.kind() == std::io::ErrorKind::StorageFull || e.kind() == std::io::ErrorKind::QuotaExceeded {
                     return Err(Error::NoSpace(e.to_string()));
                 }
-                return Err(Error::Upload(e.to_string()));
+                return Err(Error::Upload(e));
             }
         };
         tokio::fs::rename(&tmp, &p.input).await?;
@@ -258,7 +259,7 @@ impl Store {
     /// Counted again after the refusal, so a job may have ended since: with room in the queue it
     /// was the client's limit, whatever the client's count is now.
     async fn refusal(&self, s: &Submission) -> Result<Error, Error> {
-        let waiting = self.count(State::Queued).await?;
+        let waiting = self.count(JobState::Queued).await?;
         if let Some(c) = &s.client
             && s.max_per_client > 0
             && waiting < s.max_queued

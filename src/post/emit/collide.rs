@@ -150,7 +150,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         let to = (&to.joints.linear, &to.actual);
         let sink = &mut *self.sink;
         let (len, wo) = (self.setup.tool_length, &self.setup.work_offset);
-        sweep(world, self.m, from, to, &way, len, wo, stock, found, &mut || sink.halted());
+        sweep(world, self.m, from, to, &way, len, wo, stock, found, &mut || sink.halted().is_some());
     }
 
     /// What `found` found, as diagnostics of the block at `line`.

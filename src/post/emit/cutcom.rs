@@ -13,6 +13,7 @@ use crate::diag::{Code, Diagnostic, Severity};
 use crate::kinematics::{Vec3, fk};
 use crate::nc::Style;
 use crate::post::{Mode, Sink};
+use crate::post::Stop;
 
 /// cos 0.01°: a tool axis this close to the plane's normal is along it.
 const ALONG: f64 = 0.999_999_984_769;
@@ -154,7 +155,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         line: u32,
         arc: bool,
         diags: &mut Vec<Diagnostic>,
-    ) -> std::io::Result<Option<(String, Option<Active>)>> {
+    ) -> Result<Option<(String, Option<Active>)>, Stop> {
         if let Some(l) = self.cutcom.unsided.take() {
             diags.push(error(
                 l,
@@ -279,7 +280,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
 
     /// Where compensation first starts after the CL said what its path is (or said nothing):
     /// a comment on what the register must hold, once.
-    fn say_path(&mut self, line: u32) -> std::io::Result<()> {
+    fn say_path(&mut self, line: u32) -> Result<(), Stop> {
         if std::mem::replace(&mut self.cutcom.said, true) {
             return Ok(());
         }
@@ -311,7 +312,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
     /// Compensation still on where the CL reaches `what` (a tool change, a plane change, the
     /// end) without `CUTCOM/OFF`: ended there, told. Word address: `G40` on its own line; a TNC
     /// ends it with `R0` on the next move (the retract), which in a tilted plane comes too late.
-    pub(super) fn cutcom_end(&mut self, what: &str) -> std::io::Result<()> {
+    pub(super) fn cutcom_end(&mut self, what: &str) -> Result<(), Stop> {
         (self.cutcom.want, self.cutcom.unsided) = (None, None);
         let Some(a) = self.cutcom.on.clone() else { return Ok(()) };
         let msg = format!(

@@ -8,10 +8,11 @@ use crate::diag::{Code, Diagnostic, Severity};
 use crate::kinematics::{self, Joints, Vec3, angle_between, fk};
 use crate::nc::{Canned, CannedKind, CycleLines, FeedMode};
 use crate::post::plan::Committed;
+use crate::post::Stop;
 use crate::post::{AxisWords, BlockInfo, Error, Hole, Mode, MotionPt, Sink};
 
 impl<S: Sink + ?Sized> Emitter<'_, S> {
-    pub(super) fn cancel_cycle(&mut self) -> std::io::Result<()> {
+    pub(super) fn cancel_cycle(&mut self) -> Result<(), Stop> {
         if self.cycle_on.take().is_some()
             && let Some(l) = self.f.canned_off()
         {
@@ -20,7 +21,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         Ok(())
     }
 
-    pub(super) fn expanded(&mut self, pt: &MotionPt, why: &'static str) -> std::io::Result<()> {
+    pub(super) fn expanded(&mut self, pt: &MotionPt, why: &'static str) -> Result<(), Stop> {
         self.say_once(why, Code::CycleExpanded, Some(pt.line), "drilling cycle written as moves")
     }
 

@@ -36,6 +36,7 @@ pub(super) mod smooth;
 mod templates;
 
 use super::{AxisStats, Error, Options, Sink, Source, Summary};
+use super::Stop;
 use crate::diag::{Code, Diagnostic, Severity};
 use crate::kinematics::{self, Joints, Machine, Pose, Setup, Solutions, Vec3};
 use crate::nc::{Canned, Formats, Formatter};
@@ -326,13 +327,13 @@ impl<'a, S: Sink + ?Sized> Emitter<'a, S> {
         Ok(sum)
     }
 
-    pub(super) fn out(&mut self, text: &str) -> std::io::Result<()> {
+    pub(super) fn out(&mut self, text: &str) -> Result<(), Stop> {
         self.line(text, None)
     }
 
     /// Every line goes out here: in the dialect's number format, and told when it is longer
     /// than the control reads.
-    pub(super) fn line(&mut self, text: &str, info: Option<&crate::post::BlockInfo>) -> std::io::Result<()> {
+    pub(super) fn line(&mut self, text: &str, info: Option<&crate::post::BlockInfo>) -> Result<(), Stop> {
         let (text, long) = self.f.finish(text);
         // The error's own comment line is cut to fit: never told again.
         if long && info.is_some() {
@@ -347,14 +348,14 @@ impl<'a, S: Sink + ?Sized> Emitter<'a, S> {
         self.sink.line(&text, info)
     }
 
-    pub(in crate::post) fn note(&mut self, d: Diagnostic) -> std::io::Result<()> {
+    pub(in crate::post) fn note(&mut self, d: Diagnostic) -> Result<(), Stop> {
         self.count(&d);
         self.flag(&d)?;
         self.sink.diagnostic(&d)
     }
 
     /// A diagnostic about a CL pose that got no block (unreachable): where it is, for a preview.
-    pub(super) fn note_at(&mut self, d: Diagnostic, pose: &Pose) -> std::io::Result<()> {
+    pub(super) fn note_at(&mut self, d: Diagnostic, pose: &Pose) -> Result<(), Stop> {
         self.count(&d);
         self.flag(&d)?;
         self.sink.diagnostic_at(&d, pose)
@@ -362,7 +363,7 @@ impl<'a, S: Sink + ?Sized> Emitter<'a, S> {
 
     /// An error with no block of its own (a point skipped, a record refused) is a comment line
     /// where it happened: the machinist runs the NC, not the diagnostics.
-    pub(super) fn flag(&mut self, d: &Diagnostic) -> std::io::Result<()> {
+    pub(super) fn flag(&mut self, d: &Diagnostic) -> Result<(), Stop> {
         if d.severity != Severity::Error {
             return Ok(());
         }
@@ -389,7 +390,7 @@ impl<'a, S: Sink + ?Sized> Emitter<'a, S> {
     }
 
     /// An info `{what}: {why}` the first time `why` comes up in a program.
-    pub(super) fn say_once(&mut self, why: &'static str, code: Code, line: Option<u32>, what: &str) -> std::io::Result<()> {
+    pub(super) fn say_once(&mut self, why: &'static str, code: Code, line: Option<u32>, what: &str) -> Result<(), Stop> {
         if self.said_once.contains(&why) {
             return Ok(());
         }

@@ -5,6 +5,7 @@ use super::Emitter;
 use crate::diag::Code;
 use crate::kinematics::{self, Vec3, angle_between};
 use crate::post::{Mode, Sink};
+use crate::post::Stop;
 
 /// A tilted working plane in force: the rotary words it stands on (radians), its frame as the
 /// control builds it from the words written, and the CL tool axis of its run.
@@ -36,7 +37,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
 
     /// Tilts the working plane where the machine stands (the rapid to `tip` just written), if
     /// the tool axis there is tilted and the machine and dialect allow it.
-    pub(super) fn enter_plane(&mut self, tip: &Vec3) -> std::io::Result<()> {
+    pub(super) fn enter_plane(&mut self, tip: &Vec3) -> Result<(), Stop> {
         let Some(at) = self.at else { return Ok(()) };
         if (at.pose.tip - tip).norm() > 1e-9 || angle_between(&at.pose.axis, &Vec3::z()) < 1e-6 {
             return Ok(());
@@ -71,7 +72,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
 
     /// Back to untilted coordinates; `recomp`: length compensation on again for the blocks that
     /// follow (not before a tool change, which sets its own).
-    pub(super) fn leave_plane(&mut self, recomp: bool) -> std::io::Result<()> {
+    pub(super) fn leave_plane(&mut self, recomp: bool) -> Result<(), Stop> {
         if self.tilt.is_none() {
             return Ok(());
         }
@@ -88,7 +89,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
 
     /// Length compensation off (word-address controls with a G43-style word) around a plane
     /// change, which redefines the direction it applies in.
-    pub(super) fn comp_cancel(&mut self) -> std::io::Result<()> {
+    pub(super) fn comp_cancel(&mut self) -> Result<(), Stop> {
         let d = self.o.dialect.clone();
         if self.comp_on && !d.length_comp.is_empty() && d.style == crate::nc::Style::WordAddress {
             if let Some(l) = self.f.line(&d.tcp_off, self.tool.unwrap_or(1), 0) {

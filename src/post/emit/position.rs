@@ -7,6 +7,7 @@ use super::{At, Emitter};
 use crate::diag::{Code, Diagnostic, Severity};
 use crate::kinematics::{self, IkOptions, Joints, Pose, Vec3, fk, ik_into};
 use crate::post::plan::wrap;
+use crate::post::Stop;
 use crate::post::{Error, Mode, MotionPt, Retract, Sink};
 
 impl<S: Sink + ?Sized> Emitter<'_, S> {
@@ -300,7 +301,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
 
     /// Lock every clamped rotary that is unlocked (after positioning, at the end), unless the
     /// operation ahead turns a rotary while cutting: then it stays unlocked to its end.
-    pub(super) fn lock_all(&mut self) -> std::io::Result<()> {
+    pub(super) fn lock_all(&mut self) -> Result<(), Stop> {
         if self.cut_turns {
             return Ok(());
         }
@@ -308,12 +309,12 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
     }
 
     /// Unlock every locked clamp: before an operation that turns a rotary while cutting.
-    pub(in crate::post) fn unlock_all(&mut self) -> std::io::Result<()> {
+    pub(in crate::post) fn unlock_all(&mut self) -> Result<(), Stop> {
         self.set_clamps(false)
     }
 
     /// Lock (or unlock) every clamped rotary not already so.
-    fn set_clamps(&mut self, lock: bool) -> std::io::Result<()> {
+    fn set_clamps(&mut self, lock: bool) -> Result<(), Stop> {
         for i in 0..self.m.rotaries.len() {
             self.clamp(i, lock)?;
         }
@@ -322,7 +323,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
 
     /// Write rotary `i`'s lock (or unlock) word where its clamp's state differs, and note the
     /// new state; a clamp whose state is unknown (a passed-through word set it) is left alone.
-    fn clamp(&mut self, i: usize, lock: bool) -> std::io::Result<()> {
+    fn clamp(&mut self, i: usize, lock: bool) -> Result<(), Stop> {
         let Some((on, off)) = &self.o.clamps[i] else { return Ok(()) };
         if self.locked[i] == lock || self.clamp_unknown[i] {
             return Ok(());
@@ -337,7 +338,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
     }
 
     /// Unlock the clamped rotaries this move turns.
-    pub(super) fn unlock_moving(&mut self, to: &Joints) -> std::io::Result<()> {
+    pub(super) fn unlock_moving(&mut self, to: &Joints) -> Result<(), Stop> {
         // Before the first block the machine stands at home: rotaries at 0.
         let from = self.at.map_or([0.0; 3], |p| p.joints.rotary);
         for i in 0..self.m.rotaries.len() {
@@ -350,7 +351,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
 
     /// Clamp words the control does not know stop the program where it reads them: not
     /// written, told once per rotary at the start.
-    pub(super) fn unknown_clamps(&mut self) -> std::io::Result<()> {
+    pub(super) fn unknown_clamps(&mut self) -> Result<(), Stop> {
         for i in 0..self.m.rotaries.len() {
             let Some((lock, unlock)) = &self.o.clamps[i] else { continue };
             let d = self.o.dialect.clone();

@@ -6,6 +6,7 @@ use crate::cl::{CoolantCmd, Dwell, SpindleCmd};
 use crate::diag::{Code, Diagnostic, Severity};
 use crate::kinematics::Vec3;
 use crate::post::sink::ToolUse;
+use crate::post::Stop;
 use crate::post::tools::LengthFrom;
 use crate::post::{Error, Mode, Preselect, ProgEvent, Sink};
 
@@ -13,7 +14,7 @@ use crate::post::{Error, Mode, Preselect, ProgEvent, Sink};
 const MAX_TOOL_LINES: usize = 1000;
 
 impl<S: Sink + ?Sized> Emitter<'_, S> {
-    pub(in crate::post) fn program_start(&mut self) -> std::io::Result<()> {
+    pub(in crate::post) fn program_start(&mut self) -> Result<(), Stop> {
         let mut lines = vec![
             format!("KINEPOST {} FOR {} ({})", env!("CARGO_PKG_VERSION"), self.m.id, self.m.name),
             format!(
@@ -59,7 +60,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
     /// A new tool length in force (the job fixed none): the NC from here on is cut for it, so
     /// the program says so where it takes effect, and where it came from (the header only knew
     /// the profile's).
-    pub(in crate::post) fn tool_length(&mut self, l: f64, from: LengthFrom) -> std::io::Result<()> {
+    pub(in crate::post) fn tool_length(&mut self, l: f64, from: LengthFrom) -> Result<(), Stop> {
         self.setup.tool_length = l;
         self.sum.tool_length = l;
         self.length_from = from;
@@ -457,7 +458,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
 
     /// Before the first move after a stop: the spindle and coolant that ran before it.
     #[cold]
-    fn restart_after_stop(&mut self) -> std::io::Result<()> {
+    fn restart_after_stop(&mut self) -> Result<(), Stop> {
         if let Some(line) = self.stopped_spindle.take() {
             self.restart_spindle(line, "the stop halts the spindle")?;
         }
@@ -468,7 +469,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
     }
 
     /// The spindle again at the CL's last speed and direction, told at `line`: `why` it stood.
-    fn restart_spindle(&mut self, line: u32, why: &str) -> std::io::Result<()> {
+    fn restart_spindle(&mut self, line: u32, why: &str) -> Result<(), Stop> {
         let Some(v) = self.rpm else { return Ok(()) };
         let msg = format!("{why} and the CL did not start it again: S{} restarted", v.round());
         self.note(Diagnostic::new(Code::SpindleStopped, Severity::Info, Some(line), msg))?;
@@ -476,7 +477,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
     }
 
     /// The coolant in force again, told at `line`: `why` it was off.
-    fn restart_coolant(&mut self, line: u32, why: &str) -> std::io::Result<()> {
+    fn restart_coolant(&mut self, line: u32, why: &str) -> Result<(), Stop> {
         let Some(l) = self.coolant.clone().and_then(|w| self.f.line(&w, 0, 0)) else {
             return Ok(());
         };
@@ -532,7 +533,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
     }
 
     /// S and M3/M4 (TNC: a speed-only TOOL CALL, then the direction alone).
-    pub(super) fn spindle_start(&mut self, speed: f64, cw: bool) -> std::io::Result<()> {
+    pub(super) fn spindle_start(&mut self, speed: f64, cw: bool) -> Result<(), Stop> {
         let d = self.o.dialect.clone();
         let (t, s) = (self.tool.unwrap_or(1), speed.round() as i64);
         let dir = if cw { &d.spindle_cw } else { &d.spindle_ccw };
@@ -567,7 +568,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
     /// Length compensation (or TCP) on, before the first motion of a tool (at CL `line`); and the
     /// spindle again where the tool change stopped it, or at `spindle_speed` where the CL started
     /// none.
-    pub(super) fn ensure_comp(&mut self, line: u32) -> std::io::Result<()> {
+    pub(super) fn ensure_comp(&mut self, line: u32) -> Result<(), Stop> {
         if self.stopped_spindle.is_some() || self.stopped_coolant.is_some() {
             self.restart_after_stop()?;
         }

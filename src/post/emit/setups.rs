@@ -7,6 +7,7 @@ use super::Emitter;
 use crate::diag::{Code, Diagnostic, Severity};
 use crate::kinematics::Vec3;
 use crate::post::setups::{Refused, offset_text};
+use crate::post::Stop;
 use crate::post::{Error, Sink};
 
 impl<S: Sink + ?Sized> Emitter<'_, S> {
@@ -51,7 +52,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
     }
 
     /// Before the program's end: each offset after the first, and where to set it.
-    pub(super) fn list_work_offsets(&mut self) -> std::io::Result<()> {
+    pub(super) fn list_work_offsets(&mut self) -> Result<(), Stop> {
         let Some(offsets) = self.offsets.as_ref() else {
             return Ok(());
         };

@@ -5,6 +5,7 @@
 use super::Emitter;
 use crate::kinematics::Units;
 use crate::post::{Sink, Smoothing};
+use crate::post::Stop;
 
 /// Total tolerances (`INTOL` + `OUTTOL`, mm) from which an operation is roughing, and up to
 /// which it is finishing; between: semi-finishing. A roughing pass leaves stock at a coarse
@@ -77,7 +78,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
     /// The operation's smoothing word, before its first feed move, where it differs from the
     /// one in force. `auto` writes none until the CL says a tolerance: a CL without one is
     /// posted as it was before smoothing existed.
-    pub(super) fn smooth_now(&mut self) -> std::io::Result<()> {
+    pub(super) fn smooth_now(&mut self) -> Result<(), Stop> {
         self.smooth.due = false;
         let s = &self.smooth;
         let said = s.inner.is_some() || s.outer.is_some();
@@ -123,7 +124,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
 
     /// The smoothing word in force cancelled (before a tool change, at the end): the next
     /// operation writes its own.
-    pub(super) fn smooth_off(&mut self) -> std::io::Result<()> {
+    pub(super) fn smooth_off(&mut self) -> Result<(), Stop> {
         if self.smooth.on.take().is_none() {
             return Ok(());
         }

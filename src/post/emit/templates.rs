@@ -7,6 +7,7 @@ use super::Emitter;
 use crate::diag::{Code, Diagnostic, Severity};
 use crate::nc::templates::Vars;
 use crate::post::Sink;
+use crate::post::Stop;
 
 impl<S: Sink + ?Sized> Emitter<'_, S> {
     /// The variables as the program stands: the tool in the spindle, its length and (from the
@@ -36,7 +37,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
     /// Writes the dialect's template for `event` (its variables as now, then `set`'s), each
     /// line a block. `Ok(false)`: the dialect has none. A render that fails is an error at CL
     /// `line` and writes nothing.
-    pub(super) fn template_with(&mut self, event: &str, line: Option<u32>, set: impl FnOnce(&mut Vars)) -> std::io::Result<bool> {
+    pub(super) fn template_with(&mut self, event: &str, line: Option<u32>, set: impl FnOnce(&mut Vars)) -> Result<bool, Stop> {
         let d = self.o.dialect.clone();
         if !d.templates.has(event) {
             return Ok(false);
@@ -59,7 +60,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
     }
 
     /// The lines of `event`'s template, not yet written (the footer places them).
-    pub(super) fn rendered(&mut self, event: &str) -> std::io::Result<Vec<String>> {
+    pub(super) fn rendered(&mut self, event: &str) -> Result<Vec<String>, Stop> {
         let d = self.o.dialect.clone();
         match d.templates.render(event, &self.template_vars()) {
             Some(Ok(lines)) => Ok(lines),
@@ -71,7 +72,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         }
     }
 
-    pub(super) fn template(&mut self, event: &str, line: Option<u32>) -> std::io::Result<bool> {
+    pub(super) fn template(&mut self, event: &str, line: Option<u32>) -> Result<bool, Stop> {
         self.template_with(event, line, |_| {})
     }
 }

@@ -1,14 +1,14 @@
 //! Where a job's diagnostics come from, and that a failed job's end with its `error` record, so
-//! that a reader never takes a stream cut short for a whole one. The engine writes the record
-//! when it stops; where the run failed otherwise (the spool's disk full, the input gone), the
-//! store closes the block store when it records the failure; where even that write failed, the
-//! stream is rebuilt up to its last whole record and the error record follows.
+//! that a reader never takes a stream cut short for a whole one: sealed. The engine writes the
+//! record when it stops; where the run failed otherwise (the spool's disk full, the input gone),
+//! the queue seals the block store ([`close`]) when it records the failure; where even that
+//! write failed, the stream is rebuilt up to its last whole record and the error record follows.
 //!
 //! Jobs run by a version before the block store (`blocks.rs`) left an NDJSON file
 //! (`<id>.ndjson`): served as it is, or mended the same way after its last complete line.
 
+use super::Paths;
 use super::blocks::{self, Decoder, Event};
-use super::{Error, Job, State, Store};
 use crate::output::{ErrorBody, Record};
 use std::fs::File;
 use std::io::{Read, Seek, SeekFrom, Write};
@@ -33,7 +33,7 @@ pub enum Diagnostics {
 }
 
 /// The error record's line.
-pub(super) fn error_line(message: &str) -> Vec<u8> {
+fn error_line(message: &str) -> Vec<u8> {
     let mut out = Vec::new();
     let _ = Record::Error {
         error: ErrorBody::new(message),
@@ -80,7 +80,7 @@ fn ending(f: &mut File) -> std::io::Result<(u64, bool)> {
 
 /// Makes a block store (created if missing) end with an error record: an event cut short is
 /// cut off, the record appended unless the last whole event is one, and the file fsynced.
-pub(super) fn close(path: &Path, message: &str) -> std::io::Result<()> {
+pub fn close(path: &Path, message: &str) -> std::io::Result<()> {
     let mut f = File::options()
         .read(true)
         .write(true)
@@ -138,48 +138,42 @@ fn legacy(path: PathBuf, failed: Option<&str>) -> std::io::Result<Diagnostics> {
     })
 }
 
-impl Store {
-    /// How a finished job's diagnostics are served: rebuilt from its block store, or its NDJSON
-    /// file where a version before the store ran it; a failed job's end with its error record.
-    pub async fn diagnostics(&self, job: &Job) -> Result<Diagnostics, Error> {
-        let p = super::store::Paths::new(self.spool(), &job.id, 0);
-        let failed = (job.state == State::Failed).then(|| job.error.clone().unwrap_or_else(|| "the job failed".into()));
-        let read = tokio::task::spawn_blocking(move || -> std::io::Result<Diagnostics> {
-            let found = |p: &Path| match std::fs::metadata(p) {
-                Ok(m) => Ok(Some(m.len())),
-                Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(None),
-                Err(e) => Err(e),
-            };
-            if let Some(len) = found(&p.blocks)? {
-                return Ok(Diagnostics::Rebuilt {
-                    nc: if failed.is_some() { p.nc_partial } else { p.nc },
-                    store: p.blocks,
-                    end: failed.as_deref().map(error_line),
-                    len,
-                });
-            }
-            match (found(&p.diag)?, failed) {
-                (Some(_), failed) => legacy(p.diag, failed.as_deref()),
-                // Nothing at all (the run never began, or its files were lost): the record alone.
-                (None, Some(message)) => Ok(Diagnostics::Mended {
-                    path: p.diag,
-                    keep: 0,
-                    tail: error_line(&message),
-                }),
-                (None, None) => Err(std::io::Error::new(
-                    std::io::ErrorKind::NotFound,
-                    "the job's diagnostics are gone",
-                )),
-            }
+/// How a finished job's diagnostics are served (a blocking look at its files): rebuilt from
+/// its block store, or its NDJSON file where a version before the store ran it; `failed`, a
+/// failed job's error, ends them.
+pub fn locate(p: Paths, failed: Option<String>) -> std::io::Result<Diagnostics> {
+    let found = |p: &Path| match std::fs::metadata(p) {
+        Ok(m) => Ok(Some(m.len())),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(None),
+        Err(e) => Err(e),
+    };
+    if let Some(len) = found(&p.blocks)? {
+        return Ok(Diagnostics::Rebuilt {
+            nc: if failed.is_some() { p.nc_partial } else { p.nc },
+            store: p.blocks,
+            end: failed.as_deref().map(error_line),
+            len,
         });
-        Ok(read.await.map_err(std::io::Error::other)??)
+    }
+    match (found(&p.diag)?, failed) {
+        (Some(_), failed) => legacy(p.diag, failed.as_deref()),
+        // Nothing at all (the run never began, or its files were lost): the record alone.
+        (None, Some(message)) => Ok(Diagnostics::Mended {
+            path: p.diag,
+            keep: 0,
+            tail: error_line(&message),
+        }),
+        (None, None) => Err(std::io::Error::new(
+            std::io::ErrorKind::NotFound,
+            "the job's diagnostics are gone",
+        )),
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::{Diagnostics, close, ending, legacy};
-    use crate::jobs::blocks::{BlockWriter, MAGIC, rebuild};
+    use crate::spool::blocks::{BlockWriter, MAGIC, rebuild};
     use crate::output::Record;
     use crate::post::{AxisWords, BlockInfo, Summary};
     use std::io::Read;

@@ -103,7 +103,7 @@ impl History {
 
 /// What writer and reader both track from block to block.
 #[derive(Default)]
-struct State {
+struct Carried {
     n: u64,
     source: u32,
     mask: u8,
@@ -117,7 +117,7 @@ struct State {
     diags_line: Option<u32>,
 }
 
-impl State {
+impl Carried {
     /// The CL line a block's joints are predicted at (the last known where it has none; 0
     /// throughout in version 1).
     fn at(&self, source_line: Option<u32>) -> u32 {
@@ -137,7 +137,7 @@ impl State {
 /// Writes the store as the program's lines and records go by.
 pub struct BlockWriter<W: Write> {
     out: W,
-    state: State,
+    state: Carried,
     /// NC bytes written so far, and where the last block's line ended.
     nc_at: u64,
     after_block: u64,
@@ -150,7 +150,7 @@ impl<W: Write> BlockWriter<W> {
         out.write_all(MAGIC)?;
         Ok(BlockWriter {
             out,
-            state: State::default(),
+            state: Carried::default(),
             nc_at: 0,
             after_block: 0,
             buf: Vec::with_capacity(128),
@@ -361,7 +361,7 @@ pub(super) enum Event {
 /// Reads events; `at` is where the last whole one ended.
 pub(super) struct Decoder<R: BufRead> {
     r: R,
-    state: State,
+    state: Carried,
     /// The store's format (1 or 2).
     version: u8,
     pub at: u64,
@@ -383,7 +383,7 @@ impl<R: BufRead> Decoder<R> {
         };
         Ok(Decoder {
             r,
-            state: State::default(),
+            state: Carried::default(),
             version,
             at: MAGIC.len() as u64,
             pos: MAGIC.len() as u64,
@@ -598,7 +598,7 @@ impl BitRead for SliceBits<'_> {
 }
 
 /// A block's joints (version 2): per present axis its residual's bit count, then the residual.
-fn decode_joints(b: &mut impl BitRead, state: &mut State, t: u32) -> io::Result<AxisWords> {
+fn decode_joints(b: &mut impl BitRead, state: &mut Carried, t: u32) -> io::Result<AxisWords> {
     let mut joints = AxisWords::default();
     for i in (0..6).filter(|i| state.mask & (1 << i) != 0) {
         let count = b.count(state.bits[i])?;

@@ -162,20 +162,20 @@ fn version_2_is_smaller_and_the_same() {
     let opts = crate::post::Settings::default().profile_options(&p, None).unwrap();
     struct Both(FileSink<Vec<u8>, Vec<u8>>, BlockWriter<Vec<u8>>, Vec<u8>, u64);
     impl Sink for Both {
-        fn line(&mut self, text: &str, b: Option<&BlockInfo>) -> io::Result<()> {
+        fn line(&mut self, text: &str, b: Option<&BlockInfo>) -> Result<(), crate::post::Stop> {
             self.2.extend_from_slice(text.as_bytes());
             self.2.push(b'\n');
             self.3 += b.is_some() as u64;
             self.0.line(text, b)?;
-            self.1.line(text, b)
+            Ok(self.1.line(text, b)?)
         }
-        fn diagnostic(&mut self, d: &Diagnostic) -> io::Result<()> {
+        fn diagnostic(&mut self, d: &Diagnostic) -> Result<(), crate::post::Stop> {
             self.0.diagnostic(d)?;
-            self.1.record(&Record::Diagnostic { diagnostic: d })
+            Ok(self.1.record(&Record::Diagnostic { diagnostic: d })?)
         }
-        fn summary(&mut self, s: &Summary) -> io::Result<()> {
+        fn summary(&mut self, s: &Summary) -> Result<(), crate::post::Stop> {
             self.0.summary(s)?;
-            self.1.record(&Record::Summary { summary: s })
+            Ok(self.1.record(&Record::Summary { summary: s })?)
         }
     }
     let mut both = Both(FileSink::new(Vec::new(), Some(Vec::new())), BlockWriter::new(Vec::new()).unwrap(), Vec::new(), 0);

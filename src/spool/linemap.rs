@@ -64,7 +64,7 @@ impl Entries {
 }
 
 /// Writes the fixed-size entries as the program's lines go by (what the line map serves; a job
-/// stores them compactly, `jobs::lines`).
+/// stores them compactly, `spool::lines`).
 pub struct LineMap<W: Write> {
     out: W,
     entries: Entries,

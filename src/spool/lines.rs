@@ -1,5 +1,5 @@
 //! A job's line map, stored compactly (`<id>.lines`) and served as the fixed-size entries of
-//! `output::linemap`, rebuilt as they stream.
+//! `spool::linemap`, rebuilt as they stream.
 //!
 //! The fixed-size map costs 16 bytes a line, two thirds of the NC itself, though nearly every
 //! line says only "this long, the next CL line, no flags". Stored, a line is one byte: its kind
@@ -15,7 +15,7 @@
 //! before this format left the fixed-size entries themselves, whose first 8 bytes (line 1's
 //! offset) are zeros: no magic, served as they are.
 
-use crate::output::linemap::{ENTRY, Entries, Entry};
+use super::linemap::{ENTRY, Entries, Entry};
 use crate::post::BlockInfo;
 use std::io::{self, BufRead, Read, Seek, SeekFrom, Write};
 use std::path::Path;
@@ -41,7 +41,7 @@ const LEN_GIVEN: u64 = 31;
 
 /// What writer and reader track from line to line (a checkpoint holds it).
 #[derive(Clone, Copy, Default)]
-struct State {
+struct Cursor {
     offset: u64,
     cl: u32,
     len: u32,
@@ -51,7 +51,7 @@ struct State {
 pub struct Writer<W: Write> {
     out: W,
     entries: Entries,
-    state: State,
+    state: Cursor,
     lines: u64,
     /// Bytes written so far.
     at: u64,
@@ -65,7 +65,7 @@ impl<W: Write> Writer<W> {
         Ok(Writer {
             out,
             entries: Entries::default(),
-            state: State::default(),
+            state: Cursor::default(),
             lines: 0,
             at: MAGIC.len() as u64,
             checkpoints: Vec::new(),
@@ -99,7 +99,7 @@ impl<W: Write> Writer<W> {
     }
 }
 
-fn checkpoint(out: &mut Vec<u8>, at: u64, s: State) {
+fn checkpoint(out: &mut Vec<u8>, at: u64, s: Cursor) {
     out.extend_from_slice(&at.to_le_bytes());
     out.extend_from_slice(&s.offset.to_le_bytes());
     out.extend_from_slice(&s.cl.to_le_bytes());
@@ -107,7 +107,7 @@ fn checkpoint(out: &mut Vec<u8>, at: u64, s: State) {
 }
 
 /// One line's bytes; `len` is its length with the newline (the next line's offset less its own).
-fn encode(out: &mut Vec<u8>, s: &mut State, e: Entry, len: u64) {
+fn encode(out: &mut Vec<u8>, s: &mut Cursor, e: Entry, len: u64) {
     let kind = match e.cl {
         0 => CL_NONE,
         cl if cl == s.cl.wrapping_add(1) => CL_NEXT,
@@ -134,7 +134,7 @@ fn encode(out: &mut Vec<u8>, s: &mut State, e: Entry, len: u64) {
 }
 
 /// The next line's entry, from the store's bytes.
-fn decode<R: BufRead>(r: &mut R, s: &mut State) -> io::Result<Entry> {
+fn decode<R: BufRead>(r: &mut R, s: &mut Cursor) -> io::Result<Entry> {
     let head = byte(r)?;
     let cl = match head & 3 {
         CL_NEXT => s.cl.wrapping_add(1),
@@ -177,16 +177,16 @@ fn damaged(why: &str) -> io::Error {
 }
 
 /// A compact store opened: its checkpoints, read from its end.
-pub struct Store {
+pub struct LineIndex {
     path: std::path::PathBuf,
     lines: u64,
     index_at: u64,
-    checkpoints: Vec<(u64, State)>,
+    checkpoints: Vec<(u64, Cursor)>,
 }
 
-impl Store {
+impl LineIndex {
     /// `None`: the file is a fixed-size map from before this format (served as it is).
-    pub fn open(path: &Path) -> io::Result<Option<Store>> {
+    pub fn open(path: &Path) -> io::Result<Option<LineIndex>> {
         let mut f = std::fs::File::open(path)?;
         let mut magic = [0u8; 8];
         match f.read_exact(&mut magic) {
@@ -220,10 +220,10 @@ impl Store {
                 let offset = u64::from_le_bytes(c[8..16].try_into().expect("8 bytes"));
                 let cl = u32::from_le_bytes(c[16..20].try_into().expect("4 bytes"));
                 let len = u32::from_le_bytes(c[20..24].try_into().expect("4 bytes"));
-                (at, State { offset, cl, len })
+                (at, Cursor { offset, cl, len })
             })
             .collect();
-        Ok(Some(Store {
+        Ok(Some(LineIndex {
             path: path.to_path_buf(),
             lines,
             index_at,
@@ -240,7 +240,7 @@ impl Store {
         self.lines == 0
     }
 
-    /// The fixed-size map's bytes `start..end` (`end` ≤ [`Store::len`]), read as they are made.
+    /// The fixed-size map's bytes `start..end` (`end` ≤ [`LineIndex::len`]), read as they are made.
     pub fn range(&self, start: u64, end: u64) -> io::Result<Entries16> {
         let end = end.min(self.len());
         let start = start.min(end);
@@ -249,7 +249,7 @@ impl Store {
             .checkpoints
             .get((line / EVERY) as usize)
             .copied()
-            .unwrap_or((self.index_at, State::default()));
+            .unwrap_or((self.index_at, Cursor::default()));
         let mut f = std::fs::File::open(&self.path)?;
         f.seek(SeekFrom::Start(at))?;
         let mut r = Entries16 {
@@ -272,7 +272,7 @@ impl Store {
 /// A range of the fixed-size map, made from the store as it is read.
 pub struct Entries16 {
     r: io::BufReader<io::Take<std::fs::File>>,
-    state: State,
+    state: Cursor,
     /// The next line to decode, and the map's byte to serve next (within its entry or at it).
     line: u64,
     pos: u64,
@@ -311,7 +311,7 @@ fn short(e: io::Error) -> io::Error {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::output::linemap::LineMap;
+    use crate::spool::linemap::LineMap;
 
     /// Lines of every kind: blocks with CL lines that step, repeat, jump back and are absent,
     /// flags, error comments, tool changes, long and empty lines.
@@ -365,7 +365,7 @@ mod tests {
         (old.into_inner(), tempfile::Spooled::new(&new.finish().unwrap()))
     }
 
-    fn read(s: &Store, a: u64, b: u64) -> Vec<u8> {
+    fn read(s: &LineIndex, a: u64, b: u64) -> Vec<u8> {
         let mut out = Vec::new();
         s.range(a, b).unwrap().read_to_end(&mut out).unwrap();
         out
@@ -375,7 +375,7 @@ mod tests {
     fn whole_and_every_kind_of_range_are_the_old_bytes() {
         for n in [0, 1, 4095, 4096, 4097, 20_000] {
             let (old, file) = both(&program(n));
-            let s = Store::open(file.path()).unwrap().expect("compact");
+            let s = LineIndex::open(file.path()).unwrap().expect("compact");
             assert_eq!(s.len(), old.len() as u64);
             assert_eq!(read(&s, 0, s.len()), old, "{n} lines");
             let len = old.len() as u64;
@@ -401,15 +401,15 @@ mod tests {
     fn the_old_format_is_told_apart_and_damage_is_an_error() {
         let (old, file) = both(&program(5000));
         let legacy = tempfile::Spooled::new(&old);
-        assert!(Store::open(legacy.path()).unwrap().is_none());
-        assert!(Store::open(tempfile::Spooled::new(b"").path()).unwrap().is_none());
+        assert!(LineIndex::open(legacy.path()).unwrap().is_none());
+        assert!(LineIndex::open(tempfile::Spooled::new(b"").path()).unwrap().is_none());
         // A job's map as the version before wrote it (`tests/data/job_v1`).
         let v1 = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/job_v1/job.lines");
-        assert!(Store::open(&v1).unwrap().is_none());
+        assert!(LineIndex::open(&v1).unwrap().is_none());
         let bytes = std::fs::read(file.path()).unwrap();
         for cut in [9, bytes.len() / 2, bytes.len() - 1] {
             assert!(
-                Store::open(tempfile::Spooled::new(&bytes[..cut]).path()).is_err(),
+                LineIndex::open(tempfile::Spooled::new(&bytes[..cut]).path()).is_err(),
                 "cut at {cut}"
             );
         }
@@ -419,9 +419,9 @@ mod tests {
     struct Both(LineMap<Vec<u8>>, Writer<Vec<u8>>);
 
     impl crate::post::Sink for Both {
-        fn line(&mut self, text: &str, b: Option<&BlockInfo>) -> io::Result<()> {
+        fn line(&mut self, text: &str, b: Option<&BlockInfo>) -> Result<(), crate::post::Stop> {
             self.0.line(text, b)?;
-            self.1.line(text, b)
+            Ok(self.1.line(text, b)?)
         }
     }
 
@@ -451,7 +451,7 @@ mod tests {
             let mut both = Both(LineMap::new(Vec::new()), Writer::new(Vec::new()).unwrap());
             crate::post::post(&cl[..], &p.machine, &opts, &mut both).unwrap();
             let (old, file) = (both.0.into_inner(), tempfile::Spooled::new(&both.1.finish().unwrap()));
-            let s = Store::open(file.path()).unwrap().unwrap();
+            let s = LineIndex::open(file.path()).unwrap().unwrap();
             assert_eq!(read(&s, 0, s.len()), old, "{machine} {mode}");
             let len = old.len() as u64;
             for k in 0..100u64 {
