@@ -36,11 +36,11 @@ impl Links {
         for (i, r) in m.rotaries.iter().enumerate() {
             match r.mount {
                 Mount::Table => {
-                    t = t * turn(&r.axis, &r.pivot, actual[i]);
+                    t *= turn(&r.axis, &r.pivot, actual[i]);
                     table[i] = t;
                 }
                 Mount::Head => {
-                    h = h * turn(&r.axis, &r.pivot, actual[i]);
+                    h *= turn(&r.axis, &r.pivot, actual[i]);
                     head[i] = h;
                 }
             }

@@ -25,7 +25,7 @@ impl PairKind {
             (Link::Cutter, b) if table_side(b) || b == Link::Bed => Some(PairKind::Cutter),
             (Link::Cutter, _) => None,
             (a, b) if a.head_side() && (table_side(b) || b == Link::Bed) => Some(PairKind::Contact),
-            (a, Link::Bed) if matches!(a, Link::TableRotary(_) | Link::Table) => Some(PairKind::Contact),
+            (Link::TableRotary(_) | Link::Table, Link::Bed) => Some(PairKind::Contact),
             _ => None,
         }
     }
