@@ -223,7 +223,7 @@ fn an_arc_is_checked_along_the_arc() {
 /// moves across 0 must not be told).
 #[test]
 fn on_the_way_an_overlap_may_be_told_by_its_last_measure() {
-    use kinepost::collide::{Hit, Solid, ToolShape, World};
+    use kinepost::collide::{Axes, Hit, Solid, ToolShape, World};
     use kinepost::kinematics::{Setup, Vec3, controlled_point};
     let p = profile("spinner-u5-620", SPINNER);
     let (m, g) = (&p.machine, p.geometry());
@@ -251,8 +251,9 @@ fn on_the_way_an_overlap_may_be_told_by_its_last_measure() {
     for (k, (tip, actual)) in through.chain(plunge).chain(down).enumerate() {
         let lin: [f64; 3] = controlled_point(m, &actual, &tip, &setup).into();
         let (mut told, mut exact): (Vec<Hit>, Vec<Hit>) = (Vec::new(), Vec::new());
-        along.check_on_the_way(m, &lin, &actual, len, &Vec3::zeros(), true, &mut told);
-        world().check_at(m, &lin, &actual, len, &Vec3::zeros(), true, &mut exact);
+        let at = Axes { linear: lin, actual };
+        along.check_on_the_way(m, &setup, &at, true, &mut told);
+        world().check_at(m, &setup, &at, true, &mut exact);
         let pairs = |v: &[Hit]| v.iter().map(|h| (h.a.clone(), h.b.clone(), h.dist < 0.0)).collect::<Vec<_>>();
         assert_eq!(pairs(&told), pairs(&exact), "sample {k}");
         for (a, b) in told.iter().zip(&exact) {
@@ -851,7 +852,7 @@ fn bad_meshes_are_refused_naming_the_key() {
 /// hit; an open one (two triangles gone) is a surface, and the same cutter is not.
 #[test]
 fn a_closed_mesh_is_a_solid_an_open_one_a_surface() {
-    use kinepost::collide::{Hit, Solid, ToolShape, World};
+    use kinepost::collide::{Axes, Hit, Solid, ToolShape, World};
     let open: Vec<_> = table_stl()[2..].to_vec();
     let inward: Vec<_> = table_stl().into_iter().map(|[a, b, c]| [a, c, b]).collect();
     let dir = mesh_dir(
@@ -870,10 +871,10 @@ fn a_closed_mesh_is_a_solid_an_open_one_a_surface() {
         assert!(matches!(&g.bodies[0].solid, Solid::Mesh(m) if m.is_solid() == solid), "{file}");
         let mut w = World::new(&p.machine, &g, &[], &[], 2.0, 0.01);
         w.set_tool(tool);
-        let zero = kinepost::kinematics::Vec3::zeros();
+        let setup = kinepost::kinematics::Setup::new(tool.length, kinepost::kinematics::Vec3::zeros());
         let at = |w: &mut World, z: f64| {
             let mut out: Vec<Hit> = Vec::new();
-            w.check_at(&p.machine, &[100.0, 50.0, z], &[0.0; 3], tool.length, &zero, false, &mut out);
+            w.check_at(&p.machine, &setup, &Axes { linear: [100.0, 50.0, z], actual: [0.0; 3] }, false, &mut out);
             out
         };
         // The cutter spans z −25 … −15 (the table −60 … 0): wholly inside.
@@ -892,7 +893,7 @@ fn a_closed_mesh_is_a_solid_an_open_one_a_surface() {
 /// against triangle; a housing wholly inside the closed table is found too.
 #[test]
 fn a_mesh_against_a_mesh() {
-    use kinepost::collide::{Hit, ToolShape, World};
+    use kinepost::collide::{Axes, Hit, ToolShape, World};
     let head = common::stl::box_triangles([-50.0, -50.0, 5.0], [50.0, 50.0, 40.0]);
     let dir = mesh_dir("mm", &[("table.stl", common::stl::binary(&table_stl())), ("head.stl", common::stl::binary(&head))]);
     let bodies = "[[body]]\nname = \"table mesh\"\non = \"C\"\nmesh = \"table.stl\"\n[[body]]\nname = \"head mesh\"\non = \"spindle\"\nmesh = \"head.stl\"\n";
@@ -900,10 +901,10 @@ fn a_mesh_against_a_mesh() {
     let g = p.geometry();
     let mut w = World::new(&p.machine, &g, &[], &[], 2.0, 0.01);
     w.set_tool(ToolShape { length: 10.0, diameter: 10.0, corner_radius: 0.0, holder_diameter: 0.0, holder_length: 0.0 });
-    let zero = kinepost::kinematics::Vec3::zeros();
+    let setup = kinepost::kinematics::Setup::new(10.0, kinepost::kinematics::Vec3::zeros());
     let mut at = |z: f64| {
         let mut out: Vec<Hit> = Vec::new();
-        w.check_at(&p.machine, &[100.0, 50.0, z], &[0.0; 3], 10.0, &zero, false, &mut out);
+        w.check_at(&p.machine, &setup, &Axes { linear: [100.0, 50.0, z], actual: [0.0; 3] }, false, &mut out);
         out.into_iter().filter(|h| h.a == "head mesh").collect::<Vec<_>>()
     };
     // The housing spans z + 15 … z + 50 (spindle at z + 10).
@@ -958,13 +959,13 @@ fn skipping_pairs_that_cannot_have_closed_in_misses_nothing() {
 /// kept per set of joints that move a pair).
 #[test]
 fn a_rotary_turning_alone_is_counted_for_the_pairs_it_moves() {
-    use kinepost::collide::{Solid, ToolShape, World};
+    use kinepost::collide::{Axes, Solid, ToolShape, World};
     let p = shipped_profile("spinner-u5-620");
     let (m, g) = (&p.machine, p.geometry());
     let stock = [Solid::Box { min: [-40.0, -40.0, 0.0].into(), max: [40.0, 40.0, 30.0].into() }];
     let len = m.default_tool_length;
     let tool = ToolShape::default_for(len, true);
-    let wo = kinepost::kinematics::Vec3::zeros();
+    let setup = kinepost::kinematics::Setup::new(len, kinepost::kinematics::Vec3::zeros());
     let tip = [40.0 + 0.5 * tool.diameter + 3.0, 0.0, 10.0];
     let deg = std::f64::consts::PI / 180.0;
     // B (index 0) and C (index 1), each alone from 0, in steps of a quarter degree.
@@ -976,10 +977,11 @@ fn a_rotary_turning_alone_is_counted_for_the_pairs_it_moves() {
             let mut rot = [0.0; 3];
             rot[i] = end.signum() * 0.25 * k as f64 * deg;
             let (mut a, mut b) = (Vec::new(), Vec::new());
-            remembering.check_at(m, &tip, &rot, len, &wo, true, &mut a);
+            let at = Axes { linear: tip, actual: rot };
+            remembering.check_at(m, &setup, &at, true, &mut a);
             let mut fresh = World::new(m, &g, &stock, &[], 2.0, 1e-3);
             fresh.set_tool(tool);
-            fresh.check_at(m, &tip, &rot, len, &wo, true, &mut b);
+            fresh.check_at(m, &setup, &at, true, &mut b);
             let names = |v: &[kinepost::collide::Hit]| v.iter().map(|h| format!("{}-{}", h.a, h.b)).collect::<Vec<_>>();
             assert_eq!(names(&a), names(&b), "rotary {i} at {:.2}°", rot[i] / deg);
             touched += b.iter().filter(|h| h.a == "cutter" && h.b == "stock").count();
@@ -994,7 +996,7 @@ fn a_rotary_turning_alone_is_counted_for_the_pairs_it_moves() {
 /// clearance is asked, so half its smallest size is the step the samples are counted by.
 #[test]
 fn the_samples_follow_a_part_the_work_offset_puts_far_off_the_axes() {
-    use kinepost::collide::{Geometry, Solid, World};
+    use kinepost::collide::{Axes, Coarse, Geometry, Solid, World};
     use kinepost::kinematics::{Setup, Vec3, controlled_point};
     let p = shipped_profile("spinner-u5-620");
     let m = &p.machine;
@@ -1010,7 +1012,7 @@ fn the_samples_follow_a_part_the_work_offset_puts_far_off_the_axes() {
         // (B, C) actual angles at the move's ends.
         for (a, b) in [([0.0, 0.0], [0.0, 90.0]), ([0.0, 0.0], [30.0, -45.0]), ([-20.0, 170.0], [15.0, 10.0])] {
             let (from, to) = ([a[0] * deg, a[1] * deg, 0.0], [b[0] * deg, b[1] * deg, 0.0]);
-            let (n, coarse) = world.samples(m, (&lin, &from), (&lin, &to), len, &wo, 0.0);
+            let (n, coarse) = world.samples(m, &setup, &Axes { linear: lin, actual: from }, &Axes { linear: lin, actual: to }, 0.0);
             assert_eq!(coarse, None, "{n} samples");
             let at = |t: f64| std::array::from_fn::<f64, 3, _>(|i| from[i] + (to[i] - from[i]) * t);
             for corner in 0..8 {
@@ -1038,9 +1040,10 @@ fn the_samples_follow_a_part_the_work_offset_puts_far_off_the_axes() {
     let sheet = [Solid::Box { min, max: Vec3::new(40.0, 40.0, 0.01) }];
     let mut world = World::new(m, &Geometry::default(), &sheet, &[], 2.0, 1e-3);
     let (from, to) = ([0.0; 3], [0.0, std::f64::consts::PI, 0.0]);
-    let (n, coarse) = world.samples(m, (&lin, &from), (&lin, &to), len, &Vec3::new(500.0, 0.0, 0.0), 0.0);
+    let setup = Setup::new(len, Vec3::new(500.0, 0.0, 0.0));
+    let (n, coarse) = world.samples(m, &setup, &Axes { linear: lin, actual: from }, &Axes { linear: lin, actual: to }, 0.0);
     assert_eq!(n, kinepost::collide::MAX_SAMPLES);
-    let (apart, step) = coarse.expect("too few samples for the motion are told");
+    let Coarse { apart, step } = coarse.expect("too few samples for the motion are told");
     assert!((step - 0.005).abs() < 1e-12 && apart > step, "{apart} {step}");
 }
 
@@ -1050,14 +1053,14 @@ fn the_samples_follow_a_part_the_work_offset_puts_far_off_the_axes() {
 /// at the move's end or at points along it. Returns how many hits, and how many moves were taken
 /// whole.
 fn walk_compare(p: &Profile, n: usize, rnd: &mut impl FnMut() -> f64) -> (usize, usize) {
-    use kinepost::collide::{ToolShape, World};
+    use kinepost::collide::{Axes, ToolShape, World};
     let mut hits = 0;
     let m = &p.machine;
     let g = p.geometry();
     let stock = [kinepost::collide::Solid::Box { min: [-40.0, -40.0, 0.0].into(), max: [40.0, 40.0, 30.0].into() }];
     let len = m.default_tool_length;
     let tool = ToolShape::default_for(len, m.units == kinepost::kinematics::Units::Mm);
-    let wo = kinepost::kinematics::Vec3::zeros();
+    let setup = kinepost::kinematics::Setup::new(len, kinepost::kinematics::Vec3::zeros());
     let mut remembering = World::new(m, &g, &stock, &[], 2.0, 1e-3);
     remembering.set_tool(tool);
     let mut whole = World::new(m, &g, &stock, &[], 2.0, 1e-3);
@@ -1066,7 +1069,7 @@ fn walk_compare(p: &Profile, n: usize, rnd: &mut impl FnMut() -> f64) -> (usize,
         let mut fresh = World::new(m, &g, &stock, &[], 2.0, 1e-3);
         fresh.set_tool(tool);
         let mut out = Vec::new();
-        fresh.check_at(m, lin, rot, len, &wo, stock_now, &mut out);
+        fresh.check_at(m, &setup, &Axes { linear: *lin, actual: *rot }, stock_now, &mut out);
         out
     };
     let mut taken_whole = 0;
@@ -1096,15 +1099,16 @@ fn walk_compare(p: &Profile, n: usize, rnd: &mut impl FnMut() -> f64) -> (usize,
         }
         let stock_now = k % 3 == 0;
         let (mut a, mut b) = (Vec::new(), Vec::new());
-        remembering.check_at(m, &lin, &rot, len, &wo, stock_now, &mut a);
+        let (at, at0) = (Axes { linear: lin, actual: rot }, Axes { linear: lin0, actual: rot0 });
+        remembering.check_at(m, &setup, &at, stock_now, &mut a);
         let mut fresh = World::new(m, &g, &stock, &[], 2.0, 1e-3);
         fresh.set_tool(tool);
-        fresh.check_at(m, &lin, &rot, len, &wo, stock_now, &mut b);
+        fresh.check_at(m, &setup, &at, stock_now, &mut b);
         // A move that does not start where the last check left the joints is never taken whole.
-        let elsewhere = [lin0[0] + 1.0, lin0[1], lin0[2]];
-        assert!(!whole.move_clear(m, Some((&elsewhere, &rot0)), (&lin, &rot), len, &wo, stock_now, 0.0));
-        let from = (k % 7 != 3).then_some((&lin0, &rot0));
-        if whole.move_clear(m, from, (&lin, &rot), len, &wo, stock_now, 0.0) {
+        let elsewhere = Axes { linear: [lin0[0] + 1.0, lin0[1], lin0[2]], actual: rot0 };
+        assert!(!whole.move_clear(m, &setup, Some(&elsewhere), &at, stock_now, 0.0));
+        let from = (k % 7 != 3).then_some(&at0);
+        if whole.move_clear(m, &setup, from, &at, stock_now, 0.0) {
             taken_whole += 1;
             for t in [0.25, 0.5, 0.75, 1.0] {
                 let along = |p: &[f64; 3], q: &[f64; 3]| std::array::from_fn::<f64, 3, _>(|i| p[i] + (q[i] - p[i]) * t);
@@ -1112,7 +1116,7 @@ fn walk_compare(p: &Profile, n: usize, rnd: &mut impl FnMut() -> f64) -> (usize,
                 assert!(seen.is_empty(), "{} step {k}: taken whole, yet {seen:?} at {t} of the way", m.id);
             }
         } else {
-            whole.check_at(m, &lin, &rot, len, &wo, stock_now, &mut Vec::new());
+            whole.check_at(m, &setup, &at, stock_now, &mut Vec::new());
         }
         let key = |h: &kinepost::collide::Hit| (h.a.clone(), h.b.clone(), (h.dist * 1e9).round() as i64);
         let (ka, kb): (Vec<_>, Vec<_>) = (a.iter().map(key).collect(), b.iter().map(key).collect());

@@ -29,7 +29,7 @@ pub fn hold_outer(m: &Machine, pose: &Pose, setup: &Setup, outer: f64, branch: i
     let a2 = sp1(&pair.s2, &Vec3::z(), &v).unwrap_or(Cs::ZERO);
     let mut out = Solutions::new();
     let seq = &m.chain.seq;
-    push(m, &mut out, pose, setup, seq, [a1, a2, Cs::ZERO], None, branch, 0, None);
+    push(m, &mut out, pose, setup, seq, Found { branch, ..Found::of([a1, a2, Cs::ZERO]) });
     let mut s = out.pop()?;
     s.actual[seq[0]] = outer;
     s.joints.rotary[seq[0]] = m.rotaries[seq[0]].word(outer);
@@ -136,7 +136,7 @@ pub fn ik_into(m: &Machine, pose: &Pose, setup: &Setup, opt: &IkOptions, out: &m
             if miss > opt.orientation_tolerance {
                 return Err(Error::Unreachable { miss });
             }
-            push(m, out, pose, setup, &[], [Cs::ZERO; 3], None, 0, 0, None);
+            push(m, out, pose, setup, &[], Found::of([Cs::ZERO; 3]));
         }
         Shape::One { s } => {
             let cone = s.z.clamp(-1.0, 1.0).acos();
@@ -148,7 +148,7 @@ pub fn ik_into(m: &Machine, pose: &Pose, setup: &Setup, opt: &IkOptions, out: &m
                 Some(a) if (u - s * s.dot(&u)).norm_squared() > 1e-18 && s.cross(&Vec3::z()).norm_squared() > 1e-18 => (a, None),
                 _ => (free.cs(), Some((ch.seq[0], opt.free_angle))),
             };
-            push(m, out, pose, setup, &ch.seq, [a, Cs::ZERO, Cs::ZERO], None, 0, 0, sing);
+            push(m, out, pose, setup, &ch.seq, Found { singular: sing, ..Found::of([a, Cs::ZERO, Cs::ZERO]) });
         }
         Shape::Two(pair) => {
             let meet = pair.meet(&u);
@@ -160,45 +160,64 @@ pub fn ik_into(m: &Machine, pose: &Pose, setup: &Setup, opt: &IkOptions, out: &m
             }
             if meet.reach > 0.0 && !meet.on_axis {
                 for ((a1, t1, a2, t2), sg) in pair.both(&meet).into_iter().zip([1i8, -1]) {
-                    push(
-                        m,
-                        out,
-                        pose,
-                        setup,
-                        &ch.seq,
-                        [a1, a2, Cs::ZERO],
-                        Some([t1, t2, 0.0]),
-                        sg,
-                        0,
-                        None,
-                    );
+                    let found = Found {
+                        angles: Some([t1, t2, 0.0]),
+                        branch: sg,
+                        ..Found::of([a1, a2, Cs::ZERO])
+                    };
+                    push(m, out, pose, setup, &ch.seq, found);
                 }
             } else {
                 let (a1, a2, sing) = pair.angles(&u, &meet, 0.0, free);
                 let sing = sing.then_some((ch.seq[0], opt.free_angle));
-                push(m, out, pose, setup, &ch.seq, [a1, a2, Cs::ZERO], None, 0, 0, sing);
+                push(m, out, pose, setup, &ch.seq, Found { singular: sing, ..Found::of([a1, a2, Cs::ZERO]) });
             }
         }
-        Shape::Three { s0, pair, missing, form } => super::three::three(m, ch, s0, pair, *missing, form, &u, pose, setup, opt, free, out)?,
+        Shape::Three { s0, pair, missing, form } => {
+            let shape = super::three::Three { s0, pair, missing: *missing, form };
+            super::three::three(m, &shape, &u, pose, setup, opt, out)?
+        }
     }
     Ok(())
 }
 
+/// A solution as a solver finds it, before its linears are placed: the rotations in sequence
+/// order.
+#[derive(Clone, Copy)]
+pub(super) struct Found {
+    /// Each rotation as (cos, sin).
+    pub(super) cs: [Cs; 3],
+    /// The angles themselves where the solver has them (else read from `cs`).
+    pub(super) angles: Option<[f64; 3]>,
+    pub(super) branch: i8,
+    pub(super) root: u8,
+    /// The rotary (chain index) free at a singular pose, and the angle it is set to.
+    pub(super) singular: Option<(usize, f64)>,
+}
+
+impl Found {
+    /// The rotations `cs`, branch and root 0, nothing singular.
+    pub(super) fn of(cs: [Cs; 3]) -> Found {
+        Found {
+            cs,
+            angles: None,
+            branch: 0,
+            root: 0,
+            singular: None,
+        }
+    }
+}
+
 /// Builds a solution from orientation angles (in sequence order) and places the linears.
-#[allow(clippy::too_many_arguments)]
 #[inline(always)]
-pub(super) fn push(
-    m: &Machine,
-    out: &mut Solutions,
-    pose: &Pose,
-    setup: &Setup,
-    seq: &[usize],
-    cs: [Cs; 3],
-    angles: Option<[f64; 3]>,
-    branch: i8,
-    root: u8,
-    singular: Option<(usize, f64)>,
-) {
+pub(super) fn push(m: &Machine, out: &mut Solutions, pose: &Pose, setup: &Setup, seq: &[usize], found: Found) {
+    let Found {
+        cs,
+        angles,
+        branch,
+        root,
+        singular,
+    } = found;
     let mut rcs = [Cs::ZERO; 3];
     let mut actual = [0.0; 3];
     for (k, &ri) in seq.iter().enumerate() {

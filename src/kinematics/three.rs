@@ -12,8 +12,8 @@ mod circle;
 mod scan;
 
 use super::fk::rotate;
-use super::model::{Chain, Link, Machine};
-use super::solver::{IkOptions, Solution, Solutions, controlled_point_cs, push};
+use super::model::{Link, Machine};
+use super::solver::{Found, IkOptions, Solution, Solutions, controlled_point_cs, push};
 use super::subproblem::{Cs, FreeAngle, Meet, Pair};
 use super::{Error, Pose, Setup, Vec3, wrap};
 use arrayvec::ArrayVec;
@@ -225,21 +225,19 @@ fn contract(t: &[f64; 9], a1: Cs, a2: Cs) -> f64 {
     row(0) + row(3) * a1.c + row(6) * a1.s
 }
 
-#[allow(clippy::too_many_arguments)]
-pub(super) fn three(
-    m: &Machine,
-    ch: &Chain,
-    s0: &Vec3,
-    pair: &Pair,
-    missing: usize,
-    form: &Form,
-    u: &Vec3,
-    pose: &Pose,
-    setup: &Setup,
-    opt: &IkOptions,
-    free: FreeAngle,
-    out: &mut Solutions,
-) -> Result<(), Error> {
+/// A three-rotary chain's shape, as the chain holds it (`Shape::Three`).
+pub(super) struct Three<'a> {
+    pub(super) s0: &'a Vec3,
+    pub(super) pair: &'a Pair,
+    pub(super) missing: usize,
+    pub(super) form: &'a Form,
+}
+
+/// Every solution of `pose` on a three-rotary chain: the outer angle at each root of the
+/// missing linear's residual, the inner two by subproblem 2.
+pub(super) fn three(m: &Machine, shape: &Three, u: &Vec3, pose: &Pose, setup: &Setup, opt: &IkOptions, out: &mut Solutions) -> Result<(), Error> {
+    let Three { s0, pair, missing, form } = *shape;
+    let (ch, free) = (&m.chain, FreeAngle(opt.free_angle));
     let p_w = pose.tip + setup.work_offset;
     let r = Residual {
         m,
@@ -272,7 +270,13 @@ pub(super) fn three(
             continue;
         }
         let sing = sing.then_some((ch.seq[1], opt.free_angle));
-        push(m, out, pose, setup, &ch.seq, [a0, a1, a2], None, branch, count, sing);
+        let found = Found {
+            branch,
+            root: count,
+            singular: sing,
+            ..Found::of([a0, a1, a2])
+        };
+        push(m, out, pose, setup, &ch.seq, found);
         if built_miss(&r, [a0, a1, a2], lever) > 1e-13 * (1.0 + pose.tip.norm() + setup.tool_length.abs())
             && let Some(s) = out.last_mut()
         {

@@ -1,5 +1,5 @@
 // The machine's kinematics in the page: forward kinematics and the pose of every link from the
-// joints, written as src/kinematics/fk.rs and src/collide.rs write them (same order, same
+// joints, written as src/kinematics/fk.rs and src/collide/links.rs write them (same order, same
 // Rodrigues formula), so that what the page draws is where kinepost computes the machine to be.
 // No three.js here: the Node test (tests/browser/fk.test.mjs) imports this file and compares
 // `fk` with the API's /v1/machines/{id}/fk on every profile.
@@ -119,7 +119,7 @@ function compose(a, b) {
   for (let i = 0; i < 3; i++) for (let j = 0; j < 3; j++) R[i * 3 + j] = a.R[i * 3] * b.R[j] + a.R[i * 3 + 1] * b.R[3 + j] + a.R[i * 3 + 2] * b.R[6 + j];
   return { R, t: add(apply(a.R, b.t), a.t) };
 }
-/** The turn by `angle` about `axis` through `pivot` (collide.rs's `turn`). */
+/** The turn by `angle` about `axis` through `pivot` (collide/links.rs's `turn`). */
 function turn(axis, pivot, angle) {
   const [c, s] = [Math.cos(angle), Math.sin(angle)];
   const cols = [[1, 0, 0], [0, 1, 0], [0, 0, 1]].map((e) => rotate(axis, c, s, e));
@@ -128,7 +128,7 @@ function turn(axis, pivot, angle) {
 }
 export const transform = (m, v) => add(apply(m.R, v), m.t);
 
-/** Every link's pose in M at these joints (collide.rs's `World::links`): `bed`, each rotary by
+/** Every link's pose in M at these joints (collide/links.rs's `Links::at`): `bed`, each rotary by
  *  name, `table` (after every table rotary), `ram`, `spindle` (after every head rotary) and
  *  `work` (W: the table's, moved by the work offset). */
 export function links(ch, linear, actual, L = 0, wo = [0, 0, 0]) {
@@ -174,8 +174,8 @@ export function schematic(ch) {
   return out;
 }
 
-/** The tool's cutter and holder as the collision check builds them (collide.rs's `set_tool`),
- *  on the spindle, relative to the gauge point. */
+/** The tool's cutter and holder as the collision check builds them (collide/geometry.rs's
+ *  `ToolShape::holder` and `cutter`), on the spindle, relative to the gauge point. */
 export function toolBodies(t) {
   const L = t.length;
   const stick = Math.max(L - t.holder_length, L * 0.2);
@@ -185,7 +185,7 @@ export function toolBodies(t) {
   return out;
 }
 
-/** The tool kinepost assumes where nothing says (collide.rs's `ToolShape::default_for`). */
+/** The tool kinepost assumes where nothing says (collide/geometry.rs's `ToolShape::default_for`). */
 export function defaultTool(ch, length) {
   const k = ch.units === 'inch' ? 1 / 25.4 : 1;
   return { n: 1, length, diameter: 10 * k, corner_radius: 0, holder_diameter: 40 * k, holder_length: 40 * k };

@@ -2,14 +2,11 @@
 //! machine's bodies, the tool and the stock posed by the joints (`collide::World`).
 
 use super::{At, Emitter};
-use crate::collide::{Hit, ToolShape};
+use crate::collide::{Axes, Coarse, Hit, ToolShape, World};
 use crate::diag::{Code, Diagnostic, Severity};
 use crate::kinematics::{self, Machine, Pose, Setup, Units, Vec3};
 use crate::nc::Canned;
 use crate::post::{ArcSpec, Mode, Sink};
-
-/// Joints at one end of a move: linears, actual rotary angles (radians).
-type Ends<'a> = (&'a [f64; 3], &'a [f64; 3]);
 
 /// How the machine moves between two blocks: the joints in a straight line, or with TCP the
 /// control moving the tip (X Y Z words, W) and the rotary words in a straight line and placing
@@ -24,19 +21,28 @@ enum Way {
 
 impl Way {
     /// The joints a fraction `t` of the way from `a` to `b`.
-    fn at(&self, m: &Machine, a: Ends, b: Ends, t: f64) -> ([f64; 3], [f64; 3]) {
+    fn at(&self, m: &Machine, a: &Axes, b: &Axes, t: f64) -> Axes {
         let lerp = |x: &[f64; 3], y: &[f64; 3]| std::array::from_fn(|i| x[i] + (y[i] - x[i]) * t);
         match self {
-            Way::Joints => (lerp(a.0, b.0), lerp(a.1, b.1)),
+            Way::Joints => Axes {
+                linear: lerp(&a.linear, &b.linear),
+                actual: lerp(&a.actual, &b.actual),
+            },
             Way::Tcp { tip, words, setup } => {
                 let w = lerp(&words[0], &words[1]);
                 let q = kinematics::controlled_point(m, &w, &(tip[0] + (tip[1] - tip[0]) * t), setup);
-                ([q.x, q.y, q.z], m.actual_angles(&w))
+                Axes {
+                    linear: [q.x, q.y, q.z],
+                    actual: m.actual_angles(&w),
+                }
             }
             Way::Arc { tips, arc, f, actual, setup } => {
                 let tip = super::arcs::helix_tip(tips[0], tips[1], arc, f[0] + (f[1] - f[0]) * t);
                 let q = kinematics::controlled_point(m, actual, &tip, setup);
-                ([q.x, q.y, q.z], *actual)
+                Axes {
+                    linear: [q.x, q.y, q.z],
+                    actual: *actual,
+                }
             }
         }
     }
@@ -68,32 +74,30 @@ impl Way {
 struct Found {
     samples: usize,
     hits: Vec<Hit>,
-    coarse: Option<(f64, f64)>,
+    coarse: Option<Coarse>,
 }
 
-/// The samples along the move from `from` (none: the machine got to `to` some other way) to
-/// `to`, into `found`; cut short when `halted` says the run is stopping (over its time, its
-/// reader gone): a move of thousands of samples on meshes can take minutes.
-#[allow(clippy::too_many_arguments)]
-fn sweep(
-    world: &mut crate::collide::World,
-    m: &Machine,
-    from: Option<Ends>,
-    to: Ends,
-    way: &Way,
-    len: f64,
-    wo: &Vec3,
+/// One move to check: from where (none: the machine got to `to` some other way), to where, the
+/// way the machine goes, and whether the cutter is checked against the stock.
+struct Move {
+    from: Option<Axes>,
+    to: Axes,
+    way: Way,
     stock: bool,
-    found: &mut Found,
-    halted: &mut dyn FnMut() -> bool,
-) {
-    let path = from.map_or(0.0, |_| way.path(m, world.pivots()));
-    if world.move_clear(m, from, to, len, wo, stock, path) {
+}
+
+/// The samples along the move `mv`, into `found`; cut short when `halted` says the run is
+/// stopping (over its time, its reader gone): a move of thousands of samples on meshes can
+/// take minutes.
+fn sweep(world: &mut World, m: &Machine, setup: &Setup, mv: &Move, found: &mut Found, halted: &mut dyn FnMut() -> bool) {
+    let (from, to, stock) = (mv.from.as_ref(), &mv.to, mv.stock);
+    let path = from.map_or(0.0, |_| mv.way.path(m, world.pivots()));
+    if world.move_clear(m, setup, from, to, stock, path) {
         found.samples += 1;
         return;
     }
-    let (n, coarse) = from.map_or((1, None), |f| world.samples(m, f, to, len, wo, path));
-    if coarse.is_some_and(|(apart, _)| found.coarse.is_none_or(|(was, _)| apart > was)) {
+    let (n, coarse) = from.map_or((1, None), |f| world.samples(m, setup, f, to, path));
+    if coarse.is_some_and(|c| found.coarse.is_none_or(|was| c.apart > was.apart)) {
         found.coarse = coarse;
     }
     found.samples += n;
@@ -102,13 +106,13 @@ fn sweep(
         if halted() {
             return;
         }
-        let (lin, act) = match from.filter(|_| k < n) {
-            Some(f) => way.at(m, f, to, k as f64 / n as f64),
-            None => (*to.0, *to.1),
+        let at = match from.filter(|_| k < n) {
+            Some(f) => mv.way.at(m, f, to, k as f64 / n as f64),
+            None => *to,
         };
         match k < n {
-            true => world.check_on_the_way(m, &lin, &act, len, wo, stock, hits),
-            false => world.check_at(m, &lin, &act, len, wo, stock, hits),
+            true => world.check_on_the_way(m, setup, &at, stock, hits),
+            false => world.check_at(m, setup, &at, stock, hits),
         }
     }
 }
@@ -146,17 +150,24 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             _ => Way::Joints,
         };
         let Some(world) = self.world.as_mut() else { return };
-        let from = prev.map(|p| (&p.joints.linear, &p.actual));
-        let to = (&to.joints.linear, &to.actual);
+        let axes = |a: &At| Axes {
+            linear: a.joints.linear,
+            actual: a.actual,
+        };
+        let mv = Move {
+            from: prev.map(axes),
+            to: axes(to),
+            way,
+            stock,
+        };
         let sink = &mut *self.sink;
-        let (len, wo) = (self.setup.tool_length, &self.setup.work_offset);
-        sweep(world, self.m, from, to, &way, len, wo, stock, found, &mut || sink.halted().is_some());
+        sweep(world, self.m, &self.setup, &mv, found, &mut || sink.halted().is_some());
     }
 
     /// What `found` found, as diagnostics of the block at `line`.
     fn tell(&self, found: Found, line: u32, diags: &mut Vec<Diagnostic>) {
         let unit = self.m.units.as_str();
-        if let Some((apart, step)) = found.coarse {
+        if let Some(Coarse { apart, step }) = found.coarse {
             diags.push(Diagnostic::new(
                 Code::CollisionCoarse,
                 Severity::Warning,

@@ -123,7 +123,7 @@ impl<R: BufRead> Source<R> {
                 }
                 let v = kk.cross(&u);
                 let at = |t: f64| c + (u * t.cos() + v * t.sin()) * r0;
-                let theta = self.circle_stop(d, &at, start, c, kk, r0, tol, radius)?;
+                let theta = self.circle_stop(d, &Followed { at: &at, c, kk, r0 }, start, tol, radius)?;
                 let end = at(theta);
                 if theta < 1e-6 {
                     return Err("the check surface is where the tool stands".into());
@@ -193,18 +193,8 @@ impl<R: BufRead> Source<R> {
 
     /// The angle (counter-clockwise about `kk` from the start) at which the motion along the
     /// circle `at` first meets the stop condition on the check surface.
-    #[allow(clippy::too_many_arguments)]
-    fn circle_stop(
-        &self,
-        d: &Drive,
-        at: &dyn Fn(f64) -> Vec3,
-        start: Vec3,
-        c: Vec3,
-        kk: Vec3,
-        r0: f64,
-        tol: f64,
-        radius: Option<f64>,
-    ) -> Result<f64, String> {
+    fn circle_stop(&self, d: &Drive, circle: &Followed, start: Vec3, tol: f64, radius: Option<f64>) -> Result<f64, String> {
+        let Followed { at, c, kk, r0 } = *circle;
         let need_r = || radius.ok_or("TO and PAST need the tool's radius, and no CUTTER gave it");
         let angle = |p: Vec3| {
             let (u, v) = ((at(0.0) - c) / r0, kk.cross(&((at(0.0) - c) / r0)));
@@ -281,6 +271,16 @@ impl<R: BufRead> Source<R> {
             .min_by(f64::total_cmp)
             .ok_or_else(|| "the circle never meets the check surface".to_string())
     }
+}
+
+/// The circle the tool follows: its point at an angle (counter-clockwise about `kk` from the
+/// start), its centre, the axis and its radius.
+#[derive(Clone, Copy)]
+struct Followed<'a> {
+    at: &'a dyn Fn(f64) -> Vec3,
+    c: Vec3,
+    kk: Vec3,
+    r0: f64,
 }
 
 /// The direction `go` turns `fwd` to, about the tool axis `k`.
