@@ -208,3 +208,68 @@ fn the_kinematics_model_does_not_import_the_solver() {
         found.join("\n")
     );
 }
+
+/// The named fields of each `struct` in `text`, by struct name: the lines of its body (up to the
+/// brace that closes it at the struct's indent) that open a field, comments and attributes aside.
+fn struct_fields(text: &str) -> Vec<(String, Vec<String>)> {
+    let lines: Vec<&str> = text.lines().collect();
+    let mut out = Vec::new();
+    for (i, l) in lines.iter().enumerate() {
+        let t = l.trim_start();
+        let Some(rest) = t.split_once("struct ").filter(|(vis, _)| vis.is_empty() || vis.starts_with("pub")).map(|(_, r)| r) else {
+            continue;
+        };
+        if !t.ends_with('{') {
+            continue; // a unit or tuple struct
+        }
+        let name: String = rest.chars().take_while(|c| c.is_alphanumeric() || *c == '_').collect();
+        let close = format!("{}}}", &l[..l.len() - t.len()]);
+        let mut fields = Vec::new();
+        for f in lines[i + 1..].iter().take_while(|x| **x != close) {
+            let f = f.trim();
+            if f.starts_with("//") || f.starts_with("#[") {
+                continue;
+            }
+            let head = f.split_once(':').map_or("", |(h, _)| h);
+            let ident = head.rsplit(' ').next().unwrap_or("");
+            let vis = head[..head.len() - ident.len()].trim();
+            if !ident.is_empty() && ident.chars().all(|c| c.is_ascii_lowercase() || c.is_ascii_digit() || c == '_') && (vis.is_empty() || vis.starts_with("pub")) {
+                fields.push(f.to_string());
+            }
+        }
+        out.push((name, fields));
+    }
+    out
+}
+
+/// The emitter's state lives with its concepts: the `Emitter` holds what they share and one
+/// field per concept, at most 15; a concept's struct keeps its fields private (methods, or a
+/// read-only accessor, are how another concept reads it). Only the values handed from one
+/// concept to another (an arc block, the look-ahead's findings, a tilted plane) show fields.
+#[test]
+fn the_emitter_state_lives_with_its_concepts() {
+    let emit = src().join("post").join("emit");
+    let mod_rs = std::fs::read_to_string(emit.join("mod.rs")).unwrap();
+    let structs = struct_fields(&mod_rs);
+    let (_, fields) = structs.iter().find(|(n, _)| n == "Emitter").expect("no struct Emitter in src/post/emit/mod.rs");
+    assert!(fields.len() >= 5, "the Emitter's fields were not read: {fields:?}");
+    assert!(
+        fields.len() <= 15,
+        "the Emitter has {} fields (at most 15: put the state in the concept that owns it):\n{}",
+        fields.len(),
+        fields.join("\n")
+    );
+    let values = ["ArcBlock", "Ahead", "Tilt"];
+    let mut found = Vec::new();
+    for (p, text) in rust_files(&emit) {
+        for (name, fields) in struct_fields(&text) {
+            if name == "Emitter" || values.contains(&name.as_str()) {
+                continue;
+            }
+            for f in fields.iter().filter(|f| f.starts_with("pub")) {
+                found.push(format!("{}: {name}: {f}", p.display()));
+            }
+        }
+    }
+    assert!(found.is_empty(), "a concept's state shown to the other concepts:\n{}", found.join("\n"));
+}

@@ -2,12 +2,12 @@
 //! for the point that fixes its free rotary, and with tilted planes a fixed-axis run is known to
 //! end at a rapid. Items wait here, bounded by [`LOOK_AHEAD`].
 
-use super::emit::Emitter;
+use super::emit::{Ahead, Emitter};
 use super::plan::Out;
 use super::{Error, ProgEvent, Sink};
-use super::Stop;
 use crate::kinematics::{Vec3, angle_between};
 use std::collections::VecDeque;
+use super::Stop;
 
 /// The free rotary's angle at the first point ahead of a singular one that fixes it, within the
 /// cut (up to a rapid, a tool change or the end, and [`LOOK_AHEAD`] items): what a machine that
@@ -137,17 +137,17 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
     /// Whether items wait in the look-ahead: for tilted planes, and for clamps (whether an
     /// operation turns a rotary while cutting).
     pub(in crate::post) fn looks_ahead(&self) -> bool {
-        self.o.tilted_planes || self.o.clamps.iter().any(Option::is_some)
+        self.tilted_planes() || self.clamped()
     }
 
     /// At a rapid or an operation's start: whether the cut ahead turns a rotary while cutting,
     /// and if so the clamps released now, before its first move (see [`turns_while_cutting`]).
     fn clamps_ahead(&mut self, axis: Option<Vec3>, ahead: &VecDeque<Out>) -> Result<(), Stop> {
-        let Some(axis) = axis.filter(|_| self.o.clamps.iter().any(Option::is_some)) else {
+        let Some(axis) = axis.filter(|_| self.clamped()) else {
             return Ok(());
         };
-        self.cut_turns = turns_while_cutting(&axis, ahead);
-        if self.cut_turns { self.unlock_all() } else { Ok(()) }
+        let turns = turns_while_cutting(&axis, ahead);
+        self.operation_ahead(turns)
     }
 
     /// One committed item, with what is known to follow it (the tilted-plane and clamp
@@ -168,13 +168,15 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                 if c.pt.rapid {
                     self.clamps_ahead(Some(c.pt.pose.axis), ahead)?;
                 }
-                self.plane_ahead = c.pt.rapid && self.o.tilted_planes && fixed_run_ahead(&c.pt.pose.axis, ahead);
-                self.free_hint = c
-                    .cand
-                    .as_ref()
-                    .and_then(|k| k.sol.singular)
-                    .and_then(|free| free_angle_ahead(free, ahead));
-                self.point(c)
+                let found = Ahead {
+                    plane: c.pt.rapid && self.tilted_planes() && fixed_run_ahead(&c.pt.pose.axis, ahead),
+                    free: c
+                        .cand
+                        .as_ref()
+                        .and_then(|k| k.sol.singular)
+                        .and_then(|free| free_angle_ahead(free, ahead)),
+                };
+                self.point(c, found)
             }
         }
     }

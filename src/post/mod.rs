@@ -141,8 +141,7 @@ fn run<R: BufRead + Send, S: Sink + ?Sized>(
     src.spindle_range = o.spindle_range;
     let lengths = tools::Lengths::new(m.units, o.tool_length, o.tool_table.as_deref(), m.default_tool_length);
     let setup = Setup::new(lengths.length, o.work_offset);
-    let mut e = Emitter::new(m, o, sink, setup, &src);
-    e.load_order = order;
+    let mut e = Emitter::new(m, o, sink, setup, &src, order);
     e.program_start()?;
     let plan = Plan {
         src,
@@ -210,7 +209,7 @@ impl<S: Sink + ?Sized> Apply<'_, '_, S> {
                     return Err(stop.into());
                 }
                 e.drain(&mut self.pending, false)?;
-                if let Some(d) = e.strict_error.take().or(src_strict) {
+                if let Some(d) = e.take_strict_error().or(src_strict) {
                     return Err(Error::Strict(d));
                 }
             }
@@ -221,7 +220,7 @@ impl<S: Sink + ?Sized> Apply<'_, '_, S> {
                     return Err(err);
                 }
                 e.drain(&mut self.pending, true)?;
-                if let Some(d) = e.strict_error.take() {
+                if let Some(d) = e.take_strict_error() {
                     return Err(Error::Strict(d));
                 }
                 return e.finish().map(Some);

@@ -1,6 +1,7 @@
 //! Arcs: G2/G3 (Heidenhain CC + C) where the pose allows, else chords within the tolerance.
 
-use super::{At, Emitter};
+use super::block::Move;
+use super::{ArcBlock, At, Emitter};
 use crate::diag::{Code, Diagnostic, Severity};
 use crate::kinematics::{self, Pose, Vec3};
 use crate::post::{ArcSpec, Error, Mode, MotionPt, Sink};
@@ -24,7 +25,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                 t.frame.transpose() * arc.normal,
                 self.plane_coords(t, &a.pose.tip),
             )
-        } else if tcp && !self.compensated {
+        } else if tcp && !m.has_angle_error() {
             (arc.center, arc.normal, a.pose.tip)
         } else if tcp {
             // The words' frame is the nominal one: the CL's frame moved rigidly at still rotaries.
@@ -32,8 +33,8 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             let n = self.tcp_xyz(&self.at_tip(&b, arc.center + arc.normal)) - c;
             (c, n, self.tcp_xyz(&a))
         } else {
-            let c = kinematics::controlled_point(m, &b.actual, &arc.center, &self.setup);
-            let n = kinematics::controlled_point(m, &b.actual, &(arc.center + arc.normal), &self.setup) - c;
+            let c = kinematics::controlled_point(m, &b.actual, &arc.center, self.tool.setup());
+            let n = kinematics::controlled_point(m, &b.actual, &(arc.center + arc.normal), self.tool.setup()) - c;
             (c, n, Vec3::from(a.joints.linear))
         };
         // Along the helix (a flat arc: no rise): what the tool travels at F.
@@ -44,10 +45,9 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             .find(|(k, _, _)| normal[*k].abs() > 1.0 - 1e-9);
         if let (true, true, false, Some((k, word, ij))) = (still, tcp || full_linears, conversational, plane) {
             let ccw = normal[k] > 0.0;
-            if self.plane != word {
+            if self.frames.circular(word) {
                 let l = self.f.words(word).to_string();
                 self.out(&l)?;
-                self.plane = word;
             }
             // A helix of several turns (NX's TIMES): one block can say at most one, and an end on
             // its start reads as a full circle on some controls only. Half turns say it anywhere.
@@ -71,21 +71,21 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                     crate::nc::write_fixed(&mut words, crate::nc::round_to(d[idx], dec), dec);
                     words.push(' ');
                 }
-                self.arc = Some(super::ArcBlock {
+                let piece = ArcBlock {
                     ccw,
                     words: words.trim_end().to_string(),
                     length: length / pieces as f64,
                     path: (a.pose.tip, b.pose.tip, *arc, [(i - 1) as f64, i as f64].map(|k| k / pieces as f64)),
-                });
+                };
                 if i == pieces {
-                    return self.block(b, pt, false, diags, pt.inserted, None);
+                    return self.write(b, pt, Move::Arc(piece), diags, pt.inserted, None);
                 }
                 from = match &tilt {
                     Some(t) => self.plane_coords(t, &to.pose.tip),
                     None if tcp => self.tcp_xyz(&to),
                     None => Vec3::from(to.joints.linear),
                 };
-                self.block(to, pt, false, Vec::new(), true, None)?;
+                self.write(to, pt, Move::Arc(piece), Vec::new(), true, None)?;
             }
         }
         // Heidenhain: `CC` (the centre, absolute) then `C` to the end point with `DR+`/`DR-`, for a
@@ -112,13 +112,13 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             }
             let l = self.f.words(&cc).to_string();
             self.out(&l)?;
-            self.arc = Some(super::ArcBlock {
+            let block = ArcBlock {
                 ccw,
                 words: if ccw { "DR+" } else { "DR-" }.to_string(),
                 length,
                 path: (a.pose.tip, b.pose.tip, *arc, [0.0, 1.0]),
-            });
-            return self.block(b, pt, false, diags, pt.inserted, None);
+            };
+            return self.write(b, pt, Move::Arc(block), diags, pt.inserted, None);
         }
         // Chords: the arc swept in the part frame, tool axis fixed, linears from the rotaries.
         let step = 2.0 * (1.0 - (self.o.tolerance / arc.radius).min(1.0)).acos();
@@ -154,11 +154,11 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                     ));
                     continue;
                 };
-                self.segment(prev, at, pt, std::mem::take(&mut skipped), 0)?;
+                self.segment(prev, at, pt, std::mem::take(&mut skipped))?;
                 prev = at;
             }
             diags.append(&mut skipped);
-            self.segment(prev, b, pt, diags, 0)?;
+            self.segment(prev, b, pt, diags)?;
             return Ok(());
         }
         for i in 1..segs {

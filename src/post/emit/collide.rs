@@ -6,7 +6,34 @@ use crate::collide::{Axes, Coarse, Hit, ToolShape, World};
 use crate::diag::{Code, Diagnostic, Severity};
 use crate::kinematics::{self, Machine, Pose, Setup, Units, Vec3};
 use crate::nc::Canned;
-use crate::post::{ArcSpec, Mode, Sink};
+use crate::post::{ArcSpec, Mode, Options, Sink};
+
+/// The collision check's state: the machine's bodies, the tool and the stock, when it is on.
+pub(super) struct Check {
+    world: Option<crate::collide::World>,
+}
+
+impl Check {
+    /// `scale`: the CL's units to the profile's (the job gives stock and fixtures in the CL's
+    /// units, known once the reader has looked ahead).
+    pub(super) fn new(m: &Machine, o: &Options, scale: f64) -> Check {
+        let world = o.geometry.as_ref().map(|g| {
+            let k = |v: &[crate::collide::Solid]| v.iter().map(|s| s.scaled(scale)).collect::<Vec<_>>();
+            crate::collide::World::new(m, g, &k(&o.stock), &k(&o.fixtures), o.collision_clearance, o.tolerance.max(1e-3))
+        });
+        Check { world }
+    }
+
+    /// The check is on.
+    #[inline]
+    pub(super) fn on(&self) -> bool {
+        self.world.is_some()
+    }
+}
+
+/// A block's arc, as the collision check follows it: the whole arc's start and end tips, the
+/// arc, and the stretch of it (fractions) this block takes.
+pub(super) type ArcPath = (Vec3, Vec3, ArcSpec, [f64; 2]);
 
 /// How the machine moves between two blocks: the joints in a straight line, or with TCP the
 /// control moving the tip (X Y Z words, W) and the rotary words in a straight line and placing
@@ -120,36 +147,45 @@ fn sweep(world: &mut World, m: &Machine, setup: &Setup, mv: &Move, found: &mut F
 impl<S: Sink + ?Sized> Emitter<'_, S> {
     /// Diagnostics of the bodies that overlap (`collision`, an error) or come closer than the
     /// clearance (`near_collision`, a warning) at `to` or on the way from `prev`.
-    pub(super) fn collisions(&mut self, prev: Option<&At>, to: &At, rapid: bool, line: u32, diags: &mut Vec<Diagnostic>) {
+    pub(super) fn collisions(
+        &mut self,
+        prev: Option<&At>,
+        to: &At,
+        rapid: bool,
+        arc: Option<ArcPath>,
+        line: u32,
+        diags: &mut Vec<Diagnostic>,
+    ) {
         let mut found = Found::default();
-        self.sweep_to(prev, to, rapid, &mut found);
+        self.sweep_to(prev, to, rapid, arc, &mut found);
         self.tell(found, line, diags);
     }
 
-    /// The move to `to` from `prev` (a rapid or not), its samples checked into `found`.
-    fn sweep_to(&mut self, prev: Option<&At>, to: &At, rapid: bool, found: &mut Found) {
+    /// The move to `to` from `prev` (a rapid or not, an `arc` or not), its samples checked into
+    /// `found`.
+    fn sweep_to(&mut self, prev: Option<&At>, to: &At, rapid: bool, arc: Option<ArcPath>, found: &mut Found) {
         let tool = self.tool_shape();
-        let Some(world) = self.world.as_mut() else { return };
+        let Some(world) = self.collide.world.as_mut() else { return };
         world.set_tool(tool);
         let stock = world.stock_at_rapid(rapid);
         // The move from the block before (not across a tool change: the machine went elsewhere).
-        let prev = prev.filter(|_| !self.tool_changed);
-        let way = match (self.arc.as_ref().map(|a| a.path), self.o.mode, prev) {
+        let prev = prev.filter(|_| !self.tool.changed());
+        let way = match (arc, self.o.mode, prev) {
             (Some((from, end, arc, f)), _, Some(_)) => Way::Arc {
                 tips: [from, end],
                 arc,
                 f,
                 actual: to.actual,
-                setup: self.setup,
+                setup: *self.tool.setup(),
             },
             (_, Mode::Tcp, Some(p)) => Way::Tcp {
                 tip: [self.tcp_xyz(p), self.tcp_xyz(to)],
                 words: [p.joints.rotary, to.joints.rotary],
-                setup: self.setup,
+                setup: *self.tool.setup(),
             },
             _ => Way::Joints,
         };
-        let Some(world) = self.world.as_mut() else { return };
+        let Some(world) = self.collide.world.as_mut() else { return };
         let axes = |a: &At| Axes {
             linear: a.joints.linear,
             actual: a.actual,
@@ -161,7 +197,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             stock,
         };
         let sink = &mut *self.sink;
-        sweep(world, self.m, &self.setup, &mv, found, &mut || sink.halted().is_some());
+        sweep(world, self.m, self.tool.setup(), &mv, found, &mut || sink.halted().is_some());
     }
 
     /// What `found` found, as diagnostics of the block at `line`.
@@ -201,7 +237,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
     /// pair, the deepest of all the strokes (a collision where any overlaps), for the cycle's one
     /// block.
     pub(super) fn hole_collisions(&mut self, from: Option<&At>, start: &At, cb: &Canned, line: u32, diags: &mut Vec<Diagnostic>) {
-        if self.world.is_none() {
+        if !self.collide.on() {
             return;
         }
         let lift = cb.z_start.max(cb.z_r) - cb.z_start;
@@ -210,22 +246,22 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         let first = match from {
             Some(p) => {
                 let across = self.along(p, lift);
-                self.sweep_to(Some(&across), &top, true, &mut found);
+                self.sweep_to(Some(&across), &top, true, None, &mut found);
                 top
             }
             None => *start,
         };
         let (r, bottom) = (self.along(start, cb.z_r - cb.z_start), self.along(start, cb.z_bottom - cb.z_start));
-        self.sweep_to(Some(&first), &r, true, &mut found);
-        self.sweep_to(Some(&r), &bottom, false, &mut found);
-        self.sweep_to(Some(&bottom), &top, true, &mut found);
+        self.sweep_to(Some(&first), &r, true, None, &mut found);
+        self.sweep_to(Some(&r), &bottom, false, None, &mut found);
+        self.sweep_to(Some(&bottom), &top, true, None, &mut found);
         self.tell(found, line, diags);
     }
 
     /// `at` with the tip moved `by` along the tool axis, the rotaries standing.
     fn along(&self, at: &At, by: f64) -> At {
         let tip = at.pose.tip + at.pose.axis.normalize() * by;
-        let q = kinematics::controlled_point(self.m, &at.actual, &tip, &self.setup);
+        let q = kinematics::controlled_point(self.m, &at.actual, &tip, self.tool.setup());
         let mut to = *at;
         to.joints.linear = [q.x, q.y, q.z];
         to.pose = Pose { tip, axis: at.pose.axis };
@@ -236,12 +272,12 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
     /// gives them, else the cutter the CL describes, else the defaults; the length in force.
     pub(super) fn tool_shape(&self) -> ToolShape {
         let mm = self.m.units == Units::Mm;
-        let mut s = ToolShape::default_for(self.setup.tool_length, mm);
-        if let Some((d, r)) = self.cl_cutter {
+        let mut s = ToolShape::default_for(self.tool.setup().tool_length, mm);
+        if let Some((d, r)) = self.tool.cutter() {
             (s.diameter, s.corner_radius) = (d, r);
         }
         let Some(table) = self.o.tool_table.as_ref() else { return s };
-        let Some(t) = self.tool.and_then(|n| table.get(n)) else { return s };
+        let Some(t) = self.tool.number().and_then(|n| table.get(n)) else { return s };
         let k = table.units.factor_to(self.m.units);
         if let Some(d) = t.diameter {
             s.diameter = d * k;

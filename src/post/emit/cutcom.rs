@@ -38,13 +38,13 @@ pub(in crate::post) struct Active {
 #[derive(Debug, Default)]
 pub(in crate::post) struct State {
     want: Option<Want>,
-    pub(super) on: Option<Active>,
+    on: Option<Active>,
     /// The last side the CL named, with its register: what `CUTCOM/ON` alone repeats.
     last: Option<(Side, Option<u32>)>,
     /// A `CUTCOM/ON` with no side yet (CAMWorks writes `ON`, then `LEFT`): its line.
     unsided: Option<u32>,
     /// What the CL said of its path: the tool centre (true) or the contour, its words, its line.
-    pub(super) path: Option<(bool, String, u32)>,
+    path: Option<(bool, String, u32)>,
     /// The path's meaning is written in the program (the header, or where compensation starts).
     said: bool,
     /// The arc that kept a start or an end waiting was told.
@@ -64,6 +64,11 @@ impl State {
     #[inline]
     pub(super) fn idle(&self) -> bool {
         self.want.is_none() && self.on.is_none() && self.unsided.is_none()
+    }
+
+    /// A block written with compensation words: `now` is what is on after it.
+    pub(super) fn written(&mut self, now: Option<Active>) {
+        self.on = now;
     }
 
     fn pending(&self) -> bool {
@@ -189,7 +194,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             }
         };
         let d = self.o.dialect.clone();
-        let register = w.register.unwrap_or(self.tool.unwrap_or(1));
+        let register = w.register.unwrap_or(self.tool.number().unwrap_or(1));
         let template = words[if w.side == Side::Left { 0 } else { 1 }].clone();
         if template.contains("{t}") && register > d.ranges.register {
             let msg = format!(
@@ -231,7 +236,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                 )),
             };
         }
-        let (normal, plane) = match &self.tilt {
+        let (normal, plane) = match &self.frames.tilt() {
             Some(t) => (t.frame.column(0).cross(&t.frame.column(1)), "tilted plane"),
             None if tcp => (Vec3::z(), "part's X-Y plane"),
             None => (self.machine_normal(to)?, "machine's X-Y plane"),
@@ -265,11 +270,11 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         if m.linears[0].is_none() || m.linears[1].is_none() {
             return Err(format!("{} has no X and Y axes to compensate with", m.id));
         }
-        let base = fk(m, &to.joints, &self.setup).tip;
+        let base = fk(m, &to.joints, self.tool.setup()).tip;
         let step = |k: usize| {
             let mut j = to.joints;
             j.linear[k] += 1.0;
-            fk(m, &j, &self.setup).tip - base
+            fk(m, &j, self.tool.setup()).tip - base
         };
         let n = step(0).cross(&step(1));
         if n.norm() < 1e-9 {
@@ -320,7 +325,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             a.want.line
         );
         let conversational = self.o.dialect.style == Style::Conversational;
-        let severity = if conversational && self.tilt.is_some() {
+        let severity = if conversational && self.frames.tilt().is_some() {
             Severity::Error
         } else {
             Severity::Warning

@@ -2,18 +2,61 @@
 //! where a hole runs along the machine's Z, with the hole's bottom replayed through FK; the
 //! cycle's values checked against what the control's words take.
 
-use super::{At, Emitter};
+use super::{Ahead, At, Emitter};
 use crate::cl::{CycleKind, FeedUnit};
 use crate::diag::{Code, Diagnostic, Severity};
 use crate::kinematics::{self, Joints, Vec3, angle_between, fk};
 use crate::nc::{Canned, CannedKind, CycleLines, FeedMode};
 use crate::post::plan::Committed;
+use crate::post::{AxisWords, BlockInfo, Error, Hole, HolePart, Mode, MotionPt, Sink, Summary};
 use crate::post::Stop;
-use crate::post::{AxisWords, BlockInfo, Error, Hole, Mode, MotionPt, Sink};
+
+/// The canned cycle the control has on (until cancelled), and whether the points of the hole it
+/// just drilled are still arriving (they were written as the cycle).
+#[derive(Debug, Default)]
+pub(super) struct Cycles {
+    on: Option<Canned>,
+    in_hole: bool,
+    /// Holes written as canned cycles.
+    holes: u64,
+}
+
+impl Cycles {
+    pub(super) fn summary(&self, sum: &mut Summary) {
+        sum.canned_holes = self.holes;
+    }
+}
 
 impl<S: Sink + ?Sized> Emitter<'_, S> {
+    /// A committed point that is part of a hole: a hole's start written as a canned cycle (or
+    /// refused), the rest of a hole so written passed over. `Some`: the point is written as a
+    /// move.
+    #[inline]
+    pub(super) fn hole_point(&mut self, c: Committed, ahead: Ahead) -> Result<Option<Committed>, Error> {
+        match c.pt.hole.as_deref().copied() {
+            Some(HolePart::Start(h)) if self.o.canned_cycles || h.kind.canned_only() => {
+                self.cycles.in_hole = false;
+                match self.canned_check(&c, &h, ahead) {
+                    Ok((cb, start)) => return self.canned_hole(c, h, cb, start, ahead).map(|_| None),
+                    Err(why) if h.kind.canned_only() => return self.hole_refused(c, &h, why, ahead).map(|_| None),
+                    Err(why) => self.expanded(&c.pt, why)?,
+                }
+            }
+            // A hole written as moves begins.
+            Some(HolePart::Clear) => self.cycles.in_hole = false,
+            // The rest of a hole written as a cycle (or refused).
+            Some(HolePart::Top) if self.cycles.in_hole => {
+                self.written.cl_point(true);
+                return Ok(None);
+            }
+            Some(_) if self.cycles.in_hole => return Ok(None),
+            _ => self.cycles.in_hole = false,
+        }
+        Ok(Some(c))
+    }
+
     pub(super) fn cancel_cycle(&mut self) -> Result<(), Stop> {
-        if self.cycle_on.take().is_some()
+        if self.cycles.on.take().is_some()
             && let Some(l) = self.f.canned_off()
         {
             self.out(&l)?;
@@ -27,7 +70,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
 
     /// The hole starting at this point as a canned cycle, with the tool where the point puts it,
     /// or why it cannot be one. Z levels are filled in from the start level once known.
-    pub(super) fn canned_check(&mut self, c: &Committed, h: &Hole) -> Result<(Canned, At), &'static str> {
+    fn canned_check(&mut self, c: &Committed, h: &Hole, ahead: Ahead) -> Result<(Canned, At), &'static str> {
         let m = self.m;
         if self.o.mode != Mode::Joint {
             return Err("canned cycles are written in joint mode only (TCP controls refuse most)");
@@ -44,14 +87,14 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         }
         let feed = match h.feed {
             Some((f, FeedUnit::PerMinute)) => f,
-            Some((f, FeedUnit::PerRev)) => f * self.rpm.ok_or("a feed per revolution with no spindle speed")?,
+            Some((f, FeedUnit::PerRev)) => f * self.spindle.rpm().ok_or("a feed per revolution with no spindle speed")?,
             None => 0.0,
         };
         if feed.is_nan() || feed <= 0.0 {
             return Err("the cycle has no feed");
         }
         // A tap's feed is its pitch times the speed: both must be known, and the speed turning.
-        let rpm = self.rpm.filter(|s| self.spindle_on && *s > 0.0);
+        let rpm = self.spindle.turning().filter(|s| *s > 0.0);
         let pitch = match (kind, rpm) {
             (CannedKind::Tap { .. }, None) => {
                 return Err("a tap with no spindle speed turning (its feed is the pitch times the speed)");
@@ -68,7 +111,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             .as_ref()
             .filter(|k| k.feasible)
             .ok_or("the hole's start is not reachable within travel")?;
-        let (joints, actual, branch, free) = self.resolve(&c.pt.pose, cand, true).ok_or("no solution")?;
+        let (joints, actual, branch, free) = self.resolve(&c.pt.pose, cand, true, ahead.free).ok_or("no solution")?;
         let start = joints.linear[2];
         let (bottom, r) = (start - h.start - h.depth, start - h.start + h.clear);
         let in_plane = self.o.tilted_planes && self.plane_refused().is_none();
@@ -109,7 +152,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
     /// A tap or a stopping bore that cannot be the control's cycle here: an error naming its CL
     /// line, the tool taken to the hole's start level above it, and the hole left undrilled
     /// (moves would snap the tap or mark the wall).
-    pub(super) fn hole_refused(&mut self, c: Committed, h: &Hole, why: &str) -> Result<(), Error> {
+    fn hole_refused(&mut self, c: Committed, h: &Hole, why: &str, ahead: Ahead) -> Result<(), Error> {
         let line = c.pt.line;
         let d = Diagnostic::new(
             Code::CycleRefused,
@@ -119,8 +162,8 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         );
         self.note(d)?;
         let pt = MotionPt { hole: None, ..c.pt };
-        self.point_at(Committed { pt, ..c })?;
-        self.in_hole = true;
+        self.point_at(Committed { pt, ..c }, ahead)?;
+        self.cycles.in_hole = true;
         Ok(())
     }
 
@@ -135,12 +178,12 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             CycleKind::BreakChip if pecks => CannedKind::ChipBreak,
             CycleKind::Drill | CycleKind::Deep | CycleKind::BreakChip if dwells => CannedKind::Spot,
             CycleKind::Drill | CycleKind::Deep | CycleKind::BreakChip => CannedKind::Drill,
-            CycleKind::Tap { left: true, .. } if self.spindle_on && self.spindle_cw => {
+            CycleKind::Tap { left: true, .. } if self.spindle.ccw() == Some(false) => {
                 return Err("a left-hand tap with the spindle turning clockwise");
             }
             CycleKind::Tap { rigid, left } => CannedKind::Tap {
                 rigid,
-                left: left || (self.spindle_on && !self.spindle_cw),
+                left: left || self.spindle.ccw() == Some(true),
             },
             CycleKind::Bore => CannedKind::Bore,
             CycleKind::BoreStop => CannedKind::BoreStop,
@@ -196,19 +239,19 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
     pub(super) fn along_z(&self, joints: &Joints, actual: &[f64; 3], axis: &Vec3) -> bool {
         let mut up = joints.linear;
         up[2] += 1.0;
-        let d = kinematics::fk_actual(self.m, &up, actual, &self.setup).tip
-            - kinematics::fk_actual(self.m, &joints.linear, actual, &self.setup).tip;
+        let d = kinematics::fk_actual(self.m, &up, actual, self.tool.setup()).tip
+            - kinematics::fk_actual(self.m, &joints.linear, actual, self.tool.setup()).tip;
         (d - axis.normalize()).norm() < 1e-9
     }
 
     /// One hole as a canned cycle: the approach as any rapid (cancelling the previous cycle
     /// unless this hole continues it), then the cycle block.
-    pub(super) fn canned_hole(&mut self, c: Committed, h: Hole, mut cb: Canned, start: At) -> Result<(), Error> {
+    fn canned_hole(&mut self, c: Committed, h: Hole, mut cb: Canned, start: At, ahead: Ahead) -> Result<(), Error> {
         let pt = c.pt.clone();
         let before = self.at;
         self.cycle_in_plane(&mut cb, &start);
         let told = self.cycle_values(&mut cb, pt.line);
-        let modal = match (self.cycle_on, self.at) {
+        let modal = match (self.cycles.on, self.at) {
             (Some(on), Some(at)) => {
                 let same_rot = (0..self.m.rotaries.len()).all(|i| (start.joints.rotary[i] - at.joints.rotary[i]).abs() < 1e-9);
                 same_rot && on.same_cycle(&cb, &self.f.fmt) && self.f.modal_cycle(cb.kind)
@@ -219,13 +262,16 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             start
         } else {
             self.cancel_cycle()?;
-            self.point(Committed {
-                pt: MotionPt {
-                    hole: None,
-                    ..pt.clone()
+            self.point(
+                Committed {
+                    pt: MotionPt {
+                        hole: None,
+                        ..pt.clone()
+                    },
+                    ..c
                 },
-                ..c
-            })?;
+                ahead,
+            )?;
             // The approach as written: the cycle starts from there.
             match self.at {
                 // In a tilted plane its Z is the tool axis: the cycle in plane coordinates.
@@ -239,7 +285,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             }
         };
         self.at = Some(at);
-        self.positioned = false;
+        self.written.positioned(false);
         self.canned_block(&pt, &h, cb, at, before.filter(|_| modal), told)
     }
 
@@ -274,10 +320,10 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         let want = at.pose.tip - u * (h.start + h.depth);
         let mut j = at.joints;
         j.linear[2] = cb.z_bottom;
-        let tilt = self.tilt;
+        let tilt = self.frames.tilt();
         if tilt.is_some() {
             // The machine's linears at the bottom (block info); the words are plane coordinates.
-            let cp = kinematics::controlled_point(m, &at.actual, &want, &self.setup);
+            let cp = kinematics::controlled_point(m, &at.actual, &want, self.tool.setup());
             j.linear = [cp.x, cp.y, cp.z];
         }
         let mut axes: [Option<f64>; 6] = [None; 6];
@@ -291,7 +337,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             axes[r.slot()] = Some(at.joints.rotary[i].to_degrees());
         }
         j.rotary = self.written_rotaries(&at.joints.rotary);
-        let replay = fk(m, &j, &self.setup);
+        let replay = fk(m, &j, self.tool.setup());
         let tip_dev = match &tilt {
             Some(t) => (self.plane_tip(t, [cb.x.unwrap_or(0.0), cb.y.unwrap_or(0.0), cb.z_bottom]) - want).norm(),
             None => (replay.tip - want).norm(),
@@ -300,7 +346,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         let mut diags: Vec<Diagnostic> = told
             .into_iter()
             .chain(self.replayed(pt.line, tip_dev, ax_dev, "the cycle's bottom misses the hole"))
-            .chain(self.spindle_standing(pt.line))
+            .chain(self.spindle.standing(pt.line))
             .collect();
         self.hole_collisions(from.as_ref(), &at, &cb, pt.line, &mut diags);
         for d in &diags {
@@ -315,15 +361,10 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             false => self.z_rapid_time(out),
         };
         let time = self.z_rapid_time(cb.z_start - cb.z_r) + down / cb.feed + back + cb.dwell / 60.0;
-        self.sum.cycle_time_s += time * 60.0;
-        if let Some(st) = self.stats[2].as_mut() {
-            st.min = st.min.min(axes[2].unwrap_or(cb.z_bottom));
-        }
-        self.blocks += 1;
-        self.sum.blocks += 1;
-        self.sum.canned_holes += 1;
+        let n = self.written.hole(time, axes[2], cb.z_bottom);
+        self.cycles.holes += 1;
         let info = BlockInfo {
-            n: self.blocks,
+            n,
             source_line: Some(pt.line),
             joints: AxisWords(axes),
             diagnostics: diags,
@@ -336,8 +377,8 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         for l in &lines[call + 1..] {
             self.out(l)?;
         }
-        self.cycle_on = self.f.modal_cycle(cb.kind).then_some(cb);
-        self.in_hole = true;
+        self.cycles.on = self.f.modal_cycle(cb.kind).then_some(cb);
+        self.cycles.in_hole = true;
         Ok(())
     }
 }

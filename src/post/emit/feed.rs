@@ -1,23 +1,63 @@
 //! The feed: F per minute or inverse time, the machine axes' path where the tip stands, axis
 //! feed limits, and the time of each block for the cycle-time estimate.
 
-use super::{At, Emitter};
+use super::{ArcBlock, At, Emitter};
 use crate::cl::FeedUnit;
 use crate::diag::{Code, Diagnostic, Severity};
 use crate::kinematics::{self, Units};
 use crate::nc::{Dialect, FeedMode};
 use crate::post::{Mode, MotionPt, RotaryFeed, Sink};
 
+/// What the feed keeps from block to block (the block writer holds it): the tip moves taken
+/// for a standing tip, and which of its warnings have been told, once a program or once a run.
+#[derive(Debug)]
+pub(super) struct Runs {
+    /// Tip moves shorter than this (half the X Y Z words' last digit) are a standing tip.
+    standing: f64,
+    /// Feed per revolution with no spindle speed was told.
+    per_rev_told: bool,
+    /// In a run of blocks slowed to the F word's range, or to an axis's velocity (each run
+    /// told at its first block).
+    range_run: bool,
+    clamp_run: bool,
+}
+
+impl Runs {
+    pub(super) fn new(standing: f64) -> Runs {
+        Runs {
+            standing,
+            per_rev_told: false,
+            range_run: false,
+            clamp_run: false,
+        }
+    }
+
+    /// Whether this block (`slowed` or not to an axis's velocity) starts a run of slowed blocks.
+    fn clamp_starts(&mut self, slowed: bool) -> bool {
+        let first = slowed && !self.clamp_run;
+        self.clamp_run = slowed;
+        first
+    }
+
+    /// Whether this block (`beyond` the F word's range or not) starts a run of such blocks.
+    fn range_starts(&mut self, beyond: bool) -> bool {
+        let first = beyond && !self.range_run;
+        self.range_run = beyond;
+        first
+    }
+}
+
 impl<S: Sink + ?Sized> Emitter<'_, S> {
     /// The F word (per minute or inverse time) and the time (minutes) of a block to `to` from
-    /// `prev`: the tip's path at F, the machine axes' path where the tip stands while the tool
-    /// turns, slowed to every axis's feed limit; a rapid at the rapid rate.
+    /// `prev` (an `arc`, or a line): the tip's path at F, the machine axes' path where the tip
+    /// stands while the tool turns, slowed to every axis's feed limit; a rapid at the rapid rate.
     #[inline]
     pub(super) fn feed(
         &mut self,
         to: &At,
         prev: Option<&At>,
         pt: &MotionPt,
+        arc: Option<&ArcBlock>,
         rapid: bool,
         diags: &mut Vec<Diagnostic>,
     ) -> (Option<(FeedMode, f64)>, f64) {
@@ -29,10 +69,10 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             let mut f = fv;
             if unit == FeedUnit::PerRev {
                 // A stopped spindle (S0) gives no feed per minute either: F0 is an alarm.
-                match self.rpm.filter(|&r| r > 0.0) {
+                match self.spindle.rpm().filter(|&r| r > 0.0) {
                     Some(r) => f *= r,
-                    None if !self.warned_per_rev => {
-                        self.warned_per_rev = true;
+                    None if !self.written.feed_runs().per_rev_told => {
+                        self.written.feed_runs().per_rev_told = true;
                         diags.push(Diagnostic::new(
                             Code::FeedClamped,
                             Severity::Warning,
@@ -43,7 +83,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                     None => {}
                 }
             }
-            let len = match &self.arc {
+            let len = match arc {
                 Some(a) => a.length,
                 None => prev.map_or(0.0, |p| (to.pose.tip - p.pose.tip).norm()),
             };
@@ -68,7 +108,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             // Only there: a tip that moves, however little, is what F is about.
             if rot_moves
                 && !tcp
-                && len < self.standing
+                && len < self.written.feed_runs().standing
                 && f > 0.0
                 && let Some(p) = prev
             {
@@ -101,8 +141,8 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             }
             // Told at the first block of each run of slowed blocks: a dense path slowed
             // throughout is one warning, not one a block.
-            if let Some(a) = limited_axis
-                && !std::mem::replace(&mut self.clamp_run, true)
+            if self.written.feed_runs().clamp_starts(limited_axis.is_some())
+                && let Some(a) = limited_axis
             {
                 diags.push(Diagnostic::new(
                     Code::FeedClamped,
@@ -111,7 +151,6 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                     format!("feed reduced from here on while {a} would exceed its velocity (the profile's max_feed) at the programmed feed"),
                 ));
             }
-            self.clamp_run &= limited_axis.is_some();
             if let Some(fw) = &mut feed {
                 self.within_word(fw, &mut t, pt.line, diags);
             }
@@ -158,8 +197,9 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         // fast feed in inverse time is only slowed (told once a run of such blocks).
         let max = feed_max(&self.o.dialect, self.m.units, *mode);
         let beyond = v.is_nan() || *v > max;
+        let first = self.written.feed_runs().range_starts(beyond);
         if beyond {
-            if !std::mem::replace(&mut self.range_run, true) {
+            if first {
                 diags.push(Diagnostic::new(
                     Code::FeedClamped,
                     Severity::Warning,
@@ -175,7 +215,6 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             }
             *v = max;
         }
-        self.range_run &= beyond;
     }
 
     /// A rapid's time (minutes): each axis at its velocity and acceleration from rest to rest,

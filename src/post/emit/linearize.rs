@@ -3,20 +3,43 @@
 
 use super::{At, Emitter};
 use crate::diag::{Code, Diagnostic, Severity};
-use crate::kinematics::{self, IkOptions, Joints, Pose, Vec3, fk, ik_into};
+use crate::kinematics::{self, IkOptions, Joints, Pose, Solutions, Vec3, fk, ik_into};
 use crate::post::plan::wrap;
 use crate::post::{Error, Mode, MotionPt, Sink};
+
+/// What the linearization of one CL segment may still spend: halvings left (see
+/// [`MAX_SEGMENT_SPLITS`]), and whether running out was told.
+struct Budget {
+    splits: u32,
+    told: bool,
+}
 
 impl<S: Sink + ?Sized> Emitter<'_, S> {
     /// A feed move from `a` to `b`, subdivided where the rotaries step too far in one block or
     /// (joint mode) the joint-space line strays from the CL segment.
-    pub(super) fn segment(&mut self, a: At, b: At, pt: &MotionPt, diags: Vec<Diagnostic>, depth: u32) -> Result<u32, Error> {
+    pub(super) fn segment(&mut self, a: At, b: At, pt: &MotionPt, diags: Vec<Diagnostic>) -> Result<u32, Error> {
+        let mut budget = Budget {
+            splits: MAX_SEGMENT_SPLITS,
+            told: false,
+        };
+        self.split(a, b, pt, diags, 0, &mut budget)
+    }
+
+    /// What the linearization bound's lever adds to the tip's distance, less the tool length:
+    /// the work offset and the rotaries' pivots.
+    fn lever_base(&self) -> f64 {
+        self.tool.setup().work_offset.norm() + self.m.rotaries.iter().map(|r| r.pivot.norm()).sum::<f64>()
+    }
+
+    /// [`Emitter::segment`] `depth` halvings in, from `budget`.
+    fn split(&mut self, a: At, b: At, pt: &MotionPt, diags: Vec<Diagnostic>, depth: u32, budget: &mut Budget) -> Result<u32, Error> {
         let step = (0..self.m.rotaries.len())
             .map(|i| (b.joints.rotary[i] - a.joints.rotary[i]).abs())
             .fold(0.0, f64::max);
         let mut split = step > self.o.max_rotary_step;
         // TCP with angle error: the control interpolates the words, the real tip bends with Δ.
-        let curved = self.o.mode == Mode::Joint || self.compensated;
+        let compensated = self.m.has_angle_error();
+        let curved = self.o.mode == Mode::Joint || compensated;
         if !split && curved && step > 0.0 {
             // In W the tip follows R(θ(t))·x(t); |P''| ≤ Σ²·lever + 2·Σ·|Δxyz| (rotaries sweeping
             // and turning the moving linears), so the chord error is at most that over 8: below
@@ -30,10 +53,10 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                 .sqrt();
             // Longest distance from a rotary's line to what it moves (tip, pivots, tool).
             let lever =
-                a.pose.tip.norm_squared().max(b.pose.tip.norm_squared()).sqrt() + self.lever_base + self.setup.tool_length.abs();
+                a.pose.tip.norm_squared().max(b.pose.tip.norm_squared()).sqrt() + self.lever_base() + self.tool.setup().tool_length.abs();
             // With angle-error compensation the actual angle is not linear in the interpolated
             // word: no bound, always sample.
-            let bound = if self.compensated {
+            let bound = if compensated {
                 f64::INFINITY
             } else {
                 (sum * sum * lever + 2.0 * sum * dlin) / 8.0
@@ -43,9 +66,6 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         // An end farther outside travel than the travel is long is a typo in the CL file (it is
         // a limit error already): following it to the tolerance cannot converge. `GOTO/1e8,…`
         // made 2¹⁴ leaves, each written as a reposition: 98 000 blocks for one bad point.
-        if depth == 0 {
-            (self.split_budget, self.split_told) = (MAX_SEGMENT_SPLITS, false);
-        }
         if split && depth == 0 {
             let far = |j: &Joints| {
                 self.m.linears.iter().zip(j.linear).any(|(l, v)| {
@@ -66,11 +86,11 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             self.reposition(a, b, false, pt)?;
             return Ok(3);
         }
-        if split && depth < MAX_SPLIT_DEPTH && self.split_budget == 0 {
+        if split && depth < MAX_SPLIT_DEPTH && budget.splits == 0 {
             // Never seen in a real or generated path; bounds the output whatever comes. Told
             // once a segment (the budget is reset with the next one).
-            if !self.split_told {
-                self.split_told = true;
+            if !budget.told {
+                budget.told = true;
                 let d = Diagnostic::new(
                     Code::Linearized,
                     Severity::Warning,
@@ -84,11 +104,11 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             split = false;
         }
         if split && depth < MAX_SPLIT_DEPTH {
-            self.split_budget = self.split_budget.saturating_sub(1);
+            budget.splits = budget.splits.saturating_sub(1);
             match self.midpoint(&a, &b) {
                 Some(mid) => {
-                    let n1 = self.segment(a, mid, pt, Vec::new(), depth + 1)?;
-                    let n2 = self.segment(mid, b, pt, diags, depth + 1)?;
+                    let n1 = self.split(a, mid, pt, Vec::new(), depth + 1, budget)?;
+                    let n2 = self.split(mid, b, pt, diags, depth + 1, budget)?;
                     return Ok(n1 + n2);
                 }
                 None => {
@@ -134,9 +154,9 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                 j.rotary[i] += t * (b.joints.rotary[i] - a.joints.rotary[i]);
             }
             let p = if tcp {
-                kinematics::tcp_fk(self.m, &(pa + (pb - pa) * t), &j.rotary, &self.setup).tip
+                kinematics::tcp_fk(self.m, &(pa + (pb - pa) * t), &j.rotary, self.tool.setup()).tip
             } else {
-                fk(self.m, &j, &self.setup).tip
+                fk(self.m, &j, self.tool.setup()).tip
             };
             worst = worst.max(seg_dist(&p, &a.pose.tip, &b.pose.tip));
             if worst > limit {
@@ -162,9 +182,10 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             free_angle: kinematics::free_rotary(self.m).map_or(0.0, |f| want[f]),
             ..Default::default()
         };
-        ik_into(self.m, &pose, &self.setup, &opt, &mut self.buf).ok()?;
+        let mut buf = Solutions::new();
+        ik_into(self.m, &pose, self.tool.setup(), &opt, &mut buf).ok()?;
         let mut best: Option<(f64, At)> = None;
-        for s in self.buf.iter() {
+        for s in buf.iter() {
             let mut actual = s.actual;
             let mut joints = s.joints;
             let mut d = 0.0;
@@ -225,7 +246,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         {
             return Some(at);
         }
-        self.sum.max_singular_deviation_deg = self.sum.max_singular_deviation_deg.max(dev);
+        self.singular.midpoint_held(dev);
         Some(held)
     }
 }

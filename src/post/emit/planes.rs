@@ -4,8 +4,61 @@
 use super::Emitter;
 use crate::diag::Code;
 use crate::kinematics::{self, Vec3, angle_between};
-use crate::post::{Mode, Sink};
+use crate::post::setups::WorkOffsets;
+use crate::post::{Mode, Sink, Summary};
 use crate::post::Stop;
+
+/// The frames and planes the program's words are in, as the control has them selected: the
+/// tilted working plane (G68.2 …), the plane of circular interpolation (G17/G18/G19), and with
+/// `setups=work-offsets` the work offset (G54 …).
+#[derive(Debug)]
+pub(super) struct Frames {
+    tilt: Option<Tilt>,
+    /// Tilted planes written (the summary's count).
+    tilts: u64,
+    /// The circular-interpolation plane word in force.
+    circular: &'static str,
+    /// `setups=work-offsets`: the offsets used, and the one in force.
+    offsets: Option<WorkOffsets>,
+    offset_at: usize,
+}
+
+impl Frames {
+    pub(super) fn new(offsets: Option<WorkOffsets>) -> Frames {
+        Frames {
+            tilt: None,
+            tilts: 0,
+            circular: "G17",
+            offsets,
+            offset_at: 0,
+        }
+    }
+
+    /// The tilted working plane in force, if any.
+    #[inline]
+    pub(super) fn tilt(&self) -> Option<Tilt> {
+        self.tilt
+    }
+
+    /// The circular-interpolation plane `word` selected: whether it was not already.
+    pub(super) fn circular(&mut self, word: &'static str) -> bool {
+        std::mem::replace(&mut self.circular, word) != word
+    }
+
+    /// The work offsets of `setups=work-offsets` (none otherwise).
+    pub(super) fn offsets(&mut self) -> Option<&mut WorkOffsets> {
+        self.offsets.as_mut()
+    }
+
+    /// Work offset `i` selected: whether it was not already.
+    pub(super) fn select_offset(&mut self, i: usize) -> bool {
+        std::mem::replace(&mut self.offset_at, i) != i
+    }
+
+    pub(super) fn summary(&self, sum: &mut Summary) {
+        sum.tilted_planes = self.tilts;
+    }
+}
 
 /// A tilted working plane in force: the rotary words it stands on (radians), its frame as the
 /// control builds it from the words written, and the CL tool axis of its run.
@@ -17,6 +70,11 @@ pub(in crate::post) struct Tilt {
 }
 
 impl<S: Sink + ?Sized> Emitter<'_, S> {
+    /// The job writes fixed-axis runs in tilted planes where it can.
+    pub(in crate::post) fn tilted_planes(&self) -> bool {
+        self.o.tilted_planes
+    }
+
     /// Why a fixed-axis run is not written in a tilted plane, if it cannot be.
     pub(super) fn plane_refused(&self) -> Option<&'static str> {
         let m = self.m;
@@ -60,49 +118,49 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         for l in &lines {
             self.out(l)?;
         }
-        self.tilt = Some(Tilt {
+        self.frames.tilt = Some(Tilt {
             rotary: at.joints.rotary,
             frame: written,
             axis: at.pose.axis,
         });
-        self.sum.tilted_planes += 1;
-        self.template("plane_on", Some(self.last_line))?;
-        self.ensure_comp(self.last_line)
+        self.frames.tilts += 1;
+        self.template("plane_on", Some(self.written.last_line()))?;
+        self.ensure_comp(self.written.last_line())
     }
 
     /// Back to untilted coordinates; `recomp`: length compensation on again for the blocks that
     /// follow (not before a tool change, which sets its own).
     pub(super) fn leave_plane(&mut self, recomp: bool) -> Result<(), Stop> {
-        if self.tilt.is_none() {
+        if self.frames.tilt.is_none() {
             return Ok(());
         }
         self.cutcom_end("a tilted plane's end")?;
-        self.tilt = None;
+        self.frames.tilt = None;
         self.cancel_cycle()?;
         self.comp_cancel()?;
-        self.template("plane_off", Some(self.last_line))?;
+        self.template("plane_off", Some(self.written.last_line()))?;
         if let Some(l) = self.f.plane_off() {
             self.out(&l)?;
         }
-        if recomp { self.ensure_comp(self.last_line) } else { Ok(()) }
+        if recomp { self.ensure_comp(self.written.last_line()) } else { Ok(()) }
     }
 
     /// Length compensation off (word-address controls with a G43-style word) around a plane
     /// change, which redefines the direction it applies in.
     pub(super) fn comp_cancel(&mut self) -> Result<(), Stop> {
         let d = self.o.dialect.clone();
-        if self.comp_on && !d.length_comp.is_empty() && d.style == crate::nc::Style::WordAddress {
-            if let Some(l) = self.f.line(&d.tcp_off, self.tool.unwrap_or(1), 0) {
+        if self.tool.comp_on() && !d.length_comp.is_empty() && d.style == crate::nc::Style::WordAddress {
+            if let Some(l) = self.f.line(&d.tcp_off, self.tool.number().unwrap_or(1), 0) {
                 self.out(&l)?;
             }
-            self.comp_on = false;
+            self.tool.comp_off();
         }
         Ok(())
     }
 
     /// The tip in the plane's coordinates (its origin is the joint-mode program zero).
     pub(super) fn plane_coords(&self, t: &Tilt, tip_w: &Vec3) -> Vec3 {
-        t.frame.transpose() * (tip_w + self.setup.work_offset)
+        t.frame.transpose() * (tip_w + self.tool.setup().work_offset)
     }
 
     /// The inverse, from the words as written (rounded): where the control puts the tip.
@@ -112,12 +170,13 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             self.f.written(words[1], 1),
             self.f.written(words[2], 2),
         );
-        t.frame * q - self.setup.work_offset
+        t.frame * q - self.tool.setup().work_offset
     }
 
     /// The plane in force, if the rotary words `rotary` stand on it.
     pub(super) fn plane_at(&self, rotary: &[f64; 3]) -> Option<Tilt> {
-        self.tilt
+        self.frames
+            .tilt
             .filter(|t| (0..self.m.rotaries.len()).all(|i| (rotary[i] - t.rotary[i]).abs() <= 1e-9))
     }
 

@@ -4,21 +4,38 @@
 use super::singular::nearest_singular;
 use super::{At, Emitter, limit_error};
 use crate::diag::{Code, Diagnostic, Severity};
-use crate::kinematics::{self, IkOptions, Joints, Pose, angle_between, ik_into};
+use crate::kinematics::{self, IkOptions, Joints, Pose, Solutions, angle_between, ik_into};
 use crate::post::lookahead::PLANE_AXIS_EPS;
 use crate::post::plan::{self, Cand, Committed, wrap};
-use crate::post::{Error, HolePart, MotionPt, Sink};
+use crate::post::{Error, MotionPt, Sink};
+
+/// What the look-ahead found after a committed point, handed to [`Emitter::point`] with it.
+#[derive(Clone, Copy, Debug, Default)]
+pub(in crate::post) struct Ahead {
+    /// The point is a rapid whose fixed tool axis holds until the next rapid with another axis
+    /// (or a tool change, or the end): a tilted plane may start there.
+    pub(in crate::post) plane: bool,
+    /// For a singular point: the free rotary's word (the planner's winding) where the cut after
+    /// it fixes it.
+    pub(in crate::post) free: Option<f64>,
+}
 
 impl<S: Sink + ?Sized> Emitter<'_, S> {
     /// The machine reaches `pt` by positioning, not by cutting: the first move, the first after
     /// a tool change, a rapid.
     pub(in crate::post) fn positioning(&self, pt: &MotionPt) -> bool {
-        self.at.is_none() || self.tool_changed || pt.rapid
+        self.at.is_none() || self.tool.changed() || pt.rapid
     }
 
     /// The chosen candidate with its unbounded windings and singular free angle resolved against
-    /// where the machine is.
-    pub(super) fn resolve(&mut self, pose: &Pose, cand: &Cand, positioning: bool) -> Option<(Joints, [f64; 3], i8, Option<u8>)> {
+    /// where the machine is; `hint`: the free angle the cut after a singular point needs.
+    pub(super) fn resolve(
+        &mut self,
+        pose: &Pose,
+        cand: &Cand,
+        positioning: bool,
+        hint: Option<f64>,
+    ) -> Option<(Joints, [f64; 3], i8, Option<u8>)> {
         let mut sol = cand.sol;
         // Before the first move, an unbounded rotary starts nearest the angle the shop prefers.
         let start = self.o.prefer.map_or([None; 3], |p| p.start);
@@ -29,7 +46,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             // it turned during that cut, the tool axis off the CL orientation by up to 11° (a
             // cut from vertical to a 30° tilt on spinner-u5-620).
             let r = &self.m.rotaries[free];
-            let prev = match self.free_hint.map(|w| r.actual(w)) {
+            let prev = match hint.map(|w| r.actual(w)) {
                 Some(h) if positioning => {
                     if r.limits.is_some() {
                         h
@@ -46,8 +63,9 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             // The planned root: a chain missing a linear has several singular ones (C a half
             // turn apart), and the first of them, with the planner's A and B windings copied in,
             // put the tool 180° off the pose (propeller-3r2l).
-            if ik_into(self.m, pose, &self.setup, &opt, &mut self.buf).is_ok()
-                && let Some(s) = nearest_singular(&self.buf, free, &cand.sol.actual)
+            let mut buf = Solutions::new();
+            if ik_into(self.m, pose, self.tool.setup(), &opt, &mut buf).is_ok()
+                && let Some(s) = nearest_singular(&buf, free, &cand.sol.actual)
             {
                 sol = s;
             }
@@ -78,41 +96,25 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         Some((joints, actual, sol.branch, sol.singular.map(|f| f as u8)))
     }
 
-    /// One committed CL point; a rapid that starts a fixed-axis run (seen ahead) tilts the
-    /// working plane once the machine stands there.
-    pub(in crate::post) fn point(&mut self, c: Committed) -> Result<(), Error> {
-        let (rapid, tip, ahead) = (c.pt.rapid, c.pt.pose.tip, self.plane_ahead);
-        if self.tool_line_due {
+    /// One committed CL point, with what the look-ahead found after it; a rapid that starts a
+    /// fixed-axis run tilts the working plane once the machine stands there.
+    pub(in crate::post) fn point(&mut self, c: Committed, ahead: Ahead) -> Result<(), Error> {
+        let (rapid, tip) = (c.pt.rapid, c.pt.pose.tip);
+        if self.tool.line_due() {
             self.record_tool();
         }
-        self.point_at(c)?;
-        if rapid && ahead && self.tilt.is_none() {
+        self.point_at(c, ahead)?;
+        if rapid && ahead.plane && self.frames.tilt().is_none() {
             self.enter_plane(&tip)?;
         }
         Ok(())
     }
 
-    pub(super) fn point_at(&mut self, c: Committed) -> Result<(), Error> {
-        match c.pt.hole.as_deref().copied() {
-            Some(HolePart::Start(h)) if self.o.canned_cycles || h.kind.canned_only() => {
-                self.in_hole = false;
-                match self.canned_check(&c, &h) {
-                    Ok((cb, start)) => return self.canned_hole(c, h, cb, start),
-                    Err(why) if h.kind.canned_only() => return self.hole_refused(c, &h, why),
-                    Err(why) => self.expanded(&c.pt, why)?,
-                }
-            }
-            // A hole written as moves begins.
-            Some(HolePart::Clear) => self.in_hole = false,
-            // The rest of a hole written as a cycle (or refused).
-            Some(HolePart::Top) if self.in_hole => {
-                self.sum.cl_points += 1;
-                return Ok(());
-            }
-            Some(_) if self.in_hole => return Ok(()),
-            _ => self.in_hole = false,
-        }
-        self.sum.cl_points += !c.pt.inserted as u64;
+    pub(super) fn point_at(&mut self, c: Committed, ahead: Ahead) -> Result<(), Error> {
+        let Some(c) = self.hole_point(c, ahead)? else {
+            return Ok(());
+        };
+        self.written.cl_point(!c.pt.inserted);
         let pt = c.pt;
         let Some(cand) = c.cand else {
             let what = match &c.error {
@@ -130,13 +132,15 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             )?;
             return Ok(());
         };
-        let Some((mut joints, mut actual, branch, mut free)) = self.resolve(&pt.pose, &cand, self.positioning(&pt)) else {
+        let Some((mut joints, mut actual, branch, mut free)) = self.resolve(&pt.pose, &cand, self.positioning(&pt), ahead.free)
+        else {
             return Ok(());
         };
         self.ensure_comp(pt.line)?;
         let mut diags: Vec<Diagnostic> = Vec::new();
         let mut pose = pt.pose;
         let outer = kinematics::outer_rotary(self.m);
+        let exact_outer = outer.map(|oi| actual[oi]);
         if let Some(sm) = self.smooth(&pt.pose, &joints, &actual, branch) {
             diags.push(Diagnostic::new(
                 Code::Singular,
@@ -147,22 +151,10 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                     sm.3, sm.4
                 ),
             ));
-            if let Some(oi) = outer {
-                let d = wrap(actual[oi] - self.exact_prev.unwrap_or(actual[oi])).abs();
-                self.exact_travel += d;
-                self.exact_prev = Some(actual[oi]);
-            }
             (joints, actual, pose.axis, free) = (sm.0, sm.1, sm.2, None);
-        } else if let Some(oi) = outer {
-            self.exact_travel += wrap(actual[oi] - self.exact_prev.unwrap_or(actual[oi])).abs();
-            self.exact_prev = Some(actual[oi]);
         }
-        if let Some(oi) = outer {
-            self.held_travel += (actual[oi] - self.held_prev.unwrap_or(actual[oi])).abs();
-            self.held_prev = Some(actual[oi]);
-            if self.o.singular_tolerance > 0.0 {
-                self.sum.smoothing_travel_saved_deg = (self.exact_travel - self.held_travel).to_degrees();
-            }
+        if let (Some(oi), Some(exact)) = (outer, exact_outer) {
+            self.singular.outer_at(exact, actual[oi]);
         }
         // The planner judged travel at the IK's free angle; a singular point stands at the one
         // held (mikron-ucp710: C held at 666° put Y at -277 of ±275, told as "near" its limit).
@@ -172,7 +164,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             None
         };
         if let Some(v) = &outside {
-            self.outside_line = Some(pt.line);
+            self.written.outside(pt.line);
             diags.push(limit_error(v, pt.line, ""));
         } else if let Some(v) = self.near_limit(&joints) {
             diags.push(Diagnostic::new(Code::NearLimit, Severity::Info, Some(pt.line), v));
@@ -186,14 +178,14 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         };
         // After a tool change the machine stands where the change left it, not at the last
         // block: the next move, feed or not, positions as a rapid that turns rotaries does.
-        let chained = std::mem::take(&mut self.positioned) && !self.tool_changed;
+        let chained = self.written.take_positioned() && !self.tool.changed();
         if let Some(prev) = &self.at
-            && (self.tool_changed
+            && (self.tool.changed()
                 || pt.rapid
                     && (0..self.m.rotaries.len()).any(|i| (joints.rotary[i] - prev.joints.rotary[i]).abs() > 1f64.to_radians()))
         {
             self.safe_rapid(*prev, target, &pt, diags, chained)?;
-            self.positioned = pt.rapid;
+            self.written.positioned(pt.rapid);
             return Ok(());
         }
         match self.at {
@@ -215,14 +207,15 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                 }
                 // A feed that turns the axis of the plane in force: a cut longer than the look-ahead.
                 if self
-                    .tilt
+                    .frames
+                    .tilt()
                     .is_some_and(|t| angle_between(&t.axis, &pt.pose.axis) > PLANE_AXIS_EPS)
                 {
                     self.reposition(prev, target, false, &pt)?;
                 } else if unwind || branch_change {
                     self.reposition(prev, target, unwind, &pt)?;
                 } else {
-                    self.segment(prev, target, &pt, diags, 0)?;
+                    self.segment(prev, target, &pt, diags)?;
                     return Ok(());
                 }
             }
@@ -230,7 +223,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         }
         if self.at.is_none() {
             self.approach(target, &pt, diags)?;
-            self.positioned = pt.rapid;
+            self.written.positioned(pt.rapid);
             return Ok(());
         }
         self.block(target, &pt, pt.rapid || self.at.is_none(), diags, pt.inserted, None)?;

@@ -1,13 +1,12 @@
 //! Positioning: retracts (as `Options::retract` says: the top of Z, along the tool axis, or up
-//! to a plane, within travel), approaches, rapids that turn rotaries, repositions and unwinds,
-//! and the rotary clamps around them.
+//! to a plane, within travel), approaches, rapids that turn rotaries, repositions and unwinds
+//! (the rotary clamps around them: `clamps.rs`).
 
 use super::singular::rotary_offset;
 use super::{At, Emitter};
 use crate::diag::{Code, Diagnostic, Severity};
-use crate::kinematics::{self, IkOptions, Joints, Pose, Vec3, fk, ik_into};
+use crate::kinematics::{self, IkOptions, Joints, Pose, Solutions, Vec3, fk, ik_into};
 use crate::post::plan::wrap;
-use crate::post::Stop;
 use crate::post::{Error, Mode, MotionPt, Retract, Sink};
 
 impl<S: Sink + ?Sized> Emitter<'_, S> {
@@ -20,7 +19,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                 joints.linear[2] = zmax;
                 At {
                     joints,
-                    pose: fk(self.m, &joints, &self.setup),
+                    pose: fk(self.m, &joints, self.tool.setup()),
                     ..a
                 }
             }
@@ -59,7 +58,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             return Ok(()); // at the top already
         }
         let pt = MotionPt {
-            line: self.last_line,
+            line: self.written.last_line(),
             pose: up.pose,
             rapid: true,
             feed: None,
@@ -167,7 +166,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         joints.rotary = to.joints.rotary;
         let turned = At {
             joints,
-            pose: fk(self.m, &joints, &self.setup),
+            pose: fk(self.m, &joints, self.tool.setup()),
             ..to
         };
         self.block(up, pt, true, diags, true, Some("RETRACT Z"))?;
@@ -182,7 +181,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
     pub(super) fn reposition(&mut self, prev: At, to: At, unwind: bool, pt: &MotionPt) -> Result<(), Error> {
         let word = if unwind { "UNWIND" } else { "REPOSITION" };
         let code = if unwind { Code::Unwind } else { Code::BranchChange };
-        let why = if self.tilt.is_some() {
+        let why = if self.frames.tilt().is_some() {
             " (the tilted plane's fixed tool axis turns inside a cut)"
         } else {
             ""
@@ -246,7 +245,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                 lo = mid;
             }
         }
-        self.lift_notes.push(Diagnostic::new(
+        self.written.tell_next(Diagnostic::new(
             Code::NearLimit,
             Severity::Warning,
             None,
@@ -261,7 +260,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
     /// `a`'s rotaries and orientation with the tip at `tip`: only the linears move. For a machine
     /// with all three linears (on one missing a linear the rotaries place the tip too).
     pub(super) fn at_tip(&self, a: &At, tip: Vec3) -> At {
-        let cp = kinematics::controlled_point(self.m, &a.actual, &tip, &self.setup);
+        let cp = kinematics::controlled_point(self.m, &a.actual, &tip, self.tool.setup());
         let mut joints = a.joints;
         joints.linear = [cp.x, cp.y, cp.z];
         At {
@@ -279,9 +278,9 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             free_angle: kinematics::free_rotary(self.m).map_or(0.0, |f| a.actual[f]),
             ..Default::default()
         };
-        ik_into(self.m, &pose, &self.setup, &opt, &mut self.buf).ok()?;
-        let s = self
-            .buf
+        let mut buf = Solutions::new();
+        ik_into(self.m, &pose, self.tool.setup(), &opt, &mut buf).ok()?;
+        let s = buf
             .iter()
             .min_by(|x, y| rotary_offset(x, &a.actual, None).total_cmp(&rotary_offset(y, &a.actual, None)))?;
         let mut actual = s.actual;
@@ -297,78 +296,5 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             branch: s.branch,
             free: s.singular.map(|f| f as u8),
         })
-    }
-
-    /// Lock every clamped rotary that is unlocked (after positioning, at the end), unless the
-    /// operation ahead turns a rotary while cutting: then it stays unlocked to its end.
-    pub(super) fn lock_all(&mut self) -> Result<(), Stop> {
-        if self.cut_turns {
-            return Ok(());
-        }
-        self.set_clamps(true)
-    }
-
-    /// Unlock every locked clamp: before an operation that turns a rotary while cutting.
-    pub(in crate::post) fn unlock_all(&mut self) -> Result<(), Stop> {
-        self.set_clamps(false)
-    }
-
-    /// Lock (or unlock) every clamped rotary not already so.
-    fn set_clamps(&mut self, lock: bool) -> Result<(), Stop> {
-        for i in 0..self.m.rotaries.len() {
-            self.clamp(i, lock)?;
-        }
-        Ok(())
-    }
-
-    /// Write rotary `i`'s lock (or unlock) word where its clamp's state differs, and note the
-    /// new state; a clamp whose state is unknown (a passed-through word set it) is left alone.
-    fn clamp(&mut self, i: usize, lock: bool) -> Result<(), Stop> {
-        let Some((on, off)) = &self.o.clamps[i] else { return Ok(()) };
-        if self.locked[i] == lock || self.clamp_unknown[i] {
-            return Ok(());
-        }
-        let (open, close) = self.o.dialect.comment.clone();
-        let word = if lock { on.clone() } else { off.clone() };
-        let what = if lock { "LOCK" } else { "UNLOCK" };
-        let l = format!("{} {open}{} {what}{close}", self.f.words(&word), self.m.rotaries[i].name);
-        self.out(&l)?;
-        self.locked[i] = lock;
-        Ok(())
-    }
-
-    /// Unlock the clamped rotaries this move turns.
-    pub(super) fn unlock_moving(&mut self, to: &Joints) -> Result<(), Stop> {
-        // Before the first block the machine stands at home: rotaries at 0.
-        let from = self.at.map_or([0.0; 3], |p| p.joints.rotary);
-        for i in 0..self.m.rotaries.len() {
-            if (to.rotary[i] - from[i]).abs() > 1e-12 {
-                self.clamp(i, false)?;
-            }
-        }
-        Ok(())
-    }
-
-    /// Clamp words the control does not know stop the program where it reads them: not
-    /// written, told once per rotary at the start.
-    pub(super) fn unknown_clamps(&mut self) -> Result<(), Stop> {
-        for i in 0..self.m.rotaries.len() {
-            let Some((lock, unlock)) = &self.o.clamps[i] else { continue };
-            let d = self.o.dialect.clone();
-            let bad: Vec<&str> = [lock, unlock].into_iter().map(String::as_str).filter(|w| !d.knows(w)).collect();
-            if bad.is_empty() {
-                continue;
-            }
-            self.clamp_unknown[i] = true;
-            let msg = format!(
-                "the profile's clamp words for {} ({}) are no {} codes: not written, so {} turns and cuts unclamped; give the profile the codes this control's configuration provides",
-                self.m.rotaries[i].name,
-                bad.join(", "),
-                d.title,
-                self.m.rotaries[i].name
-            );
-            self.note(Diagnostic::new(Code::UnknownWord, Severity::Warning, None, msg))?;
-        }
-        Ok(())
     }
 }

@@ -7,15 +7,15 @@ use super::Emitter;
 use crate::diag::{Code, Diagnostic, Severity};
 use crate::kinematics::Vec3;
 use crate::post::setups::{Refused, offset_text};
-use crate::post::Stop;
 use crate::post::{Error, Sink};
+use crate::post::Stop;
 
 impl<S: Sink + ?Sized> Emitter<'_, S> {
     /// The operation from `line` on is in an MCS at `shift` from the first (`turned`: not
     /// parallel to it): its offset is selected, or, where none can hold it, the first's with an
     /// error (its points are in the first's frame already: the cut is right, the offset not).
     pub(super) fn setup_change(&mut self, shift: Vec3, turned: bool, line: u32, taken: &str) -> Result<(), Error> {
-        let Some(offsets) = self.offsets.as_mut() else {
+        let Some(offsets) = self.frames.offsets() else {
             let c = self.f.comment(taken).to_string();
             return Ok(self.out(&c)?);
         };
@@ -37,10 +37,9 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             let c = self.f.comment(taken).to_string();
             self.out(&c)?;
         }
-        if i == self.offset_at {
+        if !self.frames.select_offset(i) {
             return Ok(());
         }
-        self.offset_at = i;
         self.f.set_shift(s.into());
         let l = self.f.words(&code).to_string();
         self.out(&l)?;
@@ -53,7 +52,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
 
     /// Before the program's end: each offset after the first, and where to set it.
     pub(super) fn list_work_offsets(&mut self) -> Result<(), Stop> {
-        let Some(offsets) = self.offsets.as_ref() else {
+        let Some(offsets) = self.frames.offsets() else {
             return Ok(());
         };
         let lines: Vec<String> =

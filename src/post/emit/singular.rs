@@ -3,9 +3,81 @@
 
 use super::{At, Emitter};
 use crate::diag::{Code, Diagnostic, Severity};
-use crate::kinematics::{self, IkOptions, Joints, Pose, Vec3, angle_between, fk, ik_into};
+use crate::kinematics::{self, IkOptions, Joints, Machine, Pose, Solutions, Vec3, angle_between, fk, ik_into};
 use crate::post::plan::wrap;
-use crate::post::{Error, MotionPt, Sink};
+use crate::post::{Error, MotionPt, Sink, Summary};
+
+/// What singular handling keeps: the singular cone, and the outer rotary's travel, exact and as
+/// written, with what the singular tolerance's holding did (for the summary).
+#[derive(Debug)]
+pub(super) struct Held {
+    /// The singular direction and cos of the singular cone, once (they are checked per block).
+    cone: Option<(Vec3, f64)>,
+    /// Outer-rotary travel of the exact solutions and of what was written, at CL points: what
+    /// the singular tolerance saved, honestly (a held block's saving is partly paid back later).
+    exact_prev: Option<f64>,
+    exact_travel: f64,
+    held_prev: Option<f64>,
+    held_travel: f64,
+    /// Blocks whose free rotary was held, and the largest deviation (degrees) that used.
+    smoothed_blocks: u64,
+    smoothed_max_deg: f64,
+    /// The largest deviation (degrees) of a midpoint held near the singular direction.
+    midpoint_max_deg: f64,
+}
+
+impl Held {
+    /// `cone`: the singular cone's half angle (radians).
+    pub(super) fn new(m: &Machine, cone: f64) -> Held {
+        Held {
+            cone: kinematics::singular_direction(m).map(|d| (d.normalize(), cone.cos())),
+            exact_prev: None,
+            exact_travel: 0.0,
+            held_prev: None,
+            held_travel: 0.0,
+            smoothed_blocks: 0,
+            smoothed_max_deg: 0.0,
+            midpoint_max_deg: 0.0,
+        }
+    }
+
+    /// Whether `axis` lies within the singular cone of the singular direction, either way.
+    #[inline]
+    pub(super) fn in_cone(&self, axis: &Vec3) -> bool {
+        self.cone
+            .is_some_and(|(dir, cone_cos)| axis.dot(&dir).abs() > cone_cos * axis.norm())
+    }
+
+    /// The outer rotary at a CL point: `exact` where the IK put it, `written` where the block
+    /// takes it (the same unless held).
+    pub(super) fn outer_at(&mut self, exact: f64, written: f64) {
+        self.exact_travel += wrap(exact - self.exact_prev.unwrap_or(exact)).abs();
+        self.exact_prev = Some(exact);
+        self.held_travel += (written - self.held_prev.unwrap_or(written)).abs();
+        self.held_prev = Some(written);
+    }
+
+    /// A block with its free rotary held, `dev` degrees off the CL orientation.
+    fn smoothed(&mut self, dev: f64) {
+        self.smoothed_blocks += 1;
+        self.smoothed_max_deg = self.smoothed_max_deg.max(dev);
+    }
+
+    /// A midpoint held near the singular direction, `dev` degrees off the CL orientation.
+    pub(super) fn midpoint_held(&mut self, dev: f64) {
+        self.midpoint_max_deg = self.midpoint_max_deg.max(dev);
+    }
+
+    /// `tolerance`: the singular tolerance (the travel saved is told where there is one).
+    pub(super) fn summary(&self, sum: &mut Summary, tolerance: f64) {
+        sum.max_singular_deviation_deg = self.midpoint_max_deg;
+        sum.smoothed_blocks = self.smoothed_blocks;
+        sum.smoothing_max_deviation_deg = self.smoothed_max_deg;
+        if tolerance > 0.0 && self.exact_prev.is_some() {
+            sum.smoothing_travel_saved_deg = (self.exact_travel - self.held_travel).to_degrees();
+        }
+    }
+}
 
 impl<S: Sink + ?Sized> Emitter<'_, S> {
     /// Leaving a singular point by feed toward a pose that fixes its free rotary elsewhere: the
@@ -18,7 +90,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         let Some(f) = prev.free.map(usize::from) else {
             return Ok(prev);
         };
-        if to.free.is_some() || self.tilt.is_some() {
+        if to.free.is_some() || self.frames.tilt().is_some() {
             return Ok(prev);
         }
         // Spread over the cut, the turn leaves the axis within twice the cut's angle from the
@@ -38,8 +110,9 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             axis: (prev.pose.axis * (1.0 - t) + to.pose.axis * t).normalize(),
         };
         let mut want = to.actual[f];
-        if ik_into(self.m, &near, &self.setup, &IkOptions::default(), &mut self.buf).is_ok()
-            && let Some(s) = self.buf.iter().find(|s| s.singular.is_none() && s.branch == to.branch)
+        let mut buf = Solutions::new();
+        if ik_into(self.m, &near, self.tool.setup(), &IkOptions::default(), &mut buf).is_ok()
+            && let Some(s) = buf.iter().find(|s| s.singular.is_none() && s.branch == to.branch)
         {
             want += wrap(s.actual[f] - want);
         }
@@ -50,9 +123,9 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             free_angle: want,
             ..Default::default()
         };
-        let Some(s) = ik_into(self.m, &prev.pose, &self.setup, &opt, &mut self.buf)
+        let Some(s) = ik_into(self.m, &prev.pose, self.tool.setup(), &opt, &mut buf)
             .ok()
-            .and_then(|_| nearest_singular(&self.buf, f, &prev.actual))
+            .and_then(|_| nearest_singular(&buf, f, &prev.actual))
         else {
             return Ok(prev);
         };
@@ -77,10 +150,10 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
                 r.name,
                 (want - prev.actual[f]).to_degrees(),
                 turned.joints.rotary[f].to_degrees(),
-                self.last_line
+                self.written.last_line()
             ),
         );
-        self.segment(prev, turned, pt, vec![d], 0)?;
+        self.segment(prev, turned, pt, vec![d])?;
         Ok(turned)
     }
 
@@ -104,7 +177,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         if (target - from).abs() < 1e-9 {
             return None;
         }
-        let dev = |a: f64| kinematics::hold_outer(self.m, pose, &self.setup, a, branch).map_or(f64::INFINITY, |(_, d)| d);
+        let dev = |a: f64| kinematics::hold_outer(self.m, pose, self.tool.setup(), a, branch).map_or(f64::INFINITY, |(_, d)| d);
         // The smallest step toward the planner's exact choice that stays within the tolerance.
         let t = if dev(from) <= tol {
             0.0
@@ -124,7 +197,7 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             return None;
         }
         let a = from + t * (target - from);
-        let (s, d) = kinematics::hold_outer(self.m, pose, &self.setup, a, branch)?;
+        let (s, d) = kinematics::hold_outer(self.m, pose, self.tool.setup(), a, branch)?;
         let mut j = s.joints;
         let mut act = s.actual;
         for (i, r) in self.m.rotaries.iter().enumerate() {
@@ -139,18 +212,16 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         {
             return None; // holding would leave travel: stay exact
         }
-        let reached = fk(self.m, &j, &self.setup).axis;
+        let reached = fk(self.m, &j, self.tool.setup()).axis;
         let saved = ((target - from).abs() - (a - from).abs()).to_degrees();
-        self.sum.smoothed_blocks += 1;
-        self.sum.smoothing_max_deviation_deg = self.sum.smoothing_max_deviation_deg.max(d.to_degrees());
+        self.singular.smoothed(d.to_degrees());
         Some((j, act, reached, d.to_degrees(), saved))
     }
 
     /// Whether `axis` lies within the singular cone (`Options::singular_cone`) of the singular
     /// direction, either way: where the free rotary is held.
     pub(super) fn in_singular_cone(&self, axis: &Vec3) -> bool {
-        self.singular
-            .is_some_and(|(dir, cone_cos)| axis.dot(&dir).abs() > cone_cos * axis.norm())
+        self.singular.in_cone(axis)
     }
 
     /// The midpoint with the rotaries at `want` (actual angles), the tip exactly at `tip`, and
@@ -160,8 +231,8 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         for (i, r) in self.m.rotaries.iter().enumerate() {
             joints.rotary[i] = r.word(want[i]);
         }
-        let axis_fk = fk(self.m, &joints, &self.setup).axis;
-        let cp = kinematics::controlled_point(self.m, want, tip, &self.setup);
+        let axis_fk = fk(self.m, &joints, self.tool.setup()).axis;
+        let cp = kinematics::controlled_point(self.m, want, tip, self.tool.setup());
         for i in 0..3 {
             joints.linear[i] = if self.m.linears[i].is_some() { cp[i] } else { 0.0 };
         }

@@ -30,7 +30,7 @@ pub(in crate::post) struct Smooth {
     /// The level the operation's name says (NX's `TOOL PATH/ROUGH_…`), if it says one.
     named: Option<Level>,
     /// The next feed move writes the word (a new operation or tolerance).
-    pub(super) due: bool,
+    due: bool,
     /// The lines of the word in force: the same word is not written twice.
     on: Option<Vec<String>>,
 }
@@ -40,6 +40,12 @@ impl Smooth {
     pub(super) fn new(mode: Smoothing) -> Smooth {
         let due = matches!(mode, Smoothing::Rough | Smoothing::Finish);
         Smooth { due, ..Default::default() }
+    }
+
+    /// The next feed move writes the operation's word.
+    #[inline]
+    pub(super) fn due(&self) -> bool {
+        self.due
     }
 }
 

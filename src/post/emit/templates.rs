@@ -16,19 +16,20 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
         let mut v = Vars::default();
         let diameter = self
             .tool
+            .number()
             .and_then(|t| self.o.tool_table.as_ref()?.get(t)?.diameter);
-        v.set_opt("tool", self.tool)
-            .set("length", self.setup.tool_length)
+        v.set_opt("tool", self.tool.number())
+            .set("length", self.tool.setup().tool_length)
             .set_opt("diameter", diameter)
-            .set_opt("next_tool", self.next_tool)
-            .set_opt("spindle_speed", self.rpm.map(|s| s.round() as i64))
+            .set_opt("next_tool", self.tool.next())
+            .set_opt("spindle_speed", self.spindle.rpm().map(|s| s.round() as i64))
             .set("work_offset", self.o.wcs_word().unwrap_or("").to_string())
             .set("program_number", self.o.program_number)
             .set("machine", self.m.id.clone())
             .set("date", crate::text::utc_now())
             .set("units", self.m.units.as_str())
             // The CL's text: it may not close the template's comment or start a block.
-            .set_opt("operation", self.operation.as_deref().map(crate::nc::comment_safe))
+            .set_opt("operation", self.tool.operation().map(crate::nc::comment_safe))
             .set("tolerance", self.o.tolerance)
             .set("dialect", self.o.dialect.name.clone());
         v
