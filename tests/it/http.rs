@@ -1,6 +1,6 @@
 //! The HTTP service over a real socket: every route, streaming order, error paths.
 
-mod common;
+use crate::common;
 
 use common::{Fetch, cfg, server};
 use kinepost::http::{Config, openapi_json};

@@ -35,7 +35,7 @@ fn post_all(machine: &str, bytes: &[u8]) -> post::Summary {
     post::post(bytes, &m, &Options::new(&m), &mut Null(0)).unwrap()
 }
 
-const SEED: &str = include_str!("data/nx_clsf_mech491_contour_chamfer_inch_5ax.cls");
+const SEED: &str = include_str!("../data/nx_clsf_mech491_contour_chamfer_inch_5ax.cls");
 
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(std::env::var("KINEPOST_PROPTEST_SCALE").ok().and_then(|s| s.parse::<u32>().ok()).unwrap_or(1) * 300))]
@@ -68,7 +68,7 @@ proptest! {
 
     #[test]
     fn the_profile_loader_survives_mutated_profiles(cut in 0usize..900, len in 0usize..40, junk in "[ -~\n]{0,40}") {
-        let text = include_str!("../machines/htm50200-horizontal.toml");
+        let text = include_str!("../../machines/htm50200-horizontal.toml");
         let mut s = text.to_string();
         let at = cut.min(s.len());
         let end = (at + len).min(s.len());

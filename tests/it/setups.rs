@@ -1,7 +1,7 @@
 //! Programs of several setups: each NX operation's points are in its own MCS (`MSYS`), and the
 //! program's frame is the first operation's.
 
-mod common;
+use crate::common;
 
 use common::collect::Collect;
 use kinepost::diag::{Code, Severity};

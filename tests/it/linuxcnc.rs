@@ -4,7 +4,7 @@
 //! program-flow golden file. Skipped where `rs274` is not installed, unless
 //! `KINEPOST_REQUIRE_RS274` is set (CI sets it).
 
-mod common;
+use crate::common;
 
 use common::collect::Collect;
 use kinepost::machines::Library;

@@ -1,7 +1,7 @@
 //! The engine end to end: real CL files, generated paths on every profile in both modes, the real
 //! NX post's program as a golden reference, strict mode, diagnostics that keep going.
 
-mod common;
+use crate::common;
 
 use common::collect::Collect;
 use kinepost::cl::{Event, Reader};
@@ -150,7 +150,7 @@ fn generated_paths_on_every_profile_post_clean_in_joint_and_tcp_mode() {
         let cl_text = String::from_utf8(cl.clone()).unwrap();
         for mode in [Mode::Joint, Mode::Tcp] {
             // The engine under test; word address so the replay below can read it (every dialect
-            // is checked by tests/dialects.rs and, in CI, by the shared verifier).
+            // is checked by tests/it/dialects.rs and, in CI, by the shared verifier).
             let o = fanuc(m, mode);
             let (sink, s) = run(m, &cl, &o);
             let errors: Vec<_> = sink.diags.iter().filter(|d| d.severity == Severity::Error).collect();
@@ -2974,6 +2974,7 @@ fn held_words_are_told_when_a_post_stops_early() {
     for i in 0..3000 {
         long += &format!("GOTO/{},{},1\n", i % 7, i % 5);
     }
+    let _one = common::TWO_THREAD_POSTS.lock().unwrap_or_else(|e| e.into_inner());
     for threads in [1, 2] {
         let mut o = Options::new(&m);
         o.threads = threads;

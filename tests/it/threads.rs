@@ -13,7 +13,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 
 /// The tests of this file one at a time: the leak check counts the process's threads by name.
-static ONE_AT_A_TIME: Mutex<()> = Mutex::new(());
+use crate::common::TWO_THREAD_POSTS as ONE_AT_A_TIME;
 
 fn library() -> Library {
     Library::load_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap()

@@ -2,7 +2,7 @@
 //! `KINEPOST_UPDATE_GOLDEN=1` rewrites them), and the ISO dialects read back by an independent
 //! G-code parser (the `gcode` crate).
 
-mod common;
+use crate::common;
 
 use common::collect::Collect;
 use kinepost::machines::Library;

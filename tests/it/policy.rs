@@ -1,7 +1,7 @@
 //! Motion policies: where positioning retracts to (`retract`), a profile default that a job
 //! overrides, validated where options are made.
 
-mod common;
+use crate::common;
 
 use common::collect::Collect;
 use kinepost::machines::{Library, parse_profile};

@@ -2,7 +2,7 @@
 //! only where the control's compensation plane is across the tool; everything else an error
 //! naming the line. The programs read back through `verify` as the path the CL gave.
 
-mod common;
+use crate::common;
 
 use common::collect::Collect;
 use kinepost::diag::{Code, Diagnostic, Severity};

@@ -1,7 +1,7 @@
 //! Tool tables: each tool's own length in joint mode on a head machine, in the program and in
 //! `verify`; the precedence of the job's length, the table, the CL and the profile; bad tables.
 
-mod common;
+use crate::common;
 
 use common::collect::Collect;
 use kinepost::diag::{Code, Severity};

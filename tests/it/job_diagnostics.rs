@@ -3,7 +3,7 @@
 //! the real binary); a failed job's are the CLI's plus the error record that ends them; a job run
 //! by the version before the block store keeps its NDJSON file, served as it was.
 
-mod common;
+use crate::common;
 
 use common::Fetch;
 use serde_json::Value;

@@ -2,7 +2,7 @@
 //! with the admin token, ETags and If-Match, versions, loader errors naming the key, jobs running
 //! with the version they were submitted with, and the versions surviving a restart.
 
-mod common;
+use crate::common;
 
 use common::Fetch;
 

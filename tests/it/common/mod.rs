@@ -1,5 +1,5 @@
 //! A real kinepost server on an ephemeral loopback port, for integration tests.
-#![allow(dead_code)] // each test crate uses part of it
+#![allow(dead_code)] // not every helper is used by every run's configuration
 
 pub mod collect;
 pub mod stl;
@@ -26,6 +26,10 @@ pub async fn server(cfg: Config) -> String {
     tokio::spawn(async move { kinepost::http::run(listener, app(state), &cfg, std::future::pending()).await });
     format!("http://{addr}")
 }
+
+/// Posts on two threads, one at a time in this binary: `threads.rs`'s leak check counts the
+/// process's threads by name, and another test's two-thread post beside it would be counted.
+pub static TWO_THREAD_POSTS: std::sync::Mutex<()> = std::sync::Mutex::new(());
 
 static NEXT: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
 

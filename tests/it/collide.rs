@@ -2,7 +2,7 @@
 //! block and between blocks. Per machine kind, a CL made to crash is found at its block naming
 //! both bodies; a clean CL shows nothing; `collisions=off` checks nothing; strict refuses.
 
-mod common;
+use crate::common;
 
 use common::collect::Collect;
 use kinepost::diag::{Code, Diagnostic, Severity};

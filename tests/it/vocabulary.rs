@@ -82,7 +82,7 @@ fn the_documented_vocabulary_is_the_one_in_the_code() {
     let mut doc = String::from(
         "# The CL vocabulary\n\n\
          Every major word kinepost knows, and what it does with it (generated from\n\
-         `src/cl/vocabulary.rs` by `tests/vocabulary.rs`: `KINEPOST_UPDATE_DOCS=1 cargo test --test vocabulary`).\n\
+         `src/cl/vocabulary.rs` by `tests/it/vocabulary.rs`: `KINEPOST_UPDATE_DOCS=1 cargo test --test it vocabulary::`).\n\
          A word not listed here is unknown: a warning naming its line, and the record is not used.\n\
          A word told again (unknown, or told below) is told by one record a program, at the end of the\n\
          input, naming its first line and its count.\n\

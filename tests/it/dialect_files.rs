@@ -3,7 +3,7 @@
 //! from the CLI (`--dialects DIR --dialect NAME`) and over the API with versions. Bad templates
 //! are refused with their line; a template that runs away is stopped.
 
-mod common;
+use crate::common;
 
 use common::Fetch;
 use serde_json::Value;
