@@ -5,14 +5,10 @@
 
 use crate::common;
 
-use common::Fetch;
+use common::{Fetch, data};
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
-
-fn data(file: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data").join(file)
-}
 
 /// A multipart job of a CL file under its own name, so that its header has as many lines as the
 /// CLI's (`JOB`, `SOURCE` there; `DATE`, `SOURCE` here): sequence numbers agree.

@@ -263,7 +263,7 @@ fn check_point_fk(m: &kinepost::kinematics::Machine, tool_length: f64, axes: &[V
 async fn a_preview_draws_the_decimated_path_its_joints_and_every_warning() {
     let base = common::server(common::cfg()).await;
     let c = reqwest::Client::new();
-    let lib = kinepost::machines::Library::load_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/machines").as_ref()).unwrap();
+    let lib = common::library();
 
     // A long path: decimated to the cap, first and last block kept, every point on its joints.
     let cl = common::generated("spinner-u5-620", 30_000, 7);

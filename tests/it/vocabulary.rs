@@ -2,16 +2,13 @@
 //! or is told at its line; only the informational list is read past in silence, and that list
 //! is the one printed in docs/cl-vocabulary.md.
 
+use crate::common;
+
+use common::machine;
+
 use kinepost::cl::vocabulary::{Treatment, VOCABULARY};
 use kinepost::diag::{Diagnostic, Severity};
-use kinepost::kinematics::Machine;
-use kinepost::machines::Library;
 use kinepost::post::{self, BlockInfo, Options, Sink};
-
-fn machine(id: &str) -> Machine {
-    let lib = Library::load_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/machines").as_ref()).unwrap();
-    lib.get(id).unwrap().machine.clone()
-}
 
 #[derive(Default)]
 struct Collect {
