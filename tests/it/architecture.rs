@@ -1,10 +1,283 @@
 //! The rules of ARCHITECTURE.md, kept by reading the source: each "Architecture invariant" there
-//! is a test here, so that none of them rots unnoticed.
+//! is a test here, so that none of them rots unnoticed. The module rules are checked on resolved
+//! paths ([`modules`]): what a `use` or a qualified path names, wherever it is re-exported from.
 
+mod modules;
+
+use modules::{Target, Tree};
+use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
+
+fn root() -> &'static Path {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+}
 
 fn src() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("src")
+    root().join("src")
+}
+
+fn tree() -> &'static Tree {
+    static TREE: OnceLock<Tree> = OnceLock::new();
+    TREE.get_or_init(|| Tree::load(root()))
+}
+
+/// ARCHITECTURE.md's layers, bottom first: a module imports from its own layer and the layers
+/// below, never from one above. The binary (`main.rs`, `cli/`) is above them all.
+const LAYERS: &[&[&str]] = &[
+    &["kinematics", "diag", "text"],
+    &["collide", "calib", "testgen"],
+    &["cl", "nc"],
+    &["machines"],
+    &["post"],
+    &["output"],
+    &["jobs"],
+    &["http"],
+];
+
+/// Violations the tree has today, one entry each, so that this test is green while they are
+/// removed; an entry that no longer occurs fails the test too, so the list only shrinks.
+const KNOWN: &[&str] = &[
+    // The profile's `[policy]` is read into `post` types in `machines/` (issue 58: the policy
+    // typed in `machines/`, post options named once). One cause, seen twice: as a layer (keyed
+    // by the file, so that another file's arrow up fails) and as a circle between the two
+    // top-level modules.
+    "layer: src/machines/mod.rs → post",
+    "circle in kinepost: machines, post",
+    // `settings` uses the policies' types and `policy` uses `settings::Mode` (the same work).
+    "circle in kinepost::post: policy, settings",
+    // A failed job's end is closed by the store, and the diagnostics read the store's rows
+    // (issue 58: the job file formats and the schemas in modules of their own).
+    "circle in kinepost::jobs: diagnostics, store",
+    // `…/lines` and `/v1/jobs` use each other's helpers (issue 58: one shelf for the routes).
+    "circle in kinepost::http: jobs, lines",
+    // The limits keep a client's downloads in `Metrics`, which holds the limits' `Downloads`:
+    // the count belongs in the state beside the metrics, not in them.
+    "circle in kinepost::http: limits, metrics",
+    // `record` parses a statement and hands each kind to its module, which builds `record`'s
+    // types: those types want a module of their own below the parsers.
+    "circle in kinepost::cl: cycle, drive, fast, flow, frames, moves, record, tool",
+];
+
+/// Functions over the limit today, as `file: fn name`, kept the same way as [`KNOWN`]: the
+/// word grep this test replaced did not see a `pub(super) fn`.
+const KNOWN_LONG: &[&str] = &["src/post/emit/arcs.rs: fn arc_move"];
+
+/// One resolved dependency of a module on another of the crate.
+struct Edge {
+    from: usize,
+    to: usize,
+    line: usize,
+    path: String,
+}
+
+/// Every dependency between modules of the crate, test code left out (a module's tests may
+/// reach it through its callers).
+fn edges() -> Vec<Edge> {
+    let t = tree();
+    let mut out = Vec::new();
+    for (from, m) in t.modules.iter().enumerate() {
+        if m.test {
+            continue;
+        }
+        for r in m.refs.iter().filter(|r| !r.test) {
+            if let Target::Module(to) = t.resolve(from, &r.path) {
+                if to != from {
+                    out.push(Edge {
+                        from,
+                        to,
+                        line: r.line,
+                        path: r.path.join("::"),
+                    });
+                }
+            }
+        }
+    }
+    out
+}
+
+fn at(m: usize, line: usize) -> String {
+    let file = &tree().modules[m].file;
+    format!("{}:{line}", file.strip_prefix(root()).unwrap_or(file).display())
+}
+
+/// The violations found, each under its key, against [`KNOWN`]: every one printed, the test
+/// failing on a key not known and on a known key not found.
+fn judge(found: BTreeMap<String, Vec<String>>, scope: &str) {
+    let mut report = String::new();
+    for (key, lines) in &found {
+        let known = if KNOWN.contains(&key.as_str()) { " (known)" } else { "" };
+        report += &format!("{key}{known}\n");
+        for l in lines {
+            report += &format!("    {l}\n");
+        }
+    }
+    eprint!("{report}");
+    let new: Vec<_> = found.keys().filter(|k| !KNOWN.contains(&k.as_str())).collect();
+    let gone: Vec<_> = KNOWN.iter().filter(|k| k.starts_with(scope) && !found.contains_key(**k)).collect();
+    assert!(new.is_empty(), "violations:\n{report}");
+    assert!(gone.is_empty(), "fixed, to remove from KNOWN: {gone:?}");
+}
+
+/// For every module, its children's dependencies on each other (anything in one child's subtree
+/// using anything in another's) have no circle: each module can be read, and changed, with only
+/// the siblings below it in mind.
+#[test]
+fn no_module_imports_in_a_circle() {
+    let t = tree();
+    // Each dependency is an arrow between the two children of the pair's nearest common module.
+    let mut arrows: BTreeMap<usize, BTreeMap<(usize, usize), Vec<String>>> = BTreeMap::new();
+    for e in edges() {
+        let (a, b) = (ancestors(e.from), ancestors(e.to));
+        let common = a.iter().zip(&b).take_while(|(x, y)| x == y).count();
+        if common == 0 || common == a.len() || common == b.len() {
+            continue; // another crate, or a module and its own parent or child
+        }
+        let lines = arrows.entry(a[common - 1]).or_default().entry((a[common], b[common])).or_default();
+        lines.push(format!("{}: {}", at(e.from, e.line), e.path));
+    }
+    let mut found = BTreeMap::new();
+    for (parent, graph) in &arrows {
+        for scc in circles(graph) {
+            let names: Vec<_> = scc.iter().map(|&c| t.modules[c].path.last().unwrap().clone()).collect();
+            let key = format!("circle in {}: {}", t.name(*parent), names.join(", "));
+            let mut lines = Vec::new();
+            for ((x, y), uses) in graph.iter().filter(|((x, y), _)| scc.contains(x) && scc.contains(y)) {
+                lines.push(format!("{} → {}: {}", t.name(*x), t.name(*y), uses[0]));
+                lines.extend(uses[1..].iter().take(2).map(|u| format!("    {u}")));
+            }
+            found.insert(key, lines);
+        }
+    }
+    judge(found, "circle");
+}
+
+/// The module and its ancestors, the crate's root first.
+fn ancestors(mut m: usize) -> Vec<usize> {
+    let mut v = vec![m];
+    while let Some(p) = tree().modules[m].parent {
+        v.push(p);
+        m = p;
+    }
+    v.reverse();
+    v
+}
+
+/// The strongly connected groups of more than one node, each sorted.
+fn circles(graph: &BTreeMap<(usize, usize), Vec<String>>) -> Vec<BTreeSet<usize>> {
+    let nodes: BTreeSet<usize> = graph.keys().flat_map(|&(a, b)| [a, b]).collect();
+    let reach = |from: usize| {
+        let mut seen = BTreeSet::from([from]);
+        let mut stack = vec![from];
+        while let Some(n) = stack.pop() {
+            for &(_, b) in graph.keys().filter(|(a, _)| *a == n) {
+                if seen.insert(b) {
+                    stack.push(b);
+                }
+            }
+        }
+        seen
+    };
+    let reaches: BTreeMap<usize, BTreeSet<usize>> = nodes.iter().map(|&n| (n, reach(n))).collect();
+    let mut out: Vec<BTreeSet<usize>> = Vec::new();
+    for &n in &nodes {
+        let scc: BTreeSet<usize> = nodes.iter().copied().filter(|m| reaches[&n].contains(m) && reaches[m].contains(&n)).collect();
+        if scc.len() > 1 && !out.contains(&scc) {
+            out.push(scc);
+        }
+    }
+    out
+}
+
+/// The layer of a module of the library (its top-level module's), `None` for the binary's.
+fn layer(m: usize) -> Option<usize> {
+    let path = &tree().modules[m].path;
+    if path[0] != "kinepost" {
+        return None;
+    }
+    let top = path.get(1)?;
+    Some(LAYERS.iter().position(|l| l.contains(&top.as_str())).unwrap_or_else(|| panic!("kinepost::{top} is in no layer of LAYERS")))
+}
+
+/// Arrows point down only: no module of the library imports from a layer above its own, and
+/// every top-level module has its layer.
+#[test]
+fn nothing_imports_from_a_layer_above() {
+    let t = tree();
+    for top in t.modules[t.lib].children.values() {
+        layer(*top);
+    }
+    let mut found: BTreeMap<String, Vec<String>> = BTreeMap::new();
+    for e in edges() {
+        if let (Some(a), Some(b)) = (layer(e.from), layer(e.to)) {
+            if a < b {
+                let file = &t.modules[e.from].file;
+                let file = file.strip_prefix(root()).unwrap_or(file).display();
+                let key = format!("layer: {file} → {}", t.modules[e.to].path[1]);
+                found.entry(key).or_default().push(format!("{}: {}", at(e.from, e.line), e.path));
+            }
+        }
+    }
+    judge(found, "layer");
+}
+
+/// The paths (test code included) that modules under `folders` write to an external crate
+/// starting with one of `needles` (`std::fs`, `serde_json`).
+fn external_uses(folders: &[&str], needles: &[&str]) -> Vec<String> {
+    let t = tree();
+    let mut found = Vec::new();
+    for f in folders {
+        let top = t.find(&["kinepost", f]).unwrap_or_else(|| panic!("no module kinepost::{f}"));
+        for (m, module) in t.modules.iter().enumerate().filter(|(m, _)| t.within(*m, top)) {
+            for r in &module.refs {
+                if let Target::External(p) = t.resolve(m, &r.path) {
+                    if needles.iter().any(|n| p == *n || p.starts_with(&format!("{n}::"))) {
+                        found.push(format!("{}: {p}", at(m, r.line)));
+                    }
+                }
+            }
+        }
+    }
+    found.sort();
+    found.dedup();
+    found
+}
+
+#[test]
+fn kinematics_knows_no_io() {
+    let found = external_uses(
+        &["kinematics"],
+        &["std::fs", "std::io", "std::net", "std::process", "serde", "serde_json", "utoipa", "axum", "tokio"],
+    );
+    assert!(found.is_empty(), "kinematics is pure: no IO, no serde:\n{}", found.join("\n"));
+    // Nothing of the layers above it: `nothing_imports_from_a_layer_above`, kinematics being in
+    // the lowest.
+    assert_eq!(layer(tree().find(&["kinepost", "kinematics"]).unwrap()), Some(0));
+}
+
+#[test]
+fn the_engine_knows_no_output_format_http_or_files() {
+    let found = external_uses(&["cl", "nc", "post"], &["serde_json", "utoipa", "axum", "tokio", "std::fs"]);
+    assert!(
+        found.is_empty(),
+        "the engine (cl, nc, post) writes into a Sink: no JSON, schema, HTTP or file code:\n{}",
+        found.join("\n")
+    );
+    // No job, HTTP or output code: those are layers above the engine's.
+    let post = layer(tree().find(&["kinepost", "post"]).unwrap());
+    for above in ["output", "jobs", "http"] {
+        assert!(layer(tree().find(&["kinepost", above]).unwrap()) > post, "{above} above post");
+    }
+}
+
+#[test]
+fn only_the_binary_knows_the_command_line() {
+    let t = tree();
+    assert!(!t.modules[t.lib].children.contains_key("cli"), "the library declares the CLI module");
+    assert!(t.modules[t.bin].children.contains_key("cli"), "main.rs owns the CLI");
+    let tops: Vec<&str> = t.modules[t.lib].children.keys().map(String::as_str).collect();
+    let found = external_uses(&tops, &["clap"]);
+    assert!(found.is_empty(), "the command line outside the binary:\n{}", found.join("\n"));
 }
 
 /// Every `.rs` file under `dir`, with its text.
@@ -34,76 +307,6 @@ fn uses<'a>(text: &'a str, needle: &str) -> Vec<&'a str> {
         .collect()
 }
 
-fn forbid(folders: &[&str], needles: &[&str], rule: &str) {
-    let mut found = Vec::new();
-    for f in folders {
-        for (p, text) in rust_files(&src().join(f)) {
-            for n in needles {
-                for l in uses(&text, n) {
-                    found.push(format!("{}: {}", p.display(), l.trim()));
-                }
-            }
-        }
-    }
-    assert!(found.is_empty(), "{rule}:\n{}", found.join("\n"));
-}
-
-#[test]
-fn kinematics_knows_no_io() {
-    forbid(
-        &["kinematics"],
-        &[
-            "std::fs",
-            "std::io",
-            "serde_json",
-            "utoipa",
-            "axum",
-            "tokio",
-            "crate::post",
-            "crate::cl",
-            "crate::nc",
-            "crate::machines",
-        ],
-        "kinematics is pure: no IO and no layer above it",
-    );
-}
-
-#[test]
-fn the_engine_knows_no_output_format_http_or_files() {
-    forbid(
-        &["cl", "nc", "post"],
-        &[
-            "serde_json",
-            "utoipa",
-            "axum",
-            "tokio",
-            "std::fs",
-            "crate::http",
-            "crate::jobs",
-            "crate::output",
-        ],
-        "the engine (cl, nc, post) writes into a Sink: no JSON, schema, HTTP, job or file code",
-    );
-}
-
-#[test]
-fn only_the_binary_knows_the_command_line() {
-    let lib = std::fs::read_to_string(src().join("lib.rs")).unwrap();
-    assert!(uses(&lib, "mod cli").is_empty(), "the library declares the CLI module");
-    let main = std::fs::read_to_string(src().join("main.rs")).unwrap();
-    assert!(!uses(&main, "mod cli;").is_empty(), "main.rs owns the CLI");
-    let mut found = Vec::new();
-    for (p, text) in rust_files(&src()) {
-        if p.starts_with(src().join("cli")) || p.ends_with("main.rs") {
-            continue;
-        }
-        for n in ["crate::cli", "kinepost::cli", "clap::"] {
-            found.extend(uses(&text, n).into_iter().map(|l| format!("{}: {}", p.display(), l.trim())));
-        }
-    }
-    assert!(found.is_empty(), "the command line outside the binary:\n{}", found.join("\n"));
-}
-
 #[test]
 fn a_post_option_is_validated_in_one_place() {
     let settings = src().join("post").join("settings.rs");
@@ -129,48 +332,69 @@ fn a_post_option_is_validated_in_one_place() {
 }
 
 /// Files a newcomer can read: none over 1 000 lines (vendored web files aside), the pipeline
-/// driver under 400, no function over 150.
+/// driver under 400, no function over 150 (from its `fn` to its closing brace, as parsed).
 #[test]
 fn files_and_functions_stay_readable() {
+    let t = tree();
     let mut found = Vec::new();
     for (p, text) in rust_files(&src()) {
-        let lines: Vec<&str> = text.lines().collect();
+        let lines = text.lines().count();
         let limit = if p.ends_with("post/mod.rs") { 400 } else { 1000 };
-        if lines.len() > limit {
-            found.push(format!("{}: {} lines (at most {limit})", p.display(), lines.len()));
+        if lines > limit {
+            found.push(format!("{}: {lines} lines (at most {limit})", p.display()));
         }
-        for (i, l) in lines.iter().enumerate() {
-            let t = l.trim_start();
-            let indent = l.len() - t.len();
-            let is_fn = t.starts_with("fn ") || (t.starts_with("pub") && t.contains(" fn ") && t.find(" fn ") < t.find('('));
-            if !is_fn || t.ends_with(';') {
-                continue;
-            }
-            let close = format!("{}}}", " ".repeat(indent));
-            let end = lines[i..].iter().position(|x| *x == close).map_or(lines.len(), |k| i + k);
-            if end - i + 1 > 150 {
-                found.push(format!("{}:{}: fn of {} lines: {}", p.display(), i + 1, end - i + 1, t));
+    }
+    let mut long = BTreeSet::new();
+    for m in &t.modules {
+        let file = m.file.strip_prefix(root()).unwrap_or(&m.file).display().to_string();
+        for (name, first, len) in m.fns.iter().filter(|f| f.2 > 150) {
+            let key = format!("{file}: fn {name}");
+            if KNOWN_LONG.contains(&key.as_str()) {
+                eprintln!("{file}:{first}: fn {name} of {len} lines (known)");
+                long.insert(key);
+            } else {
+                found.push(format!("{file}:{first}: fn {name} of {len} lines"));
             }
         }
     }
+    let gone: Vec<_> = KNOWN_LONG.iter().filter(|k| !long.contains(**k)).collect();
+    assert!(gone.is_empty(), "short now, to remove from KNOWN_LONG: {gone:?}");
+    found.sort();
+    found.dedup();
     assert!(found.is_empty(), "hard to read:\n{}", found.join("\n"));
 }
 
 /// Inside kinematics the arrows run one way: the model holds what is precomputed from the chain,
-/// the IK (solver) reads it; neither the model nor the subproblems import the solver.
+/// the solvers read it; neither the model nor the subproblems use a solver or its answers.
 #[test]
 fn the_kinematics_model_does_not_import_the_solver() {
-    let k = src().join("kinematics");
+    let t = tree();
+    let k = |name: &str| t.find(&["kinepost", "kinematics", name]).unwrap();
+    let solvers = [k("solver"), k("three"), k("solution")];
     let mut found = Vec::new();
-    for (p, text) in rust_files(&k) {
-        let name = p.strip_prefix(&k).unwrap().to_string_lossy().to_string();
-        if name.starts_with("model") || name == "subproblem.rs" {
-            found.extend(uses(&text, "solver").into_iter().map(|l| format!("{name}: {}", l.trim())));
+    for e in edges() {
+        let below = t.within(e.from, k("model")) || t.within(e.from, k("subproblem"));
+        if below && solvers.iter().any(|&s| t.within(e.to, s)) {
+            found.push(format!("{}: {}", at(e.from, e.line), e.path));
         }
     }
-    assert!(
-        found.is_empty(),
-        "the model or subproblems depend on the solver:\n{}",
-        found.join("\n")
+    assert!(found.is_empty(), "the model or subproblems depend on a solver:\n{}", found.join("\n"));
+}
+
+/// The resolver itself, on paths whose answer is known: a re-export's home, `super::`, a renamed
+/// import, the binary's `kinepost::`, an external crate.
+#[test]
+fn paths_resolve_to_the_module_that_defines_them() {
+    let t = tree();
+    let m = |p: &[&str]| t.find(p).unwrap();
+    let s = |p: &str| p.split("::").map(String::from).collect::<Vec<_>>();
+    let model = m(&["kinepost", "kinematics", "model"]);
+    assert_eq!(t.resolve(m(&["kinepost", "post"]), &s("crate::kinematics::Machine")), Target::Module(model));
+    assert_eq!(t.resolve(m(&["kinepost", "kinematics", "solver"]), &s("super::model::Machine")), Target::Module(model));
+    assert_eq!(t.resolve(m(&["main", "cli"]), &s("kinepost::kinematics::Machine")), Target::Module(model));
+    assert_eq!(
+        t.resolve(m(&["kinepost", "kinematics"]), &s("std::fs::read")),
+        Target::External("std::fs::read".into())
     );
+    assert_eq!(t.resolve(m(&["kinepost", "kinematics"]), &s("Vec::new")), Target::Unknown);
 }
