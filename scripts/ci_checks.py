@@ -33,7 +33,7 @@ CORPUS = [
 # z = 0 with z = 0 on the table is a collision. The SOLIDWORKS 3+2 parts have their top at z = 0
 # and reach 125 mm (boss) and 65 mm (wall holes) below it, and their side faces are cut with the
 # tool level (B90): they stand on a riser that keeps the Ø4 in spindle nose above the platter.
-# NX's project2 lays the tool flat 0.5 in above its z = 0 (tests/collide.rs posts the corpus so,
+# NX's project2 lays the tool flat 0.5 in above its z = 0 (tests/it/collide.rs posts the corpus so,
 # with fitting stock).
 PLACE = {
     ('nx_clsf_mech491_project2_inch_5ax.cls', 'haas-umc750'): '0,0,3',

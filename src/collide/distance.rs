@@ -2,7 +2,7 @@
 //! (bounding spheres, boxes), then parry's contact query, and for a solid mesh the test of a
 //! body wholly inside it. Free functions taking the poses, as parry's queries are.
 
-use super::world::Placed;
+use super::geometry::Placed;
 use parry3d_f64::math::{Pose, Vector};
 use parry3d_f64::query;
 

@@ -2,6 +2,7 @@
 //! `[[body]]` entries, a job's stock and fixtures and the tool in the spindle are to the check.
 
 use super::mesh::Mesh;
+use super::v;
 use crate::kinematics::{MAX_COORD, Machine, Mount, Vec3};
 use parry3d_f64::math::{Pose, Rotation, Vector};
 use parry3d_f64::shape::{Cuboid, Cylinder, RoundShape, SharedShape};
@@ -164,11 +165,6 @@ impl Solid {
     }
 }
 
-/// A kinematics vector as parry's.
-pub(super) fn v(p: &Vec3) -> Vector {
-    Vector::new(p.x, p.y, p.z)
-}
-
 /// A named body of the machine.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Body {
@@ -239,3 +235,20 @@ impl ToolShape {
 /// A body no longer than this is no body (a tool of length 0: the gauge point is the spindle
 /// nose); one kept would ask for samples a thousandth of a micron apart.
 const SHORTEST: f64 = 1e-3;
+
+/// A body placed on its link, as parry queries it.
+pub(super) struct Placed {
+    pub(super) name: String,
+    pub(super) link: Link,
+    /// Shared: a mesh's is the profile's, not a copy per post.
+    pub(super) shape: SharedShape,
+    pub(super) local: Pose,
+    /// The bounding sphere in the link's coordinates: the cheap first test of a pair.
+    pub(super) centre: Vector,
+    pub(super) radius: f64,
+    /// A point of the body (the shape's coordinates): inside a solid mesh, the whole body is,
+    /// where no triangle touches it.
+    pub(super) probe: Vector,
+    /// Half its smallest size: the samples keep its motion within it.
+    pub(super) half: f64,
+}

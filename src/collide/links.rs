@@ -1,7 +1,8 @@
 //! Where the machine's links are at one set of joints: the pose in M of every link a body can
 //! be on (`http/web/kin.js` writes the same for the page).
 
-use super::geometry::{Link, v};
+use super::geometry::Link;
+use super::v;
 use crate::kinematics::{Machine, Mount, Setup, Vec3};
 use parry3d_f64::math::{Pose, Rotation, Vector};
 

@@ -1,7 +1,7 @@
 //! Mesh bodies: a profile's STL triangles as parry's `TriMesh`, built once when the profile
 //! loads and shared by every post's world.
 
-use super::geometry::v;
+use super::v;
 use crate::kinematics::Vec3;
 use parry3d_f64::math::Vector;
 use parry3d_f64::shape::{SharedShape, TriMesh};

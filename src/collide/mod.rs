@@ -30,5 +30,13 @@ pub use mesh::Mesh;
 pub use samples::{Coarse, MAX_SAMPLES, SAMPLES_PER_MOVE};
 pub use world::{Hit, World};
 
+use crate::kinematics::Vec3;
+use parry3d_f64::math::Vector;
+
+/// A kinematics vector as parry's.
+pub(super) fn v(p: &Vec3) -> Vector {
+    Vector::new(p.x, p.y, p.z)
+}
+
 /// The most bodies a profile may give: a machine model, not a CAD assembly.
 pub const MAX_BODIES: usize = 64;

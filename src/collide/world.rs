@@ -5,13 +5,11 @@
 
 use super::bounds::{Bounds, CLASSES, Motion, Sides, Slack, settled};
 use super::distance::{Gap, distance};
-use super::geometry::{Geometry, Link, Solid, ToolShape};
+use super::geometry::{Geometry, Link, Placed, Solid, ToolShape};
 use super::links::{Axes, Links};
 use super::pairs::{Pair, PairKind};
 use super::samples::{Allowance, Coarse};
 use crate::kinematics::{Machine, Setup, Vec3};
-use parry3d_f64::math::{Pose, Vector};
-use parry3d_f64::shape::SharedShape;
 
 /// What the check found between two bodies at one pose.
 #[derive(Clone, Debug, PartialEq)]
@@ -20,23 +18,6 @@ pub struct Hit {
     pub b: String,
     /// Negative: the depth they overlap by; else their distance (below the clearance).
     pub dist: f64,
-}
-
-/// A body placed on its link, as parry queries it.
-pub(super) struct Placed {
-    name: String,
-    link: Link,
-    /// Shared: a mesh's is the profile's, not a copy per post.
-    pub(super) shape: SharedShape,
-    local: Pose,
-    /// The bounding sphere in the link's coordinates: the cheap first test of a pair.
-    centre: Vector,
-    pub(super) radius: f64,
-    /// A point of the body (the shape's coordinates): inside a solid mesh, the whole body is,
-    /// where no triangle touches it.
-    pub(super) probe: Vector,
-    /// Half its smallest size: the samples keep its motion within it.
-    half: f64,
 }
 
 /// The setup of the last check, and its work offset's length: another tool length or work

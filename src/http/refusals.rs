@@ -4,7 +4,7 @@
 //! Every refusal is a problem document ([`Problem`], `application/problem+json`); which
 //! `ApiError` gives which status stays the one `match` of `error.rs`.
 //!
-//! `tests/http.rs` provokes each refusal on each route it is documented for, and each status a
+//! `tests/it/http.rs` provokes each refusal on each route it is documented for, and each status a
 //! route answers must be documented for it. A server fault (500) is no route's contract and is
 //! documented nowhere.
 

@@ -7,6 +7,7 @@
 mod angle_error;
 mod fk;
 mod model;
+mod solution;
 mod solver;
 mod subproblem;
 mod three;
@@ -14,7 +15,8 @@ mod three;
 pub use angle_error::AngleError;
 pub use fk::{controlled_point, fk, fk_actual, machine_frame, tcp_fk, tcp_point, tool_axis};
 pub use model::{LINEAR_NAMES, Linear, Machine, MachineSpec, Mount, Rotary, Units, WINDINGS};
-pub use solver::{IkOptions, Solution, Solutions, free_rotary, hold_outer, ik, ik_into, outer_rotary, singular_direction};
+pub use solution::{IkOptions, Solution, Solutions};
+pub use solver::{free_rotary, hold_outer, ik, ik_into, outer_rotary, singular_direction};
 
 pub type Vec3 = nalgebra::Vector3<f64>;
 

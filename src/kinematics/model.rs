@@ -8,7 +8,7 @@ use super::{Error, Vec3};
 use arrayvec::ArrayVec;
 
 mod chain;
-pub(crate) use chain::{Chain, Link, Shape};
+pub(crate) use chain::{Chain, Form, Shape, TERMS, controlled_point_cs};
 
 /// Length units of a profile. Every length of a profile, and its NC output, is in these units.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]

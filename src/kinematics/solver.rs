@@ -3,10 +3,10 @@
 //! machine precomputed of its chain ([`super::model::Chain`]: the orientation sequence, the chain's shape).
 
 use super::fk::rotate;
-use super::model::{Link, Machine, Shape};
+use super::model::{Machine, Shape};
+use super::solution::{Found, IkOptions, Solution, Solutions, push};
 use super::subproblem::{Cs, FreeAngle, sp1};
-use super::{Error, Joints, Pose, Setup, Vec3};
-use arrayvec::ArrayVec;
+use super::{Error, Pose, Setup, Vec3};
 
 /// The tool-axis direction (in W) at which the outer rotary of a two-rotary chain turns freely:
 /// near it, exact orientation makes that rotary swing. `None` for other chains.
@@ -50,47 +50,6 @@ pub fn free_rotary(m: &Machine) -> Option<usize> {
 /// The rotary (chain index) that turns freely at the singular direction of a two-rotary chain.
 pub fn outer_rotary(m: &Machine) -> Option<usize> {
     matches!(m.chain.shape, Shape::Two(_)).then(|| m.chain.seq[0])
-}
-
-/// One joint solution.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Solution {
-    /// Commanded words: linears in profile units (0 for a missing one), rotaries in radians in
-    /// (−π, π] before angle-error compensation, i.e. the NC words for that winding.
-    pub joints: Joints,
-    /// The actual rotary angles (radians, (−π, π] unless singular with a free angle outside).
-    pub actual: [f64; 3],
-    /// +1 or −1: the sign of γ in the subproblem-2 meet `c = c0 ± γ (s1 × s2)`; 0 on the fold
-    /// where both coincide. A branch is continuous in the pose until γ passes 0, so the planner
-    /// keeps it through a cut.
-    pub branch: i8,
-    /// For the 3-rotary chain: the index of this root of the 1-D equation, by increasing outer
-    /// angle; 0 otherwise.
-    pub root: u8,
-    /// The rotary (chain index) whose angle is free at this pose: the value came from
-    /// [`IkOptions::free_angle`] and any other value also reproduces the pose (with other linears).
-    pub singular: Option<usize>,
-}
-
-pub type Solutions = ArrayVec<Solution, 16>;
-
-/// Options of [`ik`]; the defaults reproduce poses exactly.
-#[derive(Clone, Copy, Debug)]
-pub struct IkOptions {
-    /// Actual angle (radians) given to a rotary that is free at a singular pose.
-    pub free_angle: f64,
-    /// How far (radians) an orientation may lie outside the reachable set and still be taken
-    /// (projected onto it): covers the rounding of i, j, k in CL files on 4-axis machines.
-    pub orientation_tolerance: f64,
-}
-
-impl Default for IkOptions {
-    fn default() -> Self {
-        IkOptions {
-            free_angle: 0.0,
-            orientation_tolerance: 1e-7,
-        }
-    }
 }
 
 /// Every joint solution of `pose` (in W, profile units), unfiltered by limits.
@@ -179,109 +138,4 @@ pub fn ik_into(m: &Machine, pose: &Pose, setup: &Setup, opt: &IkOptions, out: &m
         }
     }
     Ok(())
-}
-
-/// A solution as a solver finds it, before its linears are placed: the rotations in sequence
-/// order.
-#[derive(Clone, Copy)]
-pub(super) struct Found {
-    /// Each rotation as (cos, sin).
-    pub(super) cs: [Cs; 3],
-    /// The angles themselves where the solver has them (else read from `cs`).
-    pub(super) angles: Option<[f64; 3]>,
-    pub(super) branch: i8,
-    pub(super) root: u8,
-    /// The rotary (chain index) free at a singular pose, and the angle it is set to.
-    pub(super) singular: Option<(usize, f64)>,
-}
-
-impl Found {
-    /// The rotations `cs`, branch and root 0, nothing singular.
-    pub(super) fn of(cs: [Cs; 3]) -> Found {
-        Found {
-            cs,
-            angles: None,
-            branch: 0,
-            root: 0,
-            singular: None,
-        }
-    }
-}
-
-/// Builds a solution from orientation angles (in sequence order) and places the linears.
-#[inline(always)]
-pub(super) fn push(m: &Machine, out: &mut Solutions, pose: &Pose, setup: &Setup, seq: &[usize], found: Found) {
-    let Found {
-        cs,
-        angles,
-        branch,
-        root,
-        singular,
-    } = found;
-    let mut rcs = [Cs::ZERO; 3];
-    let mut actual = [0.0; 3];
-    for (k, &ri) in seq.iter().enumerate() {
-        rcs[ri] = cs[k];
-        actual[ri] = match angles {
-            Some(a) => a[k],
-            None => cs[k].angle(),
-        };
-    }
-    let singular = singular.map(|(ri, free)| {
-        // The caller's free angle as given: it may carry windings the planner wants to keep.
-        actual[ri] = free;
-        ri
-    });
-    let cp = controlled_point_cs(&m.chain.links, &rcs, &(pose.tip + setup.work_offset), setup.tool_length);
-    let mut joints = Joints::default();
-    for i in 0..3 {
-        joints.linear[i] = if m.chain.has_linear[i] { cp[i] } else { 0.0 };
-    }
-    for (i, l) in m.chain.links.iter().enumerate() {
-        joints.rotary[i] = if l.compensated {
-            m.rotaries[i].word(actual[i])
-        } else {
-            actual[i]
-        };
-    }
-    if out.is_full() {
-        return;
-    }
-    out.push(Solution {
-        joints,
-        actual,
-        branch,
-        root,
-        singular,
-    });
-}
-
-/// `T(φ)(p) − head offset(θ)` from (cos, sin) pairs: the same composition as `fk`, in plain
-/// scalars (the hot path of every solution; nalgebra's generic ops cost 3× the instructions here).
-/// Always inlined: called, it read back a `tip + offset` just stored as halves with one wide load
-/// (a store-forwarding stall: 17% of this function's samples, itself 8% of a joint-mode run).
-#[inline(always)]
-pub(super) fn controlled_point_cs(links: &[Link], cs: &[Cs; 3], p_w: &Vec3, tool_length: f64) -> Vec3 {
-    #[inline(always)]
-    fn turn(k: &[f64; 3], o: &[f64; 3], c: f64, s: f64, p: [f64; 3]) -> [f64; 3] {
-        let v = [p[0] - o[0], p[1] - o[1], p[2] - o[2]];
-        let d = (k[0] * v[0] + k[1] * v[1] + k[2] * v[2]) * (1.0 - c);
-        [
-            o[0] + v[0] * c + (k[1] * v[2] - k[2] * v[1]) * s + k[0] * d,
-            o[1] + v[1] * c + (k[2] * v[0] - k[0] * v[2]) * s + k[1] * d,
-            o[2] + v[2] * c + (k[0] * v[1] - k[1] * v[0]) * s + k[2] * d,
-        ]
-    }
-    let mut v = [0.0; 3];
-    let mut p = [p_w.x, p_w.y, p_w.z];
-    for i in (0..links.len()).rev() {
-        let (l, a) = (&links[i], cs[i]);
-        if l.head {
-            let q = [l.pivot[0], l.pivot[1], l.pivot[2] + tool_length];
-            v = turn(&l.axis, &q, a.c, a.s, v);
-        } else {
-            p = turn(&l.axis, &l.pivot, a.c, a.s, p);
-        }
-    }
-    Vec3::new(p[0] - v[0], p[1] - v[1], p[2] - v[2])
 }

@@ -12,8 +12,8 @@ mod circle;
 mod scan;
 
 use super::fk::rotate;
-use super::model::{Link, Machine};
-use super::solver::{Found, IkOptions, Solution, Solutions, controlled_point_cs, push};
+use super::model::{Form, Machine, TERMS};
+use super::solution::{Found, IkOptions, Solution, Solutions, push};
 use super::subproblem::{Cs, FreeAngle, Meet, Pair};
 use super::{Error, Pose, Setup, Vec3, wrap};
 use arrayvec::ArrayVec;
@@ -146,65 +146,6 @@ impl Residual<'_> {
         let (beta, gamma) = (s1.dot(u) - alpha, s1.dot(&s0.cross(u)));
         let m = (alpha.abs() + beta.hypot(gamma)).min(1.0);
         (1.0 - m) * (1.0 + m)
-    }
-}
-
-/// Terms of the multilinear form: (1, cos, sin) of each rotary, in sequence order.
-const TERMS: usize = 27;
-
-/// The missing linear's coordinate as a form in the rotaries' (1, cos, sin), the outer first:
-/// the chain turns the tip and the tool's pivots once per rotary, affinely in its (cos, sin), so
-/// the coordinate is multilinear in the three pairs, and its terms are linear in the tip and the
-/// tool length. Built with the chain; a pose's terms are five products each, and evaluating them
-/// costs a few dozen products where turning the chain costs three rotations.
-#[derive(Clone, Debug)]
-pub(crate) struct Form {
-    /// The terms' parts proportional to the tip's x, y, z and to the tool length, and the rest.
-    parts: [[f64; TERMS]; 5],
-}
-
-impl Form {
-    pub(crate) fn new(links: &[Link], seq: &[usize], missing: usize) -> Form {
-        // The tip's and the tool length's parts come from the chain turned about its axes through
-        // the origin (their rotations alone), the rest from the chain as built: no part is the
-        // difference of large values.
-        let bare: ArrayVec<Link, 3> = links.iter().map(|l| Link { pivot: [0.0; 3], ..*l }).collect();
-        let mut parts = [[0.0; TERMS]; 5];
-        for (input, part) in parts.iter_mut().enumerate() {
-            let mut p = Vec3::zeros();
-            if input < 3 {
-                p[input] = 1.0;
-            }
-            let (chain, tool_length) = match input {
-                0..=2 => (&bare[..], 0.0),
-                3 => (&bare[..], 1.0),
-                _ => (links, 0.0),
-            };
-            // Values at (cos, sin) = (0, 0), (1, 0), (0, 1) of each rotary ...
-            const AT: [Cs; 3] = [Cs { c: 0.0, s: 0.0 }, Cs { c: 1.0, s: 0.0 }, Cs { c: 0.0, s: 1.0 }];
-            for (t, value) in part.iter_mut().enumerate() {
-                let mut cs = [Cs::ZERO; 3];
-                for (k, &ri) in seq.iter().enumerate() {
-                    cs[ri] = AT[t / 3usize.pow(2 - k as u32) % 3];
-                }
-                *value = controlled_point_cs(chain, &cs, &p, tool_length)[missing];
-            }
-            // ... to the coefficients of (1, cos, sin): less the value at (0, 0), factor by factor.
-            for k in 0..3 {
-                let stride = 3usize.pow(2 - k as u32);
-                for t in (0..TERMS).filter(|t| t / stride % 3 == 0) {
-                    part[t + stride] -= part[t];
-                    part[t + 2 * stride] -= part[t];
-                }
-            }
-        }
-        Form { parts }
-    }
-
-    /// The terms at the tip `p_w` (work offset added) and the tool length.
-    fn at(&self, p_w: &Vec3, tool_length: f64) -> [f64; TERMS] {
-        let [x, y, z, l, one] = &self.parts;
-        std::array::from_fn(|t| x[t] * p_w.x + y[t] * p_w.y + z[t] * p_w.z + l[t] * tool_length + one[t])
     }
 }
 

@@ -4,7 +4,7 @@
 
 use super::emit::{Ahead, Emitter};
 use super::plan::Out;
-use super::{Error, ProgEvent, Sink};
+use super::{Error, PLANE_AXIS_EPS, ProgEvent, Sink};
 use crate::kinematics::{Vec3, angle_between};
 use std::collections::VecDeque;
 use super::Stop;
@@ -33,8 +33,6 @@ fn free_angle_at(o: &Out, free: usize) -> Option<Option<f64>> {
 
 /// Items held back for the tilted-plane look-ahead (about one planner commit).
 const LOOK_AHEAD: usize = 256;
-/// Tool axes closer than this (radians) are the same fixed axis.
-pub(super) const PLANE_AXIS_EPS: f64 = 1e-9;
 
 /// Whether the run of points after a rapid keeps `axis` until a rapid with another axis, a tool
 /// change or the end, as far as the next [`LOOK_AHEAD`] items show (beyond them, the run is taken

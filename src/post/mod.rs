@@ -35,6 +35,10 @@ use plan::{Out, Planner};
 use std::collections::VecDeque;
 use std::io::BufRead;
 
+/// Tool axes closer than this (radians) are the same fixed axis: for the look-ahead that finds
+/// a tilted plane's run and for the emitter that leaves the plane, alike.
+const PLANE_AXIS_EPS: f64 = 1e-9;
+
 #[derive(Debug, thiserror::Error)]
 pub enum Error {
     #[error(transparent)]

@@ -1,5 +1,5 @@
 // The machine on the page, in a real headless Chromium: for each machine kind (table-table,
-// head-head, head-table, nutating, three-rotary) a CL made to crash (tests/collide.rs's programs
+// head-head, head-table, nutating, three-rotary) a CL made to crash (tests/it/collide.rs's programs
 // and bodies) is posted as a job; the result page draws the machine, moves it with the block
 // slider (the plots' cursor follows, a plot click moves it back), plays, and a click on a
 // collision marker explains it (block, bodies, depth, CL line). The machine check page moves
@@ -22,7 +22,7 @@ const check = (ok, what) => { if (ok) { passed++; console.log('ok  ', what); } e
 
 const UP = [0, 0, 1];
 const tilted = (deg) => [Math.sin(deg * Math.PI / 180), 0, Math.cos(deg * Math.PI / 180)];
-/** tests/collide.rs's `cl`: the header, then points; the CL line of each point. */
+/** tests/it/collide.rs's `cl`: the header, then points; the CL line of each point. */
 function cl(units, length, pts) {
   const s = ['PARTNO/COLLIDE', `UNITS/${units}`, `LOADTL/1,LENGTH,${length}`, 'SPINDL/6000,RPM,CLW', `FEDRAT/500,${units === 'MM' ? 'MMPM' : 'IPM'}`];
   const lines = [];
@@ -35,7 +35,7 @@ function cl(units, length, pts) {
   return { text: s.join('\n'), lines };
 }
 
-// Per machine kind: a shipped profile, bodies (tests/collide.rs's) where it has none, a crash
+// Per machine kind: a shipped profile, bodies (tests/it/collide.rs's) where it has none, a crash
 // and the bodies it names.
 const KINDS = [
   {

@@ -6,8 +6,7 @@
 
 use super::{Linear, Mount, Rotary};
 use crate::kinematics::Vec3;
-use crate::kinematics::subproblem::Pair;
-use crate::kinematics::three::Form;
+use crate::kinematics::subproblem::{Cs, Pair};
 use arrayvec::ArrayVec;
 
 #[derive(Clone, Debug)]
@@ -119,4 +118,93 @@ impl Chain {
             has_linear: [linears[0].is_some(), linears[1].is_some(), linears[2].is_some()],
         })
     }
+}
+
+/// Terms of the multilinear form: (1, cos, sin) of each rotary, in sequence order.
+pub(crate) const TERMS: usize = 27;
+
+/// The missing linear's coordinate as a form in the rotaries' (1, cos, sin), the outer first:
+/// the chain turns the tip and the tool's pivots once per rotary, affinely in its (cos, sin), so
+/// the coordinate is multilinear in the three pairs, and its terms are linear in the tip and the
+/// tool length. Built with the chain; a pose's terms are five products each, and evaluating them
+/// costs a few dozen products where turning the chain costs three rotations.
+#[derive(Clone, Debug)]
+pub(crate) struct Form {
+    /// The terms' parts proportional to the tip's x, y, z and to the tool length, and the rest.
+    parts: [[f64; TERMS]; 5],
+}
+
+impl Form {
+    pub(crate) fn new(links: &[Link], seq: &[usize], missing: usize) -> Form {
+        // The tip's and the tool length's parts come from the chain turned about its axes through
+        // the origin (their rotations alone), the rest from the chain as built: no part is the
+        // difference of large values.
+        let bare: ArrayVec<Link, 3> = links.iter().map(|l| Link { pivot: [0.0; 3], ..*l }).collect();
+        let mut parts = [[0.0; TERMS]; 5];
+        for (input, part) in parts.iter_mut().enumerate() {
+            let mut p = Vec3::zeros();
+            if input < 3 {
+                p[input] = 1.0;
+            }
+            let (chain, tool_length) = match input {
+                0..=2 => (&bare[..], 0.0),
+                3 => (&bare[..], 1.0),
+                _ => (links, 0.0),
+            };
+            // Values at (cos, sin) = (0, 0), (1, 0), (0, 1) of each rotary ...
+            const AT: [Cs; 3] = [Cs { c: 0.0, s: 0.0 }, Cs { c: 1.0, s: 0.0 }, Cs { c: 0.0, s: 1.0 }];
+            for (t, value) in part.iter_mut().enumerate() {
+                let mut cs = [Cs::ZERO; 3];
+                for (k, &ri) in seq.iter().enumerate() {
+                    cs[ri] = AT[t / 3usize.pow(2 - k as u32) % 3];
+                }
+                *value = controlled_point_cs(chain, &cs, &p, tool_length)[missing];
+            }
+            // ... to the coefficients of (1, cos, sin): less the value at (0, 0), factor by factor.
+            for k in 0..3 {
+                let stride = 3usize.pow(2 - k as u32);
+                for t in (0..TERMS).filter(|t| t / stride % 3 == 0) {
+                    part[t + stride] -= part[t];
+                    part[t + 2 * stride] -= part[t];
+                }
+            }
+        }
+        Form { parts }
+    }
+
+    /// The terms at the tip `p_w` (work offset added) and the tool length.
+    pub(crate) fn at(&self, p_w: &Vec3, tool_length: f64) -> [f64; TERMS] {
+        let [x, y, z, l, one] = &self.parts;
+        std::array::from_fn(|t| x[t] * p_w.x + y[t] * p_w.y + z[t] * p_w.z + l[t] * tool_length + one[t])
+    }
+}
+
+/// `T(φ)(p) − head offset(θ)` from (cos, sin) pairs: the same composition as `fk`, in plain
+/// scalars (the hot path of every solution; nalgebra's generic ops cost 3× the instructions here).
+/// Always inlined: called, it read back a `tip + offset` just stored as halves with one wide load
+/// (a store-forwarding stall: 17% of this function's samples, itself 8% of a joint-mode run).
+#[inline(always)]
+pub(crate) fn controlled_point_cs(links: &[Link], cs: &[Cs; 3], p_w: &Vec3, tool_length: f64) -> Vec3 {
+    #[inline(always)]
+    fn turn(k: &[f64; 3], o: &[f64; 3], c: f64, s: f64, p: [f64; 3]) -> [f64; 3] {
+        let v = [p[0] - o[0], p[1] - o[1], p[2] - o[2]];
+        let d = (k[0] * v[0] + k[1] * v[1] + k[2] * v[2]) * (1.0 - c);
+        [
+            o[0] + v[0] * c + (k[1] * v[2] - k[2] * v[1]) * s + k[0] * d,
+            o[1] + v[1] * c + (k[2] * v[0] - k[0] * v[2]) * s + k[1] * d,
+            o[2] + v[2] * c + (k[0] * v[1] - k[1] * v[0]) * s + k[2] * d,
+        ]
+    }
+    let mut v = [0.0; 3];
+    let mut p = [p_w.x, p_w.y, p_w.z];
+    for i in (0..links.len()).rev() {
+        let (l, a) = (&links[i], cs[i]);
+        if l.head {
+            let q = [l.pivot[0], l.pivot[1], l.pivot[2] + tool_length];
+            v = turn(&l.axis, &q, a.c, a.s, v);
+        } else {
+            p = turn(&l.axis, &l.pivot, a.c, a.s, p);
+        }
+    }
+    Vec3::new(p[0] - v[0], p[1] - v[1], p[2] - v[2])
 }

@@ -4,7 +4,7 @@
 
 use super::{Residual, Trig, contract, contract_outer, resultant_roots, scan};
 use crate::kinematics::model::Shape;
-use crate::kinematics::solver::controlled_point_cs;
+use crate::kinematics::model::controlled_point_cs;
 use crate::kinematics::subproblem::{Cs, FreeAngle};
 use crate::kinematics::{Joints, Linear, Machine, MachineSpec, Mount, Rotary, Setup, Units, Vec3, fk, wrap};
 

@@ -5,7 +5,7 @@ use super::singular::nearest_singular;
 use super::{At, Emitter, limit_error};
 use crate::diag::{Code, Diagnostic, Severity};
 use crate::kinematics::{self, IkOptions, Joints, Pose, Solutions, angle_between, ik_into};
-use crate::post::lookahead::PLANE_AXIS_EPS;
+use crate::post::PLANE_AXIS_EPS;
 use crate::post::plan::{self, Cand, Committed, wrap};
 use crate::post::{Error, MotionPt, Sink};
 

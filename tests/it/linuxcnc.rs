@@ -4,7 +4,7 @@
 //! program-flow golden file. Skipped where `rs274` is not installed, unless
 //! `KINEPOST_REQUIRE_RS274` is set (CI sets it).
 
-mod common;
+use crate::common;
 
 use common::collect::Collect;
 use kinepost::machines::Library;
@@ -95,7 +95,7 @@ fn linuxcnc_reads_every_program_to_its_end() {
             failures.push(format!("{what}: {e}"));
         }
     };
-    let lib = Library::load_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/machines").as_ref()).unwrap();
+    let lib = common::library();
     for p in lib.iter() {
         let id = &p.machine.id;
         let mut cl = Vec::new();
@@ -135,7 +135,7 @@ fn linuxcnc_reads_every_program_to_its_end() {
 fn the_xyzbc_trt_profile_is_linuxcncs_trt_kinematics() {
     use kinepost::kinematics::{self, Joints, Setup, Vec3};
     use nalgebra::Rotation3;
-    let lib = Library::load_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/machines").as_ref()).unwrap();
+    let lib = common::library();
     let m = &lib.get("linuxcnc-xyzbc-trt").unwrap().machine;
     let (r, d) = (Vec3::zeros(), Vec3::new(-20.0, 0.0, -15.0));
     let mut seed = 7u64;
@@ -175,7 +175,7 @@ fn xyzbc_trt_programs_run_with_switchkins() {
         ),
     )
     .unwrap();
-    let lib = Library::load_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/machines").as_ref()).unwrap();
+    let lib = common::library();
     let m = &lib.get("linuxcnc-xyzbc-trt").unwrap().machine;
     let mut cl = Vec::new();
     kinepost::testgen::write_path(m, 200, 5, m.default_tool_length, &mut cl).unwrap();

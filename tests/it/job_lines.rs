@@ -3,7 +3,7 @@
 //! (which is still served): the same bytes, whole or by Range, the same ETag, statuses and
 //! range headers; and its entries agree with the NC they index.
 
-mod common;
+use crate::common;
 
 use common::Fetch;
 use serde_json::Value;

@@ -2,10 +2,9 @@
 //! `KINEPOST_UPDATE_GOLDEN=1` rewrites them), and the ISO dialects read back by an independent
 //! G-code parser (the `gcode` crate).
 
-mod common;
+use crate::common;
 
 use common::collect::Collect;
-use kinepost::machines::Library;
 use kinepost::post::{self, BlockInfo, Mode, Options, Sink};
 use std::path::Path;
 
@@ -19,7 +18,7 @@ const CASES: [(&str, &str); 5] = [
 ];
 
 fn program(dialect: &str, machine: &str, mode: Mode, points: usize) -> Collect {
-    let lib = Library::load_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap();
+    let lib = common::library();
     let m = lib.get(machine).unwrap().machine.clone();
     let mut cl = Vec::new();
     kinepost::testgen::write_path(&m, points, 11, m.default_tool_length, &mut cl).unwrap();
@@ -200,7 +199,7 @@ fn words(line: &str) -> Vec<(char, Option<f64>)> {
 /// the same arcs, the same ends, the same turning sense, and every `C` block truly on its circle.
 #[test]
 fn heidenhain_arcs_are_the_iso_arcs_as_cc_and_c() {
-    let lib = Library::load_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap();
+    let lib = common::library();
     let m = lib.get("dmg-dmc75v").unwrap().machine.clone();
     let mut total = 0;
     for file in [
@@ -322,7 +321,7 @@ fn canned(machine: &str, dialect: Option<&str>, mode: Mode) -> (Collect, post::S
             Ok(())
         }
     }
-    let lib = Library::load_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap();
+    let lib = common::library();
     let m = lib.get(machine).unwrap().machine.clone();
     let mut o = Options::new(&m);
     o.mode = mode;
@@ -516,7 +515,7 @@ fn same_holes(what: &str, got: &[DrilledHole], want: &[DrilledHole]) {
 #[test]
 fn canned_cycles_reach_every_hole_on_every_profile() {
     use kinepost::post::verify::{VerifyOptions, verify};
-    let lib = Library::load_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap();
+    let lib = common::library();
     // Holes drilled as cycles per profile: tables turn the part under a fixed Z spindle (all 8);
     // where a head tilts the tool (head-table, head-head, the 3-rotary machine's inner rotaries)
     // only the 6 top-face holes run along Z.
@@ -626,7 +625,7 @@ fn every_dialect_drills_the_same_holes() {
 #[test]
 fn verify_catches_a_wrong_canned_cycle() {
     use kinepost::post::verify::{VerifyOptions, verify};
-    let lib = Library::load_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap();
+    let lib = common::library();
     let m = lib.get("spinner-u5-620").unwrap().machine.clone();
     let (sink, sum, _) = canned("spinner-u5-620", Some("fanuc"), Mode::Joint);
     let vo = VerifyOptions {
@@ -669,7 +668,7 @@ fn random_holes(id: &str, seed: &[f64]) -> Result<(), proptest::test_runner::Tes
     use kinepost::kinematics::{Setup, Units, Vec3};
     use kinepost::post::verify::{VerifyOptions, verify};
     use proptest::prelude::*;
-    let lib = Library::load_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap();
+    let lib = common::library();
     let p = lib.get(id).unwrap();
     let m = &p.machine;
     let setup = Setup::new(m.default_tool_length, Vec3::zeros());
@@ -886,7 +885,7 @@ fn random_planes(id: &str, seed: &[f64]) -> Result<(), proptest::test_runner::Te
     use kinepost::kinematics::{Setup, Units, Vec3};
     use kinepost::post::verify::{VerifyOptions, verify};
     use proptest::prelude::*;
-    let lib = Library::load_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap();
+    let lib = common::library();
     let m = &lib.get(id).unwrap().machine;
     let s = if m.units == Units::Mm { 1.0 } else { 1.0 / 25.4 };
     let tol = if m.units == Units::Mm { 0.01 } else { 0.0004 };
@@ -944,7 +943,7 @@ proptest::proptest! {
 fn a_plane_left_inside_a_cut_is_repositioned_out_of_it() {
     use kinepost::kinematics::{Joints, Setup, Vec3};
     use kinepost::post::verify::{VerifyOptions, verify};
-    let lib = Library::load_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap();
+    let lib = common::library();
     let m = &lib.get("spinner-u5-620").unwrap().machine;
     let setup = Setup::new(m.default_tool_length, Vec3::zeros());
     let j = Joints {
@@ -998,7 +997,7 @@ fn a_plane_left_inside_a_cut_is_repositioned_out_of_it() {
 #[test]
 fn golden_tilted_plane_programs() {
     use kinepost::kinematics::Vec3;
-    let lib = Library::load_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap();
+    let lib = common::library();
     let seed = [0.21, 0.67, 0.43, 0.88, 0.12, 0.55, 0.31, 0.76, 0.49, 0.05, 0.93];
     for (d, id) in [
         ("fanuc", "spinner-u5-620"),
@@ -1040,7 +1039,7 @@ fn golden_tilted_plane_programs() {
 /// name programs take any.
 #[test]
 fn program_numbers_are_checked_against_the_dialects_program_frame() {
-    let lib = Library::load_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap();
+    let lib = common::library();
     let m = &lib.get("dmg-dmc75v").unwrap().machine;
     let settings = |dialect: &str, n: u32| post::Settings {
         dialect: Some(dialect.into()),
@@ -1081,7 +1080,7 @@ fn nc_with(m: &kinepost::kinematics::Machine, cl: &str, settings: post::Settings
 /// are additive offsets, a TNC selects its preset on the control.
 #[test]
 fn the_program_selects_its_work_coordinates() {
-    let lib = Library::load_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap();
+    let lib = common::library();
     let m = &lib.get("spinner-u5-620").unwrap().machine;
     let cl = "UNITS/MM\nLOADTL/1\nSPINDL/1000\nGOTO/10,20,30,0,0,1\nFINI\n";
     let program = |dialect: &str, wcs: Option<&str>| {
@@ -1127,7 +1126,7 @@ fn the_program_selects_its_work_coordinates() {
 /// controls whose machine Z0 is the top of travel; joint mode goes to the top of Z travel already.
 #[test]
 fn a_tcp_program_leaves_the_part_by_machine_z_home() {
-    let lib = Library::load_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap();
+    let lib = common::library();
     let m = &lib.get("spinner-u5-620").unwrap().machine;
     let cl = "UNITS/MM\nLOADTL/1\nSPINDL/1000\nFEDRAT/500\nGOTO/10,20,30,0,0,1\nGOTO/10,20,0,0,0,1\n\
               LOADTL/2\nGOTO/30,20,30,0,0,1\nGOTO/30,20,0,0,0,1\nFINI\n";
@@ -1166,7 +1165,7 @@ fn a_tcp_program_leaves_the_part_by_machine_z_home() {
 #[test]
 fn a_delay_is_each_controls_dwell() {
     use kinepost::kinematics::{Setup, Vec3};
-    let lib = Library::load_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap();
+    let lib = common::library();
     let m = &lib.get("vmc-3axis").unwrap().machine;
     let cl = "UNITS/MM\nLOADTL/1\nSPINDL/600,RPM,CLW\nRAPID\nGOTO/0,0,5\nFEDRAT/100,MMPM\nGOTO/0,0,-10\n\
               DELAY/1.5\nGOTO/0,0,5\nGOTO/0,0,-10\nDELAY/REV,10\nGOTO/0,0,5\nFINI\n";
@@ -1228,7 +1227,7 @@ fn a_delay_is_each_controls_dwell() {
 /// where it happened, and the program closes with the count before its end.
 #[test]
 fn a_program_with_errors_says_so_in_its_own_text() {
-    let lib = Library::load_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap();
+    let lib = common::library();
     let m = &lib.get("vmc-3axis").unwrap().machine;
     // Line 5 is far outside X travel; line 6 tilts the tool (no solution on three axes).
     // (FEDRAT in mm a minute says the units: a program with no feed at all is an error too.)
@@ -1280,7 +1279,7 @@ fn a_program_with_errors_says_so_in_its_own_text() {
 /// Siemens' G41 with the tool's D1, Heidenhain's RL/R0).
 #[test]
 fn program_flow_in_every_dialect() {
-    let lib = Library::load_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap();
+    let lib = common::library();
     let cl = "UNITS/MM\nLOADTL/1\nSPINDL/5000,CLW\nCOOLNT/ON\nFEDRAT/500,MMPM\nGOTO/0,0,20,0,0,1\n\
               SELCTL/2\nSTOP\nGOTO/20,0,20,0,0,1\nOPSTOP\nSPINDL/6000,CLW\nGOTO/30,0,20,0,0,1\n\
               OPSKIP/ON\nGOTO/40,0,20,0,0,1\nOPSKIP/OFF\nAUXFUN/19\nPREFUN/64\nAUXFUN/30\nPREFUN/91\nGOTO/50,0,20,0,0,1\n\
@@ -1338,7 +1337,7 @@ fn program_flow_in_every_dialect() {
 /// written. Fanuc and Haas controls take the builder's own codes.
 #[test]
 fn codes_linuxcnc_does_not_know_are_not_written() {
-    let lib = Library::load_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap();
+    let lib = common::library();
     let p = lib.get("haas-umc750").unwrap();
     let cl = "UNITS/MM\nLOADTL/1\nFEDRAT/500,MMPM\nGOTO/0,0,20,0,0,1\nAUXFUN/77\nAUXFUN/101\n\
               RAPID\nGOTO/0,0,20,0,0.5,0.8660254\nGOTO/10,0,20,0,0.5,0.8660254\nEND\n";
@@ -1393,7 +1392,7 @@ fn one_hole(kind: &str, extra: &str, ccw: bool) -> String {
 }
 
 fn post_cl(machine: &str, dialect: &str, mode: Mode, canned: bool, cl: &str) -> (Collect, post::Summary) {
-    let lib = Library::load_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap();
+    let lib = common::library();
     let m = lib.get(machine).unwrap().machine.clone();
     let mut o = Options::new(&m);
     o.mode = mode;
@@ -1477,7 +1476,7 @@ fn all_holes() -> String {
 fn golden_hole_cycles_per_dialect() {
     use kinepost::kinematics::{Setup, Vec3};
     use kinepost::post::verify::{VerifyOptions, verify};
-    let lib = Library::load_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap();
+    let lib = common::library();
     let m = lib.get("vmc-3axis").unwrap().machine.clone();
     let cl = all_holes();
     for d in ["fanuc", "haas", "linuxcnc", "siemens", "heidenhain"] {
@@ -1714,7 +1713,7 @@ fn two_operations(intol: bool) -> String {
 }
 
 fn post_smoothing(dialect: &str, smoothing: post::Smoothing, cl: &str) -> String {
-    let lib = Library::load_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap();
+    let lib = common::library();
     let m = lib.get("vmc-3axis").unwrap().machine.clone();
     let mut o = Options::new(&m);
     o.dialect = kinepost::nc::dialect(dialect).unwrap();

@@ -2,20 +2,15 @@
 //! only where the control's compensation plane is across the tool; everything else an error
 //! naming the line. The programs read back through `verify` as the path the CL gave.
 
-mod common;
+use crate::common;
+
+use common::machine;
 
 use common::collect::Collect;
 use kinepost::diag::{Code, Diagnostic, Severity};
 use kinepost::kinematics::Machine;
-use kinepost::machines::Library;
 use kinepost::post::verify::verify;
 use kinepost::post::{self, Mode, Options};
-use std::path::Path;
-
-fn machine(id: &str) -> Machine {
-    let lib = Library::load_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap();
-    lib.get(id).unwrap().machine.clone()
-}
 
 impl Collect {
     /// The lines of the cutter-compensation diagnostics of `severity`.

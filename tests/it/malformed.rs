@@ -2,7 +2,7 @@
 //! the CL line and the column — by the CLI (`kinepost lint`) and by HTTP (strict mode: 422
 //! problem+json) alike. Every input is `UNITS/MM`, the case on line 2, then a good GOTO.
 
-mod common;
+use crate::common;
 
 use serde_json::Value;
 use std::process::Command;

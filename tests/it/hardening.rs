@@ -2,7 +2,7 @@
 //! or half a header, uploads that trickle, more streams than allowed at once, huge form fields,
 //! CORS for a browser plug-in's profile writes, If-Range, and IK stalling the runtime.
 
-mod common;
+use crate::common;
 
 use common::{Fetch, raw, read_response};
 use kinepost::http::Config;
@@ -380,7 +380,7 @@ async fn if_range_gets_the_part_only_of_the_same_output() {
     common::wait_job(&c, &base, id, "succeeded", Duration::from_secs(30)).await;
     // The diagnostics are rebuilt as they stream, their length unknown: a Range, with any
     // If-Range, gets the whole (200, `Accept-Ranges: none`); the NDJSON file of a job run
-    // before the block store is served by range (`tests/job_diagnostics.rs`).
+    // before the block store is served by range (`tests/it/job_diagnostics.rs`).
     let url = format!("{base}/v1/jobs/{id}/diagnostics");
     let whole = c.get(&url).send().await.unwrap();
     let etag = whole.headers()["etag"].to_str().unwrap().to_string();

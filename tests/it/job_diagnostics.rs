@@ -3,16 +3,12 @@
 //! the real binary); a failed job's are the CLI's plus the error record that ends them; a job run
 //! by the version before the block store keeps its NDJSON file, served as it was.
 
-mod common;
+use crate::common;
 
-use common::Fetch;
+use common::{Fetch, data};
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
-
-fn data(file: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data").join(file)
-}
 
 /// A multipart job of a CL file under its own name, so that its header has as many lines as the
 /// CLI's (`JOB`, `SOURCE` there; `DATE`, `SOURCE` here): sequence numbers agree.

@@ -2,12 +2,13 @@
 //! stand-in for fuzzing (cargo-fuzz needs nightly): proptest over arbitrary and mutated inputs,
 //! plus the specific monsters.
 
+use crate::common;
+
 use kinepost::cl::{Event, Reader};
 use kinepost::diag::{Code, Severity};
-use kinepost::machines::{Library, parse_profile};
+use kinepost::machines::parse_profile;
 use kinepost::post::{self, Options, Sink};
 use proptest::prelude::*;
-use std::path::Path;
 
 struct Null(usize);
 impl Sink for Null {
@@ -30,12 +31,12 @@ fn read_all(bytes: &[u8]) -> (usize, Vec<kinepost::diag::Diagnostic>) {
 }
 
 fn post_all(machine: &str, bytes: &[u8]) -> post::Summary {
-    let lib = Library::load_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap();
+    let lib = common::library();
     let m = lib.get(machine).unwrap().machine.clone();
     post::post(bytes, &m, &Options::new(&m), &mut Null(0)).unwrap()
 }
 
-const SEED: &str = include_str!("data/nx_clsf_mech491_contour_chamfer_inch_5ax.cls");
+const SEED: &str = include_str!("../data/nx_clsf_mech491_contour_chamfer_inch_5ax.cls");
 
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(std::env::var("KINEPOST_PROPTEST_SCALE").ok().and_then(|s| s.parse::<u32>().ok()).unwrap_or(1) * 300))]
@@ -51,7 +52,7 @@ proptest! {
         let at = cut % b.len().max(1);
         let end = (at + len).min(b.len());
         b.splice(at..end, junk);
-        let lib = Library::load_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap();
+        let lib = common::library();
         let m = lib.get(machine).unwrap().machine.clone();
         // Junk at the start can make it no CL at all (a UTF-16 mark): refused, not a panic.
         match post::post(&b[..], &m, &Options::new(&m), &mut Null(0)) {
@@ -68,7 +69,7 @@ proptest! {
 
     #[test]
     fn the_profile_loader_survives_mutated_profiles(cut in 0usize..900, len in 0usize..40, junk in "[ -~\n]{0,40}") {
-        let text = include_str!("../machines/htm50200-horizontal.toml");
+        let text = include_str!("../../machines/htm50200-horizontal.toml");
         let mut s = text.to_string();
         let at = cut.min(s.len());
         let end = (at + len).min(s.len());
@@ -102,7 +103,7 @@ fn monsters() {
     assert_eq!((s.cl_points, s.errors), (1, 1));
     // A zero tool axis is an error; an unnormalized one a warning; a GOTO before any units a warning.
     let mut sink = Null(0);
-    let lib = Library::load_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap();
+    let lib = common::library();
     let m = lib.get("spinner-u5-620").unwrap().machine.clone();
     let s = post::post(&b"GOTO/1,2,3,0,0,0\nGOTO/1,2,3,0,0,2\n"[..], &m, &Options::new(&m), &mut sink).unwrap();
     assert_eq!(s.counts.get("bad_record"), Some(&1));

@@ -1,13 +1,10 @@
 //! Calibration from test cuts and angle-error fitting, on synthetic data with known answers and
 //! on the papers' own figures.
 
+use crate::common;
+
 use kinepost::calib::{self, Measurement};
 use kinepost::kinematics::{Joints, Machine, Rotary, Setup, Vec3};
-use kinepost::machines::Library;
-
-fn lib() -> Library {
-    Library::load_dir(std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap()
-}
 
 const PAPER: [f64; 5] = [0.1808, -2.95e-2, 2.3e-3, -7e-5, -8e-7];
 
@@ -78,7 +75,7 @@ fn uncalibrated(m: &Machine) -> Machine {
 fn fryer_offsets_are_recovered_from_test_cuts() {
     // Truth: the thesis' t = (0.002, 0.001, 0) and J = (0, 0.0005, 0) in, as the shipped profile
     // carries them; the nominal profile has none. Cuts at the thesis' C angles, several A.
-    let truth = lib().get("fryer-5x-45").unwrap().machine.clone();
+    let truth = common::library().get("fryer-5x-45").unwrap().machine.clone();
     let nominal = uncalibrated(&truth);
     let setup = Setup::new(3.0, Vec3::zeros());
     let (ci, ai) = (truth.rotary_index('C').unwrap(), truth.rotary_index('A').unwrap());
@@ -114,7 +111,7 @@ fn fryer_offsets_are_recovered_from_test_cuts() {
 
 #[test]
 fn too_few_cuts_are_refused_not_guessed() {
-    let truth = lib().get("fryer-5x-45").unwrap().machine.clone();
+    let truth = common::library().get("fryer-5x-45").unwrap().machine.clone();
     let nominal = uncalibrated(&truth);
     let setup = Setup::new(3.0, Vec3::zeros());
     let j = Joints::default();

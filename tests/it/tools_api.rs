@@ -3,7 +3,7 @@
 //! write a version with its ETag and `If-Match`; posts and jobs use the machine's table, or their
 //! own `tool_table`, and a job records the version it ran with.
 
-mod common;
+use crate::common;
 
 use common::Fetch;
 

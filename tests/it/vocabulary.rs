@@ -2,16 +2,13 @@
 //! or is told at its line; only the informational list is read past in silence, and that list
 //! is the one printed in docs/cl-vocabulary.md.
 
+use crate::common;
+
+use common::machine;
+
 use kinepost::cl::vocabulary::{Treatment, VOCABULARY};
 use kinepost::diag::{Diagnostic, Severity};
-use kinepost::kinematics::Machine;
-use kinepost::machines::Library;
 use kinepost::post::{self, BlockInfo, Options, Sink};
-
-fn machine(id: &str) -> Machine {
-    let lib = Library::load_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/machines").as_ref()).unwrap();
-    lib.get(id).unwrap().machine.clone()
-}
 
 #[derive(Default)]
 struct Collect {
@@ -82,7 +79,7 @@ fn the_documented_vocabulary_is_the_one_in_the_code() {
     let mut doc = String::from(
         "# The CL vocabulary\n\n\
          Every major word kinepost knows, and what it does with it (generated from\n\
-         `src/cl/vocabulary.rs` by `tests/vocabulary.rs`: `KINEPOST_UPDATE_DOCS=1 cargo test --test vocabulary`).\n\
+         `src/cl/vocabulary.rs` by `tests/it/vocabulary.rs`: `KINEPOST_UPDATE_DOCS=1 cargo test --test it vocabulary::`).\n\
          A word not listed here is unknown: a warning naming its line, and the record is not used.\n\
          A word told again (unknown, or told below) is told by one record a program, at the end of the\n\
          input, naming its first line and its count.\n\

@@ -1,16 +1,11 @@
 //! Motion policies: where positioning retracts to (`retract`), a profile default that a job
 //! overrides, validated where options are made.
 
-mod common;
+use crate::common;
 
 use common::collect::Collect;
-use kinepost::machines::{Library, parse_profile};
+use kinepost::machines::parse_profile;
 use kinepost::post::{self, Mode, Retract, Settings};
-use std::path::Path;
-
-fn library() -> Library {
-    Library::load_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap()
-}
 
 /// A cut, two rapids that each turn the rotaries, a tool change, a cut: every kind of
 /// repositioning the emitter makes.
@@ -24,12 +19,7 @@ fn program() -> String {
 }
 
 fn post_with(id: &str, s: Settings) -> Collect {
-    let lib = library();
-    let p = lib.get(id).unwrap();
-    let o = s.profile_options(&p, None).unwrap();
-    let mut sink = Collect::default();
-    post::post(program().as_bytes(), &p.machine, &o, &mut sink).unwrap();
-    sink
+    common::post_with(id, &s, program().as_bytes()).0
 }
 
 fn with_retract(mode: &str, retract: &str) -> Settings {
@@ -76,7 +66,7 @@ fn retract_along_the_axis_lifts_by_its_distance() {
 fn the_default_is_the_modes_own_and_the_top_of_z_in_joint_mode() {
     let sink = post_with("spinner-u5-620", Settings::default());
     assert!(sink.nc.contains("RETRACT Z"), "{}", sink.nc);
-    let lib = library();
+    let lib = common::library();
     let p = lib.get("spinner-u5-620").unwrap();
     let tcp = Settings {
         mode: Some("tcp".into()),
@@ -142,7 +132,7 @@ fn a_bad_policy_value_is_refused_at_load_naming_the_file_and_key() {
 
 #[test]
 fn bad_retracts_are_refused_naming_the_setting() {
-    let lib = library();
+    let lib = common::library();
     let m = &lib.get("spinner-u5-620").unwrap().machine;
     for bad in ["up", "axis:", "axis:-5", "axis:0", "plane:x", "plane:NaN", "plane:1e300", "machine-z:1"] {
         let e = with_retract("joint", bad).options(m).unwrap_err();
@@ -166,7 +156,7 @@ fn prefer_keeps_a_rotary_on_the_side_asked_for() {
         cl.push_str(&format!("GOTO/{:.3},{:.3},20,{i:.7},{j:.7},{kk:.7}\n", 30.0 * az.cos(), 30.0 * az.sin()));
     }
     cl.push_str("FINI\n");
-    let lib = library();
+    let lib = common::library();
     let p = lib.get("spinner-u5-620").unwrap();
     for (side, sign) in [("B-", -1.0), ("B+", 1.0)] {
         let s = Settings {
@@ -230,7 +220,7 @@ fn f_word(text: &str) -> Option<f64> {
 
 #[test]
 fn feed_mode_dpm_writes_no_inverse_time_and_keeps_each_blocks_time() {
-    let lib = library();
+    let lib = common::library();
     let p = lib.get("spinner-u5-620").unwrap();
     let run = |mode: Option<&str>| {
         let s = Settings {

@@ -2,7 +2,7 @@
 //! with the admin token, ETags and If-Match, versions, loader errors naming the key, jobs running
 //! with the version they were submitted with, and the versions surviving a restart.
 
-mod common;
+use crate::common;
 
 use common::Fetch;
 
@@ -194,7 +194,7 @@ async fn profiles_are_versioned_guarded_and_jobs_keep_their_version() {
     // A job runs with the version it was submitted with. A long job holds the one worker, so the
     // second job starts only after the profile changed again.
     let mut long = Vec::new();
-    let lib = kinepost::machines::Library::load_dir(cfg.machines.as_ref()).unwrap();
+    let lib = common::library();
     let m = &lib.get("spinner-u5-620").unwrap().machine;
     kinepost::testgen::write_path(m, 60_000, 3, m.default_tool_length, &mut long).unwrap();
     let mut short = Vec::new();

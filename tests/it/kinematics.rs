@@ -2,20 +2,13 @@
 //! Kinematics against the machine model: FK/IK round trips on every shipped profile (property
 //! tests), the seed papers' closed forms, singular, unreachable and angle-error cases.
 
+use crate::common;
+
+use common::machine;
+
 use kinepost::kinematics::{self, IkOptions, Joints, Machine, Pose, Setup, Vec3, angle_between, fk, ik};
-use kinepost::machines::Library;
 use proptest::prelude::*;
 use std::f64::consts::{PI, TAU};
-use std::sync::OnceLock;
-
-fn lib() -> &'static Library {
-    static L: OnceLock<Library> = OnceLock::new();
-    L.get_or_init(|| Library::load_dir(std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap())
-}
-
-fn machine(id: &str) -> Machine {
-    lib().get(id).unwrap().machine.clone()
-}
 
 const IDS: [&str; 11] = [
     "spinner-u5-620",
@@ -34,9 +27,9 @@ const IDS: [&str; 11] = [
 #[test]
 fn the_library_ships_every_seed_machine() {
     for id in IDS {
-        assert!(lib().get(id).is_ok(), "{id} missing");
+        assert!(common::library().get(id).is_ok(), "{id} missing");
     }
-    assert_eq!(lib().len(), IDS.len());
+    assert_eq!(common::library().len(), IDS.len());
 }
 
 /// Joints drawn uniformly within travel (unbounded rotaries over ±2 turns, to exercise windings)

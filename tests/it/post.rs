@@ -1,25 +1,16 @@
 //! The engine end to end: real CL files, generated paths on every profile in both modes, the real
 //! NX post's program as a golden reference, strict mode, diagnostics that keep going.
 
-mod common;
+use crate::common;
 
 use common::collect::Collect;
+use common::{data, defaults, machine};
 use kinepost::cl::{Event, Reader};
 use kinepost::diag::{Code, Diagnostic, Severity};
 use kinepost::kinematics::{Joints, Machine, Setup, Units, Vec3, angle_between, fk};
-use kinepost::machines::Library;
 use kinepost::nc::read::NcReader;
 use kinepost::post::{self, BlockInfo, Mode, Options, Sink, Summary};
 use std::path::Path;
-
-fn machine(id: &str) -> Machine {
-    let lib = Library::load_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap();
-    lib.get(id).unwrap().machine.clone()
-}
-
-fn data(name: &str) -> String {
-    format!("{}/tests/data/{name}", env!("CARGO_MANIFEST_DIR"))
-}
 
 fn run(m: &Machine, cl: &[u8], o: &Options) -> (Collect, Summary) {
     let mut sink = Collect::default();
@@ -29,9 +20,8 @@ fn run(m: &Machine, cl: &[u8], o: &Options) -> (Collect, Summary) {
 
 /// The profile's defaults in `mode`, written as word address (what `NcReader` and `verify` read).
 fn fanuc(m: &Machine, mode: Mode) -> Options {
-    let mut o = Options::new(m);
+    let mut o = post::Settings { dialect: Some("fanuc".into()), ..Default::default() }.options(m).unwrap();
     o.mode = mode;
-    o.dialect = kinepost::nc::dialect("fanuc").unwrap();
     o
 }
 
@@ -141,7 +131,7 @@ fn replay_matches(m: &Machine, cl: &str, nc: &str, mode: Mode, setup: &Setup, to
 
 #[test]
 fn generated_paths_on_every_profile_post_clean_in_joint_and_tcp_mode() {
-    let lib = Library::load_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap();
+    let lib = common::library();
     for p in lib.iter() {
         let m = &p.machine;
         let n = if m.rotaries.len() == 3 { 60 } else { 150 };
@@ -150,7 +140,7 @@ fn generated_paths_on_every_profile_post_clean_in_joint_and_tcp_mode() {
         let cl_text = String::from_utf8(cl.clone()).unwrap();
         for mode in [Mode::Joint, Mode::Tcp] {
             // The engine under test; word address so the replay below can read it (every dialect
-            // is checked by tests/dialects.rs and, in CI, by the shared verifier).
+            // is checked by tests/it/dialects.rs and, in CI, by the shared verifier).
             let o = fanuc(m, mode);
             let (sink, s) = run(m, &cl, &o);
             let errors: Vec<_> = sink.diags.iter().filter(|d| d.severity == Severity::Error).collect();
@@ -193,7 +183,7 @@ fn generated_paths_on_every_profile_post_clean_in_joint_and_tcp_mode() {
 fn nx_variable_axis_against_the_real_nx_post() {
     let m = machine("haas-umc750");
     let cl = std::fs::read(data("nx_clsf_mech491_variable_axis_inch_5ax.cls")).unwrap();
-    let mut o = Options::new(&m);
+    let mut o = defaults(&m);
     o.mode = Mode::Tcp;
     let (sink, s) = run(&m, &cl, &o);
     assert_eq!(s.errors, 0);
@@ -250,7 +240,7 @@ fn mm_cl_on_an_inch_machine_is_converted() {
     // NX's own post wrote X-10.7283 for the CL's -272.5 mm.
     let m = machine("haas-umc750");
     let cl = std::fs::read(data("nx_clsf_mech491_simple_mill_plane_mm.cls")).unwrap();
-    let (sink, s) = run(&m, &cl, &Options::new(&m));
+    let (sink, s) = run(&m, &cl, &defaults(&m));
     assert_eq!(s.cl_units, "mm");
     assert!(sink.nc.contains("X-10.7283"), "{}", &sink.nc[..600.min(sink.nc.len())]);
     assert!(sink.nc.contains("G20"));
@@ -260,7 +250,7 @@ fn mm_cl_on_an_inch_machine_is_converted() {
 fn bad_records_are_diagnostics_with_line_and_column_and_the_rest_goes_on() {
     let m = machine("spinner-u5-620");
     let cl = "UNITS/MM\nFEDRAT/500,MMPM\nGOTO/0,0,50,0,0,1\nGOTO/1,2,abc\nGOTO/10,0,50,0,0,1\nFROBNICATE/1\nGOTO/20,0,50,0,0,1\n";
-    let (sink, s) = run(&m, cl.as_bytes(), &Options::new(&m));
+    let (sink, s) = run(&m, cl.as_bytes(), &defaults(&m));
     let bad = sink.first(Code::BadRecord);
     assert_eq!((bad.line, bad.column), (Some(4), Some(10)), "{bad}");
     assert!(bad.message.contains("expected a finite number"), "{bad}");
@@ -278,7 +268,7 @@ fn feedless_moves_from_bad_tools_and_negative_depths_are_told() {
     let m = machine("spinner-u5-620");
     let cl = "UNITS/MM\nLOADTL/3\nGOTO/0,0,50\nGOTO/0,0,40\nGOTO/0,0,30\nFEDRAT/500,MMPM\n\
               GOTO/0,0,20\nFROM/0,0,60\nGOTO/0,0,55\nLOADTL/4.5\nCYCLE/DRILL,-5,MMPM,100\nGOTO/5,5,0\nCYCLE/OFF\n";
-    let (sink, _) = run(&m, cl.as_bytes(), &Options::new(&m));
+    let (sink, _) = run(&m, cl.as_bytes(), &defaults(&m));
     let no_feed: Vec<_> = sink.diags.iter().filter(|d| d.code == Code::NoFeed).collect();
     assert_eq!(no_feed.len(), 1, "{:?}", sink.diags);
     assert_eq!((no_feed[0].line, no_feed[0].severity), (Some(4), Severity::Warning));
@@ -322,7 +312,7 @@ fn feedless_moves_from_bad_tools_and_negative_depths_are_told() {
 fn a_feed_per_revolution_at_s0_is_not_f0() {
     let m = machine("spinner-u5-620");
     let cl = "UNITS/MM\nSPINDL/0,RPM\nFEDRAT/0.2,MMPR\nGOTO/1,2,3\nGOTO/5,0,0\n";
-    let (sink, _) = run(&m, cl.as_bytes(), &Options::new(&m));
+    let (sink, _) = run(&m, cl.as_bytes(), &defaults(&m));
     // Fed to the first point from the clearance over it, then on to the next: F0.2 per minute.
     assert!(sink.nc.contains("G1 Z3.000 F0.2\nX5.000 Y0.000 Z0.000\n"), "{}", sink.nc);
     assert!(
@@ -336,10 +326,10 @@ fn a_feed_per_revolution_at_s0_is_not_f0() {
 #[test]
 fn a_file_without_motion_is_told() {
     let m = machine("spinner-u5-620");
-    let (sink, s) = run(&m, b"PARTNO/EMPTY\nUNITS/MM\nFINI\n", &Options::new(&m));
+    let (sink, s) = run(&m, b"PARTNO/EMPTY\nUNITS/MM\nFINI\n", &defaults(&m));
     let d = sink.first(Code::NoMotion);
     assert_eq!((d.severity, s.cl_points), (Severity::Warning, 0));
-    let (sink, _) = run(&m, b"UNITS/MM\nGOTO/1,2,3\n", &Options::new(&m));
+    let (sink, _) = run(&m, b"UNITS/MM\nGOTO/1,2,3\n", &defaults(&m));
     assert!(!sink.diags.iter().any(|d| d.code == Code::NoMotion));
 }
 
@@ -351,7 +341,7 @@ fn input_that_is_no_cl_is_refused_saying_what_it_looks_like() {
     let m = machine("vmc-3axis");
     let refused = |cl: &str| {
         let mut sink = Collect::default();
-        match post::post(cl.as_bytes(), &m, &Options::new(&m), &mut sink) {
+        match post::post(cl.as_bytes(), &m, &defaults(&m), &mut sink) {
             Err(post::Error::NotCl(d)) => {
                 assert!(sink.nc.is_empty() && sink.diags.is_empty(), "{cl:?}: {}", sink.nc);
                 assert_eq!((d.code, d.severity), (Code::NotCl, Severity::Error));
@@ -387,10 +377,10 @@ fn input_that_is_no_cl_is_refused_saying_what_it_looks_like() {
     let d = refused(&String::from_utf8_lossy(&utf16));
     assert!(d.message.contains("nothing in the input is CL data"), "{d}");
     // CL that carries NC-looking lines, and CL whose only record is malformed: posted.
-    let (sink, s) = run(&m, b"G0 X1 Y2\nUNITS/MM\nGOTO/1,2,3\nM30\n", &Options::new(&m));
+    let (sink, s) = run(&m, b"G0 X1 Y2\nUNITS/MM\nGOTO/1,2,3\nM30\n", &defaults(&m));
     assert_eq!(s.cl_points, 1);
     assert_eq!(sink.diags.iter().filter(|d| d.code == Code::UnknownRecord).count(), 2);
-    let (sink, _) = run(&m, b"GOTO/1,x,3\n", &Options::new(&m));
+    let (sink, _) = run(&m, b"GOTO/1,x,3\n", &defaults(&m));
     assert!(sink.diags.iter().any(|d| d.code == Code::BadRecord));
 }
 
@@ -414,7 +404,7 @@ impl Sink for ByLine {
 #[test]
 fn units_apply_from_their_line_wherever_they_sit() {
     let m = machine("vmc-3axis");
-    let o = Options::new(&m);
+    let o = defaults(&m);
     let file = |at: usize| {
         let mut lines = vec!["FEDRAT/20".to_string()];
         lines.extend((0..6000).map(|i| {
@@ -455,7 +445,7 @@ fn units_apply_from_their_line_wherever_they_sit() {
 #[test]
 fn a_units_change_after_motion_is_told_with_its_line() {
     let m = machine("vmc-3axis");
-    let o = Options::new(&m);
+    let o = defaults(&m);
     let (sink, s) = run(
         &m,
         b"UNITS/MM\nFEDRAT/100\nGOTO/1,2,3\nGOTO/2,2,3\nUNITS/INCHES\nGOTO/1,2,3\n",
@@ -491,7 +481,7 @@ fn a_turn_about_a_standing_tip_takes_the_machine_axes_time() {
         "UNITS/MM\nFEDRAT/1000,MMPM\nGOTO/0,0,50,0.5,0,0.8660254\nGOTO/0,0,50,0,0.5,0.8660254\nGOTO/10,0,50,0,0.5,0.8660254\n";
     for id in ["spinner-u5-620", "dmg-dmc75v"] {
         let m = machine(id);
-        let (sink, _) = run(&m, cl.as_bytes(), &Options::new(&m));
+        let (sink, _) = run(&m, cl.as_bytes(), &defaults(&m));
         let turning: Vec<_> = sink
             .blocks
             .windows(2)
@@ -538,7 +528,7 @@ fn the_first_move_after_a_tool_change_positions_at_rapid() {
     let cl = "UNITS/MM\nLOADTL/1\nFEDRAT/500,MMPM\nGOTO/0,0,50,0.5,0,0.8660254\nGOTO/10,0,40,0.5,0,0.8660254\n\
               LOADTL/2\nGOTO/0,0,50,0,0,1\nGOTO/10,0,40,0,0,1\n";
     for mode in [Mode::Joint, Mode::Tcp] {
-        let mut o = Options::new(&m);
+        let mut o = defaults(&m);
         o.mode = mode;
         let (sink, _) = run(&m, cl.as_bytes(), &o);
         let lines: Vec<&str> = sink.nc.lines().collect();
@@ -599,7 +589,7 @@ fn the_first_move_turns_the_rotaries_at_the_top_then_comes_down() {
     let m = machine("spinner-u5-620");
     let zmax = m.linears[2].as_ref().unwrap().max;
     let cl = "UNITS/MM\nFEDRAT/500,MMPM\nGOTO/0,0,50,0.5,0,0.8660254\nGOTO/10,0,40,0.5,0,0.8660254\n";
-    let o = Options::new(&m);
+    let o = defaults(&m);
     let (sink, _) = run(&m, cl.as_bytes(), &o);
     let [over, near, down] = [&sink.blocks[0], &sink.blocks[1], &sink.blocks[2]];
     assert!(over.rapid && near.rapid && !down.rapid, "{}", sink.nc);
@@ -622,7 +612,7 @@ fn the_first_move_turns_the_rotaries_at_the_top_then_comes_down() {
 fn strict_mode_fails_cleanly_at_the_first_error() {
     let m = machine("spinner-u5-620");
     let cl = "UNITS/MM\nGOTO/0,0,50\nGOTO/1,2\nGOTO/3,4,5\n";
-    let mut o = Options::new(&m);
+    let mut o = defaults(&m);
     o.strict = true;
     let mut sink = Collect::default();
     match post::post(cl.as_bytes(), &m, &o, &mut sink) {
@@ -664,7 +654,7 @@ fn a_travel_that_leaves_out_zero_still_tells_the_branches_apart() {
             p.tip.x, p.tip.y, p.tip.z, p.axis.x, p.axis.y, p.axis.z
         );
     }
-    let (sink, s) = run(&m, cl.as_bytes(), &Options::new(&m));
+    let (sink, s) = run(&m, cl.as_bytes(), &defaults(&m));
     assert_eq!(s.errors, 0, "{:?}\n{}", sink.diags, sink.nc);
     for blk in &sink.blocks {
         let bw = blk.joints.0[4].unwrap();
@@ -676,7 +666,7 @@ fn a_travel_that_leaves_out_zero_still_tells_the_branches_apart() {
 fn unreachable_poses_name_the_line_and_limits_name_the_axis() {
     let m = machine("vmc-3axis");
     let cl = "UNITS/MM\nFEDRAT/500,MMPM\nGOTO/0,0,50,0,0,1\nGOTO/0,0,50,0,0.5,0.866025\nGOTO/0,0,40,0,0,1\nGOTO/900,0,40,0,0,1\n";
-    let (sink, s) = run(&m, cl.as_bytes(), &Options::new(&m));
+    let (sink, s) = run(&m, cl.as_bytes(), &defaults(&m));
     let u = sink.first(Code::Unreachable);
     assert_eq!(u.line, Some(4));
     assert!(u.message.contains("30.0"), "{u}");
@@ -704,14 +694,14 @@ fn a_bounded_rotary_unwinds_with_a_marked_retract() {
             p.tip.x, p.tip.y, p.tip.z, p.axis.x, p.axis.y, p.axis.z
         ));
     }
-    let (sink, s) = run(&m, cl.as_bytes(), &Options::new(&m));
+    let (sink, s) = run(&m, cl.as_bytes(), &defaults(&m));
     assert_eq!(s.errors, 0, "{:?}", sink.diags);
     assert!(s.counts.get("unwind").copied().unwrap_or(0) >= 1, "{:?}", s.counts);
     assert!(sink.nc.contains("UNWIND"));
     let c = s.axes.get(&'C').unwrap();
     assert!(c.min >= -360.0 - 1e-9 && c.max <= 360.0 + 1e-9, "C within travel: {c:?}");
     // The shop's policy unwind=rapids: the same unwind, still retracted, is an error.
-    let mut o = Options::new(&m);
+    let mut o = defaults(&m);
     o.unwind = kinepost::post::Unwind::AtRapids;
     let (strict, s2) = run(&m, cl.as_bytes(), &o);
     assert!(s2.errors >= 1 && strict.nc.contains("UNWIND") && strict.nc.contains("ERROR UNWIND"), "{}", strict.nc);
@@ -746,7 +736,7 @@ fn a_post_stops_at_its_output_and_time_budget() {
     use kinepost::post::Budget;
     let m = machine("spinner-u5-620");
     let cl = spiral(4);
-    let mut o = Options::new(&m);
+    let mut o = defaults(&m);
     let (_, whole) = run(&m, cl.as_bytes(), &o);
     assert!(whole.blocks > 1000, "{}", whole.blocks);
     let post_with = |b: Budget| {
@@ -786,7 +776,7 @@ fn a_long_travel_table_winds_on_from_where_it_stands() {
         .machine;
     let c = m.rotary_index('C').unwrap();
     assert!(m.rotaries[c].limits.is_some());
-    let (sink, s) = run(&m, spiral(20).as_bytes(), &Options::new(&m));
+    let (sink, s) = run(&m, spiral(20).as_bytes(), &defaults(&m));
     assert_eq!((s.errors, s.warnings), (0, 0), "{:?}", sink.diags);
     let travel = s.axes.get(&'C').unwrap();
     assert!(travel.max - travel.min < 7200.0 + 360.0, "twenty turns, no unwind: {travel:?}");
@@ -798,7 +788,7 @@ fn verify_replays_any_program_and_names_the_cl_lines_it_misses() {
     use kinepost::post::verify::{VerifyOptions, verify};
     let m = machine("haas-umc750");
     let cl = std::fs::read(data("nx_clsf_mech491_variable_axis_inch_5ax.cls")).unwrap();
-    let mut o = Options::new(&m);
+    let mut o = defaults(&m);
     o.mode = Mode::Tcp;
     let (sink, _) = run(&m, &cl, &o);
     let vo = VerifyOptions {
@@ -830,7 +820,7 @@ fn a_singular_tolerance_holds_the_free_rotary_within_its_bound_and_reports_what_
     use kinepost::post::verify::{VerifyOptions, verify};
     let m = machine("haas-umc750");
     let cl = std::fs::read(data("nx_clsf_mech491_variable_axis_inch_5ax.cls")).unwrap();
-    let mut o = Options::new(&m);
+    let mut o = defaults(&m);
     o.mode = Mode::Tcp;
     let (_, exact) = run(&m, &cl, &o);
     o.singular_tolerance = 0.5f64.to_radians();
@@ -949,7 +939,7 @@ fn haas_dialect_matches_the_nx_golden_programs() {
             Mode::Joint,
         ),
     ] {
-        let mut o = Options::new(&m);
+        let mut o = defaults(&m);
         o.mode = mode;
         assert_eq!(o.dialect.name, "haas", "the profile's controller is the default");
         let (sink, s) = run(&m, &std::fs::read(data(cl)).unwrap(), &o);
@@ -1084,9 +1074,9 @@ fn consecutive_rapids_that_turn_rotaries_climb_to_the_top_of_z_once() {
 
 #[test]
 fn clamped_rotaries_unlock_before_they_turn_and_lock_after_positioning() {
-    let lib = Library::load_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap();
+    let lib = common::library();
     let p = lib.get("haas-umc750").unwrap();
-    let mut o = Options::new(&p.machine);
+    let mut o = defaults(&p.machine);
     o.mode = Mode::Tcp;
     o.clamps = p.clamps();
     let (sink, _) = run(
@@ -1113,7 +1103,7 @@ fn clamped_rotaries_unlock_before_they_turn_and_lock_after_positioning() {
         &std::fs::read(data("nx_clsf_mech491_simple_mill_plane_mm.cls")).unwrap(),
         &Options {
             clamps: p.clamps(),
-            ..Options::new(&p.machine)
+            ..defaults(&p.machine)
         },
     );
     assert!(!sink.nc.contains("UNLOCK"));
@@ -1126,7 +1116,7 @@ fn clamped_rotaries_unlock_before_they_turn_and_lock_after_positioning() {
 /// self-verification).
 #[test]
 fn a_segment_through_the_singular_direction_keeps_every_block_on_its_pose() {
-    let lib = Library::load_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap();
+    let lib = common::library();
     let mut checked = 0;
     for p in lib.iter() {
         let m = &p.machine;
@@ -1166,7 +1156,7 @@ fn a_segment_through_the_singular_direction_keeps_every_block_on_its_pose() {
             a2.y,
             a2.z,
         );
-        let o = Options::new(m);
+        let o = defaults(m);
         let (sink, s) = run(m, cl.as_bytes(), &o);
         let bad: Vec<_> = sink
             .diags
@@ -1213,7 +1203,7 @@ fn inverse_time_keeps_its_precision_and_no_feed_word_is_zero() {
     let cl = "UNITS/MM\nFEDRAT/1,MMPM\nGOTO/0,0,50,0,0,1\nGOTO/200,0,50,0.5,0,0.8660254\n\
               FEDRAT/0.01,MMPM\nGOTO/210,0,50,0.5,0,0.8660254\n";
     let mut sink = Lines::default();
-    post::post(cl.as_bytes(), &m, &Options::new(&m), &mut sink).unwrap();
+    post::post(cl.as_bytes(), &m, &defaults(&m), &mut sink).unwrap();
     let (mut inverse, mut per_min) = (0, 0);
     let mut g93 = false;
     for (text, b) in &sink.0 {
@@ -1250,7 +1240,7 @@ fn a_point_far_outside_travel_is_one_error_not_a_flood_of_blocks() {
     let m = machine("spinner-u5-620");
     let cl = "UNITS/MM\nFEDRAT/1000,MMPM\nGOTO/0,0,50,0,0.5,0.8660254\nGOTO/10,0,50,0,0.5,0.8660254\n\
               GOTO/1e8,0,50,0.5,0,0.8660254\nGOTO/20,0,50,0,-0.5,0.8660254\n";
-    let (sink, s) = run(&m, cl.as_bytes(), &Options::new(&m));
+    let (sink, s) = run(&m, cl.as_bytes(), &defaults(&m));
     assert!(s.blocks < 100, "{} blocks", s.blocks);
     let limits: Vec<_> = sink.diags.iter().filter(|d| d.code == Code::LimitViolation).collect();
     assert!(limits.len() == 1 && limits[0].line == Some(5), "{limits:?}");
@@ -1289,14 +1279,14 @@ fn surface_speed_becomes_rpm_at_the_cutters_diameter() {
     ];
     for (head, want, sev) in cases {
         let cl = format!("{head}{motion}");
-        let (sink, _) = run(&m, cl.as_bytes(), &Options::new(&m));
+        let (sink, _) = run(&m, cl.as_bytes(), &defaults(&m));
         assert_eq!(s_words(&sink.nc), vec![want.to_string()], "{cl}\n{}", sink.nc);
         let d: Vec<_> = sink.diags.iter().filter(|d| d.code == Code::SurfaceSpeed).collect();
         assert!(d.len() == 1 && d[0].severity == sev, "{cl}: {d:?}");
     }
     // A feed per revolution goes with the converted speed: 0.01 in/rev at 2292 RPM.
     let cl = format!("UNITS/INCHES\nCUTTER/0.5\nSPINDL/300,SFM\nFEDRAT/0.01,IPR\n{motion}");
-    let (sink, _) = run(&m, cl.as_bytes(), &Options::new(&m));
+    let (sink, _) = run(&m, cl.as_bytes(), &defaults(&m));
     assert!(sink.nc.contains("F22.92"), "{}", sink.nc);
 }
 
@@ -1308,7 +1298,7 @@ fn surface_speed_becomes_rpm_at_the_cutters_diameter() {
 fn linearization_follows_a_near_singular_swing_and_is_bounded() {
     let m = machine("spinner-u5-620");
     let cl = std::fs::read_to_string(data("generated/near_singular_jitter.cls")).unwrap();
-    let o = Options::new(&m);
+    let o = defaults(&m);
     let (sink, s) = run(&m, cl.as_bytes(), &o);
     assert_eq!(s.errors, 0, "{:?}", sink.diags);
     let vo = kinepost::post::verify::VerifyOptions {
@@ -1327,7 +1317,7 @@ fn linearization_follows_a_near_singular_swing_and_is_bounded() {
     let chases: Vec<_> = sink.diags.iter().filter(|d| d.code == Code::BranchChange).collect();
     assert!(chases.is_empty(), "{chases:?}");
     // A quarter turn of B at a tolerance of 1e-7 mm wants 40 000 blocks: 2^14, told.
-    let mut o = Options::new(&m);
+    let mut o = defaults(&m);
     o.tolerance = 1e-7;
     let cl = "UNITS/MM\nFEDRAT/500,MMPM\nGOTO/100,0,50,0,0,1\nGOTO/100,0,50,1,0,0\n";
     let (sink, s) = run(&m, cl.as_bytes(), &o);
@@ -1430,7 +1420,7 @@ type PathCheck = fn(&str, &[f64]) -> Result<bool, proptest::test_runner::TestCas
 /// `check` on every shipped profile; it says whether the profile could take its path (a
 /// two-rotary chain that reaches its singular direction), and at least five must.
 fn on_two_rotary_profiles(check: PathCheck, seed: &[f64]) -> Result<(), proptest::test_runner::TestCaseError> {
-    let lib = Library::load_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap();
+    let lib = common::library();
     let mut exercised = 0;
     for p in lib.iter() {
         exercised += check(&p.machine.id, seed)? as u32;
@@ -1562,7 +1552,7 @@ fn no_feed_block_turns_a_rotary_past_the_step_limit() {
     let m = machine("propeller-3r2l");
     let cl = std::fs::read(data("nx_clsf_mech491_simple_mill_plane_mm.cls")).unwrap();
     for mode in [Mode::Joint, Mode::Tcp] {
-        let mut o = Options::new(&m);
+        let mut o = defaults(&m);
         o.mode = mode;
         let (sink, _) = run(&m, &cl, &o);
         let mut repositions = 0;
@@ -1638,7 +1628,7 @@ fn a_cut_from_the_singular_direction_turns_its_free_rotary_while_positioning() {
             50.0 * s
         );
         for tilted_planes in [false, true] {
-            let mut o = Options::new(&m);
+            let mut o = defaults(&m);
             o.tilted_planes = tilted_planes;
             let (sink, sum) = run(&m, cl.as_bytes(), &o);
             assert!(
@@ -1745,7 +1735,7 @@ fn verify_reads_heidenhain_conversational() {
         ] {
             let cl = std::fs::read(data(file)).unwrap();
             for mode in [Mode::Joint, Mode::Tcp] {
-                let mut o = Options::new(&m);
+                let mut o = defaults(&m);
                 o.mode = mode;
                 o.dialect = kinepost::nc::dialect("heidenhain").unwrap();
                 let (sink, s) = run(&m, &cl, &o);
@@ -1910,7 +1900,7 @@ fn tcp_words_within_travel(m: &Machine, nc: &str, length: f64) {
 fn a_drilling_cycle_without_a_feed_is_an_error() {
     let m = machine("vmc-3axis");
     let cl = "UNITS/MM\nRAPID\nGOTO/10,20,5\nCYCLE/TAP,20,1\nGOTO/10,20,0\nCYCLE/OFF\n";
-    let (sink, s) = run(&m, cl.as_bytes(), &Options::new(&m));
+    let (sink, s) = run(&m, cl.as_bytes(), &defaults(&m));
     let d = sink.first(Code::NoFeed);
     assert_eq!((d.severity, d.line), (Severity::Error, Some(5)), "{d}");
     assert!(d.message.starts_with("tapping cycle without a feed"), "{d}");
@@ -1920,7 +1910,7 @@ fn a_drilling_cycle_without_a_feed_is_an_error() {
 
 /// A strict run of `cl` fails on its first `code` diagnostic.
 fn refused_in_strict_mode(m: &Machine, cl: &str, code: Code) {
-    let mut o = Options::new(m);
+    let mut o = defaults(m);
     o.strict = true;
     let r = post::post(cl.as_bytes(), m, &o, &mut Collect::default());
     assert!(matches!(r, Err(post::Error::Strict(ref d)) if d.code == code), "{r:?}");
@@ -1932,7 +1922,7 @@ fn refused_in_strict_mode(m: &Machine, cl: &str, code: Code) {
 fn a_spindle_speed_that_rounds_to_zero_is_an_error() {
     let m = machine("vmc-3axis");
     let cl = "UNITS/MM\nSPINDL/    0.3980,RPM,CLW\nFEDRAT/100,MMPM\nGOTO/10,20,5\nGOTO/10,20,0\n";
-    let (sink, s) = run(&m, cl.as_bytes(), &Options::new(&m));
+    let (sink, s) = run(&m, cl.as_bytes(), &defaults(&m));
     let d = sink.first(Code::SpindleSpeed);
     assert_eq!((d.severity, d.line), (Severity::Error, Some(2)), "{d}");
     assert!(d.message.contains("0.398") && d.message.contains("S0"), "{d}");
@@ -1940,11 +1930,11 @@ fn a_spindle_speed_that_rounds_to_zero_is_an_error() {
     refused_in_strict_mode(&m, cl, Code::SpindleSpeed);
     // 0.5 RPM and up is a turning spindle, written S1: no diagnostic.
     let ok = cl.replace("0.3980", "0.5");
-    let (sink, _) = run(&m, ok.as_bytes(), &Options::new(&m));
+    let (sink, _) = run(&m, ok.as_bytes(), &defaults(&m));
     assert!(!sink.diags.iter().any(|d| d.code == Code::SpindleSpeed));
     // A surface speed with no cutter to convert it is written as S: the same rule.
     let sfm = cl.replace("0.3980,RPM,CLW", "0.2,SFM,CLW");
-    let (sink, _) = run(&m, sfm.as_bytes(), &Options::new(&m));
+    let (sink, _) = run(&m, sfm.as_bytes(), &defaults(&m));
     assert!(
         sink.diags
             .iter()
@@ -1961,7 +1951,7 @@ fn a_spindle_speed_that_rounds_to_zero_is_an_error() {
 fn a_cut_with_the_spindle_standing_is_told_once() {
     let m = machine("vmc-3axis");
     let stopped = |cl: &str| {
-        let (sink, _) = run(&m, cl.as_bytes(), &Options::new(&m));
+        let (sink, _) = run(&m, cl.as_bytes(), &defaults(&m));
         sink.diags
             .into_iter()
             .filter(|d| d.code == Code::SpindleStopped)
@@ -1977,7 +1967,7 @@ fn a_cut_with_the_spindle_standing_is_told_once() {
     let off = format!("{on}SPINDL/OFF\nGOTO/40,20,0\nGOTO/50,20,0\nSPINDL/900,RPM\nGOTO/60,20,0\n");
     assert_eq!(stopped(&off), [(Severity::Warning, Some(9))]);
     // A drilling cycle cuts too.
-    let mut o = Options::new(&m);
+    let mut o = defaults(&m);
     o.canned_cycles = true;
     let cl = "UNITS/MM\nLOADTL/1\nGOTO/0,0,20\nCYCLE/DRILL,5,MMPM,100\nGOTO/5,5,0\nCYCLE/OFF\n";
     let (sink, _) = run(&m, cl.as_bytes(), &o);
@@ -1997,7 +1987,7 @@ fn a_tool_change_restarts_the_spindle_the_cl_left_on() {
     let m = machine("vmc-3axis");
     let cl = "UNITS/MM\nLOADTL/1\nSPINDL/1000,RPM,CCLW\nFEDRAT/100,MMPM\nGOTO/10,20,5\nGOTO/10,20,0\n\
               LOADTL/2\nGOTO/30,20,5\nGOTO/30,20,0\n";
-    let (sink, _) = run(&m, cl.as_bytes(), &Options::new(&m));
+    let (sink, _) = run(&m, cl.as_bytes(), &defaults(&m));
     let after = &sink.nc[sink.nc.find("T2 M6").expect("a tool change")..];
     let (s, g43) = (after.find("S1000 M4").expect("a restart"), after.find("G43 H2").unwrap());
     assert!(s < g43 && g43 < after.find("G0").unwrap(), "{after}");
@@ -2005,7 +1995,7 @@ fn a_tool_change_restarts_the_spindle_the_cl_left_on() {
     assert_eq!((info.severity, info.line), (Severity::Info, Some(7)));
     // Said again by the CL: written once, as the CL says it.
     let restated = cl.replace("LOADTL/2\n", "LOADTL/2\nSPINDL/2000,RPM,CLW\n");
-    let (sink, _) = run(&m, restated.as_bytes(), &Options::new(&m));
+    let (sink, _) = run(&m, restated.as_bytes(), &defaults(&m));
     assert_eq!(
         sink.nc.matches(" M4").count() + sink.nc.matches(" M3").count(),
         2,
@@ -2017,7 +2007,7 @@ fn a_tool_change_restarts_the_spindle_the_cl_left_on() {
     // Stopped before the change: stays stopped, and the new tool's first feed (line 9: onto its
     // point from the clearance) says so.
     let off = cl.replace("LOADTL/2\n", "SPINDL/OFF\nLOADTL/2\n");
-    let (sink, _) = run(&m, off.as_bytes(), &Options::new(&m));
+    let (sink, _) = run(&m, off.as_bytes(), &defaults(&m));
     assert_eq!(sink.nc.matches("S1000").count(), 1, "{}", sink.nc);
     assert!(
         sink.diags
@@ -2034,7 +2024,7 @@ fn a_tool_change_restarts_the_spindle_the_cl_left_on() {
 #[test]
 fn a_default_spindle_speed_starts_what_the_cl_does_not() {
     let m = machine("vmc-3axis");
-    let mut o = Options::new(&m);
+    let mut o = defaults(&m);
     o.spindle_speed = Some(8000.0);
     let cl = "UNITS/MM\nLOADTL/1\nGOTO/10,20,5\nFEDRAT/0.1,MMPR\nGOTO/10,20,0\nLOADTL/2\nGOTO/30,20,5\nGOTO/30,20,0\n";
     let (sink, _) = run(&m, cl.as_bytes(), &o);
@@ -2096,7 +2086,7 @@ fn a_tool_change_turns_the_coolant_off_and_on_again() {
     let m = machine("vmc-3axis");
     let cl = "UNITS/MM\nLOADTL/1\nSPINDL/1000\nCOOLNT/THRU\nFEDRAT/100,MMPM\nGOTO/10,20,5\nGOTO/10,20,0\n\
               LOADTL/2\nGOTO/30,20,5\nGOTO/30,20,0\n";
-    let (sink, _) = run(&m, cl.as_bytes(), &Options::new(&m));
+    let (sink, _) = run(&m, cl.as_bytes(), &defaults(&m));
     let lines: Vec<&str> = sink.nc.lines().collect();
     let at = |w: &str| {
         lines
@@ -2115,12 +2105,12 @@ fn a_tool_change_turns_the_coolant_off_and_on_again() {
     assert_eq!((info.severity, info.line), (Severity::Info, Some(8)));
     // Said again by the CL: as it says; off before the change: stays off.
     let restated = cl.replace("LOADTL/2\n", "LOADTL/2\nCOOLNT/MIST\n");
-    let (sink, _) = run(&m, restated.as_bytes(), &Options::new(&m));
+    let (sink, _) = run(&m, restated.as_bytes(), &defaults(&m));
     assert_eq!(sink.nc.matches("M88").count(), 1, "{}", sink.nc);
     assert!(sink.nc.contains("T2 M6\nM7\n"), "{}", sink.nc);
     assert!(!sink.diags.iter().any(|d| d.code == Code::CoolantRestored));
     let off = cl.replace("LOADTL/2\n", "COOLNT/OFF\nLOADTL/2\n");
-    let (sink, _) = run(&m, off.as_bytes(), &Options::new(&m));
+    let (sink, _) = run(&m, off.as_bytes(), &defaults(&m));
     assert_eq!(sink.nc.matches("M88").count(), 1, "{}", sink.nc);
     assert!(!sink.diags.iter().any(|d| d.code == Code::CoolantRestored));
 }
@@ -2161,7 +2151,7 @@ fn a_helix_of_several_turns_turns_them_all() {
     assert!((t - want).abs() < 1e-6, "{t} s, not {want} s");
     assert!(!sink.diags.iter().any(|d| d.severity != Severity::Info), "{:?}", sink.diags);
     // No arc word on the TNC for a helix: chords, every end on the helix, down at its pitch.
-    let mut o = Options::new(&m);
+    let mut o = defaults(&m);
     o.dialect = kinepost::nc::dialect("heidenhain").unwrap();
     let (sink, _) = run(&m, cl.as_bytes(), &o);
     let on_helix: Vec<_> = sink.blocks.iter().filter(|b| b.source_line == Some(7)).collect();
@@ -2334,7 +2324,7 @@ fn the_length_offset_register_is_the_one_the_cl_names() {
 fn coolant_before_the_first_tool_goes_on_at_its_first_move() {
     let m = machine("vmc-3axis");
     let cl = "UNITS/MM\nCOOLNT/ON\nLOADTL/1\nSPINDL/1000\nFEDRAT/100,MMPM\nGOTO/10,20,5\nGOTO/10,20,0\n";
-    let (sink, _) = run(&m, cl.as_bytes(), &Options::new(&m));
+    let (sink, _) = run(&m, cl.as_bytes(), &defaults(&m));
     let body: Vec<&str> = sink
         .nc
         .lines()
@@ -2351,10 +2341,10 @@ fn coolant_before_the_first_tool_goes_on_at_its_first_move() {
     );
     // Turned off again before the first move: never on.
     let off = cl.replace("LOADTL/1\n", "COOLNT/OFF\nLOADTL/1\n");
-    let (sink, _) = run(&m, off.as_bytes(), &Options::new(&m));
+    let (sink, _) = run(&m, off.as_bytes(), &defaults(&m));
     assert!(!sink.nc.contains("M8"), "{}", sink.nc);
     // Without a tool change (NX CLSF has none): on at the first move.
-    let (sink, _) = run(&m, cl.replace("LOADTL/1\n", "").as_bytes(), &Options::new(&m));
+    let (sink, _) = run(&m, cl.replace("LOADTL/1\n", "").as_bytes(), &defaults(&m));
     let (on, first) = (sink.nc.find("\nM8\n").expect("coolant on"), sink.nc.find("\nG0 ").unwrap());
     assert!(on < first, "{}", sink.nc);
 }
@@ -2522,7 +2512,7 @@ fn hostile_numbers_are_written_within_range_or_told() {
 /// machine's maximum is written; `spindle_speed` beyond it is refused where options are made.
 #[test]
 fn spindle_speeds_stay_within_the_profiles_range() {
-    let lib = Library::load_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap();
+    let lib = common::library();
     for p in lib.iter() {
         let (lo, hi) = p.spindle_range();
         assert!(p.doc.spindle.is_some() && hi < post::MAX_SPINDLE_SPEED, "{}: every shipped profile states its spindle", p.doc.id);
@@ -2631,7 +2621,7 @@ fn records_that_change_the_machine_change_the_nc_or_are_told() {
             "UNITS/MM\nLOADTL/1\nSPINDL/1000,CLW\nFEDRAT/100,MMPM\nGOTO/0,0,10,0,0,1\nGOTO/5,0,10,0,0,1\n{mid}\nGOTO/10,0,10,0,0,1\nEND\n"
         )
     };
-    let (plain, _) = run(&m, cl("").as_bytes(), &Options::new(&m));
+    let (plain, _) = run(&m, cl("").as_bytes(), &defaults(&m));
     for rec in [
         "STOP",
         "OPSTOP",
@@ -2643,17 +2633,17 @@ fn records_that_change_the_machine_change_the_nc_or_are_told() {
         "PREFUN/61",
         "SELCTL/2",
     ] {
-        let (sink, _) = run(&m, cl(rec).as_bytes(), &Options::new(&m));
+        let (sink, _) = run(&m, cl(rec).as_bytes(), &defaults(&m));
         let told = sink.diags.iter().any(|d| d.line == Some(7) && d.severity >= Severity::Warning);
         assert!(told || sink.nc != plain.nc, "{rec}: neither written nor told: {:?}", sink.diags);
     }
     // Cutter compensation is written, on the move after it (`ON` with no side before it names
     // none: an error there).
     for (rec, word) in [("CUTCOM/LEFT", "G41 D1 X10.000"), ("CUTCOM/RIGHT,1", "G42 D1 X10.000"), ("CUTCOM/LEFT,XYPLAN,4", "G41 D4 X10.000")] {
-        let (sink, _) = run(&m, cl(rec).as_bytes(), &Options::new(&m));
+        let (sink, _) = run(&m, cl(rec).as_bytes(), &defaults(&m));
         assert!(sink.nc.lines().any(|l| l.ends_with(word)), "{rec}:\n{}", sink.nc);
     }
-    let (sink, _) = run(&m, cl("CUTCOM/ ON ").as_bytes(), &Options::new(&m));
+    let (sink, _) = run(&m, cl("CUTCOM/ ON ").as_bytes(), &defaults(&m));
     assert!(sink.diags.iter().any(|d| d.line == Some(7) && d.severity == Severity::Error && d.code == Code::CutterComp));
 }
 
@@ -2677,7 +2667,7 @@ fn a_turning_program_is_refused_never_milled() {
     ] {
         let cl = format!("{head}{moves}");
         let mut sink = Collect::default();
-        match post::post(cl.as_bytes(), &m, &Options::new(&m), &mut sink) {
+        match post::post(cl.as_bytes(), &m, &defaults(&m), &mut sink) {
             Err(post::Error::NotCl(d)) => {
                 assert_eq!((d.code, d.line), (Code::Turning, Some(line)), "{cl}\n{d}");
                 assert!(d.message.contains("kinepost posts milling"), "{d}");
@@ -2690,7 +2680,7 @@ fn a_turning_program_is_refused_never_milled() {
     // written, the milling tool after it cuts again.
     let cl = "UNITS/MM\nLOADTL/1\nFEDRAT/100,MMPM\nGOTO/0,0,5\nGOTO/10,0,5\nTOOLNO/2,TURN\nLOADTL/2\n\
               GOTO/20,0,5\nGOTO/30,0,5\nLOADTL/3\nGOTO/40,0,5\nGOTO/50,0,5\n";
-    let (sink, s) = run(&m, cl.as_bytes(), &Options::new(&m));
+    let (sink, s) = run(&m, cl.as_bytes(), &defaults(&m));
     let d = sink.only(Code::Turning);
     assert_eq!((d.severity, d.line), (Severity::Error, Some(6)), "{d}");
     assert!(d.message.contains("from line 8"), "{d}");
@@ -2707,7 +2697,7 @@ fn a_tool_change_with_an_unwritable_register_is_written_with_the_tools_own() {
     let m = machine("vmc-3axis");
     for (adjust, sev) in [("0", Severity::Warning), ("X", Severity::Error), ("-4", Severity::Error)] {
         let cl = format!("UNITS/MM\nLOADTL/2\nFEDRAT/100,MMPM\nGOTO/0,0,5\nLOAD/TOOL,3,ADJUST,{adjust}\nGOTO/10,0,5\n");
-        let (sink, _) = run(&m, cl.as_bytes(), &Options::new(&m));
+        let (sink, _) = run(&m, cl.as_bytes(), &defaults(&m));
         assert!(sink.nc.contains("T3 M6\nG43 H3\n"), "{cl}\n{}", sink.nc);
         let d = sink.only(Code::BadRecord);
         assert_eq!((d.line, d.severity), (Some(5), sev), "{d}");
@@ -2721,7 +2711,7 @@ fn a_tool_change_with_an_unwritable_register_is_written_with_the_tools_own() {
 #[test]
 fn a_program_with_no_feed_at_all_is_an_error() {
     let m = machine("vmc-3axis");
-    let (sink, s) = run(&m, b"UNITS/MM\nGOTO/0,0,5\nGOTO/0,0,-1\nGOTO/30,0,-1\n", &Options::new(&m));
+    let (sink, s) = run(&m, b"UNITS/MM\nGOTO/0,0,5\nGOTO/0,0,-1\nGOTO/30,0,-1\n", &defaults(&m));
     let errors: Vec<_> = sink
         .diags
         .iter()
@@ -2733,7 +2723,7 @@ fn a_program_with_no_feed_at_all_is_an_error() {
     let (sink, s) = run(
         &m,
         b"UNITS/MM\nGOTO/0,0,5\nGOTO/0,0,2\nFEDRAT/100,MMPM\nGOTO/30,0,-1\n",
-        &Options::new(&m),
+        &defaults(&m),
     );
     assert_eq!((s.errors, sink.only(Code::NoFeed).severity), (0, Severity::Warning));
 }
@@ -2749,7 +2739,7 @@ fn a_turning_program_is_told_by_its_motion() {
     let cut = "FEDRAT/0.2,MMPR\nGOTO/0,40,0\nGOTO/0,40,-30\nGOTO/0,45,-30\nGOTO/0,45,-60\nGOTO/0,50,-60\nRAPID\nGOTO/0,60,5\n";
     let cl = format!("{head}{cut}");
     let mut sink = Collect::default();
-    match post::post(cl.as_bytes(), &m, &Options::new(&m), &mut sink) {
+    match post::post(cl.as_bytes(), &m, &defaults(&m), &mut sink) {
         Err(post::Error::NotCl(d)) => {
             assert_eq!((d.code, d.line), (Code::Turning, Some(7)), "{d}");
             assert!(d.message.contains("kinepost posts milling") && d.message.contains("per revolution"), "{d}");
@@ -2765,7 +2755,7 @@ fn a_turning_program_is_told_by_its_motion() {
         "FEDRAT/1.25,MMPR\nCYCLE/TAP,FEDTO,12,MMPR,1.25,RAPTO,3,RTRCTO,15\nGOTO/0,10,0\nGOTO/0,20,0\nGOTO/0,30,0\nCYCLE/OFF\n".into(),
     ] {
         let cl = format!("{head}{milling}");
-        let (sink, s) = run(&m, cl.as_bytes(), &Options::new(&m));
+        let (sink, s) = run(&m, cl.as_bytes(), &defaults(&m));
         assert!(sink.nc.contains("M30") && s.errors == 0, "{cl}\n{:?}", sink.diags);
     }
 }
@@ -2784,13 +2774,13 @@ fn a_units_record_its_magnitudes_contradict_is_told() {
         t
     };
     for (u, k, looks) in [("UNITS/INCHES", 1.0, "millimetres"), ("UNITS/MM", 0.001, "metres")] {
-        let (sink, _) = run(&m, cl(u, k).as_bytes(), &Options::new(&m));
+        let (sink, _) = run(&m, cl(u, k).as_bytes(), &defaults(&m));
         let d = sink.only(Code::UnitsAssumed);
         assert_eq!((d.line, d.severity), (Some(1), Severity::Warning), "{d}");
         assert!(d.message.contains(looks) && d.message.contains("taken in"), "{d}");
     }
     for (u, k) in [("UNITS/INCHES", 0.05), ("UNITS/MM", 1.0)] {
-        let (sink, _) = run(&m, cl(u, k).as_bytes(), &Options::new(&m));
+        let (sink, _) = run(&m, cl(u, k).as_bytes(), &defaults(&m));
         assert!(!sink.diags.iter().any(|d| d.code == Code::UnitsAssumed), "{u} {k}: {:?}", sink.diags);
     }
 }
@@ -2811,7 +2801,7 @@ fn a_feed_unit_that_contradicts_units_is_told_and_the_slower_reading_taken() {
             "F10.0",
         ),
     ] {
-        let (sink, _) = run(&m, cl.as_bytes(), &Options::new(&m));
+        let (sink, _) = run(&m, cl.as_bytes(), &defaults(&m));
         assert!(sink.nc.contains(f) && sink.nc.contains("F30.0"), "{cl}\n{}", sink.nc);
         let d = sink.only(Code::UnitsAssumed);
         assert_eq!((d.line, d.severity), (Some(2), Severity::Warning), "{d}");
@@ -2821,7 +2811,7 @@ fn a_feed_unit_that_contradicts_units_is_told_and_the_slower_reading_taken() {
     let (sink, _) = run(
         &m,
         b"UNITS/INCHES\nFEDRAT/35.,IPM\nGOTO/0,0,1\nGOTO/1,0,1\n",
-        &Options::new(&m),
+        &defaults(&m),
     );
     assert!(
         sink.nc.contains("F889.0") && !sink.diags.iter().any(|d| d.code == Code::UnitsAssumed),
@@ -2911,10 +2901,10 @@ fn catia_circle_statements_are_arcs_and_an_unresolvable_form_an_error() {
 fn other_cam_systems_informational_words_are_known() {
     let m = machine("vmc-3axis");
     let plain = "UNITS/MM\nFEDRAT/100,MMPM\nGOTO/0,0,1\nGOTO/1,0,1\n";
-    let (want, _) = run(&m, plain.as_bytes(), &Options::new(&m));
+    let (want, _) = run(&m, plain.as_bytes(), &defaults(&m));
     for w in ["REMARK/ROUGH THE POCKET", "PPWORD/SPINDL,1", "KNOT/0,0,1,1", "CNTRL/0,0,5,1", "CAMERA/1,0,0"] {
         let cl = plain.replace("GOTO/1,0,1", &format!("{w}\nGOTO/1,0,1"));
-        let (sink, _) = run(&m, cl.as_bytes(), &Options::new(&m));
+        let (sink, _) = run(&m, cl.as_bytes(), &defaults(&m));
         assert!(sink.diags.iter().all(|d| d.line != Some(4)), "{w}: {:?}", sink.diags);
         let body = |nc: &str| nc.lines().filter(|l| !l.contains("DATE")).map(str::to_string).collect::<Vec<_>>();
         assert_eq!(body(&sink.nc), body(&want.nc), "{w}");
@@ -2945,7 +2935,7 @@ fn a_repeated_word_is_told_once_with_its_count() {
     for i in 0..50 {
         cl += &format!("FOOWORD/{i}\nSWITCH/{i}\nGOTO/{},0,1\n", i + 1);
     }
-    let (sink, s) = run(&m, cl.as_bytes(), &Options::new(&m));
+    let (sink, s) = run(&m, cl.as_bytes(), &defaults(&m));
     for (code, first) in [(Code::UnknownRecord, 5), (Code::IgnoredRecord, 6)] {
         let told: Vec<_> = sink.diags.iter().filter(|d| d.code == code && d.line.is_some()).collect();
         assert!(
@@ -2974,14 +2964,15 @@ fn held_words_are_told_when_a_post_stops_early() {
     for i in 0..3000 {
         long += &format!("GOTO/{},{},1\n", i % 7, i % 5);
     }
+    let _one = common::TWO_THREAD_POSTS.lock().unwrap_or_else(|e| e.into_inner());
     for threads in [1, 2] {
-        let mut o = Options::new(&m);
+        let mut o = defaults(&m);
         o.threads = threads;
         o.strict = true;
         let mut sink = Collect::default();
         let r = post::post(strict.as_bytes(), &m, &o, &mut sink);
         assert!(matches!(r, Err(post::Error::Strict(_))), "{r:?}");
-        let mut o = Options::new(&m);
+        let mut o = defaults(&m);
         o.threads = threads;
         o.budget = Budget { floor_blocks: 500, blocks_per_byte: 0, seconds: f64::INFINITY };
         let mut over = Collect::default();
@@ -3022,7 +3013,7 @@ fn gohome_goes_home() {
 fn text_after_the_end_is_no_unknown_record() {
     let m = machine("vmc-3axis");
     let cl = "UNITS/MM\nLOADTL/1\nSPINDL/1000\nFEDRAT/100,MMPM\nGOTO/0,0,1\nGOTO/1,0,1\nEND\nY43ewsdrjckhvl\n";
-    let (sink, s) = run(&m, cl.as_bytes(), &Options::new(&m));
+    let (sink, s) = run(&m, cl.as_bytes(), &defaults(&m));
     let d = sink.only(Code::IgnoredRecord);
     assert!(d.line == Some(8) && d.severity == Severity::Info && d.message.contains("after the program's END"), "{d}");
     assert!(!sink.diags.iter().any(|d| d.code == Code::UnknownRecord), "{:?}", sink.diags);
@@ -3051,11 +3042,11 @@ fn feed_lines(sink: &Collect) -> Vec<usize> {
 /// file, read in place: GPL) locks once per orientation.
 #[test]
 fn clamps_hold_for_a_whole_operation_never_between_feed_moves() {
-    let lib = Library::load_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap();
+    let lib = common::library();
     let p = lib.get("haas-umc750").unwrap();
     let clamp = |l: &str| ["M10", "M11", "M12", "M13"].iter().any(|w| l.starts_with(w));
     for mode in [Mode::Tcp, Mode::Joint] {
-        let mut o = Options::new(&p.machine);
+        let mut o = defaults(&p.machine);
         o.mode = mode;
         o.clamps = p.clamps();
         let (sink, _) = run(
@@ -3087,7 +3078,7 @@ fn clamps_hold_for_a_whole_operation_never_between_feed_moves() {
     let Ok(cl) = std::fs::read(boss) else { return };
     let o = Options {
         clamps: p.clamps(),
-        ..Options::new(&p.machine)
+        ..defaults(&p.machine)
     };
     let (sink, _) = run(&p.machine, &cl, &o);
     let words: Vec<&str> = sink.nc.lines().filter(|l| clamp(l)).collect();
@@ -3122,7 +3113,7 @@ fn a_preference_holds_from_a_singular_start() {
     }
     cl += "END\n";
     for side in ["B-", "B+"] {
-        let mut o = Options::new(&m);
+        let mut o = defaults(&m);
         o.prefer = Some(kinepost::post::Prefer::parse(side, &m).unwrap());
         let (sink, sum) = run(&m, cl.as_bytes(), &o);
         assert_eq!(sum.errors, 0, "{side}\n{}", sink.nc);
@@ -3142,7 +3133,7 @@ fn the_next_tool_is_readied_right_after_each_tool_change() {
     let cl = "UNITS/MM\nLOADTL/1\nSPINDL/RPM,3000,CLW\nFEDRAT/MMPM,500\nRAPID\nGOTO/0,0,50,0,0,1\nGOTO/10,0,0\n\
               LOADTL/2\nRAPID\nGOTO/0,0,50\nGOTO/20,0,0\nSELCTL/9\nLOADTL/7\nGOTO/20,0,10\nEND\n";
     let seekable = |p: Option<&str>| {
-        let mut o = Options::new(&m);
+        let mut o = defaults(&m);
         if let Some(p) = p {
             o.preselect = post::Preselect::parse(p).unwrap();
         }
@@ -3159,7 +3150,7 @@ fn the_next_tool_is_readied_right_after_each_tool_change() {
     // The CL's own SELCTL/9 is still written where it stands (between T2 M6 and T7 M6).
     assert!((t2..t7).contains(&at(&l, "T9")), "{l:?}");
     // Read once: only the CL's SELCTL, and why.
-    let (sink, _) = run(&m, cl.as_bytes(), &Options::new(&m));
+    let (sink, _) = run(&m, cl.as_bytes(), &defaults(&m));
     let l = lines(&sink.nc);
     assert!(
         !l.iter().any(|x| x == "T2" || x == "T7") && l.iter().any(|x| x == "T9"),

@@ -2,7 +2,7 @@
 //! files), run as written against a live server (only the address and the repository paths are
 //! substituted), so the documentation cannot drift from the service.
 
-mod common;
+use crate::common;
 
 use std::path::Path;
 

@@ -1,22 +1,17 @@
 //! Programs of several setups: each NX operation's points are in its own MCS (`MSYS`), and the
 //! program's frame is the first operation's.
 
-mod common;
+use crate::common;
 
 use common::collect::Collect;
+use common::machine;
 use kinepost::diag::{Code, Severity};
 use kinepost::kinematics::{Machine, Vec3};
-use kinepost::machines::Library;
 use kinepost::post::verify::verify;
 use kinepost::post::{self, Mode, Options};
 
-fn machine(id: &str) -> Machine {
-    let lib = Library::load_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/machines").as_ref()).unwrap();
-    lib.get(id).unwrap().machine.clone()
-}
-
 fn data(name: &str) -> String {
-    std::fs::read_to_string(format!("{}/tests/data/generated/{name}", env!("CARGO_MANIFEST_DIR"))).unwrap()
+    std::fs::read_to_string(common::data("generated").join(name)).unwrap()
 }
 
 fn post(m: &Machine, cl: &str, mode: Mode) -> Collect {

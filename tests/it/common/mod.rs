@@ -1,13 +1,49 @@
 //! A real kinepost server on an ephemeral loopback port, for integration tests.
-#![allow(dead_code)] // each test crate uses part of it
+#![allow(dead_code)] // not every helper is used by every run's configuration
 
 pub mod collect;
 pub mod stl;
 pub mod verify;
 
 use kinepost::http::{AppState, Config, Metrics, app};
+use kinepost::kinematics::Machine;
 use kinepost::machines::Library;
-use std::sync::Arc;
+use kinepost::post::{self, Settings, Summary};
+use std::path::PathBuf;
+use std::sync::{Arc, OnceLock};
+
+/// The shipped `machines/` directory, loaded once for the whole binary: most tests read it as
+/// it is (a test that changes a profile loads a directory of its own).
+pub fn library() -> &'static Library {
+    static LIBRARY: OnceLock<Library> = OnceLock::new();
+    LIBRARY.get_or_init(|| Library::load_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/machines").as_ref()).unwrap())
+}
+
+/// A shipped profile's machine.
+pub fn machine(id: &str) -> Machine {
+    library().get(id).unwrap().machine.clone()
+}
+
+/// A file of the corpus, `tests/data/<name>`.
+pub fn data(name: &str) -> PathBuf {
+    PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data")).join(name)
+}
+
+/// The options a user gets on machine `m` giving no setting: `Settings::default()` validated, the
+/// path the CLI and the service take.
+pub fn defaults(m: &Machine) -> post::Options {
+    Settings::default().options(m).unwrap()
+}
+
+/// `cl` posted on the shipped profile `id` as the CLI and the service post it: `settings`
+/// through [`Settings::profile_options`] (the profile's clamps, policy and bodies).
+pub fn post_with(id: &str, settings: &Settings, cl: &[u8]) -> (collect::Collect, Summary) {
+    let p = library().get(id).unwrap();
+    let o = settings.profile_options(&p, None).unwrap();
+    let mut sink = collect::Collect::default();
+    let summary = post::post(cl, &p.machine, &o, &mut sink).unwrap();
+    (sink, summary)
+}
 
 pub async fn server(cfg: Config) -> String {
     let library = Library::load_dir(&cfg.machines).unwrap().with_dialects(&cfg.dialects).unwrap();
@@ -26,6 +62,10 @@ pub async fn server(cfg: Config) -> String {
     tokio::spawn(async move { kinepost::http::run(listener, app(state), &cfg, std::future::pending()).await });
     format!("http://{addr}")
 }
+
+/// Posts on two threads, one at a time in this binary: `threads.rs`'s leak check counts the
+/// process's threads by name, and another test's two-thread post beside it would be counted.
+pub static TWO_THREAD_POSTS: std::sync::Mutex<()> = std::sync::Mutex::new(());
 
 static NEXT: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
 
@@ -99,8 +139,8 @@ pub async fn get_json(c: &reqwest::Client, url: &str) -> serde_json::Value {
 
 /// A generated 5-axis path (`testgen`) for a shipped profile, as CL bytes.
 pub fn generated(machine: &str, points: usize, seed: u64) -> Vec<u8> {
-    let lib = Library::load_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/machines").as_ref()).unwrap();
-    let m = &lib.get(machine).unwrap().machine;
+    let p = library().get(machine).unwrap();
+    let m = &p.machine;
     let mut out = Vec::new();
     kinepost::testgen::write_path(m, points, seed, m.default_tool_length, &mut out).unwrap();
     out

@@ -1,6 +1,6 @@
 //! The HTTP service over a real socket: every route, streaming order, error paths.
 
-mod common;
+use crate::common;
 
 use common::{Fetch, cfg, server};
 use kinepost::http::{Config, openapi_json};
@@ -8,7 +8,7 @@ use serde_json::Value;
 use std::time::Duration;
 
 fn data(name: &str) -> Vec<u8> {
-    std::fs::read(format!("{}/tests/data/{name}", env!("CARGO_MANIFEST_DIR"))).unwrap()
+    std::fs::read(common::data(name)).unwrap()
 }
 
 #[tokio::test]
@@ -816,7 +816,7 @@ async fn fk_ik_reachability_and_fits_over_http() {
         .expect("the proposal is a valid profile");
     assert!(prof.machine.rotaries.iter().any(|r| r.angle_error.is_some()));
     // Calibration: a machine whose A pivot sits 0.003 in off in y: recovered from test cuts.
-    let lib = kinepost::machines::Library::load_dir(&cfg().machines).unwrap();
+    let lib = common::library();
     let nominal = lib.get("fryer-5x-45").unwrap();
     let shifted = std::fs::read_to_string(cfg().machines.join("fryer-5x-45.toml"))
         .unwrap()

@@ -1,6 +1,6 @@
 //! Graceful shutdown with the real binary: SIGTERM during a post stream lets it finish.
 
-mod common;
+use crate::common;
 
 use std::process::Command;
 use std::time::Duration;

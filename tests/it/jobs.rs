@@ -1,7 +1,7 @@
 //! The job queue with real processes and a real SQLite store: submit, idempotency, progress,
 //! Range/ETag downloads, cancel, delete, and `kill -9` mid-run losing nothing.
 
-mod common;
+use crate::common;
 
 use common::Fetch;
 
@@ -263,7 +263,7 @@ fn check_point_fk(m: &kinepost::kinematics::Machine, tool_length: f64, axes: &[V
 async fn a_preview_draws_the_decimated_path_its_joints_and_every_warning() {
     let base = common::server(common::cfg()).await;
     let c = reqwest::Client::new();
-    let lib = kinepost::machines::Library::load_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/machines").as_ref()).unwrap();
+    let lib = common::library();
 
     // A long path: decimated to the cap, first and last block kept, every point on its joints.
     let cl = common::generated("spinner-u5-620", 30_000, 7);
@@ -372,7 +372,7 @@ async fn a_preview_draws_the_decimated_path_its_joints_and_every_warning() {
 async fn a_preview_carries_the_machine_the_tool_the_stock_and_each_collisions_bodies() {
     let base = common::server(common::cfg()).await;
     let c = reqwest::Client::new();
-    // tests/collide.rs's crash: the tool plunged into the table (line 9), the holder into the
+    // tests/it/collide.rs's crash: the tool plunged into the table (line 9), the holder into the
     // table tilted 85° (line 13).
     let cl = "PARTNO/COLLIDE\nUNITS/MM\nLOADTL/1,LENGTH,100\nSPINDL/6000,RPM,CLW\nFEDRAT/500,MMPM\nRAPID\nGOTO/0,0,100,0,0,1\nGOTO/0,0,20,0,0,1\nGOTO/0,0,-5,0,0,1\nRAPID\nGOTO/0,0,100,0,0,1\nRAPID\nGOTO/0,0,100,0.996195,0,0.087156\nGOTO/0,0,6,0.996195,0,0.087156\nSPINDL/OFF\nFINI\n";
     let r = c

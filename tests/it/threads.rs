@@ -3,6 +3,8 @@
 //! the same error at the same place when a post fails mid-way (strict mode, the budget, a sink
 //! or a reader that fails), without a hang or a thread left behind.
 
+use crate::common;
+
 use kinepost::collide::ToolShape;
 use kinepost::diag::Diagnostic;
 use kinepost::kinematics::{Machine, Pose};
@@ -10,14 +12,9 @@ use kinepost::machines::Library;
 use kinepost::output::FileSink;
 use kinepost::post::{self, BlockInfo, Budget, Mode, Options, Sink, Summary};
 use std::path::{Path, PathBuf};
-use std::sync::Mutex;
 
 /// The tests of this file one at a time: the leak check counts the process's threads by name.
-static ONE_AT_A_TIME: Mutex<()> = Mutex::new(());
-
-fn library() -> Library {
-    Library::load_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap()
-}
+use crate::common::TWO_THREAD_POSTS as ONE_AT_A_TIME;
 
 /// Everything a post hands its sink: the NC and NDJSON as the CLI and jobs write them, and the
 /// calls those files do not show. `fail_at`: the line at which writing fails (a full disk).
@@ -141,7 +138,7 @@ fn threads_named(name: &str) -> usize {
 #[test]
 fn generated_paths_on_every_profile_in_both_modes() {
     let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
-    let lib = library();
+    let lib = common::library();
     for p in lib.iter() {
         let m = &p.machine;
         // Long enough for several planner commits and several batches (the three-rotary IK
@@ -179,7 +176,7 @@ fn corpus() -> Vec<PathBuf> {
 #[test]
 fn corpus_files_on_each_kind_of_machine_in_both_modes() {
     let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
-    let lib = library();
+    let lib = common::library();
     let files = corpus();
     assert!(files.len() >= 8, "{files:?}");
     let mut errors = 0;
@@ -224,7 +221,7 @@ fn damaged(m: &Machine) -> Vec<u8> {
 #[test]
 fn inputs_with_errors_and_strict_mode_stop_at_the_same_place() {
     let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
-    let lib = library();
+    let lib = common::library();
     for id in ["spinner-u5-620", "dmg-dmc75v", "haas-umc750", "vmc-3axis"] {
         let m = &lib.get(id).unwrap().machine;
         let cl = damaged(m);
@@ -266,7 +263,7 @@ impl std::io::Read for Failing<'_> {
 #[test]
 fn posts_failing_mid_way_fail_the_same_and_leave_no_thread() {
     let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
-    let lib = library();
+    let lib = common::library();
     let m = &lib.get("spinner-u5-620").unwrap().machine;
     // Long enough that the reading half is far ahead, blocked on a full queue, when the
     // emitting half stops.

@@ -1,20 +1,16 @@
 //! Tool tables: each tool's own length in joint mode on a head machine, in the program and in
 //! `verify`; the precedence of the job's length, the table, the CL and the profile; bad tables.
 
-mod common;
+use crate::common;
 
 use common::collect::Collect;
 use kinepost::diag::{Code, Severity};
 use kinepost::kinematics::Machine;
-use kinepost::machines::{Library, Profile};
+use kinepost::machines::Profile;
 use kinepost::post::verify::{VerifyOptions, verify};
 use kinepost::post::{self, LengthFrom, Options, Settings, Summary};
 use std::path::Path;
 use std::sync::Arc;
-
-fn library() -> Library {
-    Library::load_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap()
-}
 
 /// A short 5-axis cut, the tool tilted up to 25° about two axes, on the fryer's table.
 fn cut(n: usize, x0: f64) -> String {
@@ -95,7 +91,7 @@ fn words_by_line(sink: &Collect) -> std::collections::BTreeMap<u32, ([f64; 3], [
 
 #[test]
 fn two_tools_on_a_head_head_machine_in_joint_mode_verify_per_tool() {
-    let lib = library();
+    let lib = common::library();
     let p = lib.get("fryer-5x-45").unwrap();
     assert_eq!(p.machine.kinematics_kind(), "head-head");
     let cl = two_tools();
@@ -147,7 +143,7 @@ fn two_tools_on_a_head_head_machine_in_joint_mode_verify_per_tool() {
 
 #[test]
 fn precedence_job_length_then_table_then_cl_then_profile() {
-    let lib = library();
+    let lib = common::library();
     let p = lib.get("fryer-5x-45").unwrap();
     // Tool 1 has a length in the CL and in the table; tool 2 only in the CL; tool 3 nowhere.
     let cl = format!(
@@ -225,7 +221,7 @@ fn precedence_job_length_then_table_then_cl_then_profile() {
 
 #[test]
 fn a_table_in_other_units_is_converted() {
-    let lib = library();
+    let lib = common::library();
     let p = lib.get("fryer-5x-45").unwrap();
     let mm = "units = \"mm\"\n[[tool]]\nnumber = 1\nlength = 88.9\n[[tool]]\nnumber = 2\nlength = 158.75\n";
     let s = Settings {
@@ -239,7 +235,7 @@ fn a_table_in_other_units_is_converted() {
 
 #[test]
 fn bad_tables_are_refused_naming_the_entry() {
-    let lib = library();
+    let lib = common::library();
     let p = lib.get("fryer-5x-45").unwrap();
     for (table, names) in [
         ("units = \"inch\"\n[[tool]]\nnumber = 1\nlength = -2\n", "tool[0] (T1).length"),
@@ -266,7 +262,7 @@ fn bad_tables_are_refused_naming_the_entry() {
 /// The machine's standing table is used unless the job brings its own.
 #[test]
 fn the_job_table_replaces_the_machine_table() {
-    let lib = library();
+    let lib = common::library();
     let p = lib.get("fryer-5x-45").unwrap();
     let standing = kinepost::machines::tools::parse_tool_table(TABLE, "t").unwrap();
     let o = Settings::default()
@@ -371,7 +367,7 @@ fn the_cli_takes_a_tool_table_and_a_machine_table_beside_the_profile() {
 /// summary and in the replay, with a table or without.
 #[test]
 fn nx_lengths_before_the_tool_change_belong_to_the_next_tool() {
-    let lib = library();
+    let lib = common::library();
     let p = lib.get("fryer-5x-45").unwrap();
     let cl = format!(
         "UNITS/INCHES\nTLDATA/MILL,0.5000,0.0000,4.0000,0.0000,0.0000\nLOAD/TOOL,1\nSPINDL/3000\n{}TLDATA/MILL,0.2500,0.0000,5.0000,0.0000,0.0000\nLOAD/TOOL,2\nSPINDL/3000\n{}FINI\n",

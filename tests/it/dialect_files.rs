@@ -3,7 +3,7 @@
 //! from the CLI (`--dialects DIR --dialect NAME`) and over the API with versions. Bad templates
 //! are refused with their line; a template that runs away is stopped.
 
-mod common;
+use crate::common;
 
 use common::Fetch;
 use serde_json::Value;
@@ -139,7 +139,7 @@ fn bad_templates_and_keys_are_refused_with_their_line() {
 
 /// Posts `cl` on `machine` in `dialect` (a value, not a file) through the engine.
 fn post_with(dialect: &str, cl: &str) -> (String, kinepost::post::Summary, Vec<kinepost::diag::Diagnostic>) {
-    let lib = kinepost::machines::Library::load_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap();
+    let lib = common::library();
     let p = lib.get(MACHINE).unwrap();
     let d = std::sync::Arc::new(kinepost::machines::dialects::parse(dialect, "test.toml", None).unwrap());
     let mut o = kinepost::post::Options::new(&p.machine);
@@ -288,7 +288,7 @@ async fn round_trip(base: String) {
 
 #[test]
 fn a_dialect_names_its_clamp_words_and_its_block_delete() {
-    let lib = kinepost::machines::Library::load_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap();
+    let lib = common::library();
     let p = lib.get("haas-umc750").unwrap();
     let d = r#"id = "haas-shop"
 extends = "haas"
@@ -390,7 +390,7 @@ finish = ["G187 P3 E{tol}", "G103 P1"]
 "#;
     let d = std::sync::Arc::new(kinepost::machines::dialects::parse(shop, "smooth.toml", None).unwrap());
     assert_eq!(d.smoothing.rough, ["G187 P1 E{tol}"], "the parent's rough level kept");
-    let lib = kinepost::machines::Library::load_dir(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap();
+    let lib = common::library();
     let p = lib.get(MACHINE).unwrap();
     let find = |id: &str| (id == "smooth").then(|| d.clone()).or_else(|| kinepost::nc::dialect(id));
     let with = |s: Settings, p: &kinepost::machines::Profile| s.profile_options_with(p, None, &find).map(|o| o.smoothing);

@@ -2,7 +2,7 @@
 //! block and between blocks. Per machine kind, a CL made to crash is found at its block naming
 //! both bodies; a clean CL shows nothing; `collisions=off` checks nothing; strict refuses.
 
-mod common;
+use crate::common;
 
 use common::collect::Collect;
 use kinepost::diag::{Code, Diagnostic, Severity};
@@ -528,10 +528,6 @@ fn bad_bodies_and_settings_are_refused_naming_the_key() {
 
 // The shipped profiles' own geometry (machines/*.toml).
 
-fn library() -> kinepost::machines::Library {
-    kinepost::machines::Library::load_dir(std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/machines"))).unwrap()
-}
-
 fn shipped_profile(id: &str) -> Profile {
     parse_profile(&shipped_file(id), id, None).unwrap()
 }
@@ -545,7 +541,7 @@ fn assert_clean(c: &Collect, what: &str) {
 /// at most 55°, the tip above the table) post without a collision or a near one, joint and TCP.
 #[test]
 fn every_shipped_profile_has_geometry_and_its_generated_path_is_clear() {
-    for p in library().iter() {
+    for p in common::library().iter() {
         let m = &p.machine;
         assert!(p.geometry().bodies.len() >= 3, "{}: no geometry", m.id);
         let n = if m.rotaries.len() == 3 { 150 } else { 600 };
@@ -569,7 +565,7 @@ fn every_shipped_profile_has_geometry_and_its_generated_path_is_clear() {
 fn the_table_top_is_w_origin_on_every_rotary_table_profile() {
     let turning = ["htm50200-horizontal", "vmc-4axis-a"];
     let mut checked = 0;
-    for p in library().iter() {
+    for p in common::library().iter() {
         let m = &p.machine;
         if !m.rotaries.iter().any(|r| r.mount == kinepost::kinematics::Mount::Table) || turning.contains(&m.id.as_str()) {
             continue;
@@ -930,7 +926,7 @@ fn skipping_pairs_that_cannot_have_closed_in_misses_nothing() {
         (s >> 11) as f64 / (1u64 << 53) as f64
     };
     let (mut steps, mut hits, mut whole) = (0, 0, 0);
-    for p in library().iter() {
+    for p in common::library().iter() {
         let (h, w) = walk_compare(p, 3000, &mut rnd);
         (hits, whole) = (hits + h, whole + w);
         steps += 3000;
@@ -1132,7 +1128,7 @@ fn walk_compare(p: &Profile, n: usize, rnd: &mut impl FnMut() -> f64) -> (usize,
 /// check's samples: the post stops within a second of it, with the `over_budget` reason.
 #[test]
 fn the_time_bound_holds_inside_a_long_collision_check() {
-    let lib = kinepost::machines::Library::load_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/machines").as_ref()).unwrap();
+    let lib = common::library();
     let p = lib.get("spinner-u5-620").unwrap().clone();
     let cl = String::from_utf8(common::generated("spinner-u5-620", 6, 1)).unwrap();
     // Options refuse such a stock now (below); the engine's bound holds whatever it is given.
@@ -1164,7 +1160,7 @@ fn the_time_bound_holds_inside_a_long_collision_check() {
 /// told `collision_coarse`.
 #[test]
 fn options_that_multiply_the_checks_cost_are_refused_or_bounded() {
-    let lib = kinepost::machines::Library::load_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/machines").as_ref()).unwrap();
+    let lib = common::library();
     let p = lib.get("spinner-u5-620").unwrap().clone();
     for (s, want) in [
         (Settings { stock: Some("-1e8,-1e8,-1e8,1e8,1e8,1e8".into()), ..Default::default() }, "within ±100000"),

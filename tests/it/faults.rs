@@ -2,7 +2,7 @@
 //! goes away mid-stream, and a full disk under the data directory. After each: nothing accepted
 //! lost, nothing partial served as complete, and the server serves again.
 
-mod common;
+use crate::common;
 
 use common::Fetch;
 

@@ -7,7 +7,7 @@
 //! ignored, so a plain `cargo test` reports them as such (not as passed); `-- --ignored` runs
 //! them, and without a database they fail under `KINEPOST_REQUIRE_POSTGRES=1` (CI).
 
-mod common;
+use crate::common;
 
 use common::Fetch;
 
