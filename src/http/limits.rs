@@ -37,17 +37,6 @@ pub(super) async fn admit_stream(State(st): State<Arc<AppState>>, mut req: Reque
     next.run(req).await
 }
 
-/// The downloads in flight by client address: one client's stalled downloads hold their files
-/// and buffers until the write deadline cuts them, so their number is bounded per client.
-#[derive(Default)]
-pub struct Downloads(std::sync::Mutex<std::collections::HashMap<std::net::IpAddr, usize>>);
-
-impl Downloads {
-    fn lock(&self) -> std::sync::MutexGuard<'_, std::collections::HashMap<std::net::IpAddr, usize>> {
-        self.0.lock().unwrap_or_else(|p| p.into_inner())
-    }
-}
-
 /// A download's place among its client's, given back when its body is dropped (sent or cut).
 struct DownloadSlot(Arc<AppState>, std::net::IpAddr);
 

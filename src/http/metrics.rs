@@ -56,7 +56,7 @@ pub struct Metrics {
     /// job ended the run and it was queued again).
     job_runs: Family<OutcomeLabel, Histogram, fn() -> Histogram>,
     /// Downloads in flight by client, for `--max-downloads-per-client`.
-    pub(super) downloads: super::limits::Downloads,
+    pub(super) downloads: Downloads,
 }
 
 impl Default for Metrics {
@@ -69,7 +69,7 @@ impl Default for Metrics {
             blocks: Counter::default(),
             posts: duration_histogram(),
             job_runs: Family::new_with_constructor(duration_histogram),
-            downloads: super::limits::Downloads::default(),
+            downloads: Downloads::default(),
         };
         for st in JobState::ALL.into_iter().filter(|s| s.finished()) {
             let _ = m.job_runs.get_or_create(&OutcomeLabel { outcome: st.as_str() });
@@ -185,4 +185,15 @@ pub(super) async fn metrics_route(State(st): State<Arc<AppState>>) -> impl IntoR
         None => None,
     };
     ([(header::CONTENT_TYPE, CONTENT_TYPE)], st.metrics.render(jobs.as_deref()))
+}
+
+/// The downloads in flight by client address: one client's stalled downloads hold their files
+/// and buffers until the write deadline cuts them, so their number is bounded per client.
+#[derive(Default)]
+pub struct Downloads(std::sync::Mutex<std::collections::HashMap<std::net::IpAddr, usize>>);
+
+impl Downloads {
+    pub(super) fn lock(&self) -> std::sync::MutexGuard<'_, std::collections::HashMap<std::net::IpAddr, usize>> {
+        self.0.lock().unwrap_or_else(|p| p.into_inner())
+    }
 }
