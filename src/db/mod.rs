@@ -40,13 +40,21 @@ pub fn not_now(e: &sqlx::Error) -> bool {
                     "57P01" | "57P02" | "57P03" | "40001" | "40P01" | "53300" | "5" | "6" | "261" | "262" | "517" | "773"
                 )
         }),
-        sqlx::Error::Io(_)
-        | sqlx::Error::Tls(_)
-        | sqlx::Error::Protocol(_)
-        | sqlx::Error::PoolTimedOut
-        | sqlx::Error::PoolClosed
-        | sqlx::Error::WorkerCrashed => true,
-        _ => false,
+        e => connection_gone(e),
     }
+}
+
+/// The connection, not the statement, failed: the link (IO, TLS, the protocol), or the pool had
+/// none to give. Whether the statement ran is then unknown.
+pub fn connection_gone(e: &sqlx::Error) -> bool {
+    matches!(
+        e,
+        sqlx::Error::Io(_)
+            | sqlx::Error::Tls(_)
+            | sqlx::Error::Protocol(_)
+            | sqlx::Error::PoolTimedOut
+            | sqlx::Error::PoolClosed
+            | sqlx::Error::WorkerCrashed
+    )
 }
 

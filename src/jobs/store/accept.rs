@@ -56,13 +56,7 @@ fn outcome_unknown(e: &sqlx::Error) -> bool {
     match e {
         // Connection exceptions and the server shutting down.
         sqlx::Error::Database(d) => d.code().is_some_and(|c| c.starts_with("08") || c.starts_with("57P")),
-        sqlx::Error::Io(_)
-        | sqlx::Error::Tls(_)
-        | sqlx::Error::Protocol(_)
-        | sqlx::Error::PoolTimedOut
-        | sqlx::Error::PoolClosed
-        | sqlx::Error::WorkerCrashed => true,
-        _ => false,
+        e => crate::db::connection_gone(e),
     }
 }
 
