@@ -4,20 +4,14 @@
 //! one statement (bounded by [`MAX_STATEMENT`]); a malformed record becomes an error diagnostic
 //! naming line, column and what was expected, and reading goes on.
 
-mod cycle;
-pub mod drive;
-mod fast;
-mod flow;
 mod foreign;
-mod frames;
-mod moves;
 mod record;
-mod tool;
 pub mod vocabulary;
 
-pub use flow::{CutterComp, Side};
+pub use record::drive;
+pub use record::flow::{CutterComp, Side};
 pub use foreign::{NcKind, NcSeen, nc_kind};
-pub use moves::Plane;
+pub use record::moves::Plane;
 
 pub use record::{CoolantCmd, CycleKind, CycleParams, Dwell, FeedUnit, Record, SpindleCmd, parse_statement};
 
@@ -271,7 +265,7 @@ impl<R: BufRead> Reader<R> {
             return Ok(None);
         };
         // A `$` anywhere (continuation, comment) is outside fast_goto's grammar: it declines.
-        let Some(record) = fast::fast_goto(buf[..end].trim_ascii()) else {
+        let Some(record) = record::fast::fast_goto(buf[..end].trim_ascii()) else {
             return Ok(None);
         };
         self.input.consume(end + 1);
@@ -299,7 +293,7 @@ impl<R: BufRead> Reader<R> {
         if code.is_empty() {
             if let Some(c) = comment {
                 self.in_comment = c.trim_end().ends_with('$');
-                if let Some(record) = flow::comment_record(c) {
+                if let Some(record) = record::flow::comment_record(c) {
                     self.queue.push_back(Event::Statement(Statement { line: line_no, record }));
                 }
             }

@@ -1,9 +1,16 @@
 //! One CL statement → one [`Record`]. The syntax variety of NX, Creo, SOLIDWORKS CAM / CAMWorks and
 //! CATIA: spaces around `/` and `,`, `6.` and `.9625`, units before or after values, free-text
 //! records without a slash.
+pub(super) mod cycle;
+pub mod drive;
+pub(super) mod fast;
+pub(super) mod flow;
+pub(super) mod frames;
+pub(super) mod moves;
+pub(super) mod tool;
 
-use super::fast::fast_goto;
 use super::vocabulary::Treatment;
+use fast::fast_goto;
 use crate::diag::{Code, Diagnostic, Severity};
 use crate::kinematics::Units;
 
@@ -159,7 +166,7 @@ pub enum Record {
         sweep_deg: Option<f64>,
     },
     /// `CLEARP`/`CLRSRF`: the plane a `RETRCT` withdraws to (none: `OFF`).
-    Clearance(Option<super::moves::Plane>),
+    Clearance(Option<moves::Plane>),
     /// `RETRCT`: along the tool axis to the clearance plane.
     Retract,
     Cycle(CycleParams),
@@ -188,13 +195,13 @@ pub enum Record {
     /// NX's absolute frame; unit and square); the points and axes after it are in it.
     Mcs { origin: [f64; 3], x: [f64; 3], y: [f64; 3] },
     /// `CUTCOM`: cutter radius compensation on (a side, a register) or off.
-    CutterComp(super::flow::CutterComp),
+    CutterComp(flow::CutterComp),
     /// The CL says whether its path is the tool centre (`centre`) or the contour: `said`, its
     /// words (Creo's `CUTCOM_GEOMETRY_TYPE` comment).
     PathMeaning { centre: bool, said: String },
     End,
     /// A motion statement with its geometry (`TLON,GOFWD/(CIRCLE/…),ON,(LINE/…)`).
-    Drive(super::drive::Drive),
+    Drive(drive::Drive),
     /// `GOHOME[/x,y,z[,i,j,k]]`: at rapid to the point, or (none given) to the machine's home.
     GoHome { p: Option<[f64; 3]>, axis: Option<[f64; 3]> },
     /// `INDIRV/i,j,k` (`point`: `INDIRP/x,y,z`, towards it): the next drive's direction.
@@ -263,22 +270,22 @@ fn parse_general(stmt: &str, line: u32, diags: &mut Vec<Diagnostic>) -> Option<R
         "FEDRAT" => feedrate(&st, diags),
         "SPINDL" => spindle(&st, diags),
         "COOLNT" => coolant(&st, diags),
-        "LOADTL" | "LOAD" => super::tool::load_tool(&st, diags),
-        "TLDATA" | "TURRET" | "TOOLNO" | "CUTTER" => Some(super::tool::tool_data(&st)),
+        "LOADTL" | "LOAD" => tool::load_tool(&st, diags),
+        "TLDATA" | "TURRET" | "TOOLNO" | "CUTTER" => Some(tool::tool_data(&st)),
         "CIRCLE" => circle(&st, diags),
-        "MOVARC" => super::moves::movarc(&st, diags),
-        "CLEARP" | "CLRSRF" => super::moves::clearance(&st, diags),
-        "RETRCT" => super::moves::retract(&st, diags),
-        "CYCLE" => super::cycle::parse_cycle(&st.args, line, st.rest_col, diags),
+        "MOVARC" => moves::movarc(&st, diags),
+        "CLEARP" | "CLRSRF" => moves::clearance(&st, diags),
+        "RETRCT" => moves::retract(&st, diags),
+        "CYCLE" => cycle::parse_cycle(&st.args, line, st.rest_col, diags),
         "UNITS" | "UNIT" => units(&st, diags),
         "MULTAX" => Some(Record::Multax(!matches!(
             st.args.first().map(Arg::word).as_deref(),
             Some("OFF")
         ))),
         "DELAY" | "DWELL" => delay(&st, diags),
-        "INDIRV" | "INDIRP" => super::drive::indir(&st, diags),
-        m => match super::drive::drive_major(m) {
-            Some((side, go, word)) => super::drive::drive(&st, side, go, word, diags),
+        "INDIRV" | "INDIRP" => drive::indir(&st, diags),
+        m => match drive::drive_major(m) {
+            Some((side, go, word)) => drive::drive(&st, side, go, word, diags),
             None => informational(&st, diags),
         },
     }
@@ -628,17 +635,17 @@ fn informational(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
         "PPRINT" | "INSERT" => Some(Record::Comment(st.rest.trim().to_string())),
         "STOP" | "OPSTOP" => Some(Record::Stop {
             optional: st.major == "OPSTOP",
-            text: super::flow::stop_text(st.rest),
+            text: flow::stop_text(st.rest),
         }),
-        "MODE" => super::flow::mode(st),
+        "MODE" => flow::mode(st),
         "FINI" | "END" => Some(Record::End),
-        "CUTCOM" => super::flow::cutcom(st, diags),
-        "OPSKIP" => super::flow::block_skip(st, diags),
-        "AUXFUN" | "PREFUN" => super::flow::function(st, diags),
-        "SELCTL" => super::flow::preselect(st, diags),
-        "INTOL" | "OUTTOL" => super::flow::tolerance(st, diags),
-        "SELECT" => super::flow::select(st, diags),
-        "MSYS" => super::frames::msys(st, diags),
+        "CUTCOM" => flow::cutcom(st, diags),
+        "OPSKIP" => flow::block_skip(st, diags),
+        "AUXFUN" | "PREFUN" => flow::function(st, diags),
+        "SELCTL" => flow::preselect(st, diags),
+        "INTOL" | "OUTTOL" => flow::tolerance(st, diags),
+        "SELECT" => flow::select(st, diags),
+        "MSYS" => frames::msys(st, diags),
         // SOLIDWORKS CAM's vendor records: tool and path parameters for its own posts.
         m if m.starts_with("CSI_") => Some(Record::Ignored(m.to_string())),
         m if let Some(w) = super::vocabulary::word(m) && w.treatment != Treatment::Honoured => {
@@ -691,7 +698,7 @@ pub(crate) fn num(s: impl AsRef<[u8]>) -> Option<f64> {
 
 #[cfg(test)]
 mod tests {
-    use super::super::fast::{digits_value, leading_digits};
+    use fast::{digits_value, leading_digits};
     use super::*;
     use proptest::prelude::*;
 

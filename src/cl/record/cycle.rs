@@ -1,13 +1,13 @@
 //! `CYCLE/` records: a drilling cycle's values by keyword (`FEDTO`, `RAPTO`, …) or, as CAMWorks
 //! writes them, by position around the keywords.
 
-use super::record::{Arg, CycleKind, CycleParams, FeedUnit, Record, num};
+use super::{Arg, CycleKind, CycleParams, FeedUnit, Record, num};
 use crate::diag::{Code, Diagnostic, Severity};
 use crate::kinematics::Units;
 
 /// `CYCLE/kind,…`: its values by keyword (`FEDTO`, `RAPTO`, …) or, as CAMWorks writes them,
 /// by position around the keywords.
-pub(super) fn parse_cycle(args: &[Arg], line: u32, rest_col: u32, diags: &mut Vec<Diagnostic>) -> Option<Record> {
+pub(in crate::cl) fn parse_cycle(args: &[Arg], line: u32, rest_col: u32, diags: &mut Vec<Diagnostic>) -> Option<Record> {
     let first = args.first().map(Arg::word).unwrap_or_default();
     let kind = match first.as_str() {
         "OFF" => return Some(Record::CycleOff),

@@ -2,7 +2,7 @@
 //! allocating. Anything it does not take word for word goes to the general parser, which gives
 //! the same record (property-tested against `str::parse`).
 
-use super::record::Record;
+use super::Record;
 
 /// `GOTO/x,y,z[,i,j,k]` with plain numbers, parsed without allocating: nearly every statement
 /// of a large file. Anything else (or anything odd) goes to the general parser.
@@ -119,7 +119,7 @@ const ZEROS: u64 = 0x3030_3030_3030_3030;
 /// first that is not. A digit is 0x30..=0x39: high nibble 3, and adding 6 keeps it 3 (a carry out
 /// of a byte ≥ 0xFA only reaches bytes after that non-digit).
 #[inline]
-pub(super) fn leading_digits(w: u64) -> usize {
+pub(in crate::cl) fn leading_digits(w: u64) -> usize {
     const HIGH: u64 = 0xF0F0_F0F0_F0F0_F0F0;
     let bad = ((w & HIGH) ^ ZEROS) | ((w.wrapping_add(0x0606_0606_0606_0606) & HIGH) ^ ZEROS);
     (bad.trailing_zeros() / 8) as usize
@@ -129,7 +129,7 @@ pub(super) fn leading_digits(w: u64) -> usize {
 /// below, which as leading zeros change nothing. The SWAR reduction of fast_float's
 /// `parse_eight_digits`.
 #[inline]
-pub(super) fn digits_value(w: u64, k: usize) -> u64 {
+pub(in crate::cl) fn digits_value(w: u64, k: usize) -> u64 {
     let w = if k >= 8 {
         w
     } else {

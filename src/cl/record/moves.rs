@@ -1,7 +1,7 @@
 //! Records that shape a move without being one: Fusion's arc `MOVARC`, and the clearance plane
 //! (`CLEARP`, `CLRSRF`) a `RETRCT` withdraws the tool to.
 
-use super::record::{Arg, Record, Stmt, num};
+use super::{Arg, Record, Stmt, num};
 use crate::diag::Diagnostic;
 
 /// A plane `normal · p = offset` in the CL's frame and units (`normal` a unit vector).
@@ -15,7 +15,7 @@ pub struct Plane {
 /// sweeping `a` degrees. Autodesk's ISO 4343 post turns counter-clockwise about the axis (it
 /// negates the axis of a clockwise arc); the sweep lets the source tell an older post's arc,
 /// which did not, and say so.
-pub(super) fn movarc(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
+pub(in crate::cl) fn movarc(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
     let mut v = Vec::with_capacity(7);
     let mut sweep = None;
     let mut args = st.args.iter();
@@ -46,7 +46,7 @@ pub(super) fn movarc(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
 
 /// `CLEARP` / `CLRSRF`: `d` or `XYPLAN,d` (the plane z = d), `YZPLAN,d`, `ZXPLAN,d`, `a,b,c,d`
 /// (the plane ax + by + cz = d), or `OFF` / `NOMORE` (none).
-pub(super) fn clearance(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
+pub(in crate::cl) fn clearance(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
     let first = st.args.first().map(Arg::word).unwrap_or_default();
     if matches!(first.as_str(), "OFF" | "NOMORE") {
         return Some(Record::Clearance(None));
@@ -93,7 +93,7 @@ fn unit_plane(n: [f64; 3], d: f64) -> Option<Plane> {
 
 /// `RETRCT` (or `RETRCT/ON`): withdraw along the tool axis to the clearance plane; `RETRCT/OFF`
 /// asks for nothing.
-pub(super) fn retract(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
+pub(in crate::cl) fn retract(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
     match st.args.first().map(Arg::word).as_deref() {
         None | Some("ON") => Some(Record::Retract),
         Some("OFF") => Some(Record::Ignored(st.major.clone())),

@@ -3,7 +3,7 @@
 //! cutter compensation (`CUTCOM`, with what the CL says its path is: Creo's
 //! `$$-> CUTCOM_GEOMETRY_TYPE` comment).
 
-use super::record::{Arg, Record, Stmt, num};
+use super::{Arg, Record, Stmt, num};
 use crate::diag::Diagnostic;
 
 /// Which side of the path the tool is offset to, looking along the motion with the tool axis
@@ -29,7 +29,7 @@ pub enum CutterComp {
 /// `CUTCOM/LEFT|RIGHT|ON|OFF[,XYPLAN][,n]` (NX `CUTCOM/LEFT,XYPLAN`, APT `CUTCOM/RIGHT,XYPLAN,5`,
 /// `ADJUST,n`, `NOMORE` for off). A plane other than XY, or a word not known, is an error and
 /// no compensation: a guess could put the tool on the wrong side of the contour.
-pub(super) fn cutcom(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
+pub(in crate::cl) fn cutcom(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
     let (mut on, mut off, mut side, mut register) = (false, false, None, None);
     for a in &st.args {
         match a.word().as_str() {
@@ -74,7 +74,7 @@ pub(super) fn cutcom(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
 
 /// A `$$` comment that states something the post needs: Creo's `$$-> CUTCOM_GEOMETRY_TYPE /
 /// OUTPUT_ON_CENTER` (the path is the tool centre) or `OUTPUT_ON_PROFILE` (the contour).
-pub(super) fn comment_record(comment: &str) -> Option<Record> {
+pub(in crate::cl) fn comment_record(comment: &str) -> Option<Record> {
     let rest = comment.trim_start().strip_prefix("->")?.trim_start();
     let (key, value) = rest.split_once('/')?;
     if !key.trim().eq_ignore_ascii_case("CUTCOM_GEOMETRY_TYPE") {
@@ -93,7 +93,7 @@ pub(super) fn comment_record(comment: &str) -> Option<Record> {
 }
 
 /// `OPSKIP/ON|OFF` (a bare `OPSKIP` turns it on).
-pub(super) fn block_skip(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
+pub(in crate::cl) fn block_skip(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
     match st.args.first().map(Arg::word).as_deref() {
         Some("ON") | None => Some(Record::BlockSkip(true)),
         Some("OFF") => Some(Record::BlockSkip(false)),
@@ -105,7 +105,7 @@ pub(super) fn block_skip(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Recor
 }
 
 /// `SELCTL/n`: the next tool's number.
-pub(super) fn preselect(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
+pub(in crate::cl) fn preselect(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
     let Some(a) = st.args.first() else {
         st.bad(diags, st.rest_col, "SELCTL: expected a tool number".into());
         return None;
@@ -117,7 +117,7 @@ pub(super) fn preselect(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record
 const MAX_TOLERANCE: f64 = 10.0;
 
 /// `INTOL/t` or `OUTTOL/t`: a tolerance of 0 up to [`MAX_TOLERANCE`].
-pub(super) fn tolerance(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
+pub(in crate::cl) fn tolerance(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
     let Some(a) = st.args.first() else {
         st.bad(diags, st.rest_col, format!("{}: expected a tolerance", st.major));
         return None;
@@ -145,7 +145,7 @@ fn preselected(st: &Stmt, a: &Arg, diags: &mut Vec<Diagnostic>) -> Option<Record
 }
 
 /// `AUXFUN/n` and `PREFUN/n`: a code number (`5.1` for G) the control is to get as it is.
-pub(super) fn function(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
+pub(in crate::cl) fn function(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
     let letter = if st.major == "AUXFUN" { 'M' } else { 'G' };
     let Some(a) = st.args.first() else {
         st.bad(diags, st.rest_col, format!("{}: expected a code number", st.major));
@@ -173,7 +173,7 @@ pub(super) fn function(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record>
 }
 
 /// `SELECT/TOOL,n` (NX, SOLIDWORKS CAM): `SELCTL/n` in other words.
-pub(super) fn select(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
+pub(in crate::cl) fn select(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
     match (st.args.first().map(Arg::word).as_deref(), st.args.get(1)) {
         (Some("TOOL"), Some(a)) => preselected(st, a, diags),
         _ => {
@@ -185,7 +185,7 @@ pub(super) fn select(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
 
 /// An operator's instruction on a stop: CATIA writes it in parentheses, which an NC comment
 /// cannot hold.
-pub(super) fn stop_text(rest: &str) -> String {
+pub(in crate::cl) fn stop_text(rest: &str) -> String {
     let t = rest.trim();
     let t = t.strip_prefix('(').and_then(|t| t.strip_suffix(')')).unwrap_or(t);
     t.trim().to_string()
@@ -193,7 +193,7 @@ pub(super) fn stop_text(rest: &str) -> String {
 
 /// `MODE/TURN|LATHE` says the moves are a lathe's, `MODE/MILL` a mill's; other modes (a
 /// listing's) are informational.
-pub(super) fn mode(st: &Stmt) -> Option<Record> {
+pub(in crate::cl) fn mode(st: &Stmt) -> Option<Record> {
     match st.args.first().map(Arg::word).as_deref() {
         Some("TURN" | "LATHE") => Some(Record::Mode { turning: true }),
         Some("MILL") => Some(Record::Mode { turning: false }),

@@ -6,7 +6,7 @@
 //! defined elsewhere, or a form not read here, is an error at its line: the motion is missing,
 //! never a straight move in its place.
 
-use super::record::{Stmt, num};
+use super::{Stmt, num};
 use crate::diag::{Code, Diagnostic, Severity};
 
 /// Where the tool stands against the drive curve (`TLON`, `TLLFT`, `TLRGT`).
@@ -61,7 +61,7 @@ pub struct Drive {
 
 /// The motion words of a drive statement's major (`TLON,GOFWD`): the side and the direction,
 /// `None` when it is no drive statement.
-pub(super) fn drive_major(major: &str) -> Option<(ToolSide, Go, &'static str)> {
+pub(in crate::cl) fn drive_major(major: &str) -> Option<(ToolSide, Go, &'static str)> {
     let (mut side, mut go) = (ToolSide::On, None);
     for w in major.split(',').map(str::trim) {
         match w {
@@ -79,13 +79,13 @@ pub(super) fn drive_major(major: &str) -> Option<(ToolSide, Go, &'static str)> {
 }
 
 /// `TLON,GOFWD/(CIRCLE/…),ON,(LINE/…)`: the drive, the stop and the check, each as written.
-pub(super) fn drive(
+pub(in crate::cl) fn drive(
     st: &Stmt,
     side: ToolSide,
     go: Go,
     word: &'static str,
     diags: &mut Vec<Diagnostic>,
-) -> Option<crate::cl::Record> {
+) -> Option<super::Record> {
     let bad = |diags: &mut Vec<Diagnostic>, why: String| {
         let msg = format!("{word}: {why}: the motion is not written");
         diags.push(Diagnostic::new(Code::BadRecord, Severity::Error, Some(st.line), msg).at(st.rest_col));
@@ -123,7 +123,7 @@ pub(super) fn drive(
         }
     };
     match geometry(c) {
-        Ok(check) => Some(crate::cl::Record::Drive(Drive {
+        Ok(check) => Some(super::Record::Drive(Drive {
             word,
             side,
             go,
@@ -140,7 +140,7 @@ pub(super) fn drive(
 
 /// `INDIRV/i,j,k` (a direction) or `INDIRP/x,y,z` (towards a point): which way the next drive
 /// statement goes.
-pub(super) fn indir(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<crate::cl::Record> {
+pub(in crate::cl) fn indir(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<super::Record> {
     let v: Vec<f64> = st.args.iter().filter_map(|a| num(a.text)).filter(|x| x.is_finite()).collect();
     let point = st.major == "INDIRP";
     if v.len() != 3 || st.args.len() != 3 || !point && v.iter().all(|x| *x == 0.0) {
@@ -152,7 +152,7 @@ pub(super) fn indir(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<crate::cl:
         st.bad(diags, st.rest_col, format!("{}: expected {what}", st.major));
         return None;
     }
-    Some(crate::cl::Record::InDir {
+    Some(super::Record::InDir {
         v: [v[0], v[1], v[2]],
         point,
     })

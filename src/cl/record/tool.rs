@@ -1,11 +1,11 @@
 //! The tool records: `LOADTL`/`LOAD/TOOL` (the change, its length and register) and what a tool
 //! is (`TLDATA`, `CUTTER`, CATIA's `TOOLNO` and `TURRET`), milling or turning.
 
-use super::record::{Arg, Record, Stmt, num};
+use super::{Arg, Record, Stmt, num};
 use crate::diag::{Code, Diagnostic, Severity};
 
 /// `LOADTL/n[,LENGTH,l]` and `LOAD/TOOL,n[,ADJUST,m]`.
-pub(super) fn load_tool(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
+pub(in crate::cl) fn load_tool(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
     let args = &st.args;
     let (mut number, mut length, mut adjust) = (None, None, None);
     let mut unread: Vec<&Arg> = Vec::new();
@@ -97,7 +97,7 @@ fn tool_number(st: &Stmt, a: &Arg, x: f64, diags: &mut Vec<Diagnostic>) -> Optio
 }
 
 /// What a tool is, by the record that describes it.
-pub(super) fn tool_data(st: &Stmt) -> Record {
+pub(in crate::cl) fn tool_data(st: &Stmt) -> Record {
     let args = &st.args;
     match st.major.as_str() {
         // TLDATA/MILL,diameter,corner radius,length,…

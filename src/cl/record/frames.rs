@@ -1,6 +1,6 @@
 //! Coordinate-system records: the frame the CL's following points and tool axes are written in.
 
-use super::record::{Record, Stmt, num};
+use super::{Record, Stmt, num};
 use crate::diag::Diagnostic;
 
 /// How far from unit length and from square an MCS's axes may be (NX writes seven decimals).
@@ -8,7 +8,7 @@ const SQUARE: f64 = 1e-4;
 
 /// NX's `MSYS/x,y,z,xi,xj,xk,yi,yj,yk`: the operation's machine coordinate system, its origin
 /// and X and Y axes in NX's absolute frame. The GOTOs after it are in this MCS.
-pub(super) fn msys(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
+pub(in crate::cl) fn msys(st: &Stmt, diags: &mut Vec<Diagnostic>) -> Option<Record> {
     let mut v = Vec::with_capacity(9);
     for a in &st.args {
         match num(a.text).filter(|x| x.is_finite()) {
