@@ -120,7 +120,12 @@ impl<S: Sink + ?Sized> Emitter<'_, S> {
             };
             return self.write(b, pt, Move::Arc(block), diags, pt.inserted, None);
         }
-        // Chords: the arc swept in the part frame, tool axis fixed, linears from the rotaries.
+        self.chords(a, b, arc, pt, diags, full_linears)
+    }
+
+    /// The arc as chords within the tolerance: swept in the part frame, the tool axis fixed, the
+    /// linears from the rotaries.
+    fn chords(&mut self, a: At, b: At, arc: &ArcSpec, pt: &MotionPt, diags: Vec<Diagnostic>, full_linears: bool) -> Result<(), Error> {
         let step = 2.0 * (1.0 - (self.o.tolerance / arc.radius).min(1.0)).acos();
         let segs = ((arc.sweep / step.max(1e-6)).ceil() as usize).clamp(1, 100_000);
         let mut diags = diags;
