@@ -234,8 +234,7 @@ pub async fn submit(
     let client = peer.map(|c| c.0.0.ip().to_string());
     // Settings are checked now, so a job never fails for a typo hours later.
     let checked = super::post::profile(&st, &params).and_then(|current| {
-        let standing = super::tools::standing(&st, &current.id);
-        params.profile_options_with(&current.item, standing, &|id| st.machines.dialect(id))?;
+        super::post::options_on(&st, &params, &current)?;
         let mut settings = JobSettings::default();
         if params.tool_table.is_none() {
             // The machine's table as it is now, whatever is written to it before the job runs.

@@ -40,6 +40,13 @@ pub(super) fn profile(st: &AppState, settings: &Settings) -> Result<crate::machi
     st.machines.get(id).map_err(|_| ApiError::UnknownMachine(id.to_string()))
 }
 
+/// The options `settings` give on the profile `c`, with the machine's standing tool table and
+/// the service's dialects (built-in or stored): what a post and a job's submission both check.
+pub(super) fn options_on(st: &AppState, settings: &Settings, c: &crate::machines::Current) -> Result<post::Options, ApiError> {
+    let standing = super::tools::standing(st, &c.id);
+    Ok(settings.profile_options_with(&c.item, standing, &|id| st.machines.dialect(id))?)
+}
+
 /// Whether the client wants NDJSON blocks instead of the NC text (`Accept`), refused (406) before
 /// the upload is read.
 pub struct Negotiated(bool);
@@ -217,12 +224,8 @@ pub async fn post_cl(
 ) -> Result<Response, ApiError> {
     // Held until the stream ends (the one in the request's extensions went with the request).
     let slot = slot.map(|Extension(s)| s);
-    let checked = profile(&st, &params).and_then(|c| {
-        let standing = super::tools::standing(&st, &c.id);
-        let opts = params.profile_options_with(&c.item, standing, &|id| st.machines.dialect(id));
-        Ok((c.item, opts?))
-    });
-    let ((profile, mut opts), body) = refuse_unread(checked, body).await?;
+    let checked = profile(&st, &params).and_then(|c| Ok((options_on(&st, &params, &c)?, c.item)));
+    let ((mut opts, profile), body) = refuse_unread(checked, body).await?;
     opts.budget = st.config.post_budget;
     opts.threads = st.config.post_threads;
     opts.header.push(format!("DATE {} UTC", crate::output::utc_now()));
